@@ -1,0 +1,5 @@
+import sys
+
+from perchd.cli import main
+
+sys.exit(main())

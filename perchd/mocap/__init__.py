@@ -1,0 +1,1 @@
+"""Motion-capture pose sources (NatNet, ZMQ, simulator), chosen by URI scheme."""
