@@ -1,0 +1,257 @@
+"""Crazyflie 2.x over cflib: a Crazyradio (`radio://0/80/2M/E7E7E7E7E7`) or cflib's `udp://`
+link (software-in-the-loop, and the tests' CRTP responder).
+
+The driver speaks the low-level CRTP link (cflib.crtp.get_link_driver) with cflib's own
+Commander and Localization encoders, not the full `Crazyflie` object: that one downloads the
+log/param TOCs and memories on connect, which the attitude stream does not need.
+
+Conversions (perchd SI -> cflib send_setpoint):
+- roll [rad] -> degrees, same sign: the firmware's roll is right-handed about body x.
+- pitch [rad] -> degrees, same sign: cflib's `pitch` argument is positive nose-down
+  (right-handed about y with z up), and cflib puts -pitch on the wire because the
+  firmware's legacy attitude is positive nose-up (commander.py packs `-pitch`).
+- yaw [rad] -> a yaw *rate* [deg/s]: the RPYT packet commands yaw rate. With a measured
+  yaw (observe_pose) it is K_YAW * wrap(yaw_sp - yaw), clamped to YAW_RATE_MAX;
+  without one it is 0 (hold the heading the vehicle has).
+- thrust [N] -> 0..65535 through drivers.thrust.CrazyflieThrust.
+
+URI options (removed before cflib sees the URI): mass=KG, hover=UNITS (thrust model
+calibration), timeout=S (link silent this long = lost, default 0.5), extpose=1 (forward
+observed poses to the on-board estimator).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any
+
+from perchd.drivers.base import DriverBase, LinkHealth
+from perchd.drivers.thrust import CrazyflieThrust
+from perchd.drivers.uriparams import bool_param, float_param, without_query
+from perchd.errors import LinkError
+from perchd.extras import require
+from perchd.runtime import Runtime
+from perchd.types import EndReason, Pose, Setpoint
+from perchd.uri import Uri
+
+KEEPALIVE_S = 0.1
+"""[s] silence after which the keep-alive re-sends (the firmware levels at 0.5 s, cuts at 2 s)."""
+PING_S = 0.02
+"""[s] period of CRTP link-echo pings, the proof of life on links without acks (udp)."""
+K_YAW = 2.0
+"""[1/s] yaw-rate gain on the yaw error when a measured yaw is known."""
+YAW_RATE_MAX = 90.0
+"""[deg/s] clamp on the commanded yaw rate."""
+
+ECHO_HEADER = 0xFC
+"""CRTP port 15 (link control) channel 0 (echo) with cflib's reserved bits 0b11."""
+
+_crtp_ready = False
+
+
+def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
+    """Factory for `radio://` and `udp://` (not connected yet)."""
+    require("cflib", "crazyflie")
+    hover = float_param(uri, "hover", 36000.0, 1000, 60000, " units")
+    mass = float_param(uri, "mass", 0.027, 0.010, 0.100, " kg")
+    timeout = float_param(uri, "timeout", 0.5, 0.01, 10.0, " s")
+    model = CrazyflieThrust(hover_units=hover, mass_kg=mass)
+    return CrazyflieDriver(uri.raw, without_query(uri), runtime, model, timeout,
+                           extpose=bool_param(uri, "extpose"))
+
+
+def _init_cflib() -> Any:
+    """cflib.crtp.init_drivers() once: it appends to a global driver list on every call."""
+    global _crtp_ready
+    import cflib.crtp
+    if not _crtp_ready:
+        cflib.crtp.init_drivers()
+        _crtp_ready = True
+    return cflib.crtp
+
+
+def wrap_angle(a: float) -> float:
+    """[rad] into [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def yaw_of(q: tuple[float, float, float, float]) -> float:
+    """[rad] Z-Y-X yaw of an (x, y, z, w) quaternion."""
+    x, y, z, w = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+class _LinkPort:
+    """The slice of cflib's Crazyflie that Commander and Localization use."""
+
+    def __init__(self, link: Any) -> None:
+        self.link = link
+        self.lock = threading.Lock()
+
+    def send_packet(self, pk: Any) -> None:
+        with self.lock:
+            if self.link is not None:
+                self.link.send_packet(pk)
+
+    def add_port_callback(self, port: int, cb: Any) -> None:
+        """Incoming packets are drained by the driver itself; nothing dispatches them."""
+
+
+class CrazyflieDriver(DriverBase):
+    def __init__(self, uri: str, link_uri: str, runtime: Runtime, model: CrazyflieThrust,
+                 timeout: float, extpose: bool = False) -> None:
+        self.uri = uri
+        self.link_uri = link_uri
+        self.clock = runtime.clock
+        self.model = model
+        self.timeout = timeout
+        self.extpose = extpose
+        self._port: _LinkPort | None = None
+        self._commander: Any = None
+        self._loc: Any = None
+        self._stop_threads = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._echoed = threading.Event()
+        self._link_error = ""
+        self._last_heard: float | None = None
+        self._last_sent = 0.0  # time.monotonic() of the last setpoint on the wire
+        self._last_cmd = (0.0, 0.0, 0.0, 0)  # (roll deg, pitch deg, yawrate deg/s, units)
+        self._yaw: float | None = None
+        self._stopped = False
+        self.failsafe_reasons: list[EndReason] = []
+
+    # -- Driver protocol ---------------------------------------------------------------
+    def connect(self) -> None:
+        crtp = _init_cflib()
+        from cflib.crazyflie.commander import Commander
+        from cflib.crazyflie.localization import Localization
+        link = crtp.get_link_driver(self.link_uri, None, self._on_link_error)
+        if link is None:
+            raise LinkError(f"{self.uri}: cflib has no link driver for {self.link_uri!r}")
+        self._port = _LinkPort(link)
+        self._commander = Commander(self._port)
+        self._loc = Localization(self._port)
+        self._stopped = False
+        self._start_threads()
+        self._ping()
+        if not self._echoed.wait(2.0) or self._link_error:
+            why = self._link_error or "no answer to a link echo within 2.0 s"
+            self._close_link()
+            raise LinkError(f"{self.uri}: connection failed: {why}")
+        self._send_cmd((0.0, 0.0, 0.0, 0))  # thrust 0 unlocks the firmware's thrust lock
+
+    def send(self, setpoint: Setpoint) -> None:
+        if self._stopped or self._port is None:
+            return  # after a failsafe nothing may re-arm thrust
+        self._send_cmd(self.command(setpoint))
+
+    def failsafe(self, reason: EndReason) -> None:
+        self.failsafe_reasons.append(reason)
+        self._stop()
+
+    def health(self) -> LinkHealth:
+        if self._port is None:
+            return LinkHealth(False, 0.0, "not connected")
+        age = 0.0 if self._last_heard is None else self.clock.now() - self._last_heard
+        if self._link_error:
+            return LinkHealth(False, age, f"connection lost: {self._link_error}")
+        if age > self.timeout:
+            return LinkHealth(False, age, f"connection lost: silent for {age:.3f} s")
+        return LinkHealth(True, age)
+
+    def close(self) -> None:
+        if self._port is None:
+            return
+        if not self._stopped:
+            self._stop()
+        self._close_link()
+
+    # -- conversions -----------------------------------------------------------------
+    def command(self, sp: Setpoint) -> tuple[float, float, float, int]:
+        """send_setpoint arguments for an SI setpoint: (roll deg, pitch deg, yaw rate
+        deg/s, thrust units), in cflib's conventions (see the module docstring)."""
+        yawrate = 0.0
+        if self._yaw is not None:
+            err = math.degrees(wrap_angle(sp.yaw - self._yaw))
+            yawrate = max(-YAW_RATE_MAX, min(YAW_RATE_MAX, K_YAW * err))
+        return (math.degrees(sp.roll), math.degrees(sp.pitch), yawrate,
+                self.model.units(sp.thrust))
+
+    def observe_pose(self, pose: Pose) -> None:
+        """The newest mocap pose: its yaw closes the yaw-rate loop; with extpose=1 it also
+        goes to the on-board estimator (cflib's send_extpose)."""
+        if not pose.valid:
+            return
+        self._yaw = yaw_of(pose.q)
+        if self.extpose and self._loc is not None and not self._stopped:
+            self._loc.send_extpose(list(pose.p), list(pose.q))
+
+    # -- wire ------------------------------------------------------------------------
+    def _send_cmd(self, cmd: tuple[float, float, float, int]) -> None:
+        self._last_cmd = cmd
+        self._last_sent = time.monotonic()
+        self._commander.send_setpoint(*cmd)
+
+    def _stop(self) -> None:
+        self._stopped = True
+        if self._commander is not None:
+            # twice: on udp a pending ICMP error from an earlier datagram eats one send
+            for _ in range(2):
+                self._commander.send_stop_setpoint()
+
+    def _ping(self) -> None:
+        from cflib.crtp.crtpstack import CRTPPacket
+        if self._port is not None:
+            self._port.send_packet(CRTPPacket(ECHO_HEADER, b"perchd"))
+
+    def _on_link_error(self, message: str) -> None:
+        """cflib's link error: connection_failed before the echo, connection_lost after."""
+        lines = [ln.strip() for ln in message.strip().splitlines() if ln.strip()]
+        self._link_error = ": ".join(lines[:2]) or "link error"
+
+    def _start_threads(self) -> None:
+        self._stop_threads.clear()
+        self._echoed.clear()
+        self._link_error = ""
+        self._threads = [threading.Thread(target=f, name=f"crazyflie-{f.__name__}", daemon=True)
+                         for f in (self._receive_loop, self._keepalive_loop)]
+        for t in self._threads:
+            t.start()
+
+    def _receive_loop(self) -> None:
+        while not self._stop_threads.is_set():
+            link = self._port.link if self._port else None
+            pk = link.receive_packet(0.05) if link is not None else None
+            if pk is None:
+                continue
+            self._last_heard = self.clock.now()
+            if pk.header == ECHO_HEADER:
+                self._echoed.set()
+
+    def _keepalive_loop(self) -> None:
+        """Never let KEEPALIVE_S pass without a setpoint: a stalled loop gets the last
+        thrust, levelled (a held tilt would keep accelerating the vehicle at the wall)."""
+        next_ping = 0.0
+        while not self._stop_threads.wait(PING_S):
+            now = time.monotonic()
+            if now >= next_ping:
+                self._ping()
+                next_ping = now + PING_S
+            if (not self._stopped and self._commander is not None
+                    and now - self._last_sent >= KEEPALIVE_S):
+                self._send_cmd((0.0, 0.0, 0.0, self._last_cmd[3]))
+
+    def _close_link(self) -> None:
+        self._stop_threads.set()
+        for t in self._threads:
+            t.join(timeout=1.0)
+        port, self._port = self._port, None
+        if port is None or port.link is None:
+            return
+        with port.lock:
+            link, port.link = port.link, None
+        # cflib's udp receive thread blocks in recv for up to 1 s before it sees the stop
+        # flag; release the link in the background rather than stall the caller.
+        threading.Thread(target=link.close, name="crazyflie-close", daemon=True).start()
