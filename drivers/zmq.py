@@ -1,0 +1,130 @@
+"""Setpoints published on ZMQ (CONTRACTS 3) for external simulators and HIL rigs.
+
+`zmq://HOST:PORT[?vehicle=cf1&bind=1&wait=2]`: by default the driver connects to a
+subscriber that has bound the port (`perchd sim --setpoint-in` binds, like a mocap bridge
+binds its pose port); bind=1 binds instead. The socket is an XPUB, so the driver sees its
+subscribers come and go: connect() waits up to `wait` seconds for one to subscribe to
+`setpoint` (nothing is sent into the void), and health() is not ok once none is left.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+from perchd.drivers.base import DriverBase, LinkHealth
+from perchd.drivers.uriparams import bool_param, float_param
+from perchd.errors import LinkError, UriError
+from perchd.runtime import Runtime
+from perchd.types import EndReason, Setpoint
+from perchd.uri import Uri
+
+SETPOINT, STOP = b"setpoint", b"stop"
+
+
+def open_zmq_driver(uri: Uri, runtime: Runtime) -> "ZmqSetpointDriver":
+    if not uri.host or uri.port is None:
+        raise UriError(f"{uri.raw}: a zmq driver needs host and port, e.g. zmq://127.0.0.1:5556")
+    return ZmqSetpointDriver(
+        uri.raw, f"tcp://{uri.host}:{uri.port}", runtime,
+        vehicle=uri.param("vehicle", "cf1") or "cf1",
+        bind=bool_param(uri, "bind"),
+        wait=float_param(uri, "wait", 2.0, 0.0, 60.0, " s"))
+
+
+def setpoint_message(vehicle: str, seq: int, sp: Setpoint) -> dict[str, Any]:
+    """The CONTRACTS 3 setpoint body: radians, newtons, world-frame Z-Y-X attitude."""
+    return {"vehicle": vehicle, "seq": seq, "t": sp.t, "pose_seq": sp.pose_seq,
+            "roll": sp.roll, "pitch": sp.pitch, "yaw": sp.yaw, "thrust": sp.thrust,
+            "phase": sp.phase.value}
+
+
+class ZmqSetpointDriver(DriverBase):
+    def __init__(self, uri: str, endpoint: str, runtime: Runtime, vehicle: str,
+                 bind: bool, wait: float) -> None:
+        self.uri = uri
+        self.endpoint = endpoint
+        self.clock = runtime.clock
+        self.vehicle = vehicle
+        self.bind = bind
+        self.wait = wait
+        self._sock: Any = None
+        self._subscribers = 0
+        self._seq = 0
+        self._stopped = False
+        self.failsafe_reasons: list[EndReason] = []
+
+    def connect(self) -> None:
+        import zmq
+        sock = zmq.Context.instance().socket(zmq.XPUB)
+        sock.setsockopt(zmq.LINGER, 500)  # let a final stop reach the subscriber
+        sock.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription, for the count
+        sock.setsockopt(zmq.IMMEDIATE, 1)  # a lost peer drops its pipe: we see it unsubscribe
+        try:
+            (sock.bind if self.bind else sock.connect)(self.endpoint)
+        except zmq.ZMQError as err:
+            sock.close(0)
+            raise LinkError(f"{self.uri}: cannot open {self.endpoint}: {err}") from None
+        self._sock, self._stopped, self._subscribers = sock, False, 0
+        deadline = time.monotonic() + self.wait
+        while self._subscribers <= 0:
+            left = deadline - time.monotonic()
+            if left <= 0 or not sock.poll(int(left * 1000) + 1):
+                self._release()
+                raise LinkError(f"{self.uri}: no subscriber to 'setpoint' within {self.wait:g} s")
+            self._drain()
+
+    def send(self, setpoint: Setpoint) -> None:
+        if self._stopped or self._sock is None:
+            return
+        body = setpoint_message(self.vehicle, self._seq, setpoint)
+        self._seq += 1
+        self._publish(SETPOINT, body)
+
+    def failsafe(self, reason: EndReason) -> None:
+        self.failsafe_reasons.append(reason)
+        self._stop(reason.value, reason.name)
+
+    def health(self) -> LinkHealth:
+        if self._sock is None:
+            return LinkHealth(False, 0.0, "not connected")
+        self._drain()
+        if self._subscribers <= 0:
+            return LinkHealth(False, 0.0, "connection lost: no subscriber to 'setpoint' left")
+        return LinkHealth(True, 0.0)
+
+    def close(self) -> None:
+        if self._sock is None:
+            return
+        if not self._stopped:
+            self._stop("driver closed while the vehicle was flying", "CLOSED")
+        self._release()
+
+    def _stop(self, reason: str, code: str) -> None:
+        self._stopped = True
+        if self._sock is not None:
+            self._publish(STOP, {"vehicle": self.vehicle, "reason": reason, "code": code,
+                                 "t": self.clock.now()})
+
+    def _publish(self, topic: bytes, body: dict[str, Any]) -> None:
+        import zmq
+        try:
+            self._sock.send_multipart([topic, json.dumps(body).encode()], zmq.NOBLOCK)
+        except zmq.Again:
+            pass  # a PUB never blocks the control loop; a slow subscriber loses messages
+
+    def _drain(self) -> None:
+        """Count subscriptions to 'setpoint' (or to everything) from XPUB's notices."""
+        import zmq
+        while True:
+            try:
+                note = self._sock.recv(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            if note[:1] in (b"\x00", b"\x01") and SETPOINT.startswith(note[1:]):
+                self._subscribers += 1 if note[:1] == b"\x01" else -1
+
+    def _release(self) -> None:
+        sock, self._sock = self._sock, None
+        sock.close()
