@@ -29,6 +29,7 @@ from typing import Any
 
 from perchd.drivers.base import DriverBase, LinkHealth
 from perchd.drivers.thrust import CrazyflieThrust
+from perchd.drivers.ticker import Ticker
 from perchd.drivers.uriparams import bool_param, float_param, without_query
 from perchd.errors import LinkError
 from perchd.extras import require
@@ -111,8 +112,7 @@ class CrazyflieDriver(DriverBase):
         self._port: _LinkPort | None = None
         self._commander: Any = None
         self._loc: Any = None
-        self._stop_threads = threading.Event()
-        self._threads: list[threading.Thread] = []
+        self._tickers: list[Ticker] = []
         self._echoed = threading.Event()
         self._link_error = ""
         self._last_heard: float | None = None
@@ -212,41 +212,31 @@ class CrazyflieDriver(DriverBase):
         self._link_error = ": ".join(lines[:2]) or "link error"
 
     def _start_threads(self) -> None:
-        self._stop_threads.clear()
         self._echoed.clear()
         self._link_error = ""
-        self._threads = [threading.Thread(target=f, name=f"crazyflie-{f.__name__}", daemon=True)
-                         for f in (self._receive_loop, self._keepalive_loop)]
-        for t in self._threads:
-            t.start()
+        # receive: receive_packet blocks up to 50 ms, so a zero period is no busy loop
+        self._tickers = [Ticker(0.0, self._receive, "crazyflie-receive").start(),
+                         Ticker(PING_S, self._keepalive, "crazyflie-keepalive").start()]
 
-    def _receive_loop(self) -> None:
-        while not self._stop_threads.is_set():
-            link = self._port.link if self._port else None
-            pk = link.receive_packet(0.05) if link is not None else None
-            if pk is None:
-                continue
+    def _receive(self) -> None:
+        link = self._port.link if self._port else None
+        pk = link.receive_packet(0.05) if link is not None else None
+        if pk is not None:
             self._last_heard = self.clock.now()
             if pk.header == ECHO_HEADER:
                 self._echoed.set()
 
-    def _keepalive_loop(self) -> None:
-        """Never let KEEPALIVE_S pass without a setpoint: a stalled loop gets the last
-        thrust, levelled (a held tilt would keep accelerating the vehicle at the wall)."""
-        next_ping = 0.0
-        while not self._stop_threads.wait(PING_S):
-            now = time.monotonic()
-            if now >= next_ping:
-                self._ping()
-                next_ping = now + PING_S
-            if (not self._stopped and self._commander is not None
-                    and now - self._last_sent >= KEEPALIVE_S):
-                self._send_cmd((0.0, 0.0, 0.0, self._last_cmd[3]))
+    def _keepalive(self) -> None:
+        """Ping, and never let KEEPALIVE_S pass without a setpoint: a stalled loop gets the
+        last thrust, levelled (a held tilt would keep accelerating the vehicle at the wall)."""
+        self._ping()
+        if (not self._stopped and self._commander is not None
+                and time.monotonic() - self._last_sent >= KEEPALIVE_S):
+            self._send_cmd((0.0, 0.0, 0.0, self._last_cmd[3]))
 
     def _close_link(self) -> None:
-        self._stop_threads.set()
-        for t in self._threads:
-            t.join(timeout=1.0)
+        for ticker in self._tickers:
+            ticker.stop()
         port, self._port = self._port, None
         if port is None or port.link is None:
             return

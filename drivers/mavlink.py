@@ -1,0 +1,291 @@
+"""MAVLink autopilots over pymavlink: ArduPilot in GUIDED_NOGPS, PX4 in OFFBOARD, both flown
+with SET_ATTITUDE_TARGET (attitude quaternion + normalised thrust).
+
+`mavlink:udpout:HOST:PORT?mass=KG[&arm=1&hover=F&timeout=S&stream=HZ&wait=S]`
+- mass (required): the vehicle's mass, for the thrust model (drivers.thrust.NormalisedThrust).
+- hover: normalised hover thrust; default: read MOT_THST_HOVER (ArduPilot) or
+  MPC_THR_HOVER (PX4) from the vehicle.
+- arm=1: arm after the mode switch (default: never arm; the pilot does).
+- timeout [s, default 1.5]: no message from the vehicle this long = link lost. The driver
+  asks for ATTITUDE at `stream` Hz (default 50) so a short timeout is usable.
+- wait [s, default 5]: how long connect() waits for each answer.
+
+Frames: perchd's world is Z-up with Z-Y-X Euler angles; autopilots want the body FRD
+attitude in NED. Rotating by pi about X maps one onto the other: roll stays, pitch and
+yaw change sign. The quaternion goes out w-first. Yaw is relative to the autopilot's own
+heading reference, so its yaw zero must face the mocap X axis (as the paper's does).
+
+ArduPilot reads the thrust field as a climb rate unless GUID_OPTIONS bit 3 (value 8) is
+set; the driver reads the parameter and refuses to fly without it.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any, Callable
+
+from perchd.drivers.base import DriverBase, LinkHealth
+from perchd.drivers.thrust import NormalisedThrust
+from perchd.drivers.ticker import Ticker
+from perchd.drivers.uriparams import bool_param, float_param, split_query
+from perchd.errors import ConfigError, LinkError, UriError
+from perchd.extras import require
+from perchd.runtime import Runtime
+from perchd.types import EndReason, Setpoint
+from perchd.uri import Uri
+
+HEARTBEAT_S = 0.5
+"""[s] our heartbeat period (MAVLink asks for at least 1 Hz)."""
+KEEPALIVE_S = 0.1
+"""[s] a silent loop gets its last attitude target repeated after this long (PX4 leaves
+OFFBOARD after COM_OF_LOSS_T = 0.5 s without one; ArduPilot levels after 1 s)."""
+PX4_PRESTREAM_S = 1.2
+"""[s] setpoints streamed before asking PX4 for OFFBOARD (it wants > 1 s of them)."""
+GUIDED_THRUST_BIT = 8
+"""ArduPilot GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET thrust is thrust, not climb rate."""
+
+ARDUPILOT, PX4 = 3, 12  # MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4
+ARDUPILOT_GUIDED_NOGPS, ARDUPILOT_LAND = 20, 9
+PX4_OFFBOARD = (6, 0)  # (main mode, sub mode)
+PX4_AUTO_LAND = (4, 6)
+HOVER_PARAM = {ARDUPILOT: "MOT_THST_HOVER", PX4: "MPC_THR_HOVER"}
+IGNORE_BODY_RATES = 0b0000_0111
+ATTITUDE_MSG_ID = 30
+CMD_DO_SET_MODE, CMD_ARM, CMD_SET_MESSAGE_INTERVAL = 176, 400, 511
+
+
+def open_mavlink(uri: Uri, runtime: Runtime) -> "MavlinkDriver":
+    require("pymavlink", "mavlink")
+    device, query = split_query(uri.path)
+    if not device.startswith(("udpout:", "udpin:", "udp:", "tcp:", "/dev/", "COM")):
+        raise UriError(f"{uri.raw}: expected mavlink:udpout:HOST:PORT (or udpin:, tcp:, a serial device)")
+    opts = Uri(uri.raw, uri.scheme, "", None, device, query)
+    mass = float_param(opts, "mass", None, 0.01, 50.0, " kg")
+    if mass is None:
+        raise UriError(f"{uri.raw}: the mavlink driver needs the vehicle mass: add ?mass=KG")
+    return MavlinkDriver(
+        uri.raw, device, runtime, mass_kg=mass,
+        hover=float_param(opts, "hover", None, 0.05, 0.95),
+        arm=bool_param(opts, "arm"),
+        timeout=float_param(opts, "timeout", 1.5, 0.01, 30.0, " s"),
+        stream_hz=float_param(opts, "stream", 50.0, 1.0, 500.0, " Hz"),
+        wait=float_param(opts, "wait", 5.0, 0.1, 60.0, " s"))
+
+
+def quaternion_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of Z-Y-X Euler angles [rad]."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+
+
+def ned_attitude(sp: Setpoint) -> tuple[float, float, float, float]:
+    """perchd's Z-up attitude as the FRD-in-NED quaternion an autopilot takes."""
+    return quaternion_wxyz(sp.roll, -sp.pitch, -sp.yaw)
+
+
+def px4_custom_mode(main: int, sub: int) -> int:
+    return (main << 16) | (sub << 24)
+
+
+class MavlinkDriver(DriverBase):
+    def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float,
+                 hover: float | None, arm: bool, timeout: float, stream_hz: float,
+                 wait: float) -> None:
+        self.uri = uri
+        self.device = device
+        self.clock = runtime.clock
+        self.mass_kg = mass_kg
+        self.hover = hover
+        self.arm = arm
+        self.timeout = timeout
+        self.stream_hz = stream_hz
+        self.wait = wait
+        self.model: NormalisedThrust | None = None
+        self.autopilot: int | None = None
+        self._conn: Any = None
+        self._lock = threading.Lock()
+        self._tickers: list[Ticker] = []
+        self._target = (0, 0)
+        self._heard: float | None = None  # clock time of the vehicle's last message
+        self._mode: int | None = None  # custom_mode from its last heartbeat
+        self._armed = False
+        self._params: dict[str, float] = {}
+        self._acks: dict[int, int] = {}
+        self._flight_mode: int | None = None  # the custom mode we fly in
+        self._last_target: tuple[tuple[float, float, float, float], float] | None = None
+        self._last_sent = 0.0
+        self._last_heartbeat = 0.0
+        self._stopped = False
+        self.failsafe_reasons: list[EndReason] = []
+
+    # -- Driver protocol ---------------------------------------------------------------
+    def connect(self) -> None:
+        from pymavlink import mavutil
+        self._conn = mavutil.mavlink_connection(self.device, source_system=255,
+                                                source_component=191)  # onboard computer
+        self._stopped = False
+        self._tickers = [Ticker(0.0, self._receive, "mavlink-receive").start(),
+                         Ticker(KEEPALIVE_S / 2, self._keepalive, "mavlink-keepalive").start()]
+        try:
+            self._setup()
+        except BaseException:
+            self._release()
+            raise
+
+    def send(self, setpoint: Setpoint) -> None:
+        if self._stopped or self._conn is None or self.model is None:
+            return
+        self._send_target(ned_attitude(setpoint), self.model.fraction(setpoint.thrust))
+
+    def failsafe(self, reason: EndReason) -> None:
+        self.failsafe_reasons.append(reason)
+        self._land()
+
+    def health(self) -> LinkHealth:
+        if self._conn is None or self._heard is None:
+            return LinkHealth(False, 0.0, "not connected")
+        age = self.clock.now() - self._heard
+        if age > self.timeout:
+            return LinkHealth(False, age, f"connection lost: no message from the vehicle for {age:.2f} s")
+        if not self._stopped and self._flight_mode is not None and self._mode != self._flight_mode:
+            return LinkHealth(False, age, f"vehicle left the offboard mode (custom mode {self._mode})")
+        return LinkHealth(True, age)
+
+    def close(self) -> None:
+        if self._conn is None:
+            return
+        if not self._stopped and self._flight_mode is not None:
+            self._land()
+        self._release()
+
+    # -- connection setup --------------------------------------------------------------
+    def _setup(self) -> None:
+        self._await(lambda: self._heard is not None, "a heartbeat from the vehicle")
+        if self.autopilot not in (ARDUPILOT, PX4):
+            raise LinkError(f"{self.uri}: autopilot type {self.autopilot} is neither ArduPilot nor PX4")
+        self._command(CMD_SET_MESSAGE_INTERVAL, ATTITUDE_MSG_ID, 1e6 / self.stream_hz)
+        if self.autopilot == ARDUPILOT:
+            options = int(self._param("GUID_OPTIONS"))
+            if not options & GUIDED_THRUST_BIT:
+                raise ConfigError(
+                    f"{self.uri}: GUID_OPTIONS={options} lacks bit 3 (thrust as thrust); "
+                    f"set GUID_OPTIONS={options | GUIDED_THRUST_BIT} on the vehicle")
+        hover = self.hover if self.hover is not None else self._param(HOVER_PARAM[self.autopilot])
+        try:
+            self.model = NormalisedThrust(self.mass_kg, hover)
+        except ValueError as err:
+            raise ConfigError(f"{self.uri}: {err}") from None
+        self._send_target((1.0, 0.0, 0.0, 0.0), 0.0)  # level, no thrust, until the loop runs
+        if self.autopilot == PX4:
+            time.sleep(PX4_PRESTREAM_S)  # the keep-alive streams meanwhile
+            mode, main_sub = px4_custom_mode(*PX4_OFFBOARD), PX4_OFFBOARD
+        else:
+            mode, main_sub = ARDUPILOT_GUIDED_NOGPS, (ARDUPILOT_GUIDED_NOGPS, 0)
+        self._set_mode(*main_sub)
+        self._await(lambda: self._mode == mode, f"the switch to custom mode {mode}")
+        self._flight_mode = mode
+        if self.arm:
+            self._acks.pop(CMD_ARM, None)
+            self._command(CMD_ARM, 1)
+            self._await(lambda: self._armed or self._acks.get(CMD_ARM, 0) not in (0, 5),
+                        "arming")
+            if not self._armed:
+                raise LinkError(f"{self.uri}: the vehicle refused to arm "
+                                f"(MAV_RESULT {self._acks.get(CMD_ARM)})")
+
+    def _await(self, done: Callable[[], bool], what: str) -> None:
+        deadline = time.monotonic() + self.wait
+        while not done():
+            if time.monotonic() > deadline:
+                raise LinkError(f"{self.uri}: waited {self.wait:g} s for {what} in vain")
+            time.sleep(0.005)
+
+    def _param(self, name: str) -> float:
+        """Read one parameter, asking again every 0.5 s (PARAM_REQUEST_READ can be lost)."""
+        asked = 0.0
+
+        def answered() -> bool:
+            nonlocal asked
+            if name not in self._params and time.monotonic() - asked > 0.5:
+                asked = time.monotonic()
+                with self._lock:
+                    self._conn.mav.param_request_read_send(*self._target, name.encode(), -1)
+            return name in self._params
+        self._await(answered, f"parameter {name}")
+        return self._params[name]
+
+    def _set_mode(self, main: int, sub: int) -> None:
+        self._command(CMD_DO_SET_MODE, 1, main, sub)  # 1: MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+
+    def _command(self, command: int, *params: float) -> None:
+        p = list(params) + [0.0] * (7 - len(params))
+        with self._lock:
+            self._conn.mav.command_long_send(*self._target, command, 0, *p)
+
+    # -- streaming ---------------------------------------------------------------------
+    def _send_target(self, q: tuple[float, float, float, float], thrust: float) -> None:
+        self._last_target = (q, thrust)
+        self._last_sent = time.monotonic()
+        boot_ms = int(self.clock.now() * 1000) & 0xFFFFFFFF
+        with self._lock:
+            self._conn.mav.set_attitude_target_send(
+                boot_ms, *self._target, IGNORE_BODY_RATES, list(q), 0.0, 0.0, 0.0, thrust)
+
+    def _keepalive(self) -> None:
+        """Heartbeat at 2 Hz; repeat the last attitude target, levelled, if the loop is silent."""
+        now = time.monotonic()
+        if now - self._last_heartbeat >= HEARTBEAT_S:
+            self._last_heartbeat = now
+            with self._lock:
+                self._conn.mav.heartbeat_send(18, 8, 0, 0, 4)  # onboard controller, no autopilot, active
+        if not self._stopped and self._last_target and now - self._last_sent >= KEEPALIVE_S:
+            self._send_target((1.0, 0.0, 0.0, 0.0), self._last_target[1])
+
+    def _land(self) -> None:
+        """Stop streaming and hand the vehicle to the autopilot's own landing mode."""
+        self._stopped = True
+        if self._conn is None or self.autopilot is None:
+            return
+        main_sub = PX4_AUTO_LAND if self.autopilot == PX4 else (ARDUPILOT_LAND, 0)
+        for _ in range(2):  # UDP: a lost command would leave the vehicle hovering
+            self._set_mode(*main_sub)
+
+    # -- receiving ---------------------------------------------------------------------
+    def _receive(self) -> None:
+        conn = self._conn
+        msg = conn.recv_match(blocking=True, timeout=0.05) if conn is not None else None
+        if msg is None or msg.get_type() == "BAD_DATA":
+            return
+        if msg.get_type() == "HEARTBEAT":
+            self._on_heartbeat(msg)
+        if self._heard is None or msg.get_srcSystem() != self._target[0]:
+            return
+        self._heard = self.clock.now()
+        kind = msg.get_type()
+        if kind == "PARAM_VALUE":
+            self._params[msg.param_id] = float(msg.param_value)
+        elif kind == "COMMAND_ACK":
+            self._acks[msg.command] = msg.result
+
+    def _on_heartbeat(self, msg: Any) -> None:
+        if msg.autopilot == 8 or msg.type in (6, 18):  # no autopilot, a GCS or a companion
+            return
+        if self._heard is None:
+            self._target = (msg.get_srcSystem(), msg.get_srcComponent())
+            self.autopilot = msg.autopilot
+            self._heard = self.clock.now()
+        if msg.get_srcSystem() == self._target[0]:
+            self._mode = msg.custom_mode
+            self._armed = bool(msg.base_mode & 128)  # MAV_MODE_FLAG_SAFETY_ARMED
+
+    def _release(self) -> None:
+        for ticker in self._tickers:
+            ticker.stop()
+        conn, self._conn = self._conn, None
+        if conn is not None:
+            conn.close()
