@@ -1,0 +1,110 @@
+"""One rig per registered driver scheme: the far end of the link and how to read it back.
+
+Each rig turns what its vehicle received back into SI (roll, pitch [rad], thrust [N]) with
+its own decoding, so the conformance suite holds every driver to the same numbers.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from typing import Protocol
+
+from perchd.drivers.thrust import G, CrazyflieThrust
+
+MASS = 0.027
+"""[kg] the vehicle every rig pretends to be (a Crazyflie, the paper's)."""
+
+
+class Rig(Protocol):
+    uri: str
+
+    def commanded(self) -> tuple[float, float, float] | None:
+        """The newest (roll rad, pitch rad, thrust N) the vehicle received, or None."""
+
+    def stopped(self) -> bool:
+        """The vehicle was told to stop (stop setpoint, land mode, stop message)."""
+
+    def kill(self) -> None:
+        """The vehicle end of the link dies."""
+
+    def close(self) -> None: ...
+
+
+class CrazyflieRig:
+    def __init__(self) -> None:
+        from crtp_responder import CrtpResponder
+        self.peer = CrtpResponder()
+        self.uri = self.peer.uri
+        self._model = CrazyflieThrust()
+
+    def commanded(self):
+        sps = [s for s in self.peer.setpoints() if s.thrust]
+        if not sps:
+            return None
+        s = sps[-1]
+        return (math.radians(s.roll_deg), math.radians(-s.wire_pitch_deg),
+                self._model.newtons(s.thrust))
+
+    def stopped(self) -> bool:
+        return bool(self.peer.stops())
+
+    def kill(self) -> None:
+        self.peer.die()
+
+    def close(self) -> None:
+        self.peer.close()
+
+
+class MavlinkRig:
+    HOVER = 0.35
+
+    def __init__(self) -> None:
+        from mavlink_double import VehicleDouble
+        self.peer = VehicleDouble(params={"GUID_OPTIONS": 8.0, "MOT_THST_HOVER": self.HOVER})
+        self.uri = f"{self.peer.uri}?mass={MASS}&timeout=0.06"
+
+    def commanded(self):
+        from pymavlink.quaternion import Quaternion
+        targets = [t for t in self.peer.targets if t.thrust > 0]
+        if not targets:
+            return None
+        roll, pitch, _ = Quaternion(list(targets[-1].q)).euler
+        return roll, -pitch, targets[-1].thrust * MASS * G / self.HOVER
+
+    def stopped(self) -> bool:
+        return self.peer.custom_mode == 9  # LAND
+
+    def kill(self) -> None:
+        self.peer.die()
+
+    def close(self) -> None:
+        self.peer.close()
+
+
+class ZmqRig:
+    def __init__(self) -> None:
+        from zmq_subscriber import SetpointSubscriber
+        self.peer = SetpointSubscriber()
+        self.uri = self.peer.uri
+
+    def commanded(self):
+        sps = self.peer.of("setpoint")
+        return (sps[-1]["roll"], sps[-1]["pitch"], sps[-1]["thrust"]) if sps else None
+
+    def stopped(self) -> bool:
+        return bool(self.peer.of("stop"))
+
+    def kill(self) -> None:
+        self.peer.die()
+
+    def close(self) -> None:
+        self.peer.close()
+
+
+def loopback_available() -> bool:
+    return importlib.util.find_spec("perchd.drivers.loopback") is not None
+
+
+RIGS = {"udp": CrazyflieRig, "mavlink": MavlinkRig, "zmq": ZmqRig}
+NOT_HERE = {"radio": "needs a Crazyradio; the same driver as udp://, see tests/hardware"}

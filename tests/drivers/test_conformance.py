@@ -1,0 +1,101 @@
+"""Every registered driver keeps the same promises (drivers/base.py Driver protocol)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from rigs import MASS, NOT_HERE, RIGS, loopback_available
+from ticks import level, ticks_until_lost
+from perchd.drivers.base import DRIVERS, LinkHealth, open_driver
+from perchd.drivers.thrust import G
+from perchd.runtime import Runtime
+from perchd.types import EndReason, Phase, Setpoint
+
+WEIGHT = MASS * G
+
+
+def rig_factory(scheme: str):
+    if scheme == "sim":
+        if not loopback_available():
+            pytest.skip("drivers/loopback.py has not landed yet")
+        from rigs import LoopbackRig  # written alongside drivers/loopback.py
+        return LoopbackRig
+    if scheme in NOT_HERE:
+        pytest.skip(NOT_HERE[scheme])
+    return RIGS[scheme]
+
+
+@pytest.fixture(params=DRIVERS.schemes)
+def rig(request):
+    r = rig_factory(request.param)()
+    yield r
+    r.close()
+
+
+@pytest.fixture
+def driver(rig):
+    d = open_driver(rig.uri, Runtime.real())
+    d.connect()
+    yield d
+    d.close()
+
+
+def test_every_registered_scheme_has_a_rig_or_a_reason():
+    assert set(DRIVERS.schemes) <= set(RIGS) | set(NOT_HERE) | {"sim"}
+
+
+def test_opening_a_driver_does_not_connect_it(rig):
+    d = open_driver(rig.uri, Runtime.real())
+    assert d.uri == rig.uri
+    health = d.health()
+    assert isinstance(health, LinkHealth) and not health.ok
+    d.close()  # closing what never connected is harmless
+
+
+def test_a_connected_driver_is_healthy_and_carries_an_si_setpoint(rig, driver):
+    assert driver.health().ok
+    sp = Setpoint(0.0, 0.1, -0.15, 0.0, WEIGHT, 1, Phase.STAGE1)
+    # streamed like the loop does, so a keep-alive can never be the newest command
+    assert _wait(lambda: driver.send(sp) or (rig.commanded() or (0,))[0] != 0)
+    roll, pitch, thrust = rig.commanded()
+    assert roll == pytest.approx(0.1, abs=1e-4)
+    assert pitch == pytest.approx(-0.15, abs=1e-4)
+    assert thrust == pytest.approx(WEIGHT, rel=2e-3)
+
+
+def test_failsafe_reaches_the_vehicle_is_idempotent_and_silences_later_setpoints(rig, driver):
+    driver.send(level(WEIGHT))
+    assert _wait(lambda: rig.commanded() is not None)
+    driver.failsafe(EndReason.OPERATOR_ABORT)
+    driver.failsafe(EndReason.OPERATOR_ABORT)
+    assert _wait(rig.stopped)
+    before = rig.commanded()
+    driver.send(Setpoint(0.0, 0.3, 0.3, 0.0, 2 * WEIGHT, 2, Phase.STAGE1))
+    _wait(lambda: False, 0.2)
+    assert rig.commanded() == before
+
+
+def test_leaving_the_context_stops_a_flying_vehicle_and_closing_twice_is_harmless(rig):
+    with open_driver(rig.uri, Runtime.real()) as d:
+        d.send(level(WEIGHT))
+    assert _wait(rig.stopped)
+    d.close()
+    assert not d.health().ok
+
+
+def test_a_vehicle_end_that_dies_is_reported_within_3_ticks(rig, driver):
+    if not hasattr(rig, "kill"):
+        pytest.skip("this rig's vehicle cannot die")
+    lost_after = ticks_until_lost(driver, 25.0, level(WEIGHT), rig.kill)
+    assert lost_after is not None and lost_after <= 3
+
+
+def _wait(predicate, timeout: float = 2.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return bool(predicate())
