@@ -127,7 +127,10 @@ class CrazyflieDriver(DriverBase):
         crtp = _init_cflib()
         from cflib.crazyflie.commander import Commander
         from cflib.crazyflie.localization import Localization
-        link = crtp.get_link_driver(self.link_uri, None, self._on_link_error)
+        try:
+            link = crtp.get_link_driver(self.link_uri, None, self._on_link_error)
+        except Exception as err:  # cflib raises bare Exceptions (no dongle, link open)
+            raise LinkError(f"{self.uri}: connection failed: {err}") from None
         if link is None:
             raise LinkError(f"{self.uri}: cflib has no link driver for {self.link_uri!r}")
         self._port = _LinkPort(link)
