@@ -24,6 +24,8 @@ import threading
 import time
 from dataclasses import dataclass
 
+from ticks import wait_for
+
 ECHO, RPYT, STOP, EXTPOSE = 0xFC, 0x3C, 0x7C, 0x6D
 
 
@@ -88,13 +90,7 @@ class CrtpResponder:
     def extposes(self) -> list[tuple[float, ...]]:
         return [struct.unpack("<Bfffffff", d.payload)[1:] for d in self.of(EXTPOSE)]
 
-    def wait_for(self, predicate, timeout: float = 2.0) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            time.sleep(0.005)
-        return predicate()
+    wait_for = staticmethod(wait_for)
 
     # -- failures ----------------------------------------------------------------------
     def mute(self) -> None:

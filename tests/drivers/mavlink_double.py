@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 from pymavlink import mavutil
 
+from ticks import wait_for
+
 ARDUPILOT, PX4 = 3, 12
 ACCEPTED, DENIED = 0, 2
 
@@ -129,13 +131,7 @@ class VehicleDouble:
         self.custom_mode = custom_mode
         self._heartbeat()
 
-    def wait_for(self, predicate, timeout: float = 2.0) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            time.sleep(0.005)
-        return predicate()
+    wait_for = staticmethod(wait_for)
 
     def mute(self) -> None:
         self._sending = False

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from rigs import MASS, NOT_HERE, RIGS, loopback_available
 from ticks import level, ticks_until_lost
+from ticks import wait_for as _wait
 from perchd.drivers.base import DRIVERS, LinkHealth, open_driver
 from perchd.drivers.thrust import G
 from perchd.runtime import Runtime
@@ -90,12 +89,3 @@ def test_a_vehicle_end_that_dies_is_reported_within_3_ticks(rig, driver):
         pytest.skip("this rig's vehicle cannot die")
     lost_after = ticks_until_lost(driver, 25.0, level(WEIGHT), rig.kill)
     assert lost_after is not None and lost_after <= 3
-
-
-def _wait(predicate, timeout: float = 2.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return bool(predicate())

@@ -8,6 +8,16 @@ from typing import Callable
 from perchd.types import EndReason, Phase, Setpoint
 
 
+def wait_for(predicate: Callable[[], object], timeout: float = 2.0) -> bool:
+    """Poll `predicate` until it holds or `timeout` [s] passes; returns whether it held."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.005)
+    return bool(predicate())
+
+
 def level(thrust: float, t: float = 0.0, seq: int = 0) -> Setpoint:
     return Setpoint(t, 0.0, 0.0, 0.0, thrust, seq, Phase.STAGE1)
 

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import json
 import threading
-import time
 
 import zmq
+
+from ticks import wait_for
 
 
 class SetpointSubscriber:
@@ -37,13 +38,7 @@ class SetpointSubscriber:
         with self._lock:
             return [body for t, body in self.received if t == topic]
 
-    def wait_for(self, predicate, timeout: float = 2.0) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            time.sleep(0.005)
-        return predicate()
+    wait_for = staticmethod(wait_for)
 
     def die(self) -> None:
         if self._alive:
