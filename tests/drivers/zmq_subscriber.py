@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 
 import zmq
 
@@ -20,7 +21,7 @@ class SetpointSubscriber:
         self.uri = f"zmq://127.0.0.1:{self.port}"
         for topic in (b"setpoint", b"stop"):
             self.sock.setsockopt(zmq.SUBSCRIBE, topic)
-        self.received: list[tuple[str, dict]] = []
+        self.received: list[tuple[str, dict, float]] = []  # topic, body, arrival [s]
         self._alive = True
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._serve, name="zmq-subscriber", daemon=True)
@@ -32,11 +33,15 @@ class SetpointSubscriber:
                 continue
             topic, body = self.sock.recv_multipart()
             with self._lock:
-                self.received.append((topic.decode(), json.loads(body)))
+                self.received.append((topic.decode(), json.loads(body), time.monotonic()))
 
     def of(self, topic: str) -> list[dict]:
         with self._lock:
-            return [body for t, body in self.received if t == topic]
+            return [body for t, body, _ in self.received if t == topic]
+
+    def arrivals(self, topic: str) -> list[float]:
+        with self._lock:
+            return [at for t, _, at in self.received if t == topic]
 
     wait_for = staticmethod(wait_for)
 
