@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import socket
+import sys
 import time
 
 import pytest
@@ -12,7 +13,7 @@ from crtp_responder import STOP, CrtpResponder
 from ticks import level, ticks_until_lost
 from perchd.drivers.base import open_driver
 from perchd.drivers.thrust import CrazyflieThrust
-from perchd.errors import LinkError, UriError
+from perchd.errors import LinkError, MissingExtraError, UriError
 from perchd.runtime import Runtime
 from perchd.types import EndReason, Phase, Pose, Setpoint
 
@@ -192,3 +193,9 @@ def test_a_vehicle_that_hangs_mid_flight_is_lost_within_3_ticks(responder):
         assert responder.wait_for(lambda: responder.stops())  # the failsafe went out
     finally:
         cf.close()
+
+
+def test_without_cflib_the_factory_names_the_extra_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "cflib", None)  # as if not installed
+    with pytest.raises(MissingExtraError, match=r"pip install 'perchd\[crazyflie\]'"):
+        open_driver("radio://0/80/2M/E7E7E7E7E7", Runtime.real())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 
 import pytest
 
@@ -14,7 +15,7 @@ from pymavlink.quaternion import Quaternion  # noqa: E402
 from mavlink_double import ARDUPILOT, PX4, VehicleDouble  # noqa: E402
 from ticks import level, ticks_until_lost  # noqa: E402
 from perchd.drivers.base import open_driver  # noqa: E402
-from perchd.errors import ConfigError, LinkError, UriError  # noqa: E402
+from perchd.errors import ConfigError, LinkError, MissingExtraError, UriError  # noqa: E402
 from perchd.runtime import Runtime  # noqa: E402
 from perchd.types import EndReason, Phase, Setpoint  # noqa: E402
 
@@ -204,3 +205,9 @@ def test_a_dead_autopilot_is_lost_within_3_ticks_and_the_land_command_still_goes
         drv.close()
         if witness is not None:
             witness.close()
+
+
+def test_without_pymavlink_the_factory_names_the_extra_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pymavlink", None)  # as if not installed
+    with pytest.raises(MissingExtraError, match=r"pip install 'perchd\[mavlink\]'"):
+        open_driver("mavlink:udpout:127.0.0.1:14550?mass=1", Runtime.real())
