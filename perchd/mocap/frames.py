@@ -32,11 +32,11 @@ def to_world(p: Vec3, q: Quat, up: UpAxis) -> tuple[Vec3, Quat]:
     """Position [m] and quaternion (x, y, z, w) from the mocap axes to the world frame."""
     if up is UpAxis.Z:
         return p, q
-    return (p[0], -p[2], p[1]), (q[0], -q[2], q[1], q[3])
+    return (p[0], 0.0 - p[2], p[1]), (q[0], 0.0 - q[2], q[1], q[3])  # 0.0 - x: no -0.0
 
 
 def from_world(p: Vec3, q: Quat, up: UpAxis) -> tuple[Vec3, Quat]:
     """The inverse of to_world: what a mocap system with `up` axes would stream."""
     if up is UpAxis.Z:
         return p, q
-    return (p[0], p[2], -p[1]), (q[0], q[2], -q[1], q[3])
+    return (p[0], p[2], 0.0 - p[1]), (q[0], q[2], 0.0 - q[1], q[3])

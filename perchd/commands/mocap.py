@@ -1,0 +1,73 @@
+"""`perchd mocap URI [--count N] [--json]`: print poses as they arrive, to check the mocap
+before flying. With --json, one object per line: body, seq, t, p, q, valid, latency."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from perchd.errors import LinkError
+from perchd.types import Pose
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "mocap", help="print the poses a mocap source delivers",
+        description="Print poses as they arrive, e.g. natnet://10.0.0.5?body=cf1 or "
+                    "zmq://127.0.0.1:5555?body=cf1.")
+    parser.add_argument("uri", help="mocap source URI")
+    parser.add_argument("--count", type=_positive_int, default=None,
+                        help="stop after N poses (default: until interrupted)")
+    parser.add_argument("--json", action="store_true", help="one JSON object per pose")
+    parser.add_argument("--timeout", type=float, default=5.0,
+                        help="[s] give up when no pose arrives for this long (default 5)")
+    parser.set_defaults(run=run)
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--count must be at least 1, got {value}")
+    return value
+
+
+def pose_json(pose: Pose) -> str:
+    return json.dumps({"body": pose.body, "seq": pose.seq, "t": pose.t, "p": list(pose.p),
+                       "q": list(pose.q), "valid": pose.valid, "latency": pose.latency})
+
+
+def pose_line(pose: Pose) -> str:
+    p = " ".join(f"{v:+.4f}" for v in pose.p)
+    q = " ".join(f"{v:+.4f}" for v in pose.q)
+    state = "valid" if pose.valid else "NOT TRACKED"
+    return (f"{pose.body} #{pose.seq} t={pose.t:.4f} s  p=[{p}] m  q=[{q}]  {state}  "
+            f"latency {pose.latency * 1000:.2f} ms")
+
+
+def run(args: argparse.Namespace) -> int:
+    from perchd.mocap.base import open_source
+    from perchd.runtime import Runtime
+
+    source = open_source(args.uri, Runtime.real())
+    source.start()
+    shown, seq = 0, -(2 ** 63)
+    try:
+        while args.count is None or shown < args.count:
+            pose = source.wait(seq, args.timeout)
+            if pose is None:
+                raise LinkError(f"no pose from {args.uri} within {args.timeout:g} s "
+                                f"({_summary(source)})")
+            if pose.seq < seq:  # the sender restarted its numbering
+                seq = pose.seq
+            print(pose_json(pose) if args.json else pose_line(pose), flush=True)
+            shown, seq = shown + 1, pose.seq
+    finally:
+        print(f"perchd mocap: {_summary(source)}", file=sys.stderr)
+        source.close()
+    return 0
+
+
+def _summary(source) -> str:
+    stats = source.stats()
+    return f"{stats.received} received, {stats.poses} poses, {stats.dropped} dropped"
