@@ -244,8 +244,6 @@ class NatNetSource:
                 self._on_echo(payload, arrival)
             elif message_id == proto.NAT_MODELDEF:
                 self.models = proto.decode_model_defs(payload, self.version)
-            elif message_id not in _HARMLESS:
-                self._stream.drop(Drop.GARBAGE, f"unknown message id {message_id}")
         except Truncated as err:
             self._stream.drop(Drop.TRUNCATED, str(err))
         except proto.Oversized as err:
@@ -268,8 +266,8 @@ class NatNetSource:
 
     def _latency(self, timing: Timing, arrival: float) -> float:
         exposure, transmit = timing.camera_mid_exposure, timing.transmit
-        if exposure is None or transmit is None or self._sync is None:
-            return 0.0
+        if not exposure or transmit is None or self._sync is None:
+            return 0.0  # no stamps (NatNet 2.x, or a server that leaves them 0)
         in_server = max(0.0, (transmit - exposure) / self._sync.clock_hz)
         if not self._sync.synced:
             return in_server
@@ -299,6 +297,3 @@ class NatNetSource:
         if self._command is not None:
             self._command.sendto(packet, self._server)
 
-
-_HARMLESS = {proto.NAT_SERVERINFO, proto.NAT_RESPONSE, proto.NAT_MESSAGESTRING,
-             proto.NAT_UNRECOGNIZED_REQUEST, proto.NAT_KEEPALIVE}

@@ -32,6 +32,7 @@ NAT_ECHORESPONSE = 13
 NAT_DISCOVERY = 14
 NAT_UNRECOGNIZED_REQUEST = 100
 
+KNOWN_IDS = frozenset(range(15)) | {NAT_UNRECOGNIZED_REQUEST}
 MAX_PACKET = 65_535 + 4  # the u16 length field bounds every payload
 SENDER_NAME_BYTES = 256
 DEFAULT_COMMAND_PORT = 1510
@@ -54,10 +55,13 @@ def pack(message_id: int, payload: bytes = b"") -> bytes:
 
 
 def unpack(datagram: bytes) -> tuple[int, bytes]:
-    """(message id, payload); Truncated or Oversized when the length field disagrees."""
+    """(message id, payload). MalformedPacket for no header or an unknown message id,
+    Truncated or Oversized when the length field disagrees with the datagram."""
     if len(datagram) < 4:
-        raise Truncated(f"datagram of {len(datagram)} bytes has no NatNet header")
+        raise MalformedPacket(f"datagram of {len(datagram)} bytes has no NatNet header")
     message_id, size = _HEADER.unpack_from(datagram)
+    if message_id not in KNOWN_IDS:
+        raise MalformedPacket(f"unknown message id {message_id}")
     if len(datagram) - 4 < size:
         raise Truncated(f"header says {size} payload bytes, datagram has {len(datagram) - 4}")
     if len(datagram) - 4 > size:

@@ -73,6 +73,7 @@ class NatNetServer:
                                   socket.inet_aton(host))
             self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
         self.frames_sent = 0
+        self.keepalives = 0
 
     # ------------------------------------------------------------ public API
 
@@ -87,11 +88,13 @@ class NatNetServer:
     @property
     def uri(self) -> str:
         """A natnet:// URI a perchd client can open (add &body=NAME). NatNet 2.x server info
-        does not announce the multicast group and data port, so the URI carries them."""
+        does not announce the transport, group and data port, so the URI carries them."""
         uri = f"natnet://{self.host}:{self.command_port}?local={self.host}"
-        if self.multicast and self.version < (3, 0):
-            uri += f"&multicast={self.group}&data_port={self.data_port}"
-        return uri
+        if self.version >= (3, 0):
+            return uri
+        if self.multicast:
+            return uri + f"&multicast={self.group}&data_port={self.data_port}"
+        return uri + "&transport=unicast"
 
     def start(self) -> "NatNetServer":
         self._spawn(self._serve_commands, "natnet-server-cmd")
@@ -242,6 +245,8 @@ class NatNetServer:
         if message_id == proto.NAT_DISCONNECT:
             with self._lock:
                 self._clients.pop(address, None)
+        if message_id == proto.NAT_KEEPALIVE:
+            self.keepalives += 1
         if message_id in (proto.NAT_KEEPALIVE, proto.NAT_DISCONNECT):
             return None
         return proto.pack(proto.NAT_UNRECOGNIZED_REQUEST)
