@@ -10,6 +10,7 @@ subscribers come and go: connect() waits up to `wait` seconds for one to subscri
 from __future__ import annotations
 
 import json
+import math
 import time
 from typing import Any
 
@@ -17,7 +18,7 @@ from perchd.drivers.base import DriverBase, LinkHealth
 from perchd.drivers.uriparams import bool_param, float_param
 from perchd.errors import LinkError, UriError
 from perchd.runtime import Runtime
-from perchd.types import EndReason, Setpoint
+from perchd.types import EndReason, Phase, Setpoint
 from perchd.uri import Uri
 
 SETPOINT, STOP = b"setpoint", b"stop"
@@ -38,6 +39,36 @@ def setpoint_message(vehicle: str, seq: int, sp: Setpoint) -> dict[str, Any]:
     return {"vehicle": vehicle, "seq": seq, "t": sp.t, "pose_seq": sp.pose_seq,
             "roll": sp.roll, "pitch": sp.pitch, "yaw": sp.yaw, "thrust": sp.thrust,
             "phase": sp.phase.value}
+
+
+class BadSetpoint(ValueError):
+    """A setpoint message that does not follow CONTRACTS 3; the message names the field."""
+
+
+def parse_setpoint_message(body: bytes) -> tuple[str, int, Setpoint]:
+    """(vehicle, seq, Setpoint) from a `setpoint` body, the receiving end of setpoint_message."""
+    try:
+        msg = json.loads(body)
+    except (ValueError, UnicodeDecodeError) as err:
+        raise BadSetpoint(f"setpoint message is not JSON: {err}") from None
+    if not isinstance(msg, dict):
+        raise BadSetpoint("setpoint message is not a JSON object")
+    values = {}
+    for key in ("t", "roll", "pitch", "yaw", "thrust"):
+        v = msg.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise BadSetpoint(f"setpoint field {key!r} must be a finite number, got {v!r}")
+        values[key] = float(v)
+    try:
+        phase = Phase(msg.get("phase", Phase.STAGE1.value))
+    except ValueError:
+        raise BadSetpoint(f"setpoint field 'phase' is not a phase: {msg.get('phase')!r}") from None
+    seq, pose_seq = msg.get("seq", -1), msg.get("pose_seq", -1)
+    if not isinstance(seq, int) or not isinstance(pose_seq, int):
+        raise BadSetpoint("setpoint fields 'seq' and 'pose_seq' must be integers")
+    sp = Setpoint(values["t"], values["roll"], values["pitch"], values["yaw"], values["thrust"],
+                  pose_seq, phase)
+    return str(msg.get("vehicle", "")), seq, sp
 
 
 class ZmqSetpointDriver(DriverBase):

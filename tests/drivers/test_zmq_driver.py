@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from ticks import level, ticks_until_lost
 from zmq_subscriber import SetpointSubscriber
 from perchd.drivers.base import open_driver
+from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, setpoint_message
 from perchd.errors import LinkError, UriError
 from perchd.runtime import Runtime
 from perchd.types import EndReason, Phase, Setpoint
@@ -70,3 +73,21 @@ def test_a_subscriber_that_dies_mid_flight_is_lost_within_3_ticks(sub):
         assert "no subscriber" in drv.health().detail
     finally:
         drv.close()
+
+
+def test_the_receiving_end_reads_back_exactly_what_the_driver_sent():
+    sp = Setpoint(3.5, 0.1, -0.2, 0.3, 0.27, 17, Phase.STAGE2)
+    body = json.dumps(setpoint_message("cf1", 9, sp)).encode()
+    assert parse_setpoint_message(body) == ("cf1", 9, sp)
+
+
+@pytest.mark.parametrize("body, field", [
+    (b"{", "not JSON"),
+    (b"[1]", "not a JSON object"),
+    (b'{"t": 0, "roll": "x", "pitch": 0, "yaw": 0, "thrust": 0}', "'roll' must be a finite number"),
+    (b'{"t": 0, "roll": 0, "pitch": 0, "yaw": 0, "thrust": NaN}', "'thrust' must be a finite"),
+    (b'{"t": 0, "roll": 0, "pitch": 0, "yaw": 0, "thrust": 0, "phase": "up"}', "'phase'"),
+])
+def test_a_malformed_setpoint_is_refused_naming_the_field(body, field):
+    with pytest.raises(BadSetpoint, match=field):
+        parse_setpoint_message(body)
