@@ -54,9 +54,10 @@ def pack(message_id: int, payload: bytes = b"") -> bytes:
     return _HEADER.pack(message_id, len(payload)) + payload
 
 
-def unpack(datagram: bytes) -> tuple[int, bytes]:
+def unpack(datagram: bytes, strict: bool = True) -> tuple[int, bytes]:
     """(message id, payload). MalformedPacket for no header or an unknown message id,
-    Truncated or Oversized when the length field disagrees with the datagram."""
+    Truncated or Oversized when the length field disagrees with the datagram. Not `strict`,
+    bytes past the stated length are ignored (NatNet clients pad requests with a NUL)."""
     if len(datagram) < 4:
         raise MalformedPacket(f"datagram of {len(datagram)} bytes has no NatNet header")
     message_id, size = _HEADER.unpack_from(datagram)
@@ -64,9 +65,9 @@ def unpack(datagram: bytes) -> tuple[int, bytes]:
         raise MalformedPacket(f"unknown message id {message_id}")
     if len(datagram) - 4 < size:
         raise Truncated(f"header says {size} payload bytes, datagram has {len(datagram) - 4}")
-    if len(datagram) - 4 > size:
+    if len(datagram) - 4 > size and strict:
         raise Oversized(f"header says {size} payload bytes, datagram has {len(datagram) - 4}")
-    return message_id, datagram[4:]
+    return message_id, datagram[4:4 + size]
 
 
 # ---------------------------------------------------------------- server info

@@ -163,6 +163,8 @@ class NatNetServer:
 
     def _bind(self, port: int) -> socket.socket:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # clients on this host bind the data port too (OptiTrack's own client does)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind((self.host, port))
         return sock
 
@@ -219,7 +221,7 @@ class NatNetServer:
     def _answer(self, datagram: bytes, address: tuple[str, int]) -> None:
         arrival_ticks = self.ticks(self._clock.now())
         try:
-            message_id, payload = proto.unpack(datagram)
+            message_id, payload = proto.unpack(datagram, strict=False)
         except MalformedPacket:
             return
         reply = self._reply(message_id, payload, address, arrival_ticks)

@@ -1,0 +1,68 @@
+"""OptiTrack's own Python NatNet client (NatNet SDK 4.1, on PyPI as `natnetsdk`) talks to the
+emulator: server info, model definitions, frames and keep-alives, in unicast on loopback.
+
+Its multicast data socket binds the interface address, which on Linux receives no multicast,
+so multicast interoperability is left to perchd's own client (tested on loopback). Its
+NatNet 4.0 reader expects the 4.1 precision timestamp; OptiTrack's C++ PacketClient and the
+4.1 notes put that in 4.1+, as the emulator does, so 4.0 is not tried with it here.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from perchd.clock import MonotonicClock
+from perchd.mocap.natnet import NatNetServer
+from perchd.types import Pose
+
+natnetsdk = pytest.importorskip("natnetsdk.NatNetClient")
+
+
+def stop(client) -> None:
+    """Its receive threads block in recvfrom; wake them before its shutdown joins them."""
+    client.stop_threads = True
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as waker:
+        for sock in (client.data_socket, client.command_socket):
+            waker.sendto(b"\0\0\0\0", ("127.0.0.1", sock.getsockname()[1]))
+    client.shutdown()
+
+
+@pytest.mark.parametrize("version", [(3, 0), (4, 1)], ids=["3.0", "4.1"])
+def test_optitracks_client_reads_the_emulator(version, capsys):
+    clock = MonotonicClock()
+    server = NatNetServer({"cf1": 1, "wand": 2}, version, rate_hz=100.0).start()
+    server.publish(Pose("cf1", 0, clock.now(), (0.5, 1.0, 1.5), (0.0, 0.0, 0.0, 1.0)))
+    bodies, frames, printed = [], [], []
+    client = natnetsdk.NatNetClient()
+    client.set_client_address("127.0.0.1")
+    client.set_server_address("127.0.0.1")
+    client.set_use_multicast(False)
+    client.command_port = server.command_port
+    client.set_print_level(10 ** 9)  # quiet frames, but print the model definitions
+    client.rigid_body_listener = lambda body_id, p, q: bodies.append((body_id, p, q))
+    client.new_frame_listener = frames.append
+    try:
+        assert client.run()
+        _until(lambda: len(frames) >= 5)
+        client.send_request(client.command_socket, client.NAT_REQUEST_MODELDEF, "",
+                            ("127.0.0.1", server.command_port))
+        _until(lambda: printed.append(capsys.readouterr().out) or "cf1" in "".join(printed))
+    finally:
+        stop(client)
+        server.close()
+    assert client.connected() and client.get_application_name() == "Motive"
+    assert client.get_nat_net_version_server()[:2] == list(version)
+    assert bodies[-1] == (1, pytest.approx((0.5, 1.5, -1.0)), (0.0, 0.0, 0.0, 1.0))  # Y up
+    numbers = [f["frame_number"] for f in frames]
+    assert numbers == sorted(set(numbers)) and all(f["rigid_body_count"] == 1 for f in frames)
+    assert "wand" in "".join(printed) and server.keepalives > 0
+
+
+def _until(condition, timeout: float = 3.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.02)
