@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ipaddress
 
+from perchd.drivers.uriparams import float_param
 from perchd.errors import UriError
 from perchd.mocap.frames import UpAxis
 from perchd.mocap.natnet_client import NatNetConfig, NatNetSource
@@ -54,23 +55,17 @@ def config_from_uri(uri: Uri) -> NatNetConfig:
     return NatNetConfig(
         server=uri.host, body=body, command_port=uri.port or DEFAULT_COMMAND_PORT,
         transport=transport, multicast_group=group,
-        data_port=_number(uri, "data_port", int, 1, 65535),
+        data_port=_port(uri, "data_port"),
         local=local, up=UpAxis.parse(uri.param("up", "y") or "y", where),
-        connect_timeout_s=_number(uri, "timeout", float, 0.05, 60.0) or 2.0,
-        limits=PoseLimits(max_age_s=_number(uri, "max_age", float, 0.001, 10.0) or 0.5))
+        connect_timeout_s=float_param(uri, "timeout", 2.0, 0.05, 60.0, " s"),
+        limits=PoseLimits(max_age_s=float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")))
 
 
-def _number(uri: Uri, key: str, kind: type, low: float, high: float):
-    text = uri.param(key)
-    if text is None:
-        return None
-    try:
-        value = kind(text)
-    except ValueError:
-        raise UriError(f"{uri.raw}: {key}={text!r} is not a {kind.__name__}") from None
-    if not low <= value <= high:
-        raise UriError(f"{uri.raw}: {key}={value} outside {low}..{high}")
-    return value
+def _port(uri: Uri, key: str) -> int | None:
+    value = float_param(uri, key, None, 1, 65535)
+    if value is not None and value != int(value):
+        raise UriError(f"{uri.raw}: {key}={value:g} is not a whole port number")
+    return None if value is None else int(value)
 
 
 def _check_address(text: str, key: str, where: str, multicast: bool = False) -> None:

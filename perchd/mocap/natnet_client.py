@@ -17,19 +17,18 @@ from __future__ import annotations
 import logging
 import select
 import socket
-import threading
 import time
 from dataclasses import dataclass, field
 
 from perchd.clock import Clock
 from perchd.errors import LinkError, UriError
 from perchd.mocap import natnet_protocol as proto
-from perchd.mocap.base import SourceStats
 from perchd.mocap.frames import UpAxis, to_world
 from perchd.mocap.natnet_clock import ClockSync
 from perchd.mocap.natnet_frame import Frame, Timing, decode_frame
 from perchd.mocap.natnet_wire import MalformedPacket, Truncated
-from perchd.mocap.stream import Drop, DropCounts, PoseLimits, PoseStream, RateLimitedWarning
+from perchd.mocap.stream import (
+    Drop, PoseLimits, PoseStream, RateLimitedWarning, ThreadedSource)
 from perchd.types import Pose
 
 log = logging.getLogger("perchd.mocap.natnet")
@@ -62,10 +61,11 @@ class NatNetConfig:
     limits: PoseLimits = field(default_factory=PoseLimits)
 
 
-class NatNetSource:
+class NatNetSource(ThreadedSource):
     """PoseSource over NatNet; see the module docstring for the protocol steps."""
 
     def __init__(self, config: NatNetConfig, clock: Clock) -> None:
+        super().__init__()
         self.config = config
         self.body = config.body
         self._clock = clock
@@ -74,8 +74,6 @@ class NatNetSource:
         self._server = (config.server, config.command_port)
         self._command: socket.socket | None = None
         self._data: socket.socket | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
         self.info: proto.ServerInfo | None = None
         self.models = proto.ModelDefs()
         self.multicast = True
@@ -98,26 +96,10 @@ class NatNetSource:
         except (LinkError, UriError):
             self.close()
             raise
-        self._thread = threading.Thread(target=self._run, name="natnet-rx", daemon=True)
-        self._thread.start()
-
-    def latest(self) -> Pose | None:
-        return self._stream.latest()
-
-    def wait(self, after_seq: int, timeout: float) -> Pose | None:
-        return self._stream.wait(after_seq, timeout)
-
-    def stats(self) -> SourceStats:
-        return self._stream.stats()
-
-    def drops(self) -> DropCounts:
-        return self._stream.drops()
+        self._start_thread("natnet-rx")
 
     def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        self._stop_thread()
         for sock in (self._command, self._data):
             if sock is not None:
                 sock.close()

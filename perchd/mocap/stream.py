@@ -188,3 +188,41 @@ class PoseStream:
     def drops(self) -> DropCounts:
         with self._cond:
             return DropCounts(*(self._drops[reason] for reason in Drop))
+
+
+class ThreadedSource:
+    """The PoseSource half both socket sources share: reads go to the PoseStream, and one
+    receive thread runs `_run` until `_stop` is set."""
+
+    body: str
+    _stream: PoseStream
+
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def latest(self) -> Pose | None:
+        return self._stream.latest()
+
+    def wait(self, after_seq: int, timeout: float) -> Pose | None:
+        return self._stream.wait(after_seq, timeout)
+
+    def stats(self) -> SourceStats:
+        return self._stream.stats()
+
+    def drops(self) -> DropCounts:
+        return self._stream.drops()
+
+    def _run(self) -> None:
+        raise NotImplementedError
+
+    def _start_thread(self, name: str) -> None:
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def _stop_thread(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None

@@ -1,6 +1,6 @@
 """`zmq://` pose source and the pose publisher (CONTRACTS 3, topic `pose`).
 
-    zmq://HOST:PORT?body=NAME[&bind=0|1][&clock=local|remote][&max_age=0.5]
+    zmq://HOST:PORT?body=NAME[&bind=1][&clock=local|remote][&max_age=0.5]
 
 Messages are multipart `[b"pose", JSON]` with body, seq, t, p (world, Z up, metres),
 q (x, y, z, w) and valid. The source SUBscribes, by default connecting to a publisher that
@@ -26,9 +26,10 @@ import time
 from typing import Any
 
 from perchd.clock import Clock
+from perchd.drivers.uriparams import bool_param, float_param
 from perchd.errors import LinkError, UriError
-from perchd.mocap.base import SourceStats
-from perchd.mocap.stream import Drop, DropCounts, PoseLimits, PoseStream, RateLimitedWarning
+from perchd.mocap.stream import (
+    Drop, PoseLimits, PoseStream, RateLimitedWarning, ThreadedSource)
 from perchd.runtime import Runtime
 from perchd.types import Pose
 from perchd.uri import Uri
@@ -55,23 +56,10 @@ def open_zmq(uri: Uri, runtime: Runtime) -> "ZmqPoseSource":
     clock = uri.param("clock", "local")
     if clock not in ("local", "remote"):
         raise UriError(f"{uri.raw}: clock={clock!r} must be local or remote")
-    bind = uri.param("bind", "0")
-    if bind not in ("0", "1"):
-        raise UriError(f"{uri.raw}: bind={bind!r} must be 0 or 1")
+    max_age = float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")
     return ZmqPoseSource(f"tcp://{uri.host}:{uri.port}", body, runtime.clock,
-                         bind=bind == "1", local_clock=clock == "local",
-                         limits=PoseLimits(max_age_s=_max_age(uri)), name=uri.raw)
-
-
-def _max_age(uri: Uri) -> float:
-    text = uri.param("max_age", "0.5") or "0.5"
-    try:
-        value = float(text)
-    except ValueError:
-        raise UriError(f"{uri.raw}: max_age={text!r} is not a number of seconds") from None
-    if not 0.001 <= value <= 10.0:
-        raise UriError(f"{uri.raw}: max_age={value} s outside 0.001..10 s")
-    return value
+                         bind=bool_param(uri, "bind"), local_clock=clock == "local",
+                         limits=PoseLimits(max_age_s=max_age), name=uri.raw)
 
 
 # ---------------------------------------------------------------- message codec
@@ -119,12 +107,13 @@ def _vector(msg: dict, key: str, n: int) -> tuple[float, ...]:
 
 # ---------------------------------------------------------------- source
 
-class ZmqPoseSource:
+class ZmqPoseSource(ThreadedSource):
     """PoseSource over a ZMQ SUB socket; a thread receives, validates and publishes."""
 
     def __init__(self, endpoint: str, body: str, clock: Clock, *, bind: bool = False,
                  local_clock: bool = True, limits: PoseLimits | None = None,
                  name: str = "") -> None:
+        super().__init__()
         self.body = body
         self.endpoint = endpoint
         self._clock = clock
@@ -134,8 +123,6 @@ class ZmqPoseSource:
         self._stream = PoseStream(body, limits or PoseLimits(),
                                   RateLimitedWarning(log, self._name))
         self._sock: Any = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
 
     def start(self) -> None:
         import zmq  # a core dependency, imported late to keep `perchd --help` fast
@@ -148,27 +135,10 @@ class ZmqPoseSource:
             sock.close(0)
             raise LinkError(f"{self._name}: cannot open {self.endpoint}: {err}") from None
         self._sock = sock
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="zmq-pose-rx", daemon=True)
-        self._thread.start()
-
-    def latest(self) -> Pose | None:
-        return self._stream.latest()
-
-    def wait(self, after_seq: int, timeout: float) -> Pose | None:
-        return self._stream.wait(after_seq, timeout)
-
-    def stats(self) -> SourceStats:
-        return self._stream.stats()
-
-    def drops(self) -> DropCounts:
-        return self._stream.drops()
+        self._start_thread("zmq-pose-rx")
 
     def close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        self._stop_thread()
         if self._sock is not None:
             self._sock.close(0)
             self._sock = None

@@ -7,13 +7,14 @@ import logging
 import math
 import struct
 import time
+from dataclasses import replace
 
 import pytest
 
 from perchd.clock import ManualClock
 from perchd.errors import LinkError, UriError
 from perchd.mocap import natnet_protocol as proto
-from perchd.mocap.natnet import NatNetServer, config_from_uri, open_natnet
+from perchd.mocap.natnet import NatNetServer, NatNetSource, config_from_uri, open_natnet
 from perchd.mocap.natnet_frame import Frame, RigidBodySample, Timing, encode_frame
 from perchd.runtime import Runtime
 from perchd.types import Pose
@@ -89,12 +90,14 @@ def test_latency_on_the_real_clock_adds_the_transit_to_the_servers_delay():
 
 def test_a_unicast_client_keeps_its_place_with_keepalives():
     server = serve((4, 1))
-    source = connect(server, Runtime.real())
+    config = replace(config_from_uri(parse_uri(server.uri + "&body=cf1")), keepalive_s=0.02)
+    source = NatNetSource(config, Runtime.real().clock)
+    source.start()
     try:
         deadline = time.monotonic() + 3.0
-        while server.keepalives < 2 and time.monotonic() < deadline:
+        while server.keepalives < 3 and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert server.keepalives >= 2 and len(server.clients) == 1
+        assert server.keepalives >= 3 and len(server.clients) == 1
     finally:
         source.close()
         server.close()
@@ -136,8 +139,9 @@ def test_no_server_is_a_link_error_within_the_timeout():
     ("body=cf1&transport=tcp", "transport='tcp'"),
     ("body=cf1&multicast=10.0.0.1", "not a multicast address"),
     ("body=cf1&local=nowhere", "local='nowhere'"),
-    ("body=cf1&data_port=70000", "data_port=70000 outside"),
-    ("body=cf1&timeout=abc", "timeout='abc' is not a float"),
+    ("body=cf1&data_port=70000", "data_port=70000 is outside"),
+    ("body=cf1&data_port=1511.5", "not a whole port"),
+    ("body=cf1&timeout=abc", "timeout='abc' is not a number"),
     ("body=cf1&bodyy=cf1", "unknown parameter 'bodyy'"),
 ])
 def test_bad_natnet_uris_get_one_clear_line(query, message):
