@@ -33,6 +33,8 @@ from perchd.types import Pose
 
 log = logging.getLogger("perchd.mocap.natnet")
 
+MODELS_CHANGED = 0x02  # frame params bit: Motive's list of tracked models changed
+
 
 @dataclass(frozen=True)
 class NatNetConfig:
@@ -79,7 +81,8 @@ class NatNetSource(ThreadedSource):
         self.multicast = True
         self._body_id: int | None = int(config.body) if config.body.isdigit() else None
         self._sync: ClockSync | None = None
-        self._next_keepalive = self._next_echo = 0.0
+        self._next_keepalive = self._next_echo = self._next_models = 0.0
+        self._want_models = False
 
     # ------------------------------------------------------------ PoseSource
 
@@ -225,7 +228,7 @@ class NatNetSource(ThreadedSource):
             elif message_id == proto.NAT_ECHORESPONSE:
                 self._on_echo(payload, arrival)
             elif message_id == proto.NAT_MODELDEF:
-                self.models = proto.decode_model_defs(payload, self.version)
+                self._on_models(proto.decode_model_defs(payload, self.version))
         except Truncated as err:
             self._stream.drop(Drop.TRUNCATED, str(err))
         except proto.Oversized as err:
@@ -235,7 +238,23 @@ class NatNetSource(ThreadedSource):
         except Exception as err:  # noqa: BLE001 - the receive loop must survive anything
             self._stream.drop(Drop.GARBAGE, f"{type(err).__name__}: {err}")
 
+    def _on_models(self, models: proto.ModelDefs) -> None:
+        """New definitions (asked for after Motive flagged a change): follow the body's id."""
+        self.models = models
+        self._want_models = False
+        new_id = models.body_ids().get(self.config.body)
+        if new_id is not None and new_id != self._body_id:
+            log.warning("natnet %s: rigid body %r is now id %d (was %s)", self.config.server,
+                        self.config.body, new_id, self._body_id)
+            self._body_id = new_id
+
     def _on_frame(self, frame: Frame, arrival: float) -> None:
+        if frame.params & MODELS_CHANGED and not self.config.body.isdigit():
+            self._want_models = True  # ids may have moved: no pose until the names are known
+        if self._want_models:
+            self._stream.drop(Drop.NO_BODY, f"frame {frame.number}: awaiting the new model "
+                                            "definitions Motive announced")
+            return
         sample = next((b for b in frame.rigid_bodies if b.id == self._body_id), None)
         if sample is None:
             self._stream.drop(Drop.NO_BODY, f"frame {frame.number} has no rigid body "
@@ -265,8 +284,8 @@ class NatNetSource(ThreadedSource):
         return proto.echo_request(self._sync.request(self._clock.now()))
 
     def _housekeeping(self) -> None:
-        """Keep-alive (unicast) and clock-sync echoes, paced in wall time: they serve the
-        network, not the flight."""
+        """Keep-alive (unicast), clock-sync echoes and model-definition refreshes, paced in
+        wall time: they serve the network, not the flight."""
         now = time.monotonic()
         if not self.multicast and now >= self._next_keepalive:
             self._send(proto.pack(proto.NAT_KEEPALIVE))
@@ -274,6 +293,9 @@ class NatNetSource(ThreadedSource):
         if self._sync is not None and now >= self._next_echo:
             self._send(self._echo_packet())
             self._next_echo = now + self.config.sync_interval_s
+        if self._want_models and now >= self._next_models:
+            self._send(proto.pack(proto.NAT_REQUEST_MODELDEF))
+            self._next_models = now + 0.5
 
     def _send(self, packet: bytes) -> None:
         if self._command is not None:

@@ -64,6 +64,7 @@ class NatNetServer:
         self._latest: dict[int, tuple[RigidBodySample, float, float]] = {}
         self._clients: dict[tuple[str, int], float] = {}
         self._frame_number = 0
+        self._models_changed = False
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._command = self._bind(command_port)
@@ -114,6 +115,14 @@ class NatNetServer:
         if not self.rate_hz:
             self.send_frame()
 
+    def redefine(self, bodies: dict[str, int]) -> None:
+        """Change the rigid bodies (as when a Motive user edits assets); the next frame
+        carries the "tracked models changed" flag so clients ask for the new definitions."""
+        with self._lock:
+            self.bodies = dict(bodies)
+            self._latest.clear()
+            self._models_changed = True
+
     def send_frame(self) -> Frame:
         """Build a frame from the newest poses and send it to every client."""
         frame = self._next_frame()
@@ -156,7 +165,9 @@ class NatNetServer:
                                 self.data_port, self.multicast, self.group)
 
     def model_defs(self) -> proto.ModelDefs:
-        bodies = tuple(proto.RigidBodyDef(name, body_id) for name, body_id in self.bodies.items())
+        with self._lock:
+            named = list(self.bodies.items())
+        bodies = tuple(proto.RigidBodyDef(name, body_id) for name, body_id in named)
         return proto.ModelDefs((("all", ()),), bodies)
 
     # ------------------------------------------------------------ internals
@@ -179,6 +190,7 @@ class NatNetServer:
             self._frame_number += 1
             number = self._frame_number
             latest = sorted(self._latest.items())
+            params, self._models_changed = (0x02 if self._models_changed else 0), False
         bodies = tuple(sample for _, (sample, _, _) in latest)
         measured = max((t for _, (_, t, _) in latest), default=now)
         received = max((r for _, (_, _, r) in latest), default=now)
@@ -186,7 +198,7 @@ class NatNetServer:
                         data_received=self.ticks(received), transmit=self.ticks(now))
         if self.version < (3, 0):
             timing = replace(timing, camera_mid_exposure=None, data_received=None, transmit=None)
-        return Frame(number, bodies, timing, marker_sets=(("all", ()),))
+        return Frame(number, bodies, timing, marker_sets=(("all", ()),), params=params)
 
     def _destinations(self) -> list[tuple[str, int]]:
         if self.multicast:

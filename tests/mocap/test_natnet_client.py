@@ -231,3 +231,22 @@ def test_the_emulator_answers_motives_string_requests():
     assert replies["Bitstream"][1] == b"Bitstream,4.1\0"
     assert replies["CurrentMode"] == (proto.NAT_RESPONSE, b"\0\0\0\0")
     assert replies["Nonsense"][0] == proto.NAT_UNRECOGNIZED_REQUEST
+
+
+def test_the_client_follows_its_body_when_motive_redefines_the_models():
+    runtime = Runtime.real()
+    server = serve((4, 1))
+    source = connect(server, runtime)
+    try:
+        first = collect(server, source, [Pose("cf1", 0, runtime.clock.now(), (1.0, 0.0, 0.0), LEVEL)])[0]
+        server.redefine({"wand": 1, "cf1": 7})
+        deadline, pose = time.monotonic() + 3.0, None
+        while pose is None and time.monotonic() < deadline:
+            server.publish(Pose("cf1", 0, runtime.clock.now(), (2.0, 0.0, 0.0), LEVEL))
+            pose = source.wait(first.seq, 0.05)
+    finally:
+        source.close()
+        server.close()
+    assert pose is not None and pose.p == pytest.approx((2.0, 0.0, 0.0))
+    assert source.models.body_ids() == {"wand": 1, "cf1": 7}
+    assert source.stats().dropped == source.drops().no_body  # frames held while ids moved
