@@ -91,6 +91,8 @@ class NatNetServer:
         """A natnet:// URI a perchd client can open (add &body=NAME). NatNet 2.x server info
         does not announce the transport, group and data port, so the URI carries them."""
         uri = f"natnet://{self.host}:{self.command_port}?local={self.host}"
+        if self.up is UpAxis.Z:
+            uri += "&up=z"
         if self.version >= (3, 0):
             return uri
         if self.multicast:
