@@ -11,6 +11,7 @@ size in bytes, which the decoder checks section by section.
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 
 from perchd.mocap.natnet_wire import (
@@ -155,7 +156,17 @@ def _read_marker_set(r: Reader) -> tuple[str, tuple[Vec3, ...]]:
     return name, tuple(r.vec3() for _ in range(r.count("marker")))
 
 
+_BODY = struct.Struct("<i3f4f")  # id, position, quaternion
+_BODY_TAIL = struct.Struct("<fh")  # mean error, params (2.6+)
+_MARKERS = {(3, 0): struct.Struct("<i3ffhf"), (2, 6): struct.Struct("<i3ffh"),
+            (0, 0): struct.Struct("<i3ff")}  # id, position, size[, params[, residual]]
+
+
 def _read_body(r: Reader, version: Version) -> RigidBodySample:
+    if version >= (3, 0):  # the common case in one unpack
+        i, x, y, z, qx, qy, qz, qw = r.record(_BODY)
+        error, params = r.record(_BODY_TAIL)
+        return RigidBodySample(i, (x, y, z), (qx, qy, qz, qw), error, bool(params & 0x01))
     body_id, p, q = r.i32(), r.vec3(), r.quat()
     markers: tuple = ()
     if version < (3, 0):
@@ -176,21 +187,15 @@ def _read_skeleton(r: Reader, version: Version) -> Skeleton:
 
 def _read_asset(r: Reader) -> Asset:
     asset_id = r.i32()
-    bodies = tuple(_read_asset_body(r) for _ in range(r.count("asset body")))
+    bodies = tuple(_read_body(r, (3, 0)) for _ in range(r.count("asset body")))  # same layout
     markers = tuple(_read_marker(r, (4, 1)) for _ in range(r.count("asset marker")))
     return Asset(asset_id, bodies, markers)
 
 
-def _read_asset_body(r: Reader) -> RigidBodySample:
-    body_id, p, q, error = r.i32(), r.vec3(), r.quat(), r.f32()
-    return RigidBodySample(body_id, p, q, error, bool(r.i16() & 0x01))
-
-
 def _read_marker(r: Reader, version: Version) -> LabeledMarker:
-    marker_id, p, size = r.i32(), r.vec3(), r.f32()
-    params = r.i16() if at_least(version, 2, 6) else 0
-    residual = r.f32() if at_least(version, 3, 0) else 0.0
-    return LabeledMarker(marker_id, p, size, params, residual)
+    layout = _MARKERS[(3, 0) if version >= (3, 0) else (2, 6) if version >= (2, 6) else (0, 0)]
+    marker_id, x, y, z, size, *rest = r.record(layout)
+    return LabeledMarker(marker_id, (x, y, z), size, *rest)
 
 
 def _read_device(r: Reader) -> AnalogDevice:
