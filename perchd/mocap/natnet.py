@@ -6,8 +6,8 @@
 
 PORT is Motive's command port (1510). `multicast=` names the group (and implies multicast);
 `local=` is this machine's address on the mocap network; `up=` the axis Motive streams as up.
-The pieces: natnet_wire (bounded reads), natnet_frame and natnet_protocol (the codec),
-natnet_clock (clock sync), natnet_client (the source), natnet_server (the emulator).
+The pieces: natnet_wire (bounded reads); natnet_frame, natnet_models, natnet_protocol (the
+codec); natnet_clock (clock sync); natnet_client (the source); natnet_server (the emulator).
 """
 
 from __future__ import annotations

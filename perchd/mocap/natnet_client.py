@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 from perchd.clock import Clock
 from perchd.errors import LinkError, UriError
-from perchd.mocap import natnet_protocol as proto
+from perchd.mocap import natnet_models as natdefs, natnet_protocol as proto
 from perchd.mocap.frames import UpAxis, to_world
 from perchd.mocap.natnet_clock import ClockSync
 from perchd.mocap.natnet_frame import Frame, Timing, decode_frame
@@ -77,7 +77,7 @@ class NatNetSource(ThreadedSource):
         self._command: socket.socket | None = None
         self._data: socket.socket | None = None
         self.info: proto.ServerInfo | None = None
-        self.models = proto.ModelDefs()
+        self.models = natdefs.ModelDefs()
         self.multicast = True
         self._body_id: int | None = int(config.body) if config.body.isdigit() else None
         self._sync: ClockSync | None = None
@@ -135,7 +135,7 @@ class NatNetSource(ThreadedSource):
             self._sync = ClockSync(info.clock_hz)
             self._initial_sync()
         self.info = info
-        self.models = proto.decode_model_defs(
+        self.models = natdefs.decode_model_defs(
             self._ask(proto.pack(proto.NAT_REQUEST_MODELDEF), proto.NAT_MODELDEF), info.version)
         return info
 
@@ -228,7 +228,7 @@ class NatNetSource(ThreadedSource):
             elif message_id == proto.NAT_ECHORESPONSE:
                 self._on_echo(payload, arrival)
             elif message_id == proto.NAT_MODELDEF:
-                self._on_models(proto.decode_model_defs(payload, self.version))
+                self._on_models(natdefs.decode_model_defs(payload, self.version))
         except Truncated as err:
             self._stream.drop(Drop.TRUNCATED, str(err))
         except proto.Oversized as err:
@@ -238,7 +238,7 @@ class NatNetSource(ThreadedSource):
         except Exception as err:  # noqa: BLE001 - the receive loop must survive anything
             self._stream.drop(Drop.GARBAGE, f"{type(err).__name__}: {err}")
 
-    def _on_models(self, models: proto.ModelDefs) -> None:
+    def _on_models(self, models: natdefs.ModelDefs) -> None:
         """New definitions (asked for after Motive flagged a change): follow the body's id."""
         self.models = models
         self._want_models = False

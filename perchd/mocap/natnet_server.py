@@ -30,7 +30,7 @@ import time
 from dataclasses import replace
 
 from perchd.clock import Clock, MonotonicClock
-from perchd.mocap import natnet_protocol as proto
+from perchd.mocap import natnet_models as natdefs, natnet_protocol as proto
 from perchd.mocap.frames import UpAxis, from_world
 from perchd.mocap.natnet_frame import Frame, RigidBodySample, Timing, encode_frame
 from perchd.mocap.natnet_wire import MalformedPacket, Version
@@ -166,11 +166,11 @@ class NatNetServer:
         return proto.ServerInfo(self._app[0], self._app[1], (*self.version, 0, 0), self.clock_hz,
                                 self.data_port, self.multicast, self.group)
 
-    def model_defs(self) -> proto.ModelDefs:
+    def model_defs(self) -> natdefs.ModelDefs:
         with self._lock:
             named = list(self.bodies.items())
-        bodies = tuple(proto.RigidBodyDef(name, body_id) for name, body_id in named)
-        return proto.ModelDefs((("all", ()),), bodies)
+        bodies = tuple(natdefs.RigidBodyDef(name, body_id) for name, body_id in named)
+        return natdefs.ModelDefs((("all", ()),), bodies)
 
     # ------------------------------------------------------------ internals
 
@@ -251,7 +251,7 @@ class NatNetServer:
         self._touch(address)
         if message_id == proto.NAT_REQUEST_MODELDEF:
             return proto.pack(proto.NAT_MODELDEF,
-                              proto.encode_model_defs(self.model_defs(), self.version))
+                              natdefs.encode_model_defs(self.model_defs(), self.version))
         if message_id == proto.NAT_ECHOREQUEST:
             return proto.echo_response(payload, arrival_ticks)
         if message_id == proto.NAT_REQUEST_FRAMEOFDATA:

@@ -8,7 +8,7 @@ import pytest
 
 from natnet_recordings import (
     V2X, V3, RecordedMotive, expected_rows, packet, payload, session_frames)
-from perchd.mocap import natnet_protocol as proto
+from perchd.mocap import natnet_models as natdefs, natnet_protocol as proto
 from perchd.mocap.frames import UpAxis
 from perchd.mocap.natnet_client import NatNetConfig, NatNetSource
 from perchd.mocap.natnet_frame import decode_frame, encode_frame
@@ -81,16 +81,16 @@ def test_server_info_and_model_definitions_decode():
     info = proto.decode_server_info(payload(V3 / "serverinfo_packet_v3.bin"))
     assert (info.app_name, info.app_version[:2], info.version) == ("Motive", (2, 1), (3, 0))
     assert (info.data_port, info.multicast, info.multicast_group) == (1511, True, "239.255.42.99")
-    defs = proto.decode_model_defs(payload(V3 / "modeldef_packet_v3.bin"), (3, 0))
+    defs = natdefs.decode_model_defs(payload(V3 / "modeldef_packet_v3.bin"), (3, 0))
     assert [(b.name, b.id, b.parent_id, len(b.markers)) for b in defs.rigid_bodies] == [
         ("RaceQuad", 2, -1, 5)]
     assert [name for name, _ in defs.marker_sets] == ["RaceQuad", "all"]
-    cameras = proto.decode_model_defs(payload(V3 / "modeldef_packet_v3_2.bin"), (3, 0))
+    cameras = natdefs.decode_model_defs(payload(V3 / "modeldef_packet_v3_2.bin"), (3, 0))
     assert cameras.body_ids() == {"crossbow": 54}
     assert sum(o.startswith("camera") for o in cameras.others) == 4
-    skeleton = proto.decode_model_defs(payload(V3 / "modeldef_packet_skeleton_v3.bin"), (3, 0))
+    skeleton = natdefs.decode_model_defs(payload(V3 / "modeldef_packet_skeleton_v3.bin"), (3, 0))
     assert [(n, i) for n, i, _ in skeleton.skeletons] == [("Skeleton 002", 3)]
-    v2 = proto.decode_model_defs(payload(V3 / "modeldef_packet_v2.bin"), (2, 10))
+    v2 = natdefs.decode_model_defs(payload(V3 / "modeldef_packet_v2.bin"), (2, 10))
     assert v2.body_ids() == {"RigidBody 1": 1}
     assert [(n, i) for n, i, _ in v2.skeletons] == [("Karlie", 4)]
 
@@ -98,7 +98,7 @@ def test_server_info_and_model_definitions_decode():
 def test_the_encoder_reproduces_motives_bytes():
     for name, decode, encode in [
             ("mocapframe_packet_v3.bin", decode_frame, encode_frame),
-            ("modeldef_packet_v3.bin", proto.decode_model_defs, proto.encode_model_defs)]:
+            ("modeldef_packet_v3.bin", natdefs.decode_model_defs, natdefs.encode_model_defs)]:
         body = payload(V3 / name)
         assert encode(decode(body, (3, 0)), (3, 0)) == body
 
