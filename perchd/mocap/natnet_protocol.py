@@ -1,4 +1,4 @@
-"""NatNet messages other than frames: header, server info, model definitions, requests.
+"""NatNet messages other than frames and model definitions: header, server info, requests.
 
 Every UDP payload is `u16 message id, u16 payload length`, then the payload, little endian.
 The client talks to the server's command port (1510): connect (0) -> server info (1), request
