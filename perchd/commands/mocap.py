@@ -20,7 +20,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--count", type=_positive_int, default=None,
                         help="stop after N poses (default: until interrupted)")
     parser.add_argument("--json", action="store_true", help="one JSON object per pose")
-    parser.add_argument("--timeout", type=float, default=5.0,
+    parser.add_argument("--timeout", type=_positive_float, default=5.0,
                         help="[s] give up when no pose arrives for this long (default 5)")
     parser.set_defaults(run=run)
 
@@ -29,6 +29,13 @@ def _positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"--count must be at least 1, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"--timeout must be > 0 s, got {value:g}")
     return value
 
 
