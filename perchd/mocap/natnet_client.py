@@ -212,7 +212,7 @@ class NatNetSource(ThreadedSource):
                     datagram = sock.recv(proto.MAX_PACKET + 1)
                     self.handle_datagram(datagram, self._clock.now())
                 self._housekeeping()
-            except OSError as err:  # socket closed under us or network gone
+            except (OSError, ValueError) as err:  # socket closed under us, network gone
                 if self._stop.is_set():
                     return
                 log.warning("natnet %s: receive error: %s", self.config.server, err)
