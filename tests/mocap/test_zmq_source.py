@@ -122,3 +122,20 @@ def test_bad_zmq_uris_get_one_clear_line(uri, message):
     with pytest.raises(UriError, match=message):
         open_source(uri, Runtime.real())
 
+
+
+def test_a_source_can_bind_and_the_publisher_connect():
+    runtime = Runtime.real()
+    probe = ZmqPosePublisher()  # find a free port, then hand it to the binding source
+    port = probe.endpoint.rsplit(":", 1)[1]
+    probe.close()
+    source = open_source(f"zmq://127.0.0.1:{port}?body=cf1&bind=1", runtime)
+    source.start()
+    publisher = ZmqPosePublisher(f"tcp://127.0.0.1:{port}", bind=False)
+    try:
+        assert publisher.wait_for_subscriber(2.0)
+        publisher.publish(Pose("cf1", 1, runtime.clock.now(), (0.0, 0.0, 1.0), LEVEL))
+        assert source.wait(-1, 2.0).p == (0.0, 0.0, 1.0)
+    finally:
+        publisher.close()
+        source.close()
