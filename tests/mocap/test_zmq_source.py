@@ -36,7 +36,7 @@ def test_poses_arrive_as_sent_with_their_latency(link):
     publisher.publish(sent)
     got = source.wait(-1, 2.0)
     assert (got.body, got.seq, got.p, got.q, got.valid) == ("cf1", 17, sent.p, sent.q, False)
-    assert 0.010 <= got.latency < 0.060 and got.t == pytest.approx(sent.t, abs=1e-9)
+    assert 0.010 <= got.latency < 0.25 and got.t == pytest.approx(sent.t, abs=1e-9)
 
 
 def test_the_message_is_the_contract_json():
