@@ -1,0 +1,243 @@
+"""Robust IPTS: one k_1..k_n for a whole box of trigger states, found then certified.
+
+Search (sampled, never trusted on its own):
+  * For a fixed k every limit is, per k_0 = v0/x0, an interval [L(k_0), U(k_0)] of
+    admissible |x0| (see perchd.tau.certify).  `admissible` samples it on a k_0 grid.
+  * `largest_box` runs differential evolution over k; each k is scored by the largest
+    axis-aligned box inside {(|x0|, v0): L(-v0/|x0|) <= |x0| <= U(-v0/|x0|)} on a grid,
+    then polishes box and k together (Nelder-Mead, box boundary sampled: limits are
+    linear in |x0| along each ray v0/x0 = const, so the boundary of a box decides it).
+  * `fastest_k` minimises the worst-case duration t_s(k_max) + |tau_s| over the box
+    (t_s is nondecreasing in k_0, so the worst state is the box's largest k_0).
+Every result is then shrunk about its centre until `certify_box` proves it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from perchd.errors import PlanError
+from perchd.tau.certify import Box, Certificate, certify_box, first_switch, scale_functions
+
+T_SAMPLES = 97          # time samples per trajectory in the search (certifier bounds between)
+SEARCH_MARGIN = 2e-3    # relative slack the search keeps from every limit
+
+
+@dataclass(frozen=True)
+class RobustLimits:
+    """tau_s [s] < 0, v_contact (V_l, V_u) [m/s], v_max [m/s], a_max [m/s^2]."""
+
+    tau_s: float
+    v_contact: tuple[float, float]
+    v_max: float
+    a_max: float
+
+    def certify(self, k, box: Box) -> Certificate:
+        return certify_box(k, box, self.v_contact, self.v_max, self.a_max, self.tau_s)
+
+
+@dataclass(frozen=True)
+class RobustResult:
+    """k = (k_1..k_n), its certified box and certificate."""
+
+    k: tuple[float, ...]
+    box: Box
+    certificate: Certificate
+
+
+def admissible(k, k0s: np.ndarray, lim: RobustLimits, margin: float = SEARCH_MARGIN):
+    """Sampled (L, U) [m] of admissible |x0| for each k_0 (nan where tau misses tau_s)."""
+    k = np.asarray(k, float)
+    lo, hi = np.full(len(k0s), np.nan), np.full(len(k0s), np.nan)
+    u = np.linspace(0.0, 1.0, T_SAMPLES)
+    for j, k0 in enumerate(k0s):
+        ts, _ = first_switch(k, k0, lim.tau_s)
+        if ts is None:
+            continue
+        _, f1, f2 = scale_functions(k, k0, u * ts)
+        vc = f1[-1]
+        lo[j] = lim.v_contact[0] / vc * (1 + margin)
+        hi[j] = min(lim.v_contact[1] / vc, lim.v_max / f1.max(), lim.a_max / np.abs(f2).max()) * (1 - margin)
+    return lo, hi
+
+
+def box_margin(k, box: Box, lim: RobustLimits, n_edge: int = 16) -> float:
+    """Worst relative margin over sampled box-boundary states (< 0: some limit broken)."""
+    xs = np.linspace(box.x0[0], box.x0[1], n_edge)
+    vs = np.linspace(box.v0[0], box.v0[1], n_edge)
+    pts = np.concatenate([np.stack([xs, np.full_like(xs, v)], 1) for v in box.v0]
+                         + [np.stack([np.full_like(vs, x), vs], 1) for x in box.x0])
+    s, k0s = -pts[:, 0], pts[:, 1] / pts[:, 0]
+    lo, hi = admissible(k, k0s, lim, margin=0.0)
+    if np.isnan(lo).any() or k0s.min() <= 1 / lim.tau_s:
+        return -1.0
+    return float(min(np.min(1 - lo / s), np.min(hi / s - 1)))
+
+
+def _largest_rectangle(mask: np.ndarray) -> tuple[int, int, int, int, int]:
+    """(cells, i0, i1, j0, j1) of the largest all-True rectangle mask[i0:i1, j0:j1]."""
+    best = (0, 0, 0, 0, 0)
+    heights = np.zeros(mask.shape[1], int)
+    for i in range(mask.shape[0]):
+        heights = np.where(mask[i], heights + 1, 0)
+        stack: list[int] = []
+        for j in range(len(heights) + 1):
+            h = heights[j] if j < len(heights) else 0
+            while stack and heights[stack[-1]] >= h:
+                top = stack.pop()
+                left = stack[-1] + 1 if stack else 0
+                area = heights[top] * (j - left)
+                if area > best[0]:
+                    best = (area, i - heights[top] + 1, i + 1, left, j)
+            stack.append(j)
+    return best
+
+
+@dataclass(frozen=True)
+class SearchDomain:
+    """Where boxes are looked for: |x0| in s_range [m], v0 in v_range [m/s]; `contains`
+    an (x0, v0) the box must hold (grow-a-box mode)."""
+
+    s_range: tuple[float, float] = (0.5, 4.0)
+    v_range: tuple[float, float] = (0.2, 2.5)
+    contains: tuple[float, float] | None = None
+    grid: int = 60
+
+
+def grid_box(k, lim: RobustLimits, dom: SearchDomain) -> Box | None:
+    """Largest box (on dom's grid) whose grid states all pass the sampled limits."""
+    s = np.linspace(*dom.s_range, dom.grid)
+    v = np.linspace(*dom.v_range, dom.grid)
+    kgrid = np.linspace(-v[-1] / s[0], -v[0] / s[-1], 160)
+    kgrid = kgrid[kgrid > 1 / lim.tau_s]
+    if len(kgrid) < 2:
+        return None
+    lo, hi = admissible(k, kgrid, lim)
+    ss, vv = np.meshgrid(s, v, indexing="ij")
+    k0 = -vv / ss
+    L = np.interp(k0, kgrid, np.nan_to_num(lo, nan=np.inf), left=np.inf, right=np.inf)
+    U = np.interp(k0, kgrid, np.nan_to_num(hi, nan=-np.inf), left=-np.inf, right=-np.inf)
+    mask = (L <= ss) & (ss <= U)
+    if dom.contains is not None:
+        return _box_containing(mask, s, v, dom.contains)
+    cells, i0, i1, j0, j1 = _largest_rectangle(mask)
+    if cells == 0 or i1 - i0 < 2 or j1 - j0 < 2:
+        return None
+    return Box((-s[i1 - 1], -s[i0]), (v[j0], v[j1 - 1]))
+
+
+def _box_containing(mask, s, v, state) -> Box | None:
+    """Grow a box cell by cell around the grid point nearest `state` while it stays feasible."""
+    i, j = int(np.abs(s + state[0]).argmin()), int(np.abs(v - state[1]).argmin())
+    if not mask[i, j]:
+        return None
+    i0, i1, j0, j1 = i, i + 1, j, j + 1
+    grown = True
+    while grown:
+        grown = False
+        for d in ((-1, 0, 0, 0), (0, 1, 0, 0), (0, 0, -1, 0), (0, 0, 0, 1)):
+            a, b, c, e = i0 + d[0], i1 + d[1], j0 + d[2], j1 + d[3]
+            if a >= 0 and c >= 0 and b <= len(s) and e <= len(v) and mask[a:b, c:e].all():
+                i0, i1, j0, j1, grown = a, b, c, e, True
+    if i1 - i0 < 2 or j1 - j0 < 2:
+        return None
+    return Box((-s[i1 - 1], -s[i0]), (v[j0], v[j1 - 1]))
+
+
+def _score(k, lim, dom) -> float:
+    box = grid_box(k, lim, dom)
+    return 0.0 if box is None else -box.area
+
+
+def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain) -> tuple[np.ndarray, Box]:
+    """Grow the box and adjust k together (Nelder-Mead; sampled boundary must keep a margin)."""
+    from scipy.optimize import minimize
+
+    n = len(k)
+    z0 = np.concatenate([k, [box.x0[0], box.x0[1], box.v0[0], box.v0[1]]])
+
+    def unpack(z):
+        return z[:n], Box((z[n], z[n + 1]), (z[n + 2], z[n + 3]))
+
+    def cost(z):
+        kk, b = unpack(z)
+        if not (b.x0[0] < b.x0[1] < 0 < b.v0[0] < b.v0[1]) or (
+                dom.contains and not (b.x0[0] <= dom.contains[0] <= b.x0[1]
+                                      and b.v0[0] <= dom.contains[1] <= b.v0[1])):
+            return 1.0
+        return -b.area if box_margin(kk, b, lim) >= SEARCH_MARGIN else 1.0
+
+    res = minimize(cost, z0, method="Nelder-Mead",
+                   options={"maxfev": 600 * (n + 4), "xatol": 1e-6, "fatol": 1e-7, "adaptive": True})
+    z = res.x if res.fun < cost(z0) else z0
+    kk, b = unpack(z)
+    return np.asarray(kk), b
+
+
+def shrink_until_certified(k, box: Box, lim: RobustLimits, steps: int = 40) -> RobustResult:
+    """Largest (within 0.1 %) centred shrink of `box` that `certify_box` proves."""
+    cert = lim.certify(k, box)
+    if cert.certified:
+        return RobustResult(tuple(map(float, k)), box, cert)
+    lo, hi, best = 0.0, 1.0, None
+    for _ in range(steps):
+        mid = (lo + hi) / 2
+        c = lim.certify(k, box.scaled(mid))
+        if c.certified:
+            lo, best = mid, (box.scaled(mid), c)
+        else:
+            hi = mid
+        if hi - lo < 1e-3 and best:
+            break
+    if best is None:
+        raise PlanError(f"no certified box around the found one (last: {cert.reason})")
+    return RobustResult(tuple(map(float, k)), best[0], best[1])
+
+
+def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(), *,
+                seed: int = 0, maxiter: int = 60, popsize: int = 12, k_bound: float = 2.0,
+                workers: int = 1) -> RobustResult:
+    """k_1..k_n (n = order) and the largest certified box for them (see module docstring)."""
+    from scipy.optimize import differential_evolution
+
+    if order < 1:
+        raise PlanError(f"order must be >= 1, got {order}")
+    bounds = [(-3.0, 1.0)] + [(-k_bound, k_bound)] * (order - 1)
+    de = differential_evolution(_score, bounds, args=(lim, dom), seed=seed, maxiter=maxiter,
+                                popsize=popsize, tol=1e-8, polish=False, workers=workers,
+                                updating="deferred" if workers != 1 else "immediate")
+    box = grid_box(de.x, lim, dom)
+    if box is None:
+        raise PlanError(f"no order-{order} k found that keeps any box inside the limits")
+    k, box = polish(de.x, box, lim, dom)
+    return shrink_until_certified(k, box, lim)
+
+
+def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
+              starts: int = 24) -> RobustResult:
+    """k_1..k_n certified over `box` with the least worst-case duration."""
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(seed)
+    k_max = box.k0_range[1]
+    best = None
+
+    def worst(k):
+        ts, _ = first_switch(np.asarray(k), k_max, lim.tau_s)
+        return np.inf if ts is None else ts
+
+    cons = {"type": "ineq", "fun": lambda k: box_margin(k, box, lim) - SEARCH_MARGIN}
+    for _ in range(starts):
+        k0 = np.concatenate([[rng.uniform(-2, 0.5)], rng.uniform(-1, 1, order - 1)])
+        res = minimize(worst, k0, method="COBYLA", constraints=[cons],
+                       options={"maxiter": 400 * order, "rhobeg": 0.2})
+        if box_margin(res.x, box, lim) >= SEARCH_MARGIN and (best is None or worst(res.x) < worst(best)):
+            best = res.x
+    if best is None:
+        raise PlanError(f"no order-{order} k found for box x0 {box.x0}, v0 {box.v0}")
+    cert = lim.certify(best, box)
+    if not cert.certified:
+        raise PlanError(f"best order-{order} k for the box is not certified: {cert.reason}")
+    return RobustResult(tuple(map(float, best)), box, cert)
