@@ -64,6 +64,7 @@ class EndReason(enum.Enum):
     SIGNAL = "stopped by a signal"
     TRIGGER_REFUSED = "trigger state outside what the plan allows"
     TIMEOUT = "flight took too long"
+    SOFTWARE_ERROR = "flight software error"
 
     @property
     def is_success(self) -> bool:

@@ -1,0 +1,56 @@
+"""`sim://[NAME][?latency=S&noise=M&...]`: the in-process simulated vehicle (perchd.sim).
+
+The reference driver: it keeps the Driver protocol's promises with no radio in between.
+Setpoints go to the shared SimWorld's plant (after the configured command latency); the
+failsafe sends a motors-off setpoint and silences later ones; health() reports the world's
+link fault switch, so tests can cut the link.
+"""
+
+from __future__ import annotations
+
+from perchd.drivers.base import DriverBase, LinkHealth
+from perchd.runtime import Runtime
+from perchd.sim.world import SimWorld, world_for
+from perchd.types import EndReason, Setpoint
+from perchd.uri import Uri
+
+
+def open_loopback(uri: Uri, runtime: Runtime) -> "LoopbackDriver":
+    return LoopbackDriver(uri.raw, world_for(uri, runtime))
+
+
+class LoopbackDriver(DriverBase):
+    def __init__(self, uri: str, world: SimWorld) -> None:
+        self.uri = uri
+        self.world = world
+        self._connected = False
+        self._stopped = False
+        self.failsafe_reasons: list[EndReason] = []
+
+    def connect(self) -> None:
+        self._connected, self._stopped = True, False
+
+    def send(self, setpoint: Setpoint) -> None:
+        if self._connected and not self._stopped and self.world.faults.link_ok:
+            self.world.command(setpoint)
+
+    def failsafe(self, reason: EndReason) -> None:
+        self.failsafe_reasons.append(reason)
+        if not self._stopped:
+            self.world.failsafes.append(reason)
+            self.world.command(Setpoint.stop(self.world.clock.now()))
+        self._stopped = True
+
+    def health(self) -> LinkHealth:
+        if not self._connected:
+            return LinkHealth(False, 0.0, "not connected")
+        if not self.world.faults.link_ok:
+            return LinkHealth(False, 0.0, "simulated link cut")
+        return LinkHealth(True, 0.0)
+
+    def close(self) -> None:
+        if self._connected and not self._stopped:
+            self.failsafe_reasons.append(EndReason.OPERATOR_ABORT)
+            self.world.command(Setpoint.stop(self.world.clock.now()))
+            self._stopped = True
+        self._connected = False

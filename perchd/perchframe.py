@@ -1,0 +1,60 @@
+"""The perching frame: origin on the surface, X along the approach normal, Z as near up as
+a wall allows, Y = Z x X. World vectors map in and out of it (ARCHITECTURE, Frames)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from perchd.types import Vec3
+
+
+def body_z(roll: float, pitch: float, yaw: float) -> Vec3:
+    """World-frame direction of the body z axis for Z-Y-X angles (eq. 19's thrust direction)."""
+    sr, cr = math.sin(roll), math.cos(roll)
+    sp, cp = math.sin(pitch), math.cos(pitch)
+    sy, cy = math.sin(yaw), math.cos(yaw)
+    return (cy * sp * cr + sy * sr, sy * sp * cr - cy * sr, cp * cr)
+
+
+def _unit(v: Vec3) -> Vec3:
+    n = math.sqrt(sum(c * c for c in v))
+    return (v[0] / n, v[1] / n, v[2] / n)
+
+
+@dataclass(frozen=True, slots=True)
+class PerchFrame:
+    """point [m] on the surface, world frame; ex, ey, ez: unit axes in world coordinates."""
+
+    point: Vec3
+    ex: Vec3
+    ey: Vec3
+    ez: Vec3
+
+    @classmethod
+    def from_surface(cls, point: Vec3, normal: Vec3) -> "PerchFrame":
+        ex = _unit(normal)
+        up_dot = ex[2]
+        ez = _unit((-up_dot * ex[0], -up_dot * ex[1], 1.0 - up_dot * ex[2]))
+        ey = (ez[1] * ex[2] - ez[2] * ex[1], ez[2] * ex[0] - ez[0] * ex[2],
+              ez[0] * ex[1] - ez[1] * ex[0])
+        return cls(tuple(point), ex, ey, ez)
+
+    @property
+    def yaw_facing(self) -> float:
+        """[rad] world yaw that points the body x axis at the surface."""
+        return math.atan2(self.ex[1], self.ex[0])
+
+    def to_frame(self, p: Vec3) -> Vec3:
+        """World position [m] -> perching-frame position [m]."""
+        d = (p[0] - self.point[0], p[1] - self.point[1], p[2] - self.point[2])
+        return self.rotate_in(d)
+
+    def rotate_in(self, v: Vec3) -> Vec3:
+        """World vector -> perching-frame components."""
+        return (sum(v[i] * self.ex[i] for i in range(3)), sum(v[i] * self.ey[i] for i in range(3)),
+                sum(v[i] * self.ez[i] for i in range(3)))
+
+    def rotate_out(self, v: Vec3) -> Vec3:
+        """Perching-frame components -> world vector."""
+        return tuple(v[0] * self.ex[i] + v[1] * self.ey[i] + v[2] * self.ez[i] for i in range(3))

@@ -1,0 +1,123 @@
+"""A quadrotor plant driven by attitude/thrust setpoints: what the loopback driver flies.
+
+The onboard attitude controller is modelled as a first-order response of roll, pitch and yaw
+to their setpoints (time constant attitude_tau_s), the motors as a first-order lag of the
+collective thrust (motor_tau_s) clamped to 0..thrust_max_n, and the radio as a pure delay
+(latency_s) before a setpoint reaches the vehicle. Translational dynamics are rigid-body with
+optional linear drag. The floor (world z = 0) stops a falling vehicle. Pure Python floats:
+a 1 ms step costs a few microseconds, so simulated seconds take milliseconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from perchd.perchframe import body_z
+from perchd.types import Setpoint, Vec3
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """mass_kg [kg] (30 g Crazyflie 2.0 with markers); thrust_max_n [N] collective (four CF2.0
+    motors give about 0.6 N); attitude_tau_s, motor_tau_s [s] first-order time constants;
+    latency_s [s] command delay; drag_per_s [1/s] linear drag coefficient; g [m/s^2];
+    step_s [s] integration step."""
+
+    mass_kg: float = 0.030
+    thrust_max_n: float = 0.60
+    attitude_tau_s: float = 0.07
+    motor_tau_s: float = 0.03
+    latency_s: float = 0.0
+    drag_per_s: float = 0.0
+    g: float = 9.81
+    step_s: float = 0.001
+
+
+@dataclass(frozen=True, slots=True)
+class PlantState:
+    """p [m], v [m/s] world frame; roll, pitch, yaw [rad] (Z-Y-X); thrust [N]."""
+
+    p: Vec3
+    v: Vec3
+    roll: float
+    pitch: float
+    yaw: float
+    thrust: float
+
+
+def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of Z-Y-X Euler angles."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+
+
+class Plant:
+    """Integrates the vehicle; `command` queues a setpoint, `step_to` advances time."""
+
+    def __init__(self, params: PlantParams, start: Vec3, t0: float, hover: bool = True) -> None:
+        self.params = params
+        self.t = t0
+        self.p = list(start)
+        self.v = [0.0, 0.0, 0.0]
+        self.att = [0.0, 0.0, 0.0]
+        weight = params.mass_kg * params.g
+        airborne = hover and start[2] > 0.0
+        self.thrust = weight if airborne else 0.0
+        self.cmd = (0.0, 0.0, 0.0, self.thrust)
+        self.applied: Setpoint | None = None
+        self._queue: deque[tuple[float, Setpoint]] = deque()
+        self.frozen = False
+
+    def command(self, sp: Setpoint, now: float) -> None:
+        """The setpoint reaches the vehicle latency_s after `now`."""
+        self._queue.append((now + self.params.latency_s, sp))
+
+    def state(self) -> PlantState:
+        return PlantState(tuple(self.p), tuple(self.v), *self.att, self.thrust)
+
+    def step_to(self, t: float, on_step=None) -> None:
+        """Integrate up to time t [s]; on_step(t_prev, p_prev, t, p, v) after each step."""
+        h = self.params.step_s
+        while self.t < t - 1e-12:
+            dt = min(h, t - self.t)
+            self._apply_due(self.t)
+            p_prev = tuple(self.p)
+            if not self.frozen:
+                self._integrate(dt)
+            self.t += dt
+            if on_step is not None:
+                on_step(self.t - dt, p_prev, self.t)
+
+    def freeze(self) -> None:
+        """Stuck to the surface (perched): nothing moves any more."""
+        self.frozen = True
+        self.v = [0.0, 0.0, 0.0]
+
+    def _apply_due(self, t: float) -> None:
+        while self._queue and self._queue[0][0] <= t + 1e-12:
+            _, sp = self._queue.popleft()
+            self.applied = sp
+            self.cmd = (sp.roll, sp.pitch, sp.yaw, sp.thrust)
+
+    def _integrate(self, dt: float) -> None:
+        prm = self.params
+        a_att = dt / (prm.attitude_tau_s + dt)
+        for i in range(3):
+            self.att[i] += a_att * (self.cmd[i] - self.att[i])
+        target = min(max(self.cmd[3], 0.0), prm.thrust_max_n)
+        self.thrust += dt / (prm.motor_tau_s + dt) * (target - self.thrust)
+        bz = body_z(*self.att)
+        f = self.thrust / prm.mass_kg
+        acc = [f * bz[0] - prm.drag_per_s * self.v[0], f * bz[1] - prm.drag_per_s * self.v[1],
+               f * bz[2] - prm.g - prm.drag_per_s * self.v[2]]
+        for i in range(3):
+            self.v[i] += acc[i] * dt
+            self.p[i] += self.v[i] * dt
+        if self.p[2] <= 0.0 and self.v[2] <= 0.0:  # on the floor
+            self.p[2] = 0.0
+            self.v = [0.0, 0.0, 0.0]

@@ -1,0 +1,265 @@
+"""The simulated world: one plant, a surface that registers contact, and a mocap model.
+
+The `sim://` driver and the `sim://` mocap source share one world through Runtime.sim (or,
+for tests that hold two runtimes, a world named by the URI host: `sim://rig1`). The world is
+lazy: it integrates the plant up to runtime.clock.now() whenever it is asked for a pose or
+given a setpoint, so with a ManualClock the control loop's sleep_until drives simulated time
+and a 3 s flight runs in a few hundred milliseconds of wall time.
+
+URI options (read by whichever factory creates the world): latency [s] command delay,
+noise [m] mocap noise std, mocap_rate [Hz], mocap_latency [s], start=X,Y,Z [m],
+attitude_tau [s], motor_tau [s], seed.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import threading
+from collections import deque
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from perchd.errors import UriError
+from perchd.mocap.base import SourceStats
+from perchd.runtime import Runtime
+from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
+from perchd.types import Pose, Setpoint, Vec3
+from perchd.uri import Uri
+
+_NAMED: dict[str, "SimWorld"] = {}
+_NAMED_LOCK = threading.Lock()
+
+
+@dataclass(frozen=True)
+class MocapParams:
+    """rate_hz [Hz]; latency_s [s] exposure to arrival; noise_m [m] Gaussian std per axis."""
+
+    rate_hz: float = 120.0
+    latency_s: float = 0.004
+    noise_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class WorldParams:
+    """plant, mocap; start [m] world position, hovering there when start z > 0;
+    surface_point [m] and surface_normal (towards the surface, i.e. the approach direction);
+    body: the mocap body name; seed for the noise."""
+
+    plant: PlantParams = PlantParams()
+    mocap: MocapParams = MocapParams()
+    start: Vec3 = (-4.5, 0.0, 1.0)
+    surface_point: Vec3 = (0.0, 0.0, 0.0)
+    surface_normal: Vec3 = (1.0, 0.0, 0.0)
+    body: str = "cf1"
+    seed: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Contact:
+    """t [s] when the vehicle reached the surface; speed [m/s] along the normal then;
+    p [m] world position of the contact."""
+
+    t: float
+    speed: float
+    p: Vec3
+
+
+@dataclass
+class Faults:
+    """Things a test can break: mocap outages [(t0, t1)] (no pose measured in between),
+    link_ok (the driver's health), and queued velocity kicks / attitude kicks."""
+
+    mocap_outages: list[tuple[float, float]] = field(default_factory=list)
+    link_ok: bool = True
+
+
+class SimWorld:
+    def __init__(self, params: WorldParams, clock: Any) -> None:
+        self.params = params
+        self.clock = clock
+        self.t0 = clock.now()
+        self.plant = Plant(params.plant, params.start, self.t0)
+        self.faults = Faults()
+        self.contact: Contact | None = None
+        self.sent: list[Setpoint] = []
+        self.failsafes: list[Any] = []
+        n = params.surface_normal
+        norm = math.sqrt(sum(c * c for c in n))
+        self._n = tuple(c / norm for c in n)
+        self._rng = random.Random(params.seed)
+        self._lock = threading.RLock()
+        period = 1.0 / params.mocap.rate_hz
+        self._period = period
+        self._next_frame = 0  # index k of the next exposure at t0 + k * period
+        self._in_flight: deque[Pose] = deque()  # measured, not yet arrived
+        self._latest: Pose | None = None
+        self._seq = 0
+
+    # --- time -----------------------------------------------------------------------------
+    def advance(self, t: float | None = None) -> None:
+        """Integrate up to `t` (default clock.now()), measuring mocap frames on the way."""
+        t = self.clock.now() if t is None else t
+        with self._lock:
+            while True:
+                t_frame = self.t0 + self._next_frame * self._period
+                if t_frame > t:
+                    break
+                self.plant.step_to(t_frame, self._check_contact)
+                self._measure(t_frame)
+                self._next_frame += 1
+            self.plant.step_to(t, self._check_contact)
+            self._deliver(t)
+
+    def state(self) -> PlantState:
+        self.advance()
+        return self.plant.state()
+
+    def gap(self, p: Vec3) -> float:
+        """[m] signed distance along the normal: < 0 before the surface."""
+        sp = self.params.surface_point
+        return sum((p[i] - sp[i]) * self._n[i] for i in range(3))
+
+    def _check_contact(self, t_prev: float, p_prev: Vec3, t: float) -> None:
+        if self.contact is not None:
+            return
+        g1 = self.gap(self.plant.p)
+        if g1 < 0.0:
+            return
+        g0 = self.gap(p_prev)
+        frac = -g0 / (g1 - g0) if g1 > g0 else 1.0
+        speed = sum(self.plant.v[i] * self._n[i] for i in range(3))
+        self.contact = Contact(t_prev + frac * (t - t_prev), speed, tuple(self.plant.p))
+        self.plant.freeze()
+
+    # --- the driver side --------------------------------------------------------------------
+    def command(self, sp: Setpoint) -> None:
+        with self._lock:
+            self.advance()
+            self.sent.append(sp)
+            self.plant.command(sp, self.clock.now())
+
+    def applied(self) -> Setpoint | None:
+        """The newest setpoint that has reached the vehicle."""
+        self.advance()
+        return self.plant.applied
+
+    # --- the mocap side ---------------------------------------------------------------------
+    def _measure(self, t: float) -> None:
+        if any(a <= t < b for a, b in self.faults.mocap_outages):
+            return
+        noise = self.params.mocap.noise_m
+        p = tuple(c + (self._rng.gauss(0.0, noise) if noise > 0 else 0.0) for c in self.plant.p)
+        q = quaternion(*self.plant.att)
+        self._seq += 1
+        self._in_flight.append(Pose(self.params.body, self._seq, t, p, q, True,
+                                    self.params.mocap.latency_s))
+
+    def _deliver(self, t: float) -> None:
+        while self._in_flight and self._in_flight[0].t + self._in_flight[0].latency <= t + 1e-12:
+            self._latest = self._in_flight.popleft()
+
+    def latest_pose(self) -> Pose | None:
+        with self._lock:
+            self.advance()
+            return self._latest
+
+    def next_arrival(self) -> float:
+        """[s] when the next pose will arrive (assuming no outage)."""
+        with self._lock:
+            if self._in_flight:
+                return self._in_flight[0].t + self._in_flight[0].latency
+            return self.t0 + self._next_frame * self._period + self.params.mocap.latency_s
+
+
+def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldParams:
+    """Apply a sim:// URI's options to `base` (defaults); bad values are one UriError."""
+    from perchd.drivers.uriparams import float_param
+
+    wp = base or WorldParams()
+    plant = replace(
+        wp.plant,
+        latency_s=float_param(uri, "latency", wp.plant.latency_s, 0.0, 1.0, " s"),
+        attitude_tau_s=float_param(uri, "attitude_tau", wp.plant.attitude_tau_s, 0.005, 1.0, " s"),
+        motor_tau_s=float_param(uri, "motor_tau", wp.plant.motor_tau_s, 0.001, 1.0, " s"),
+        mass_kg=float_param(uri, "mass", wp.plant.mass_kg, 0.005, 50.0, " kg"))
+    mocap = replace(
+        wp.mocap,
+        rate_hz=float_param(uri, "mocap_rate", wp.mocap.rate_hz, 1.0, 1000.0, " Hz"),
+        latency_s=float_param(uri, "mocap_latency", wp.mocap.latency_s, 0.0, 0.5, " s"),
+        noise_m=float_param(uri, "noise", wp.mocap.noise_m, 0.0, 0.1, " m"))
+    start = wp.start
+    text = uri.param("start")
+    if text is not None:
+        try:
+            start = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            start = ()
+        if len(start) != 3 or not all(math.isfinite(v) for v in start):
+            raise UriError(f"{uri.raw}: start={text!r} must be X,Y,Z in metres")
+    seed = int(float_param(uri, "seed", float(wp.seed), 0, 2 ** 31, ""))
+    return replace(wp, plant=plant, mocap=mocap, start=start, seed=seed,
+                   body=uri.param("body", wp.body) or wp.body)
+
+
+def world_for(uri: Uri, runtime: Runtime) -> SimWorld:
+    """The runtime's world, created from this URI's options if it has none yet.
+
+    `sim://NAME` joins a process-wide world of that name instead (tests that open the
+    driver in one runtime and look at the vehicle from another)."""
+    if uri.host:
+        with _NAMED_LOCK:
+            world = _NAMED.get(uri.host)
+            if world is None:
+                world = _NAMED[uri.host] = SimWorld(world_params_from_uri(uri), runtime.clock)
+            return world
+    if runtime.sim is None:
+        runtime.sim = SimWorld(world_params_from_uri(uri), runtime.clock)
+    return runtime.sim
+
+
+def forget_named(name: str) -> None:
+    with _NAMED_LOCK:
+        _NAMED.pop(name, None)
+
+
+class SimMocap:
+    """PoseSource over a SimWorld: poses at the mocap rate, delayed and noisy as configured."""
+
+    def __init__(self, world: SimWorld) -> None:
+        self.world = world
+        self.body = world.params.body
+        self._started = False
+        self._served = 0
+
+    def start(self) -> None:
+        self._started = True
+
+    def latest(self) -> Pose | None:
+        if not self._started:
+            return None
+        return self.world.latest_pose()
+
+    def wait(self, after_seq: int, timeout: float) -> Pose | None:
+        """Sleep on the world's clock until a newer pose arrives (ManualClock: at once)."""
+        deadline = self.world.clock.now() + max(0.0, timeout)
+        while True:
+            pose = self.latest()
+            if pose is not None and pose.seq > after_seq:
+                return pose
+            now = self.world.clock.now()
+            if now >= deadline:
+                return None
+            self.world.clock.sleep_until(min(max(self.world.next_arrival(), now + 1e-4), deadline))
+
+    def stats(self) -> SourceStats:
+        pose = self.world.latest_pose()
+        n = pose.seq if pose else 0
+        return SourceStats(n, n, 0)
+
+    def close(self) -> None:
+        self._started = False
+
+
+def open_sim_mocap(uri: Uri, runtime: Runtime) -> SimMocap:
+    return SimMocap(world_for(uri, runtime))
