@@ -93,7 +93,7 @@ class NatNetSource(ThreadedSource):
             self._resolve_body()
             if self.multicast:
                 self._data = self._open_data_socket()
-        except OSError as err:
+        except (OSError, MalformedPacket) as err:
             self.close()
             raise LinkError(f"natnet {self.config.server}: {err}") from None
         except (LinkError, UriError):

@@ -250,3 +250,23 @@ def test_the_client_follows_its_body_when_motive_redefines_the_models():
     assert pose is not None and pose.p == pytest.approx((2.0, 0.0, 0.0))
     assert source.models.body_ids() == {"wand": 1, "cf1": 7}
     assert source.stats().dropped == source.drops().no_body  # frames held while ids moved
+
+
+def test_a_server_answering_garbage_is_a_link_error_not_a_traceback():
+    import socket
+    import threading
+    fake = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    fake.bind(("127.0.0.1", 0))
+
+    def answer():
+        _, address = fake.recvfrom(2048)
+        fake.sendto(proto.pack(proto.NAT_SERVERINFO, b"Motive\0"), address)  # cut short
+    thread = threading.Thread(target=answer)
+    thread.start()
+    try:
+        with pytest.raises(LinkError, match="natnet 127.0.0.1: .*bytes"):
+            open_natnet(parse_uri(f"natnet://127.0.0.1:{fake.getsockname()[1]}?body=cf1"
+                                  "&local=127.0.0.1&timeout=1"), Runtime.real()).start()
+    finally:
+        thread.join()
+        fake.close()
