@@ -6,11 +6,13 @@ import json
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from perchd.clock import ManualClock
 from perchd.errors import UriError
 from perchd.mocap.base import open_source
-from perchd.mocap.zmq import ZmqPosePublisher, parse_pose_message, pose_message
+from perchd.mocap.zmq import ZmqPosePublisher, ZmqPoseSource, parse_pose_message, pose_message
 from perchd.runtime import Runtime
 from perchd.types import Pose
 
@@ -139,3 +141,27 @@ def test_a_source_can_bind_and_the_publisher_connect():
     finally:
         publisher.close()
         source.close()
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner, max_size=4),
+    max_leaves=12)
+fields = st.fixed_dictionaries({}, optional={
+    "body": st.sampled_from(["cf1", "cf2", 3]), "seq": json_values | st.integers(),
+    "t": json_values, "p": json_values | st.lists(st.floats(), min_size=3, max_size=3),
+    "q": json_values | st.lists(st.floats(), min_size=4, max_size=4), "valid": json_values})
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.one_of(
+    st.lists(st.binary(max_size=64), max_size=3),
+    fields.map(lambda f: [b"pose", json.dumps(f).encode()])), min_size=1, max_size=6))
+def test_arbitrary_messages_never_raise_and_are_counted(messages):
+    source = ZmqPoseSource("tcp://127.0.0.1:1", "cf1", ManualClock(5.0))
+    for frames in messages:
+        source.handle_message(frames, 5.0)
+    stats = source.stats()
+    assert stats.received == len(messages) and stats.poses + stats.dropped == stats.received
+    latest = source.latest()
+    assert latest is None or all(math.isfinite(v) for v in (*latest.p, *latest.q))
