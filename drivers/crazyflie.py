@@ -57,7 +57,7 @@ def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
     """Factory for `radio://` and `udp://` (not connected yet)."""
     require("cflib", "crazyflie")
     hover = float_param(uri, "hover", 36000.0, 1000, 60000, " units")
-    mass = float_param(uri, "mass", 0.027, 0.010, 0.100, " kg")
+    mass = float_param(uri, "mass", 0.030, 0.010, 0.100, " kg")
     timeout = float_param(uri, "timeout", 0.5, 0.01, 10.0, " s")
     model = CrazyflieThrust(hover_units=hover, mass_kg=mass)
     return CrazyflieDriver(uri.raw, without_query(uri), runtime, model, timeout,

@@ -24,14 +24,16 @@ class CrazyflieThrust:
     "System Identification of the Crazyflie 2.0 Nano Quadrocopter" (ETH Zurich, 2015):
         f(u) = A u^2 + B u + C   [N per motor], four motors.
     Calibration: the curve is scaled by a single factor so that the vehicle's weight
-    mass_kg * G maps exactly to hover_units. The default, 36000 units for 27 g at
-    9.81 m/s^2, is the paper's hover figure (ERRATA 8: about 36000 for a 27-30 g CF2.0);
-    the unscaled curve gives 36000 <-> 26.6 g, so the default factor is 1.0136.
+    mass_kg * G maps exactly to hover_units. The default, 36000 units for 30 g at
+    9.81 m/s^2, is the paper's hover figure (ERRATA 8: about 36000 for a 27-30 g CF2.0)
+    at the mass perchd's controller and simulator use (VehicleConfig, PlantParams: a
+    CF2.0 with markers); the unscaled curve gives 36000 <-> 26.6 g, so the default
+    factor is 1.1262 (a 30 g vehicle's motors run ~6 % harder than the bare curve says).
     Set mass/hover per vehicle (driver URI ?mass=KG&hover=UNITS) after a hover test.
     """
 
     hover_units: float = 36000.0
-    mass_kg: float = 0.027
+    mass_kg: float = 0.030
 
     A = 2.130295e-11
     """[N / unit^2] per motor."""

@@ -12,8 +12,9 @@ from typing import Protocol
 
 from perchd.drivers.thrust import G, CrazyflieThrust
 
-MASS = 0.027
-"""[kg] the vehicle every rig pretends to be (a Crazyflie, the paper's)."""
+MASS = 0.030
+"""[kg] the vehicle every rig pretends to be (a Crazyflie 2.0 with markers, as
+VehicleConfig and the default thrust model have it)."""
 
 
 class Rig(Protocol):
@@ -102,9 +103,39 @@ class ZmqRig:
         self.peer.close()
 
 
+class LoopbackRig:
+    """The in-process simulator, in a named world so the rig sees what the driver does."""
+
+    _count = 0
+
+    def __init__(self) -> None:
+        from perchd.clock import MonotonicClock
+        from perchd.drivers.base import open_driver
+        from perchd.runtime import Runtime
+        LoopbackRig._count += 1
+        self.name = f"conformance{LoopbackRig._count}"
+        self.uri = f"sim://{self.name}"
+        # opening once creates the named world on a real clock (the drivers run in real time)
+        self.world = open_driver(self.uri, Runtime(MonotonicClock())).world
+
+    def commanded(self):
+        sent = [sp for sp in self.world.sent if sp.thrust > 0]
+        return (sent[-1].roll, sent[-1].pitch, sent[-1].thrust) if sent else None
+
+    def stopped(self) -> bool:
+        return bool(self.world.sent) and self.world.sent[-1].thrust == 0.0
+
+    def kill(self) -> None:
+        self.world.faults.link_ok = False
+
+    def close(self) -> None:
+        from perchd.sim.world import forget_named
+        forget_named(self.name)
+
+
 def loopback_available() -> bool:
     return importlib.util.find_spec("perchd.drivers.loopback") is not None
 
 
-RIGS = {"udp": CrazyflieRig, "mavlink": MavlinkRig, "zmq": ZmqRig}
+RIGS = {"udp": CrazyflieRig, "mavlink": MavlinkRig, "zmq": ZmqRig, "sim": LoopbackRig}
 NOT_HERE = {"radio": "needs a Crazyradio; the same driver as udp://, see tests/hardware"}

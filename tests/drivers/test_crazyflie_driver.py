@@ -19,7 +19,7 @@ from perchd.types import EndReason, Phase, Pose, Setpoint
 
 pytest.importorskip("cflib")
 
-HOVER_N = 0.027 * 9.81
+HOVER_N = 0.030 * 9.81  # the default thrust model's vehicle
 
 
 @pytest.fixture
@@ -79,8 +79,8 @@ def test_the_thrust_model_clamps_and_round_trips():
     assert model.units(0.0) == 0 and model.units(-1.0) == 0 and model.units(math.nan) == 0
     assert model.units(10.0) == 65535
     assert model.newtons(model.units(0.2)) == pytest.approx(0.2, abs=2e-5)
-    heavy = CrazyflieThrust(hover_units=39000, mass_kg=0.030)
-    assert heavy.units(0.030 * 9.81) == 39000
+    light = CrazyflieThrust(hover_units=34000, mass_kg=0.027)
+    assert light.units(0.027 * 9.81) == 34000
 
 
 def test_setpoints_stream_at_the_loop_rate(responder, cf):
