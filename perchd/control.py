@@ -77,10 +77,12 @@ class TauController:
         self.pid.reset()
 
     def step(self, state: State, tau_ref: float, a_plan: float, dt: float,
-             saturated: bool = False) -> float:
+             saturated: bool = False, schedule: bool = True) -> float:
+        """schedule=False uses kp_slow both ways (eq. 20's argument, a shrinking |X| under
+        a tau reference, does not hold when the reference is a speed)."""
         g = self.gains
         e = min(max(tau_error(tau_ref, state.tau), g.error_min), g.error_max)
-        kp = g.kp_fast if e < 0.0 else g.kp_slow  # eq. 20: tau_ref/tau > 1 <=> e < 0
+        kp = g.kp_fast if e < 0.0 and schedule else g.kp_slow  # eq. 20: tau_ref/tau > 1 <=> e < 0
         self.last_error, self.last_kp = e, kp
         u = self.pid.step(kp, e, dt, freeze=saturated)
         return u + (a_plan if g.feedforward else 0.0)

@@ -114,6 +114,7 @@ class Supervisor:
         self._hold: tuple[float, float, float] | None = None
         self._z_ref = 0.0
         self._a_app = 0.0
+        self._x: float | None = None  # [m] measured X of the tick in hand
 
     # --- helpers ----------------------------------------------------------------------------
     def _enter(self, phase: Phase, t: float, detail: str = "", **values: float) -> None:
@@ -137,6 +138,7 @@ class Supervisor:
         self._t_prev = t
         if self.t_start is None:
             self.t_start = t
+        self._x = None if state is None else state.x
         if self.end is None:
             reason, detail = self._check(t, state, health, overrun_streak, abort,
                                          mocap_period, arrival_age)
@@ -264,10 +266,14 @@ class Supervisor:
         refs, ux, e, vz_ref = Refs(), 0.0, None, 0.0
         if self.phase in (Phase.STAGE1, Phase.STAGE2):
             refs = self._refs(t)
-            if self.phase is Phase.STAGE2 and refs.tau_ref > -self.cfg.tau_gains.terminal_s:
+            g = self.cfg.tau_gains
+            if self.phase is Phase.STAGE2 and not g.stage2_hold_speed \
+                    and refs.tau_ref > -g.terminal_s:
                 ux = 0.0  # terminal: constant speed (see TauGains.terminal_s)
             else:
-                ux = self.ctl.tau.step(st, refs.tau_ref, refs.a, dt, self.ctl.saturated)
+                hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
+                ux = self.ctl.tau.step(st, refs.tau_ref, refs.a, dt, self.ctl.saturated,
+                                       schedule=not hold)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
             ux = self._approach_accel(st)
@@ -282,6 +288,13 @@ class Supervisor:
         u = (ux, uy, uz)
         sp = self.ctl.setpoint(u, t, st.pose_seq, self.phase)
         return TickReport(self.phase, sp, None, False, refs, u, e)
+
+    @property
+    def v_hold(self) -> float:
+        """[m/s] the stage-2 speed held: V_c, kept v_contact_margin_mps inside the window."""
+        v, m = float(self.plan.v_contact), self.cfg.tau_gains.v_contact_margin_mps
+        lo, hi = self.plan.limits.v_contact
+        return min(max(v, lo + m), hi - m) if hi - lo > 2 * m else v
 
     @property
     def _tau_s(self) -> float | None:
@@ -357,6 +370,9 @@ class Supervisor:
             tau_ref = float(plan.tau_ref(s))
             s_ff = min(s + self.cfg.tau_gains.ff_lead_s, plan.duration)
             a = float(plan.a(s_ff)) if plan.stage(s_ff) == 1 else 0.0
+        elif self.cfg.tau_gains.stage2_hold_speed and self._x is not None:
+            tau_ref = min(self._x, 0.0) / self.v_hold
+            a = 0.0
         else:
             tau_ref = self._tau_s + (t - self.t_stage2)
             a = 0.0

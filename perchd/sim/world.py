@@ -42,13 +42,14 @@ class MocapParams:
 
 @dataclass(frozen=True)
 class WorldParams:
-    """plant, mocap; start [m] world position, hovering there when start z > 0;
+    """plant, mocap; start [m] world position, hovering there when start z > 0 (None: 4.5 m
+    back from the surface point along the normal, 1 m above it);
     surface_point [m] and surface_normal (towards the surface, i.e. the approach direction);
     body: the mocap body name; seed for the noise."""
 
     plant: PlantParams = PlantParams()
     mocap: MocapParams = MocapParams()
-    start: Vec3 = (-4.5, 0.0, 1.0)
+    start: Vec3 | None = None
     surface_point: Vec3 = (0.0, 0.0, 0.0)
     surface_normal: Vec3 = (1.0, 0.0, 0.0)
     body: str = "cf1"
@@ -78,8 +79,12 @@ class SimWorld:
     def __init__(self, params: WorldParams, clock: Any) -> None:
         self.params = params
         self.clock = clock
+        sp, n = params.surface_point, params.surface_normal
+        norm = math.sqrt(sum(c * c for c in n))
+        self.start = params.start or (sp[0] - 4.5 * n[0] / norm, sp[1] - 4.5 * n[1] / norm,
+                                      sp[2] + 1.0)
         self.t0 = clock.now()
-        self.plant = Plant(params.plant, params.start, self.t0)
+        self.plant = Plant(params.plant, self.start, self.t0)
         self.faults = Faults()
         self.contact: Contact | None = None
         self.sent: list[Setpoint] = []

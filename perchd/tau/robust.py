@@ -198,21 +198,32 @@ def shrink_until_certified(k, box: Box, lim: RobustLimits, steps: int = 40) -> R
 
 def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(), *,
                 seed: int = 0, maxiter: int = 60, popsize: int = 12, k_bound: float = 2.0,
-                workers: int = 1) -> RobustResult:
-    """k_1..k_n (n = order) and the largest certified box for them (see module docstring)."""
+                start: RobustResult | None = None) -> RobustResult:
+    """k_1..k_n (n = order) and the largest certified box for them (see module docstring).
+    `start` (e.g. the order n-1 result, padded with zeros) seeds the search, so a higher
+    order never does worse than the lower one it contains."""
     from scipy.optimize import differential_evolution
 
     if order < 1:
         raise PlanError(f"order must be >= 1, got {order}")
     bounds = [(-3.0, 1.0)] + [(-k_bound, k_bound)] * (order - 1)
+    guess = None if start is None else np.pad(start.k, (0, order - len(start.k)))[:order]
     de = differential_evolution(_score, bounds, args=(lim, dom), seed=seed, maxiter=maxiter,
-                                popsize=popsize, tol=1e-8, polish=False, workers=workers,
-                                updating="deferred" if workers != 1 else "immediate")
-    box = grid_box(de.x, lim, dom)
-    if box is None:
+                                popsize=popsize, tol=1e-8, polish=False, x0=guess)
+    candidates = [(de.x, grid_box(de.x, lim, dom))]
+    if start is not None:
+        candidates.append((guess, start.box))
+    found = []
+    for k, box in candidates:
+        if box is not None:
+            k, box = polish(k, box, lim, dom)
+            try:
+                found.append(shrink_until_certified(k, box, lim))
+            except PlanError:
+                pass
+    if not found:
         raise PlanError(f"no order-{order} k found that keeps any box inside the limits")
-    k, box = polish(de.x, box, lim, dom)
-    return shrink_until_certified(k, box, lim)
+    return max(found, key=lambda r: r.box.area)
 
 
 def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,

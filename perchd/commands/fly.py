@@ -1,0 +1,158 @@
+"""`perchd fly P.json --driver URI --mocap URI [--config F] [--surface X Y Z]
+[--normal NX NY NZ] [--log F] [--json]`: fly one perch and report it (CONTRACTS 2).
+
+While flying, a one-line status on stderr (phase, X, Xdot, tau vs tau_ref); afterwards a
+summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise.
+With `--driver sim:// --mocap sim://` the flight is simulated on a simulated clock.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+
+from perchd.errors import ConfigError, UriError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("fly", help="fly a perch along a plan",
+                              description="Fly a perch along a plan file, e.g. "
+                                          "perchd fly plans/case1-ipts-n3.json "
+                                          "--driver sim:// --mocap sim://")
+    p.add_argument("plan", help="plan file (perchd.plan/1 JSON)")
+    p.add_argument("--driver", required=True, help="vehicle URI (sim://, radio://..., ...)")
+    p.add_argument("--mocap", required=True, help="mocap URI (sim://, natnet://..., ...)")
+    p.add_argument("--config", help="flight configuration file (TOML)")
+    p.add_argument("--surface", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="[m] a point on the surface, world frame (default 0 0 0)")
+    p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
+                   help="surface normal along the approach, world frame (default 1 0 0)")
+    p.add_argument("--log", help="flight log path (default ./flightlogs/<time>-<strategy>.jsonl)")
+    p.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
+    p.set_defaults(run=run)
+
+
+def load_config(args: argparse.Namespace):
+    """FlightConfig from --config (the TOML loader, perchd.config) and --surface/--normal."""
+    from perchd.flightconfig import FlightConfig, SurfaceConfig
+
+    cfg = FlightConfig()
+    if args.config:
+        try:
+            from perchd.config import load_flight_config
+        except ImportError:
+            raise ConfigError(f"--config {args.config}: this build has no TOML loader "
+                              "(perchd.config)") from None
+        cfg = load_flight_config(args.config)
+    surface = cfg.surface
+    if args.surface:
+        surface = dataclasses.replace(surface, point=tuple(args.surface))
+    if args.normal:
+        surface = dataclasses.replace(surface, normal=tuple(args.normal))
+    return dataclasses.replace(cfg, surface=SurfaceConfig(surface.point, surface.normal))
+
+
+def make_runtime(args: argparse.Namespace, cfg):
+    """A simulated clock and world when both links are sim://, real time otherwise."""
+    from perchd.clock import ManualClock
+    from perchd.runtime import Runtime
+    from perchd.uri import parse_uri
+
+    driver_sim = parse_uri(args.driver).scheme == "sim"
+    mocap_sim = parse_uri(args.mocap).scheme == "sim"
+    if driver_sim != mocap_sim:
+        raise UriError("sim:// flies only with sim:// on both --driver and --mocap "
+                       f"(got {args.driver} and {args.mocap})")
+    if not driver_sim:
+        return Runtime.real()
+    from perchd.sim.world import SimWorld, world_params_from_uri
+
+    rt = Runtime(ManualClock())
+    params = world_params_from_uri(parse_uri(args.driver))
+    rt.sim = SimWorld(dataclasses.replace(params, surface_point=cfg.surface.point,
+                                          surface_normal=cfg.surface.normal), rt.clock)
+    return rt
+
+
+class StatusLine:
+    """The live status on stderr: rewritten in place on a terminal, else a line per 0.5 s."""
+
+    def __init__(self, stream=sys.stderr) -> None:
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.every = 0.1 if self.tty else 0.5
+        self._next = 0.0
+
+    def __call__(self, st) -> None:
+        if st.t < self._next:
+            return
+        self._next = st.t + self.every
+        fmt = lambda v, f: "  --  " if v is None else format(v, f)  # noqa: E731
+        line = (f"t {st.t:6.2f} s  {st.phase.value:<8} X {fmt(st.x, '+7.3f')} m  "
+                f"Xdot {fmt(st.xdot, '+6.3f')} m/s  tau {fmt(st.tau, '+7.3f')} / "
+                f"ref {fmt(st.tau_ref, '+7.3f')} s")
+        self.stream.write(("\r" + line) if self.tty else line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+
+
+def summary_text(res) -> str:
+    lines = [f"outcome: {res.outcome.name} ({res.outcome.value}){': ' + res.detail if res.detail else ''}"]
+    if res.contact_speed is not None:
+        lines.append(f"contact speed: {res.contact_speed:.3f} m/s (plan {res.v_contact_plan:.3f}, "
+                     f"error {res.contact_speed - res.v_contact_plan:+.3f} m/s)")
+    if res.perch_time is not None:
+        lines.append(f"perch time: {res.perch_time:.3f} s (plan {res.plan_duration:.3f}, "
+                     f"error {100 * (res.perch_time / res.plan_duration - 1):+.1f} %)")
+    if res.true_contact_speed is not None:
+        lines.append(f"simulator: contact at {res.true_contact_speed:.3f} m/s"
+                     + (f", {res.true_perch_time:.3f} s after the trigger"
+                        if res.true_perch_time is not None else ""))
+    if res.trigger is not None:
+        lines.append(f"trigger: x {res.trigger.x:.3f} m, v {res.trigger.v:.3f} m/s; "
+                     f"{res.trigger.action}")
+    lp = res.loop
+    lines.append(f"loop: {lp.ticks} ticks, compute median {lp.compute_median_s * 1e6:.0f} us "
+                 f"(p99 {lp.compute_p99_s * 1e6:.0f} us), {lp.overruns} overruns")
+    lines.append(f"log: {res.log}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from perchd.drivers.base import open_driver
+    from perchd.flight import FlightAbort, fly
+    from perchd.mocap.base import open_source
+    from perchd.tau import load_plan
+    from perchd.types import EndReason
+
+    plan = load_plan(args.plan)
+    cfg = load_config(args)
+    runtime = make_runtime(args, cfg)
+    log = Path(args.log) if args.log else Path("flightlogs") / (
+        f"{time.strftime('%Y%m%d-%H%M%S')}-{plan.strategy}.jsonl")
+    abort = FlightAbort()
+    handlers = {s: signal.signal(s, lambda *_: abort.request(EndReason.SIGNAL))
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    status = StatusLine()
+    source = open_source(args.mocap, runtime)
+    try:
+        source.start()
+        with open_driver(args.driver, runtime) as driver:
+            res = fly(plan, driver, source, runtime.clock, log, cfg, abort, status,
+                      world=runtime.sim, header={"plan_file": str(args.plan),
+                                                 "mocap": args.mocap})
+    finally:
+        status.close()
+        source.close()
+        for s, h in handlers.items():
+            signal.signal(s, h)
+    print(json.dumps(res.to_json()) if args.json else summary_text(res))
+    return 0 if res.outcome is EndReason.CONTACT else 1

@@ -1,0 +1,53 @@
+"""Fly a plan in simulation the way `perchd fly --driver sim:// --mocap sim://` does."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+import refplans
+from perchd.clock import ManualClock
+from perchd.drivers.base import open_driver
+from perchd.flight import FlightAbort, FlightResult, fly
+from perchd.flightconfig import FlightConfig
+from perchd.mocap.base import open_source
+from perchd.runtime import Runtime
+
+PLANS = Path(__file__).resolve().parents[2] / "plans"
+NOISY = "sim://?latency=0.02&noise=0.001"
+"""20 ms command latency and 1 mm mocap noise (the issue's second acceptance case)."""
+
+
+def case1(strategy: str) -> Any:
+    """The paper's case-1 plan: from perchd.tau (plans/case1-*.json) once it has landed,
+    else the closed-form reference in refplans.py."""
+    path = PLANS / {"ctdts": "case1-ctdts.json", "ipts": "case1-ipts-n3.json"}[strategy]
+    try:
+        from perchd.tau import load_plan
+    except ImportError:
+        load_plan = None
+    if load_plan is not None and path.exists():
+        return load_plan(path)
+    return refplans.ctdts() if strategy == "ctdts" else refplans.ipts()
+
+
+class Sim:
+    """One simulated flight: its world, driver, source and result."""
+
+    def __init__(self, uri: str = "sim://") -> None:
+        self.runtime = Runtime(ManualClock(0.0))
+        self.driver = open_driver(uri, self.runtime)
+        self.source = open_source(uri, self.runtime)
+        self.world = self.runtime.sim
+        self.driver.connect()
+        self.source.start()
+
+    def fly(self, plan: Any, log: Path, cfg: FlightConfig = FlightConfig(),
+            abort: FlightAbort | None = None,
+            on_tick: Callable[[Any], None] | None = None) -> FlightResult:
+        try:
+            return fly(plan, self.driver, self.source, self.runtime.clock, log, cfg, abort,
+                       on_tick, world=self.world)
+        finally:
+            self.source.close()
+            self.driver.close()

@@ -1,0 +1,81 @@
+"""Acceptance: the paper's case-1 plans flown closed loop in simulation end in contact at
+the planned speed and time (issue 3), nominal and with 20 ms latency + 1 mm noise."""
+
+from __future__ import annotations
+
+import pytest
+
+from simflight import NOISY, Sim, case1
+from perchd.flightconfig import FlightConfig, TauGains
+from perchd.flightlog import read_log
+from perchd.types import EndReason
+
+LINKS = {"nominal": "sim://", "latency+noise": NOISY, "latency+noise seed 1": NOISY + "&seed=1"}
+
+
+@pytest.fixture(scope="module", params=[(s, l) for s in ("ctdts", "ipts") for l in LINKS],
+                ids=lambda p: f"{p[0]}-{p[1]}")
+def flown(request, tmp_path_factory):
+    strategy, link = request.param
+    plan = case1(strategy)
+    result = Sim(LINKS[link]).fly(plan, tmp_path_factory.mktemp("perch") / "f.jsonl")
+    return plan, result
+
+
+def test_the_perch_ends_in_contact_inside_the_speed_window(flown):
+    plan, res = flown
+    lo, hi = plan.limits.v_contact
+    assert res.outcome is EndReason.CONTACT
+    assert lo <= res.true_contact_speed <= hi
+    assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.05)
+
+
+def test_the_perch_takes_the_planned_time_within_5_percent(flown):
+    plan, res = flown
+    assert res.true_perch_time == pytest.approx(plan.duration, rel=0.05)
+
+
+def test_the_agent_estimates_its_own_contact_as_the_simulator_measured_it(flown):
+    _, res = flown
+    assert res.contact_speed == pytest.approx(res.true_contact_speed, abs=0.05)
+    assert res.perch_time == pytest.approx(res.true_perch_time, abs=0.02)
+
+
+def test_the_flight_triggered_at_the_plans_state_and_sent_no_failsafe(flown):
+    plan, res = flown
+    assert res.trigger.x == pytest.approx(plan.x0, abs=0.05)
+    assert res.trigger.v == pytest.approx(plan.v0, abs=0.1)
+    assert not res.failsafe_sent
+
+
+def test_the_log_has_one_row_per_tick_and_ends_in_contact(flown):
+    _, res = flown
+    log = read_log(res.log)
+    assert log.complete and log.end["outcome"] == "CONTACT"
+    assert len(log.rows) == res.loop.ticks
+    assert [r.k for r in log.rows] == list(range(len(log.rows)))
+    assert log.rows[-1].end == "CONTACT"
+    phases = [r.phase for r in log.rows]
+    for a, b in [("hold", "approach"), ("approach", "stage1"), ("stage1", "stage2"),
+                 ("stage2", "contact")]:
+        assert phases.index(a) < phases.index(b)
+
+
+@pytest.mark.parametrize("strategy", ["ctdts", "ipts"])
+def test_without_feedforward_the_tau_pid_alone_still_perches_inside_the_window(strategy, tmp_path):
+    plan = case1(strategy)
+    cfg = FlightConfig(tau_gains=TauGains(feedforward=False))
+    res = Sim().fly(plan, tmp_path / "f.jsonl", cfg)
+    lo, hi = plan.limits.v_contact
+    assert res.outcome is EndReason.CONTACT
+    assert lo - 0.05 <= res.true_contact_speed <= hi + 0.05
+    assert res.true_perch_time == pytest.approx(plan.duration, rel=0.10)
+
+
+def test_stage_two_starts_when_the_measured_tau_reaches_tau_s(flown):
+    plan, res = flown
+    log = read_log(res.log)
+    switch = next(e for e in log.events if e.kind == "stage2")
+    assert switch.values["tau"] >= plan.tau_s
+    before = [r for r in log.rows if r.phase == "stage1"][-1]
+    assert before.tau < plan.tau_s
