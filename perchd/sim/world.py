@@ -18,7 +18,7 @@ import random
 import threading
 from collections import deque
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Callable
 
 from perchd.errors import UriError
 from perchd.mocap.base import SourceStats
@@ -69,10 +69,12 @@ class Contact:
 @dataclass
 class Faults:
     """Things a test can break: mocap outages [(t0, t1)] (no pose measured in between),
-    link_ok (the driver's health), and queued velocity kicks / attitude kicks."""
+    link_ok (the driver's health), and `at`: (t, fn(world)) disturbances applied once when
+    simulated time reaches t (a gust: fn changes plant.v; a knock: plant.att)."""
 
     mocap_outages: list[tuple[float, float]] = field(default_factory=list)
     link_ok: bool = True
+    at: list[tuple[float, Callable[["SimWorld"], None]]] = field(default_factory=list)
 
 
 class SimWorld:
@@ -115,6 +117,14 @@ class SimWorld:
                 self._next_frame += 1
             self.plant.step_to(t, self._check_contact)
             self._deliver(t)
+            self._disturb(t)
+
+    def _disturb(self, t: float) -> None:
+        due = [item for item in self.faults.at if item[0] <= t]
+        if due:
+            self.faults.at = [item for item in self.faults.at if item[0] > t]
+            for _, fn in due:
+                fn(self)
 
     def state(self) -> PlantState:
         self.advance()
