@@ -208,7 +208,7 @@ def _cell_bounds(poly: _Poly, ka, kb, t1, t2):
     ek, et = _absmax(dk_f2) * hk, _absmax(dt_f2) * ht
     ub2 = np.abs(f2c) + ek + et
     ek1, et1 = _absmax(dk_f1) * hk, _absmax(f2) * ht
-    return ub1, ub2, p[1], np.maximum(ek, ek1), np.maximum(et, et1)
+    return ub1, ub2, p[1], np.maximum(ek, ek1), np.maximum(et, et1), (kc, tc, f1c, f2c)
 
 
 # --- the certifier --------------------------------------------------------------
@@ -283,8 +283,11 @@ def _contact_cells(k, box, v_contact, tau_s, kmin, kmax, min_width, n0: int = 32
             done.append((a, b, ta, tb))
             lo_all, hi_all = min(lo_all, vc_lo), max(hi_all, vc_hi)
             continue
+        witness = _contact_witness(k, box, (c,), v_contact, tau_s)
+        if witness:
+            return None, witness
         if 2 * h < min_width * max(1.0, abs(kmin)):
-            witness = _contact_witness(k, box, (a, c, b), v_contact, tau_s)
+            witness = _contact_witness(k, box, (a, b), v_contact, tau_s)
             if witness:
                 return None, witness
             undecided = True   # within SLACK of a limit: keep looking for a real violation
@@ -322,7 +325,7 @@ def _peak_cells(k, box, cells_k, v_max, a_max, tau_s, min_width, m0: int = 16):
             return None
         s_hi = box.segment(kb)[1]  # largest s on the cell: v_hi/|k0| grows with k0
         s_hi = np.maximum(s_hi, box.segment(ka)[1])
-        ub1, ub2, p_hi, ek, et = _cell_bounds(poly, ka, kb, t1, t2)
+        ub1, ub2, p_hi, ek, et, centre = _cell_bounds(poly, ka, kb, t1, t2)
         live = p_hi >= 1.0 / tau_s       # else the whole cell lies after t_s
         v_ub, a_ub = s_hi * ub1 * (1 + SLACK), s_hi * ub2 * (1 + SLACK)
         ok = (~live) | ((v_ub <= v_lim) & (a_ub <= a_lim))
@@ -331,6 +334,9 @@ def _peak_cells(k, box, cells_k, v_max, a_max, tau_s, min_width, m0: int = 16):
         bad = ~ok
         if not bad.any():
             break
+        witness = _centre_witness(k, box, centre, bad, v_lim, a_lim, tau_s)
+        if witness:
+            return witness
         ka, kb, t1, t2, tsb, ek, et = (x[bad] for x in (ka, kb, t1, t2, tsb, ek, et))
         tiny = ((kb - ka) < min_width * kspan) & ((t2 - t1) < min_width * 10)
         if tiny.any():
@@ -355,6 +361,22 @@ def _split(k, tau_s, ka, kb, t1, t2, tsb, along_k):
     t2_n = np.minimum(t2_n, ts_n)
     keep = t1_n < t2_n
     return ka_n[keep], kb_n[keep], t1_n[keep], t2_n[keep], ts_n[keep]
+
+
+def _centre_witness(k, box, centre, bad, v_lim, a_lim, tau_s):
+    """The worst real violation at the centre of a failing cell (largest s of its ray), if any."""
+    kc, tc, f1c, f2c = (x[bad] for x in centre)
+    s = box.segment(kc)[1]
+    ratio = np.maximum(s * f1c / v_lim, s * np.abs(f2c) / a_lim)
+    for j in np.argsort(-ratio)[:8]:
+        if ratio[j] <= 1.0:
+            break
+        ts, _ = first_switch(k, kc[j], tau_s)
+        if ts is not None and tc[j] <= ts:
+            if s[j] * f1c[j] > v_lim:
+                return Violation("v_max", -s[j], s[j] * abs(kc[j]), tc[j], s[j] * f1c[j], v_lim)
+            return Violation("a_max", -s[j], s[j] * abs(kc[j]), tc[j], s[j] * f2c[j], a_lim)
+    return None
 
 
 def _peak_witness(k, box, ka, kb, t1, t2, v_lim, a_lim, tau_s):
