@@ -1,0 +1,191 @@
+"""`perchd sim`: the loopback plant as a process of its own, for hardware-in-the-loop runs.
+
+    perchd sim --pose-out natnet://127.0.0.1[:PORT] | zmq://127.0.0.1:5555
+               --setpoint-in zmq://127.0.0.1:5556 [--body cf1] [--start X Y Z]
+               [--latency S] [--noise M] [--surface X Y Z] [--normal NX NY NZ]
+               [--duration S] [--exit-on-stop] [--json]
+
+The simulated world (perchd.sim.world) runs in real time. Poses go out at the mocap rate
+through a NatNet server emulator or a ZMQ publisher (perchd.mocap.outputs); setpoints come
+in on a ZMQ SUB socket bound at --setpoint-in (CONTRACTS 3 topics `setpoint` and `stop`),
+which `perchd fly --driver zmq://...` connects to. A `stop` cuts the motors.
+
+Port 0 picks a free port. Once serving, one line on stderr says where:
+    perchd sim: ready: mocap <URI for perchd fly --mocap> driver <URI for --driver>
+On exit (SIGINT/SIGTERM, --duration, or --exit-on-stop) a summary: text, or with --json
+exactly one JSON object on stdout (contact time [s] and speed [m/s], counts).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from perchd.errors import LinkError, UriError
+
+STOP_GRACE_S = 0.5
+"""[s] --exit-on-stop keeps serving this long after a stop (the agent's last messages)."""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("sim", help="run the simulated vehicle as its own process",
+                              description=__doc__.splitlines()[0])
+    p.add_argument("--pose-out", required=True, help="natnet://HOST[:PORT] or zmq://HOST:PORT")
+    p.add_argument("--setpoint-in", required=True, help="zmq://HOST:PORT to bind for setpoints")
+    p.add_argument("--body", default="cf1", help="rigid body name (default cf1)")
+    p.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="[m] start position, hovering when Z > 0 (default 4.5 m before the "
+                        "surface, 1 m above it)")
+    p.add_argument("--latency", type=float, default=0.0, help="[s] setpoint-to-vehicle delay")
+    p.add_argument("--noise", type=float, default=0.0, help="[m] mocap noise std per axis")
+    p.add_argument("--surface", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   default=(0.0, 0.0, 0.0), help="[m] a point on the surface (default 0 0 0)")
+    p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
+                   default=(1.0, 0.0, 0.0), help="approach direction (default 1 0 0)")
+    p.add_argument("--duration", type=float, help="[s] stop serving after this long")
+    p.add_argument("--exit-on-stop", action="store_true",
+                   help="exit once the agent has sent `stop` (the flight ended)")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(run=run)
+
+
+@dataclass
+class Counts:
+    setpoints: int = 0
+    stops: int = 0
+    rejected: int = 0
+    poses: int = 0
+    stop_at: float | None = None  # time.monotonic() of the first stop
+
+
+class SetpointInbox:
+    """SUB bound at --setpoint-in: setpoints and stops for `body` go to the world."""
+
+    def __init__(self, text: str, world: Any, body: str, counts: Counts) -> None:
+        from perchd.uri import parse_uri
+        import zmq
+        uri = parse_uri(text)
+        if uri.scheme != "zmq" or not uri.host or uri.port is None:
+            raise UriError(f"--setpoint-in {text}: expected zmq://HOST:PORT")
+        self.world, self.body, self.counts = world, body, counts
+        self.sock = zmq.Context.instance().socket(zmq.SUB)
+        self.sock.setsockopt(zmq.LINGER, 0)
+        try:
+            self.sock.bind(f"tcp://{uri.host}:{uri.port}")
+        except zmq.ZMQError as err:
+            self.sock.close()
+            raise LinkError(f"--setpoint-in {text}: cannot bind: {err}") from None
+        for topic in (b"setpoint", b"stop"):
+            self.sock.setsockopt(zmq.SUBSCRIBE, topic)
+        port = self.sock.getsockopt(zmq.LAST_ENDPOINT).decode().rsplit(":", 1)[1]
+        self.uri = f"zmq://{uri.host}:{port}?vehicle={body}"
+        self._alive = True
+        self._thread = threading.Thread(target=self._serve, name="sim-setpoints", daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        while self._alive:
+            if self.sock.poll(50):
+                self.handle(*self.sock.recv_multipart()[:2])
+
+    def handle(self, topic: bytes, body: bytes) -> None:
+        from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message
+        from perchd.types import Setpoint
+        if topic == b"stop":
+            self.counts.stops += 1
+            self.counts.stop_at = self.counts.stop_at or time.monotonic()
+            self.world.command(Setpoint.stop(self.world.clock.now()))
+            return
+        try:
+            vehicle, _, sp = parse_setpoint_message(body)
+        except BadSetpoint:
+            self.counts.rejected += 1  # counted, never fatal: the sim outlives a bad sender
+            return
+        if vehicle in ("", self.body):
+            self.counts.setpoints += 1
+            self.world.command(sp)
+
+    def close(self) -> None:
+        self._alive = False
+        self._thread.join(timeout=1.0)
+        self.sock.close()
+
+
+def make_world(args: argparse.Namespace) -> Any:
+    from perchd.clock import MonotonicClock
+    from perchd.sim.world import MocapParams, WorldParams, SimWorld
+    from perchd.sim.plant import PlantParams
+    if not 0.0 <= args.latency <= 1.0:
+        raise UriError(f"--latency {args.latency:g} s is outside 0..1 s")
+    if not 0.0 <= args.noise <= 0.1:
+        raise UriError(f"--noise {args.noise:g} m is outside 0..0.1 m")
+    params = WorldParams(plant=PlantParams(latency_s=args.latency),
+                         mocap=MocapParams(noise_m=args.noise),
+                         start=tuple(args.start) if args.start else None,
+                         surface_point=tuple(args.surface), surface_normal=tuple(args.normal),
+                         body=args.body)
+    return SimWorld(params, MonotonicClock())
+
+
+def serve(world: Any, output: Any, counts: Counts, done: threading.Event,
+          until: float | None, exit_on_stop: bool) -> None:
+    """Publish each pose as it arrives, in real time, until told to stop."""
+    last = -1
+    while not done.is_set():
+        pose = world.latest_pose()
+        if pose is not None and pose.seq != last:
+            output.publish(pose)
+            counts.poses, last = counts.poses + 1, pose.seq
+        now = time.monotonic()
+        if until is not None and now >= until:
+            return
+        if exit_on_stop and counts.stop_at is not None and now >= counts.stop_at + STOP_GRACE_S:
+            return
+        done.wait(max(0.0, min(world.next_arrival() - world.clock.now(), 0.05)))
+
+
+def summary(world: Any, counts: Counts, mocap_uri: str, driver_uri: str) -> dict[str, Any]:
+    c = world.contact
+    return {"contact": c is not None, "contact_t": c.t - world.t0 if c else None,
+            "contact_speed": c.speed if c else None, "setpoints": counts.setpoints,
+            "stops": counts.stops, "rejected": counts.rejected, "poses": counts.poses,
+            "mocap": mocap_uri, "driver": driver_uri}
+
+
+def run(args: argparse.Namespace) -> int:
+    from perchd.mocap.outputs import open_pose_output
+    world = make_world(args)
+    counts = Counts()
+    output = open_pose_output(args.pose_out, [args.body], world.clock)
+    try:
+        inbox = SetpointInbox(args.setpoint_in, world, args.body, counts)
+    except BaseException:
+        output.close()
+        raise
+    done = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    mocap_uri = output.uri(args.body)
+    print(f"perchd sim: ready: mocap {mocap_uri} driver {inbox.uri}", file=sys.stderr, flush=True)
+    until = None if args.duration is None else time.monotonic() + args.duration
+    try:
+        serve(world, output, counts, done, until, args.exit_on_stop)
+    finally:
+        inbox.close()
+        output.close()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    result = summary(world, counts, mocap_uri, inbox.uri)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        contact = (f"contact at {result['contact_speed']:.3f} m/s, {result['contact_t']:.3f} s "
+                   "after start" if result["contact"] else "no contact")
+        print(f"{contact}; {counts.setpoints} setpoints, {counts.stops} stops, "
+              f"{counts.rejected} rejected, {counts.poses} poses")
+    return 0

@@ -1,0 +1,172 @@
+"""`perchd sim` as its own process: hardware-in-the-loop over real sockets.
+
+The agent flies with the zmq:// driver and the natnet:// mocap against `perchd sim` in
+another process, and must perch within the tolerances the in-process simulator meets
+(tests/closedloop/test_perch_acceptance.py): contact inside the speed window and within
+0.05 m/s of the plan's speed, the planned time within 5 %.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import zmq
+
+from perchd.clock import ManualClock
+from perchd.drivers.base import open_driver
+from perchd.mocap.base import open_source
+from perchd.runtime import Runtime
+from perchd.types import EndReason
+
+flight = pytest.importorskip("perchd.flight", reason="the closed loop is not in this checkout")
+
+ROOT = Path(__file__).resolve().parents[2]
+PLAN_FILE = ROOT / "plans" / "case1-ipts-n3.json"
+
+
+def case1_ipts():
+    """The paper's case-1 IPTS plan: from perchd.tau's plan file once it exists, else the
+    closed-loop tests' closed-form reference."""
+    try:
+        from perchd.tau import load_plan
+        if PLAN_FILE.exists():
+            return load_plan(PLAN_FILE)
+    except ImportError:
+        pass
+    spec = importlib.util.spec_from_file_location("refplans_for_hil", ROOT / "tests/closedloop/refplans.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module.ipts()
+
+
+class SimProcess:
+    """`perchd sim` in a child process; .mocap and .driver are the URIs it announced."""
+
+    def __init__(self, *extra: str, pose_out: str = "natnet://127.0.0.1:0") -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "perchd", "sim", "--pose-out", pose_out,
+             "--setpoint-in", "zmq://127.0.0.1:0", "--json", *extra],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        line = self.proc.stderr.readline()
+        found = re.search(r"ready: mocap (\S+) driver (\S+)", line)
+        if found is None:
+            self.proc.kill()
+            raise AssertionError(f"perchd sim did not start: {line}{self.proc.stderr.read()}")
+        self.mocap, self.driver = found.groups()
+
+    def finish(self, timeout: float = 10.0) -> dict:
+        """Its one JSON summary (after --exit-on-stop, or after a SIGTERM we send)."""
+        try:
+            out, _ = self.proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.send_signal(signal.SIGTERM)
+            out, _ = self.proc.communicate(timeout=5.0)
+        assert self.proc.returncode == 0
+        return json.loads(out)
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.communicate()
+
+
+def fly_agent(plan, sim: SimProcess, log: Path):
+    """The agent against the sim process: `perchd fly` when plan files exist, else the
+    same flight.fly call `perchd fly` makes, in this process, on the real clock."""
+    if PLAN_FILE.exists() and importlib.util.find_spec("perchd.commands.fly"):
+        done = subprocess.run(
+            [sys.executable, "-m", "perchd", "fly", str(PLAN_FILE), "--driver", sim.driver,
+             "--mocap", sim.mocap, "--log", str(log), "--json"],
+            capture_output=True, text=True, timeout=60)
+        assert done.stdout, done.stderr
+        out = json.loads(done.stdout)
+        return EndReason[out["outcome"]], out["contact_speed"], out["perch_time"]
+    runtime = Runtime.real()
+    source = open_source(sim.mocap, runtime)
+    source.start()
+    try:
+        with open_driver(sim.driver, runtime) as driver:
+            res = flight.fly(plan, driver, source, runtime.clock, log)
+    finally:
+        source.close()
+    return res.outcome, res.contact_speed, res.perch_time
+
+
+def fly_in_process(plan, log: Path):
+    runtime = Runtime(ManualClock(0.0))
+    driver, source = open_driver("sim://", runtime), open_source("sim://", runtime)
+    driver.connect()
+    source.start()
+    try:
+        return flight.fly(plan, driver, source, runtime.clock, log, world=runtime.sim)
+    finally:
+        source.close()
+        driver.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("pose_out", ["natnet://127.0.0.1:0", "zmq://127.0.0.1:0"],
+                         ids=["natnet", "zmq"])
+def test_the_agent_perches_on_perchd_sim_in_another_process_as_in_process(pose_out, tmp_path):
+    plan = case1_ipts()
+    reference = fly_in_process(plan, tmp_path / "in_process.jsonl")
+    sim = SimProcess("--exit-on-stop", pose_out=pose_out)
+    try:
+        outcome, speed, perch_time = fly_agent(plan, sim, tmp_path / "hil.jsonl")
+        report = sim.finish()
+    finally:
+        sim.kill()
+    lo, hi = plan.limits.v_contact
+    assert reference.outcome is outcome is EndReason.CONTACT
+    assert lo <= report["contact_speed"] <= hi
+    assert report["contact_speed"] == pytest.approx(plan.v_contact, abs=0.05)
+    assert report["contact_speed"] == pytest.approx(reference.true_contact_speed, abs=0.05)
+    assert speed == pytest.approx(report["contact_speed"], abs=0.05)  # the agent's estimate
+    assert perch_time == pytest.approx(plan.duration, rel=0.05)
+    assert report["stops"] >= 1 and report["rejected"] == 0
+
+
+def send(sock, topic: bytes, body: bytes) -> None:
+    sock.send_multipart([topic, body])
+
+
+def test_the_sim_counts_bad_setpoints_obeys_stop_and_reports_on_sigterm():
+    sim = SimProcess("--start", "-4.5", "0", "1")
+    pub = zmq.Context.instance().socket(zmq.PUB)
+    try:
+        pub.connect("tcp://" + sim.driver.split("//")[1].split("?")[0])
+        time.sleep(0.3)  # let the subscription reach the publisher
+        send(pub, b"setpoint", b"{not json")
+        send(pub, b"setpoint", json.dumps({"vehicle": "cf1", "seq": 0, "t": 0.0, "pose_seq": 0,
+                                           "roll": 0.0, "pitch": 0.0, "yaw": 0.0,
+                                           "thrust": 0.2943, "phase": "hold"}).encode())
+        send(pub, b"stop", json.dumps({"vehicle": "cf1", "reason": "operator abort"}).encode())
+        time.sleep(0.3)
+        sim.proc.send_signal(signal.SIGTERM)
+        report = sim.finish()
+    finally:
+        pub.close(0)
+        sim.kill()
+    assert (report["setpoints"], report["rejected"], report["stops"]) == (1, 1, 1)
+    assert report["poses"] > 30 and report["contact"] is False
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--pose-out", "udp://x", "--setpoint-in", "zmq://127.0.0.1:0"], "a pose output is"),
+    (["--pose-out", "zmq://127.0.0.1:0", "--setpoint-in", "tcp://127.0.0.1:0"], "expected zmq://HOST:PORT"),
+    (["--pose-out", "zmq://127.0.0.1:0", "--setpoint-in", "zmq://127.0.0.1:0", "--noise", "1"], "--noise 1 m"),
+])
+def test_bad_arguments_are_one_line_and_exit_2(args, message):
+    done = subprocess.run([sys.executable, "-m", "perchd", "sim", *args],
+                          capture_output=True, text=True, timeout=30)
+    assert done.returncode == 2
+    assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1
