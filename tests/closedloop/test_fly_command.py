@@ -1,0 +1,90 @@
+"""`perchd fly` (CONTRACTS 2): a whole simulated perch from the command line."""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+
+import pytest
+
+from simflight import PLANS, Sim, case1
+from perchd.cli import main
+from perchd.commands.fly import StatusLine, make_runtime, summary_text
+from perchd.errors import UriError
+from perchd.flight import TickStatus
+from perchd.flightconfig import FlightConfig
+from perchd.flightlog import read_log
+from perchd.types import Phase
+
+
+def plan_file(tmp_path, strategy="ipts"):
+    tau = pytest.importorskip("perchd.tau", reason="perchd.tau (the planner) has not landed")
+    if not hasattr(tau, "load_plan"):
+        pytest.skip("perchd.tau has no load_plan yet")
+    shipped = PLANS / ("case1-ipts-n3.json" if strategy == "ipts" else "case1-ctdts.json")
+    if shipped.exists():
+        return shipped
+    path = tmp_path / "plan.json"
+    tau.save_plan(case1(strategy), path)
+    return path
+
+
+def test_perchd_fly_sim_performs_a_whole_perch_and_prints_the_contract_json(tmp_path, capsys):
+    log = tmp_path / "f.jsonl"
+    code = main(["fly", str(plan_file(tmp_path)), "--driver", "sim://", "--mocap", "sim://",
+                 "--log", str(log), "--json"])
+    out, err = capsys.readouterr()
+    res = json.loads(out)
+    assert code == 0 and res["outcome"] == "CONTACT"
+    for key in ("contact_speed", "perch_time", "plan_duration", "v_contact_plan", "log"):
+        assert key in res
+    assert res["contact_speed"] == pytest.approx(res["v_contact_plan"], abs=0.05)
+    assert res["perch_time"] == pytest.approx(res["plan_duration"], rel=0.05)
+    assert res["log"] == str(log) and read_log(log).complete
+    assert "stage1" in err and "tau" in err  # the live status line
+
+
+def test_perchd_fly_without_log_writes_into_flightlogs_and_prints_a_summary(tmp_path, capsys,
+                                                                            monkeypatch):
+    plan = plan_file(tmp_path).resolve()
+    monkeypatch.chdir(tmp_path)
+    assert main(["fly", str(plan), "--driver", "sim://", "--mocap", "sim://"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("outcome: CONTACT")
+    assert "contact speed:" in out and "perch time:" in out
+    assert len(list((tmp_path / "flightlogs").glob("*.jsonl"))) == 1
+
+
+def test_a_surface_given_on_the_command_line_moves_the_simulated_wall_too():
+    args = argparse.Namespace(driver="sim://", mocap="sim://")
+    cfg = FlightConfig()
+    import dataclasses
+    cfg = dataclasses.replace(cfg, surface=dataclasses.replace(cfg.surface, point=(2.0, 1.0, 0.0),
+                                                               normal=(0.0, 1.0, 0.0)))
+    rt = make_runtime(args, cfg)
+    assert rt.sim.params.surface_point == (2.0, 1.0, 0.0)
+    assert rt.sim.start == pytest.approx((2.0, -3.5, 1.0))
+
+
+def test_sim_on_one_side_only_is_refused_with_one_line():
+    with pytest.raises(UriError, match="sim:// flies only with sim:// on both"):
+        make_runtime(argparse.Namespace(driver="sim://", mocap="natnet://10.0.0.5"), FlightConfig())
+
+
+def test_the_status_line_shows_phase_x_xdot_and_tau_against_its_reference():
+    stream = io.StringIO()
+    line = StatusLine(stream)
+    line(TickStatus(0.0, Phase.STAGE1, -2.5, 1.4, -1.786, -1.75))
+    line(TickStatus(0.1, Phase.STAGE1, -2.4, 1.4, -1.7, -1.7))  # within 0.5 s: not repeated
+    text = stream.getvalue()
+    assert text.count("\n") == 1
+    assert "stage1" in text and "-2.500" in text and "+1.400" in text
+    assert "tau  -1.786 / ref  -1.750" in text
+
+
+def test_the_summary_reports_errors_against_the_plan(tmp_path):
+    res = Sim().fly(case1("ipts"), tmp_path / "f.jsonl")
+    text = summary_text(res)
+    assert text.splitlines()[0] == "outcome: CONTACT (contact with the surface): " + res.detail
+    assert f"{res.contact_speed - res.v_contact_plan:+.3f} m/s" in text
