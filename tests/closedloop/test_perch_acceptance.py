@@ -79,3 +79,27 @@ def test_stage_two_starts_when_the_measured_tau_reaches_tau_s(flown):
     assert switch.values["tau"] >= plan.tau_s
     before = [r for r in log.rows if r.phase == "stage1"][-1]
     assert before.tau < plan.tau_s
+
+
+def test_the_papers_clock_indexed_stage_two_also_perches(tmp_path):
+    """tau_ref = tau_s + (t - t_s) (eq. 6) instead of holding V_c: contact, nearer the edge."""
+    plan = case1("ipts")
+    cfg = FlightConfig(tau_gains=TauGains(stage2_hold_speed=False))
+    res = Sim().fly(plan, tmp_path / "f.jsonl", cfg)
+    assert res.outcome is EndReason.CONTACT
+    assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.05)
+    assert res.true_perch_time == pytest.approx(plan.duration, rel=0.05)
+
+
+@pytest.mark.parametrize("action,thrust", [("cut", 0.0), ("idle", 0.08)])
+def test_after_contact_the_motors_are_cut_or_idled_as_configured(action, thrust, tmp_path):
+    from perchd.flightconfig import PostContact
+    from perchd.types import Phase
+    sim = Sim()
+    cfg = FlightConfig(post_contact=PostContact(action))
+    res = sim.fly(case1("ctdts"), tmp_path / "f.jsonl", cfg)
+    after = [sp for sp in sim.world.sent if sp.phase is Phase.CONTACT]
+    assert res.outcome is EndReason.CONTACT and not res.failsafe_sent
+    assert len(after) == pytest.approx(cfg.post_contact_s * cfg.rate_hz, abs=1)
+    assert {sp.thrust for sp in after} == {thrust}
+    assert read_log(res.log).rows[-1].phase == "done"
