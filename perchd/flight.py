@@ -8,7 +8,6 @@ driver.failsafe(reason) with the log closed; an exception is re-raised after tha
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -177,7 +176,3 @@ def _result(run: _Run, world: Any, log_path: str) -> FlightResult:
         float(sup.plan.v_contact), trig, true_speed, true_perch, log_path,
         run.loop.stats.summary(), run.failsafe_sent)
 
-
-def relative_error(value: float | None, ref: float) -> float:
-    """(value - ref) / ref, NaN when there is no value."""
-    return math.nan if value is None else (value - ref) / ref

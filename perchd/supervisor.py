@@ -20,7 +20,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
-from perchd.control import Controller
+from perchd.control import AxisController, Controller
 from perchd.drivers.base import LinkHealth
 from perchd.errors import PlanError
 from perchd.flightconfig import FlightConfig, PostContact, TriggerPolicy
@@ -125,10 +125,6 @@ class Supervisor:
         if self.end is None:
             self.end, self.end_detail, self._t_end = reason, detail, t
             self.events.append(LogEvent(t, "end", f"{reason.value}{': ' if detail else ''}{detail}"))
-
-    @property
-    def since_trigger(self) -> float | None:
-        return None if self.trigger is None else self._t_prev - self.trigger.t
 
     # --- the tick ---------------------------------------------------------------------------
     def tick(self, t: float, state: State | None, health: LinkHealth, overrun_streak: int,
@@ -301,8 +297,6 @@ class Supervisor:
         return getattr(self.plan, "tau_s", None)
 
     def _start(self, t: float, st: State) -> None:
-        from perchd.control import AxisController
-
         self._hold = (st.x, st.y, st.z)
         self._hold_x = AxisController(self.cfg.lateral.z)
         start_world = self.frame.rotate_out((st.x, st.y, st.z))

@@ -103,3 +103,33 @@ def test_after_contact_the_motors_are_cut_or_idled_as_configured(action, thrust,
     assert len(after) == pytest.approx(cfg.post_contact_s * cfg.rate_hz, abs=1)
     assert {sp.thrust for sp in after} == {thrust}
     assert read_log(res.log).rows[-1].phase == "done"
+
+
+@pytest.mark.parametrize("rate_hz", [50.0, 500.0])
+def test_the_loop_perches_as_well_at_50_and_500_hz(rate_hz, tmp_path):
+    plan = case1("ipts")
+    res = Sim(NOISY).fly(plan, tmp_path / "f.jsonl", FlightConfig(rate_hz=rate_hz))
+    assert res.outcome is EndReason.CONTACT
+    assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.05)
+    assert res.loop.ticks == pytest.approx(rate_hz * read_log(res.log).rows[-1].t, rel=0.01)
+
+
+def _retarget_or_skip():
+    tau = pytest.importorskip("perchd.tau", reason="perchd.tau (the planner) has not landed")
+    if not hasattr(tau, "retarget"):
+        pytest.skip("perchd.tau has no retarget yet")
+    return tau.retarget
+
+
+@pytest.mark.parametrize("strategy", ["ctdts", "ipts"])
+def test_the_replan_policy_flies_a_plan_made_for_the_measured_trigger_state(strategy, tmp_path):
+    _retarget_or_skip()
+    from perchd.flightconfig import TriggerConfig, TriggerPolicy
+    plan = case1(strategy)
+    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN))
+    res = Sim(NOISY).fly(plan, tmp_path / "f.jsonl", cfg)
+    assert res.outcome is EndReason.CONTACT
+    assert (res.trigger.plan_x0, res.trigger.plan_v0) == (res.trigger.x, res.trigger.v)
+    assert res.trigger.action.startswith("replan")
+    assert res.true_perch_time == pytest.approx(res.plan_duration, rel=0.05)
+    assert res.true_contact_speed == pytest.approx(res.v_contact_plan, abs=0.05)
