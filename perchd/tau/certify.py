@@ -65,11 +65,14 @@ class Box:
         r = np.abs(k0)
         return (np.maximum(-self.x0[1], self.v0[0] / r), np.minimum(-self.x0[0], self.v0[1] / r))
 
-    def scaled(self, factor: float) -> "Box":
-        """The box shrunk (factor < 1) or grown about its centre."""
-        xc, xh = sum(self.x0) / 2, (self.x0[1] - self.x0[0]) / 2 * factor
-        vc, vh = sum(self.v0) / 2, (self.v0[1] - self.v0[0]) / 2 * factor
-        return Box((xc - xh, xc + xh), (vc - vh, vc + vh))
+    def scaled(self, factor: float, about: tuple[float, float] | None = None) -> "Box":
+        """The box shrunk (factor < 1) or grown about `about` (x0, v0), default its centre."""
+        xc, vc = about if about is not None else (sum(self.x0) / 2, sum(self.v0) / 2)
+        return Box(tuple(float(xc + (e - xc) * factor) for e in self.x0),
+                   tuple(float(vc + (e - vc) * factor) for e in self.v0))
+
+    def contains(self, x0: float, v0: float) -> bool:
+        return self.x0[0] <= x0 <= self.x0[1] and self.v0[0] <= v0 <= self.v0[1]
 
 
 @dataclass(frozen=True)

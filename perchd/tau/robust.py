@@ -130,10 +130,11 @@ def grid_box(k, lim: RobustLimits, dom: SearchDomain) -> Box | None:
 
 def _box_containing(mask, s, v, state) -> Box | None:
     """Grow a box cell by cell around the grid point nearest `state` while it stays feasible."""
-    i, j = int(np.abs(s + state[0]).argmin()), int(np.abs(v - state[1]).argmin())
-    if not mask[i, j]:
+    i = int(np.clip(np.searchsorted(s, -state[0]) - 1, 0, len(s) - 2))
+    j = int(np.clip(np.searchsorted(v, state[1]) - 1, 0, len(v) - 2))
+    i0, i1, j0, j1 = i, i + 2, j, j + 2       # the grid cell holding the state
+    if not mask[i0:i1, j0:j1].all():
         return None
-    i0, i1, j0, j1 = i, i + 1, j, j + 1
     grown = True
     while grown:
         grown = False
@@ -147,8 +148,17 @@ def _box_containing(mask, s, v, state) -> Box | None:
 
 
 def _score(k, lim, dom) -> float:
+    """-area of the grid box; when a required state is infeasible, how far it is (> 0)."""
     box = grid_box(k, lim, dom)
-    return 0.0 if box is None else -box.area
+    if box is not None:
+        return -box.area
+    if dom.contains is None:
+        return 0.0
+    x0, v0 = dom.contains
+    lo, hi = admissible(k, np.array([v0 / x0]), lim)
+    if np.isnan(lo[0]):
+        return 10.0
+    return float(max(lo[0] + x0, -x0 - hi[0], 0.0)) + 1e-3
 
 
 def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain) -> tuple[np.ndarray, Box]:
@@ -176,23 +186,24 @@ def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain) -> tuple[np.ndarra
     return np.asarray(kk), b
 
 
-def shrink_until_certified(k, box: Box, lim: RobustLimits, steps: int = 40) -> RobustResult:
-    """Largest (within 0.1 %) centred shrink of `box` that `certify_box` proves."""
+def shrink_until_certified(k, box: Box, lim: RobustLimits, about=None, steps: int = 40) -> RobustResult:
+    """Largest (within 0.1 %) shrink of `box` about `about` (default its centre) that
+    `certify_box` proves."""
     cert = lim.certify(k, box)
     if cert.certified:
         return RobustResult(tuple(map(float, k)), box, cert)
     lo, hi, best = 0.0, 1.0, None
     for _ in range(steps):
         mid = (lo + hi) / 2
-        c = lim.certify(k, box.scaled(mid))
+        c = lim.certify(k, box.scaled(mid, about))
         if c.certified:
-            lo, best = mid, (box.scaled(mid), c)
+            lo, best = mid, (box.scaled(mid, about), c)
         else:
             hi = mid
         if hi - lo < 1e-3 and best:
             break
     if best is None:
-        raise PlanError(f"no certified box around the found one (last: {cert.reason})")
+        raise PlanError(f"no certified box around the one found ({cert.reason})")
     return RobustResult(tuple(map(float, k)), best[0], best[1])
 
 
@@ -218,7 +229,7 @@ def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(
         if box is not None:
             k, box = polish(k, box, lim, dom)
             try:
-                found.append(shrink_until_certified(k, box, lim))
+                found.append(shrink_until_certified(k, box, lim, dom.contains))
             except PlanError:
                 pass
     if not found:
@@ -227,28 +238,47 @@ def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(
 
 
 def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
-              starts: int = 24) -> RobustResult:
-    """k_1..k_n certified over `box` with the least worst-case duration."""
-    from scipy.optimize import minimize
+              maxiter: int = 60) -> RobustResult:
+    """k_1..k_n certified over `box` with the least worst-case duration: first the k with the
+    widest sampled margin over the box (differential evolution), then the worst duration
+    t_s(k_max) + |tau_s| minimised under a sampled margin (COBYLA), then certified."""
+    from scipy.optimize import differential_evolution, minimize
 
-    rng = np.random.default_rng(seed)
+    if order < 1:
+        raise PlanError(f"order must be >= 1, got {order}")
     k_max = box.k0_range[1]
-    best = None
+    bounds = [(-3.0, 1.0)] + [(-2.0, 2.0)] * (order - 1)
+    de = differential_evolution(lambda k: -box_margin(k, box, lim), bounds, seed=seed,
+                                maxiter=maxiter, popsize=12, tol=1e-8, polish=False)
+    if -de.fun < SEARCH_MARGIN:
+        cert = lim.certify(de.x, box)
+        raise PlanError(f"no order-{order} k holds over x0 {box.x0[0]:g}..{box.x0[1]:g} m, "
+                        f"v0 {box.v0[0]:g}..{box.v0[1]:g} m/s: the best one breaks a limit by "
+                        f"{-100 * de.fun:.3g} % ({cert.reason})")
 
     def worst(k):
         ts, _ = first_switch(np.asarray(k), k_max, lim.tau_s)
-        return np.inf if ts is None else ts
+        return 1e3 if ts is None else ts
 
-    cons = {"type": "ineq", "fun": lambda k: box_margin(k, box, lim) - SEARCH_MARGIN}
-    for _ in range(starts):
-        k0 = np.concatenate([[rng.uniform(-2, 0.5)], rng.uniform(-1, 1, order - 1)])
-        res = minimize(worst, k0, method="COBYLA", constraints=[cons],
-                       options={"maxiter": 400 * order, "rhobeg": 0.2})
-        if box_margin(res.x, box, lim) >= SEARCH_MARGIN and (best is None or worst(res.x) < worst(best)):
-            best = res.x
-    if best is None:
-        raise PlanError(f"no order-{order} k found for box x0 {box.x0}, v0 {box.v0}")
+    best = de.x
+    for margin in (SEARCH_MARGIN, 4 * SEARCH_MARGIN, 16 * SEARCH_MARGIN):
+        cons = {"type": "ineq", "fun": lambda k, m=margin: box_margin(k, box, lim) - m}
+        res = minimize(worst, de.x, method="COBYLA", constraints=[cons],
+                       options={"maxiter": 500 * order, "rhobeg": 0.05})
+        k = res.x if box_margin(res.x, box, lim) >= 0 else de.x
+        cert = lim.certify(k, box)
+        if cert.certified:
+            return RobustResult(tuple(map(float, k)), box, cert)
     cert = lim.certify(best, box)
-    if not cert.certified:
-        raise PlanError(f"best order-{order} k for the box is not certified: {cert.reason}")
-    return RobustResult(tuple(map(float, best)), box, cert)
+    if cert.certified:
+        return RobustResult(tuple(map(float, best)), box, cert)
+    raise PlanError(f"order-{order} k for the box could not be certified: {cert.reason}")
+
+
+def retarget_k(k, box: Box, x0: float, v0: float) -> np.ndarray:
+    """(k_0, k_1..k_n) for a measured trigger state: k_1..k_n kept, k_0 = v0/x0.
+    PlanError if (x0, v0) lies outside the certified box."""
+    if not box.contains(x0, v0):
+        raise PlanError(f"trigger state x0 = {x0:.3f} m, v0 = {v0:.3f} m/s is outside the "
+                        f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} m/s")
+    return np.concatenate(([v0 / x0], np.asarray(k, float)))
