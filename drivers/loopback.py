@@ -49,8 +49,7 @@ class LoopbackDriver(DriverBase):
         return LinkHealth(True, 0.0)
 
     def close(self) -> None:
-        if self._connected and not self._stopped:
-            self.failsafe_reasons.append(EndReason.OPERATOR_ABORT)
+        if self._connected and not self._stopped:  # motors off, like every driver's close
             self.world.command(Setpoint.stop(self.world.clock.now()))
             self._stopped = True
         self._connected = False

@@ -133,3 +133,12 @@ def test_the_replan_policy_flies_a_plan_made_for_the_measured_trigger_state(stra
     assert res.trigger.action.startswith("replan")
     assert res.true_perch_time == pytest.approx(res.plan_duration, rel=0.05)
     assert res.true_contact_speed == pytest.approx(res.v_contact_plan, abs=0.05)
+
+
+def test_a_vehicle_on_the_ground_takes_off_holds_and_then_perches(tmp_path):
+    sim = Sim("sim://?start=-4.5,0,0")
+    res = sim.fly(case1("ipts"), tmp_path / "f.jsonl")
+    kinds = [e.kind for e in read_log(res.log).events]
+    assert kinds[:3] == ["takeoff", "hold", "approach"]
+    assert res.outcome is EndReason.CONTACT
+    assert sim.world.contact.p[2] == pytest.approx(1.0, abs=0.1)  # at take-off height
