@@ -22,6 +22,7 @@ set; the driver reads the parameter and refuses to fly without it.
 from __future__ import annotations
 
 import math
+import socket
 import threading
 import time
 from typing import Any, Callable
@@ -88,6 +89,38 @@ def ned_attitude(sp: Setpoint) -> tuple[float, float, float, float]:
     return quaternion_wxyz(sp.roll, -sp.pitch, -sp.yaw)
 
 
+def watch_refusals(conn: Any, on_refused: Callable[[], None]) -> None:
+    """Make a pymavlink `udpout` link report a vehicle that has gone away.
+
+    pymavlink's mavudp swallows ECONNREFUSED, and an unconnected socket never sees it
+    anyway. Connected to the vehicle's address, the kernel turns the ICMP port-unreachable
+    that answers a datagram to a closed port into ECONNREFUSED on the next call, so the
+    loss is known one datagram later instead of after the heartbeat timeout. This
+    replaces the link's recv/write with the same socket calls, minus the swallowing."""
+    sock = conn.port
+    dest = (socket.gethostbyname(conn.destination_addr[0]), conn.destination_addr[1])
+    sock.connect(dest)
+
+    def recv(n: int | None = None) -> bytes | str:
+        try:
+            return sock.recv(65535)
+        except (BlockingIOError, InterruptedError):
+            return ""
+        except ConnectionRefusedError:
+            on_refused()
+            return ""
+
+    def write(buf: bytes) -> None:
+        try:
+            sock.send(buf)
+        except ConnectionRefusedError:
+            on_refused()
+        except OSError:
+            pass  # as pymavlink: a full buffer or a transient error drops one datagram
+
+    conn.recv, conn.write = recv, write
+
+
 def px4_custom_mode(main: int, sub: int) -> int:
     return (main << 16) | (sub << 24)
 
@@ -128,6 +161,9 @@ class MavlinkDriver(DriverBase):
         from pymavlink import mavutil
         self._conn = mavutil.mavlink_connection(self.device, source_system=255,
                                                 source_component=191)  # onboard computer
+        self._refused = ""
+        if self.device.startswith("udpout:"):
+            watch_refusals(self._conn, self._on_refused)
         self._stopped = False
         self._tickers = [Ticker(0.0, self._receive, "mavlink-receive").start(),
                          Ticker(KEEPALIVE_S / 2, self._keepalive, "mavlink-keepalive").start()]
@@ -150,6 +186,8 @@ class MavlinkDriver(DriverBase):
         if self._conn is None or self._heard is None:
             return LinkHealth(False, 0.0, "not connected")
         age = self.clock.now() - self._heard
+        if self._refused:
+            return LinkHealth(False, age, f"connection lost: {self._refused}")
         if age > self.timeout:
             return LinkHealth(False, age, f"connection lost: no message from the vehicle for {age:.2f} s")
         if not self._stopped and self._flight_mode is not None and self._mode != self._flight_mode:
@@ -271,6 +309,10 @@ class MavlinkDriver(DriverBase):
             self._params[msg.param_id] = float(msg.param_value)
         elif kind == "COMMAND_ACK":
             self._acks[msg.command] = msg.result
+
+    def _on_refused(self) -> None:
+        if self._heard is not None:  # before the first heartbeat, connect() waits it out
+            self._refused = "the vehicle's port refused our datagrams (it has gone away)"
 
     def _on_heartbeat(self, msg: Any) -> None:
         if msg.autopilot == 8 or msg.type in (6, 18):  # no autopilot, a GCS or a companion

@@ -63,7 +63,7 @@ class MavlinkRig:
     def __init__(self) -> None:
         from mavlink_double import VehicleDouble
         self.peer = VehicleDouble(params={"GUID_OPTIONS": 8.0, "MOT_THST_HOVER": self.HOVER})
-        self.uri = f"{self.peer.uri}?mass={MASS}&timeout=0.06"
+        self.uri = f"{self.peer.uri}?mass={MASS}"
 
     def commanded(self):
         from pymavlink.quaternion import Quaternion

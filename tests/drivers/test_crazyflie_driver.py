@@ -169,7 +169,7 @@ def test_a_vehicle_that_dies_mid_flight_is_lost_within_3_ticks_and_gets_a_stop(r
         responder.die()  # the kernel refuses the next datagram: cflib's link error
 
     try:
-        lost_after = ticks_until_lost(cf, 50.0, level(HOVER_N), die_and_leave_a_witness)
+        lost_after = ticks_until_lost(cf, 100.0, level(HOVER_N), die_and_leave_a_witness)
         assert lost_after is not None and lost_after <= 3
         assert "connection lost" in cf.health().detail
         witness.bind(("127.0.0.1", responder.port))  # where the vehicle was

@@ -67,7 +67,7 @@ def test_a_subscriber_that_dies_mid_flight_is_lost_within_3_ticks(sub):
     drv = open_driver(sub.uri, Runtime.real())
     drv.connect()
     try:
-        lost_after = ticks_until_lost(drv, 50.0, level(0.3), sub.die)
+        lost_after = ticks_until_lost(drv, 100.0, level(0.3), sub.die)
         assert lost_after is not None and lost_after <= 3
         assert drv.failsafe_reasons == [EndReason.LOST_LINK]
         assert "no subscriber" in drv.health().detail
