@@ -246,6 +246,12 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
 
     if order < 1:
         raise PlanError(f"order must be >= 1, got {order}")
+    ratio, k0 = contact_ratio(box)
+    if ratio > lim.v_contact[1] / lim.v_contact[0]:
+        raise PlanError(f"no k of any order holds x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 "
+                        f"{box.v0[0]:g}..{box.v0[1]:g} m/s: along v0/x0 = {k0:.4g}/s the box spans "
+                        f"|x0| by a factor {ratio:.4f} > V_u/V_l = "
+                        f"{lim.v_contact[1] / lim.v_contact[0]:.4f}, and contact speed scales with |x0|")
     k_max = box.k0_range[1]
     bounds = [(-3.0, 1.0)] + [(-2.0, 2.0)] * (order - 1)
     de = differential_evolution(lambda k: -box_margin(k, box, lim), bounds, seed=seed,
@@ -273,6 +279,19 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
     if cert.certified:
         return RobustResult(tuple(map(float, best)), box, cert)
     raise PlanError(f"order-{order} k for the box could not be certified: {cert.reason}")
+
+
+def contact_ratio(box: Box) -> tuple[float, float]:
+    """(max over rays v0/x0 = const of s_hi/s_lo, the k_0 where it occurs).  V(t_s) is
+    linear in |x0| along a ray, so no k of any order holds a box whose ratio exceeds
+    V_u/V_l.  The ratio is piecewise monotone in k_0 with breaks where a segment end
+    changes edge, so its maximum is at one of those breaks or an end."""
+    kmin, kmax = box.k0_range
+    cands = [kmin, kmax, -box.v0[1] / -box.x0[0], -box.v0[0] / -box.x0[1]]
+    cands = np.array([c for c in cands if kmin <= c <= kmax])
+    lo, hi = box.segment(cands)
+    j = int(np.argmax(hi / lo))
+    return float(hi[j] / lo[j]), float(cands[j])
 
 
 def retarget_k(k, box: Box, x0: float, v0: float) -> np.ndarray:

@@ -1,0 +1,129 @@
+"""Robust search, retargeting, the `plan robust` command and the robust plans in plans/."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from perchd.errors import PlanError
+from perchd.tau.certify import Box
+from perchd.tau.robust import (RobustLimits, contact_ratio, fastest_k, retarget_k,
+                               shrink_until_certified)
+from perchd.tau.robust_cli import check_record, main, nominal_profile
+from robust_brute import fly, worst_over_box
+
+LIM = RobustLimits(-0.5, (0.7, 1.0), 2.5, 1.4)
+PLANS = sorted((Path(__file__).parents[2] / "plans").glob("robust-*.json"))
+K3 = (-0.3111, -0.3082, 0.02853)
+ARGS = ["robust", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4"]
+
+
+@pytest.fixture(scope="module")
+def contracts_box():
+    """The CONTRACTS 2 example box, solved once for the module."""
+    return fastest_k(3, Box((-3.9, -3.7), (1.8, 2.0)), LIM, maxiter=10)
+
+
+def test_a_given_box_gets_a_k_the_brute_force_confirms(contracts_box):
+    r = contracts_box
+    assert r.certificate.certified
+    w = worst_over_box(r.k, r.box.x0, r.box.v0, -0.5, n=5)
+    assert w["reaches"] and w["v_peak"] <= 2.5 and w["a_peak"] <= 1.4 + 1e-4
+    assert 0.7 <= w["vc_lo"] and w["vc_hi"] <= 1.0
+
+
+def test_its_worst_duration_is_the_slowest_corner_and_beats_the_paper_table2_k(contracts_box):
+    r = contracts_box
+    slow = fly(r.k, -3.9, 1.8, -0.5)
+    assert r.certificate.duration[1] == pytest.approx(slow.t_s + 0.5, abs=1e-5)
+    assert r.certificate.duration[1] < 2.5
+
+
+@pytest.mark.parametrize("order, box", [(4, Box((-2.92, -2.0), (1.0, 1.65))),
+                                        (5, Box((-3.43, -2.0), (1.4, 2.15)))])
+def test_paper_table2_boxes_4_and_5_cannot_be_held_by_any_k(order, box):
+    ratio, k0 = contact_ratio(box)
+    assert ratio > 1.0 / 0.7
+    lo, hi = box.segment(k0)            # two states on one ray: contact speeds scale with |x0|
+    assert hi / lo == pytest.approx(ratio)
+    with pytest.raises(PlanError, match="no k of any order"):
+        fastest_k(order, box, LIM, maxiter=1)
+
+
+def test_shrinking_finds_the_certified_sub_box_about_a_state():
+    grown = Box((-3.8, -2.94), (0.67, 2.49))
+    r = shrink_until_certified(K3, grown, LIM, about=(-3.0, 1.5))
+    assert r.certificate.certified and r.box.contains(-3.0, 1.5)
+    assert r.box.area < grown.area and not LIM.certify(K3, r.box.scaled(1.02, (-3.0, 1.5))).certified
+
+
+def test_retarget_keeps_k1_to_kn_and_takes_k0_from_the_measured_state():
+    box = Box((-3.65, -2.94), (0.67, 2.49))
+    k = retarget_k(K3, box, -3.2, 1.6)
+    assert k[0] == -0.5 and tuple(k[1:]) == K3
+    with pytest.raises(PlanError, match=r"x0 = -3.700 m.*outside the robust box"):
+        retarget_k(K3, box, -3.7, 1.6)
+    with pytest.raises(PlanError, match="v0 = 2.600"):
+        retarget_k(K3, box, -3.2, 2.6)
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--x0", "-3.9", "-3.7", "--v0", "1.8"], "--x0 and --v0 go together"),
+    (["--x0", "-3.7", "-3.9", "--v0", "1.8", "2.0"], "--x0 LO must be below HI"),
+    (["--x0", "3", "--v0", "1.5"], "--x0 must be < 0"),
+    (["--x0", "-3", "--v0", "1", "2", "3"], "--v0 takes LO HI"),
+    (["--x0", "-3.43", "-2", "--v0", "1.4", "2.15", "--order", "5"], "no k of any order"),
+    (["--order", "9"], "--order must be 1..7"),
+])
+def test_bad_input_is_one_line_and_exit_2(extra, words, tmp_path, capsys):
+    assert main(ARGS + extra + ["--out", str(tmp_path / "P.json")]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1 and not (tmp_path / "P.json").exists()
+
+
+def test_plan_robust_writes_a_plan_file_plan_check_recertifies(tmp_path, capsys):
+    out = tmp_path / "P.json"
+    argv = ARGS + ["--x0", "-3.9", "-3.7", "--v0", "1.8", "2.0", "--maxiter", "8",
+                   "--out", str(out), "--json"]
+    assert main(argv) == 0
+    summary = json.loads(capsys.readouterr().out)
+    rec = json.loads(out.read_text())
+    assert rec["robust"] == {"x0": [-3.9, -3.7], "v0": [1.8, 2.0]} == summary["robust"]
+    assert rec["stage1"]["k"][0] == pytest.approx(1.9 / -3.8)
+    assert check_record(rec).certified
+    f = fly(rec["stage1"]["k"][1:], rec["x0"], rec["v0"], -0.5)
+    assert rec["duration"] == pytest.approx(f.t_s + 0.5, abs=1e-5)
+    assert rec["v_contact"] == pytest.approx(f.v_contact, rel=1e-5)
+
+
+def test_a_tampered_box_fails_the_check_naming_the_broken_limit_and_state():
+    rec = json.loads(PLANS[0].read_text())
+    rec["robust"]["x0"][0] -= 0.4
+    with pytest.raises(PlanError, match=r"not certified: .* at x0=-\d"):
+        check_record(rec)
+    rec = json.loads(PLANS[0].read_text())
+    rec["stage1"]["k"][0] *= 1.1
+    with pytest.raises(PlanError, match="stage1.k"):
+        check_record(rec)
+
+
+@pytest.mark.parametrize("path", PLANS, ids=[p.name for p in PLANS])
+def test_every_robust_plan_in_plans_is_certified_and_its_figures_reproduce(path):
+    rec = json.loads(path.read_text())
+    cert = check_record(rec)
+    assert cert.certified
+    assert rec["certificate"]["area"] == pytest.approx(Box(tuple(rec["robust"]["x0"]),
+                                                           tuple(rec["robust"]["v0"])).area)
+    prof = nominal_profile(rec["stage1"]["k"][1:], rec["x0"], rec["v0"], rec["tau_s"])
+    for key in ("t_switch", "duration", "v_contact"):
+        assert rec[key] == pytest.approx(prof[key], rel=1e-9)
+    rng = np.random.default_rng(1)
+    (xl, xh), (vl, vh) = rec["robust"]["x0"], rec["robust"]["v0"]
+    for x0, v0 in [(xl, vl), (xh, vh), (xl, vh), (xh, vl)] + [
+            (rng.uniform(xl, xh), rng.uniform(vl, vh)) for _ in range(3)]:
+        f = fly(rec["stage1"]["k"][1:], x0, v0, -0.5)
+        assert f.reaches and f.v_peak <= 2.5 and f.a_peak <= 1.4 + 1e-4
+        assert 0.7 <= f.v_contact <= 1.0
