@@ -7,7 +7,8 @@ v_max 2.5, a_max 1.4: contact-speed error [m/s] and perch-time error [%] (trigge
 the simulator's own figures against the plan), over N noise seeds, for the nominal link and
 for 20 ms command latency + 1 mm mocap noise. The paper's experiment missed by -0.03 m/s /
 +34 % (CTDTS) and -0.09 m/s / +44 % (IPTS). Also: the control tick's compute time (wall
-clock, median and p99 over all ticks) and the wall time per simulated flight second.
+clock, median and p99 over all ticks) and the wall time per simulated flight second; and
+one perch flown in real time (MonotonicClock, 100 Hz) for the loop's period jitter.
 Plans come from plans/case1-*.json through perchd.tau when present, else from the
 closed-form reference the tests use (tests/closedloop/refplans.py).
 """
@@ -76,6 +77,58 @@ def measure(seeds: int, logdir: Path) -> dict:
     return out
 
 
+def realtime_jitter(logdir: Path) -> dict:
+    """One noisy IPTS perch on the real clock: the loop's jitter and compute time [us]."""
+    from perchd.drivers.base import open_driver
+    from perchd.flight import fly
+    from perchd.mocap.base import open_source
+    from perchd.runtime import Runtime
+    rt = Runtime.real()
+    driver = open_driver("sim://?latency=0.02&noise=0.001", rt)
+    source = open_source("sim://", rt)
+    driver.connect()
+    source.start()
+    try:
+        res = fly(case1("ipts"), driver, source, rt.clock, logdir / "realtime.jsonl", world=rt.sim)
+    finally:
+        source.close()
+        driver.close()
+    lp = res.loop
+    return {"outcome": res.outcome.name, "ticks": lp.ticks, "overruns": lp.overruns,
+            "jitter_median_us": 1e6 * lp.jitter_median_s, "jitter_p99_us": 1e6 * lp.jitter_p99_s,
+            "jitter_max_us": 1e6 * lp.jitter_max_s, "compute_median_us": 1e6 * lp.compute_median_s,
+            "compute_p99_us": 1e6 * lp.compute_p99_s}
+
+
+def agent_tick_us(n: int = 5000) -> dict:
+    """The agent's own work per tick, no simulator: estimator update and prediction, then
+    supervisor + controller in stage 1 (median and p99 over n ticks) [us]."""
+    from perchd.drivers.base import LinkHealth
+    from perchd.estimator import Estimator
+    from perchd.flightconfig import FlightConfig
+    from perchd.perchframe import PerchFrame
+    from perchd.supervisor import Supervisor
+    from perchd.types import Pose
+    cfg, plan = FlightConfig(), case1("ipts")
+    frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
+    ok, times = LinkHealth(True), []
+    while len(times) < n:  # synthetic 4 s flights: accelerate to the trigger, then coast
+        est, sup = Estimator(cfg.estimator, frame), Supervisor(plan, cfg, frame)
+        for k in range(400):
+            t = k * 0.01
+            x = -4.5 + 0.375 * t * t if t < 2.0 else -3.0 + 1.5 * (t - 2.0)
+            w0 = time.perf_counter()
+            est.offer(Pose("cf1", k + 1, t - 0.004, (x, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), True,
+                           0.004))
+            rep = sup.tick(t, est.state(t), ok, 0, None, est.mocap_period, 0.004)
+            times.append(time.perf_counter() - w0)
+            if rep.end is not None:
+                break
+    times = sorted(times)
+    return {"ticks": len(times), "median_us": 1e6 * statistics.median(times),
+            "p99_us": 1e6 * times[int(0.99 * (len(times) - 1))]}
+
+
 def _loop_p99(logdir: Path) -> float:
     from perchd.flightlog import read_log
     values = [r.compute_s for p in sorted(logdir.glob("*.jsonl")) for r in read_log(p).rows[1:]]
@@ -88,12 +141,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--seeds", type=int, default=8, help="noise seeds per noisy case (default 8)")
     ap.add_argument("--logs", default=None, help="keep the flight logs in this folder")
+    ap.add_argument("--no-realtime", action="store_true", help="skip the real-time perch (5 s)")
     args = ap.parse_args(argv)
     import tempfile
     with tempfile.TemporaryDirectory() as tmp:
         logdir = Path(args.logs or tmp)
         logdir.mkdir(parents=True, exist_ok=True)
         figures = measure(args.seeds, logdir)
+        figures["agent_tick"] = agent_tick_us()
+        if not args.no_realtime:
+            figures["realtime"] = realtime_jitter(logdir)
     if args.json:
         print(json.dumps(figures))
         return 0
@@ -104,9 +161,18 @@ def main(argv: list[str] | None = None) -> int:
               f"{c['speed_err_maxabs']:9.3f} {c['time_err_pct_median']:+11.2f} "
               f"{c['time_err_pct_maxabs']:10.2f}   {c['paper_speed_err']:+.2f} / "
               f"{c['paper_time_err_pct']:+.0f} %")
-    print(f"control tick compute: median {figures['compute_us']['median_of_flight_medians']:.0f} us, "
+    at = figures["agent_tick"]
+    print(f"agent tick alone (estimator + supervisor + controller, {at['ticks']} ticks): "
+          f"median {at['median_us']:.0f} us, p99 {at['p99_us']:.0f} us")
+    print(f"control tick incl. simulator: median {figures['compute_us']['median_of_flight_medians']:.0f} us, "
           f"p99 {figures['loop_p99_us']:.0f} us (budget 10000 us at 100 Hz)")
     print(f"wall time per simulated flight second: {1000 * figures['wall_per_sim_s']:.1f} ms")
+    rt = figures.get("realtime")
+    if rt:
+        print(f"real-time perch ({rt['outcome']}, {rt['ticks']} ticks at 100 Hz): jitter median "
+              f"{rt['jitter_median_us']:.0f} us, p99 {rt['jitter_p99_us']:.0f} us, max "
+              f"{rt['jitter_max_us']:.0f} us; compute median {rt['compute_median_us']:.0f} us, "
+              f"p99 {rt['compute_p99_us']:.0f} us; {rt['overruns']} overruns")
     return 0
 
 
