@@ -74,8 +74,9 @@ class TickReport:
 
 @dataclass(frozen=True, slots=True)
 class Trigger:
-    """t [s] on the clock; x [m], v [m/s] measured; plan_x0/plan_v0 [m, m/s] of the plan
-    finally flown; action: how the plan was chosen (as-made, retargeted, replanned)."""
+    """t [s] on the clock when X crossed the flown plan's x0 (the plan's t = 0; at most a tick
+    before the triggering tick); x [m], v [m/s] measured at the triggering tick;
+    plan_x0/plan_v0 [m, m/s] of the plan finally flown; action: how the plan was chosen."""
 
     t: float
     x: float
@@ -327,8 +328,12 @@ class Supervisor:
         if plan is None:
             self._finish(EndReason.TRIGGER_REFUSED, t, why)
             return
+        # The plan's clock starts when X crossed its x0, a fraction of a tick ago (a plan
+        # retargeted to this very state starts now).
+        late = (st.x - plan.x0) / st.xdot if st.xdot > 0 else 0.0
+        t0 = t - min(max(late, 0.0), 1.0 / self.cfg.rate_hz)
         self.plan = plan
-        self.trigger = Trigger(t, st.x, st.xdot, plan.x0, plan.v0, action)
+        self.trigger = Trigger(t0, st.x, st.xdot, plan.x0, plan.v0, action)
         self.ctl.tau.reset()
         self._enter(Phase.STAGE1, t, action, x=st.x, v=st.xdot, plan_x0=plan.x0, plan_v0=plan.v0)
 
