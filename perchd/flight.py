@@ -153,8 +153,10 @@ def fly(plan: Any, driver: Any, source: Any, clock: Clock, log_path: str | Path,
         run.loop.run(run.tick)
     except BaseException as err:
         reason = EndReason.SIGNAL if isinstance(err, KeyboardInterrupt) else EndReason.SOFTWARE_ERROR
-        run.failsafe(reason)
-        log.close({"outcome": reason.name, "detail": f"{type(err).__name__}: {err}"})
+        try:
+            run.failsafe(reason)
+        finally:
+            log.close({"outcome": reason.name, "detail": f"{type(err).__name__}: {err}"})
         raise
     result = _result(run, world, str(log_path))
     log.close({"outcome": result.outcome.name, "detail": result.detail,
