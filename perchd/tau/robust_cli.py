@@ -168,6 +168,17 @@ def plan_record(result, lim, nominal=None) -> dict:
     }
 
 
+def check_plan(plan):
+    """`check_record` for a loaded Plan object (Plan API attributes: x0, v0, tau_s, k,
+    limits, robust)."""
+    lim = plan.limits
+    return check_record({"x0": plan.x0, "v0": plan.v0, "tau_s": plan.tau_s,
+                         "stage1": {"k": list(plan.k)},
+                         "robust": {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])},
+                         "limits": {"v_contact": list(lim.v_contact), "v_max": lim.v_max,
+                                    "a_max": lim.a_max}})
+
+
 def check_record(record: dict):
     """Re-certify a robust plan file over its whole box (for `perchd plan check`).
     Returns the Certificate; PlanError names the field or the violated limit and state."""

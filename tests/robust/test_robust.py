@@ -127,3 +127,17 @@ def test_every_robust_plan_in_plans_is_certified_and_its_figures_reproduce(path)
         f = fly(rec["stage1"]["k"][1:], x0, v0, -0.5)
         assert f.reaches and f.v_peak <= 2.5 and f.a_peak <= 1.4 + 1e-4
         assert 0.7 <= f.v_contact <= 1.0
+
+
+def test_a_loaded_plan_object_is_rechecked_the_same_way():
+    from types import SimpleNamespace as NS
+
+    from perchd.tau.robust_cli import check_plan
+
+    rec = json.loads(PLANS[0].read_text())
+    plan = NS(x0=rec["x0"], v0=rec["v0"], tau_s=rec["tau_s"], k=tuple(rec["stage1"]["k"]),
+              robust=(tuple(rec["robust"]["x0"]), tuple(rec["robust"]["v0"])),
+              limits=NS(v_contact=(0.7, 1.0), v_max=2.5, a_max=1.4))
+    assert check_plan(plan).certified
+    with pytest.raises(PlanError, match="a_max"):
+        check_plan(NS(**{**vars(plan), "limits": NS(v_contact=(0.7, 1.0), v_max=2.5, a_max=1.2)}))
