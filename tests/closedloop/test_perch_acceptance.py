@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from simflight import NOISY, Sim, case1
+from simflight import NOISY, PLANS, Sim, case1
 from perchd.flightconfig import FlightConfig, TauGains
 from perchd.flightlog import read_log
 from perchd.types import EndReason
@@ -142,3 +142,20 @@ def test_a_vehicle_on_the_ground_takes_off_holds_and_then_perches(tmp_path):
     assert kinds[:3] == ["takeoff", "hold", "approach"]
     assert res.outcome is EndReason.CONTACT
     assert sim.world.contact.p[2] == pytest.approx(1.0, abs=0.1)  # at take-off height
+
+
+def test_the_robust_policy_flies_a_certified_plan_from_the_measured_state(tmp_path):
+    _retarget_or_skip()
+    from perchd.flightconfig import TriggerConfig, TriggerPolicy
+    from perchd.tau import load_plan
+    path = PLANS / "robust-n3-around-case1.json"
+    if not path.exists():
+        pytest.skip(f"{path.name} is not in this checkout")
+    plan = load_plan(path)
+    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.ROBUST))
+    res = Sim(NOISY).fly(plan, tmp_path / "f.jsonl", cfg)
+    lo, hi = plan.limits.v_contact
+    assert res.outcome is EndReason.CONTACT
+    assert res.trigger.action.startswith("robust")
+    assert lo <= res.true_contact_speed <= hi
+    assert res.true_perch_time == pytest.approx(res.plan_duration, rel=0.05)
