@@ -118,10 +118,12 @@ def first_switch(k: np.ndarray, k0: float, tau_s: float) -> tuple[float | None, 
     poly = q.copy()
     poly[0] = k0 - 1.0 / tau_s
     roots = npoly.polyroots(poly) if np.any(poly[1:]) else np.array([])
-    real = [r.real for r in roots if abs(r.imag) <= 1e-7 * (1 + abs(r)) and r.real > 0]
+    near = sorted(r.real for r in roots if abs(r.imag) <= 1e-7 * (1 + abs(r)) and r.real > 0)
+    # a near-real pair counts only if p really gets to the level there (not a near miss)
+    real = [t for t in (_polish(poly, r) for r in near) if npoly.polyval(t, poly) <= 1e-12]
     if not real:
         return None, "tau_s"
-    ts = _polish(poly, min(real))
+    ts = min(real)
     crit = [r.real for r in (npoly.polyroots(npoly.polyder(q)) if len(k) > 1 else [])
             if abs(r.imag) <= 1e-9 and 0 < r.real < ts]
     pmax = max(npoly.polyval(np.array([0.0, ts] + crit), q)) + k0
