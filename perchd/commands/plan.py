@@ -1,0 +1,119 @@
+"""`perchd plan ctds|ctdts|ipts|robust|check` (CONTRACTS 2)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def register(sub) -> None:
+    parser = sub.add_parser("plan", help="make, check and plot tau perching plans")
+    plan_sub = parser.add_subparsers(dest="strategy", required=True)
+    _ctds(plan_sub)
+    _ctdts(plan_sub)
+    _ipts(plan_sub)
+    from perchd.tau.robust_cli import register as register_robust
+
+    register_robust(plan_sub)
+    check = plan_sub.add_parser("check", help="re-derive and verify a plan file")
+    check.add_argument("file")
+    check.add_argument("--json", action="store_true", help="print one JSON object")
+    check.add_argument("--plot", metavar="FILE.png", help="draw X, V, A and tau against time")
+    check.set_defaults(run=run_check)
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--x0", type=float, required=True, help="gap at trigger [m], < 0")
+    p.add_argument("--v0", type=float, required=True, help="closing speed at trigger [m/s] > 0")
+    p.add_argument("--out", help="plan file to write")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _ctds(plan_sub) -> None:
+    p = plan_sub.add_parser("ctds", help="constant tau-dot: zero contact speed")
+    _common(p)
+    p.add_argument("--c", type=float, default=0.5, help="tau-dot in (0, 0.5]")
+    p.set_defaults(run=lambda a: _emit(a, _plan_ctds(a)))
+
+
+def _ctdts(plan_sub) -> None:
+    p = plan_sub.add_parser("ctdts", help="constant tau-dot, then constant speed")
+    _common(p)
+    p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
+    p.add_argument("--v-contact", type=float, required=True, help="contact speed [m/s]")
+    p.add_argument("--a-max", type=float, help="[m/s^2]")
+    p.add_argument("--v-max", type=float, help="[m/s]")
+    p.set_defaults(run=lambda a: _emit(a, _plan_ctdts(a)))
+
+
+def _ipts(plan_sub) -> None:
+    p = plan_sub.add_parser("ipts", help="inverse polynomial, minimum time, then constant speed")
+    _common(p)
+    p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
+    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
+    p.add_argument("--v-max", type=float, help="[m/s]")
+    p.add_argument("--a-max", type=float, help="[m/s^2]")
+    p.add_argument("--order", type=int, default=3, help="polynomial order 1..7")
+    p.set_defaults(run=lambda a: _emit(a, _plan_ipts(a)))
+
+
+def _plan_ctds(a):
+    from perchd.tau import plan_ctds
+
+    return plan_ctds(a.x0, a.v0, a.c)
+
+
+def _plan_ctdts(a):
+    from perchd.tau import plan_ctdts
+
+    return plan_ctdts(a.x0, a.v0, a.tau_s, a.v_contact, a.a_max, a.v_max)
+
+
+def _plan_ipts(a):
+    from perchd.tau import plan_ipts
+
+    return plan_ipts(a.x0, a.v0, a.tau_s, tuple(a.v_contact), a.v_max, a.a_max, a.order)
+
+
+def _emit(args, plan) -> int:
+    from perchd.tau import report, save_plan
+
+    if args.out:
+        save_plan(plan, args.out)
+    rep = report(plan)
+    print(json.dumps(rep.to_json()) if args.json else table(rep, plan))
+    return 0 if rep.feasible else 1
+
+
+def run_check(args) -> int:
+    from perchd.tau import load_plan
+
+    plan = load_plan(args.file)
+    if args.plot:
+        from perchd.tau.plot import plot_plan
+
+        plot_plan(plan, args.plot)
+    return _emit(argparse.Namespace(out=None, json=args.json), plan)
+
+
+def table(rep, plan) -> str:
+    params = f"c = {plan.c:.4f}" if plan.c is not None else \
+        "k = (" + ", ".join(f"{k:.4f}" for k in plan.k) + ")"
+    rows = [("strategy", f"{rep.strategy}{'' if rep.order is None else f' n={rep.order}'}"),
+            ("trigger", f"x0 = {rep.x0:g} m, v0 = {rep.v0:g} m/s"),
+            ("stage 1", params),
+            ("switch", "-" if rep.tau_s is None else
+             f"tau_s = {rep.tau_s:g} s at t = {rep.t_switch:.4f} s"),
+            ("duration", f"{rep.duration:.4f} s"),
+            ("contact speed", f"{rep.v_contact:.4f} m/s"),
+            ("peak speed", f"{rep.v_peak:.4f} m/s"),
+            ("peak |accel|", f"{rep.a_peak:.4f} m/s^2"),
+            ("lower bound", f"{rep.bound:.4f} s (ratio {rep.ratio:.4f})"),
+            ("robust box", "-" if rep.robust is None else
+             f"x0 {rep.robust['x0']} m, v0 {rep.robust['v0']} m/s (certified)"
+             if rep.feasible else "NOT certified"),
+            ("feasible", "yes" if rep.feasible else "NO: " + "; ".join(rep.violations))]
+    return "\n".join(f"{k:>14}  {v}" for k, v in rows)
+
+

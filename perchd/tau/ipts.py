@@ -1,0 +1,262 @@
+"""IPTS minimum-time planning (paper eq. 16) with a global multistart and analytic gradients.
+
+Formulation. In scaled time u = t / t_s in [0, 1] the stage-1 polynomial is
+q(u) = p(t_s u) = sum m_i u^i with m_i = k_i t_s^i. Then m_0 = 1/tau_0 is fixed, reaching
+tau_s at the switch is the *linear* equality sum m_i = 1/tau_s, the objective t_s is linear,
+and with S = |X| = |x0| exp(t_s Q(u)) (Q the antiderivative of q):
+    V = -S q,    A = -S (q'/t_s + q^2),    V_c = S(1) / |tau_s|.
+The limits 16c-16e plus "tau stays negative and has not yet reached tau_s before the switch"
+(0 >= q > 1/tau_s) are imposed on a grid of u; the result is then verified densely in t
+(perchd.tau.plan.peak_abs) and re-solved with tightened limits if the grid let a peak slip
+between nodes. Variables z = (m_1..m_n, t_s); every constraint gradient is analytic.
+
+Global search: the problem is non-convex (the paper's case 2 is a local minimum, ERRATA 6),
+so SLSQP runs from seeds fitted to the bang-bang bound profile for several V_c and from
+a spread of random polynomials, and the best verified solution wins.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from perchd.errors import PlanError
+from perchd.tau.bound import min_time_bound
+from perchd.tau.limits import Limits
+from perchd.tau.plan import Plan, check_trigger, make_plan
+
+MAX_ORDER = 7
+GRID = 96          # constraint nodes in u, clustered at both ends where peaks sit
+RANDOM_SEEDS = 24  # random starts beside the bound-fitted ones
+CANDIDATES = 4     # best grid solutions tried through dense verification
+VERIFY_TOL = 1e-9  # relative overshoot of a limit accepted by the dense check
+UNBOUNDED = 1e3    # stands in for an unset v_max [m/s] or a_max [m/s^2]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One IPTS minimum-time problem; lengths in m, speeds m/s, accelerations m/s^2."""
+
+    x0: float
+    v0: float
+    tau_s: float
+    limits: Limits
+    order: int
+
+    @property
+    def m0(self) -> float:
+        return self.v0 / self.x0
+
+    @property
+    def m_sum(self) -> float:
+        return 1.0 / self.tau_s - self.m0
+
+
+def _grid(n: int = GRID) -> np.ndarray:
+    return 0.5 - 0.5 * np.cos(np.linspace(0.0, math.pi, n))
+
+
+class _Model:
+    """Vectorised profiles on the u-grid and their Jacobians w.r.t. z = (m_1..m_n, t_s)."""
+
+    def __init__(self, prob: Problem, u: np.ndarray, a_max: float, v_max: float) -> None:
+        self.p, self.u, self.a_max, self.v_max = prob, u, a_max, v_max
+        i = np.arange(1, prob.order + 1)
+        self.U = u[:, None] ** i                                  # d q / d m_i
+        self.dU = i * u[:, None] ** (i - 1)                        # d q' / d m_i
+        self.IU = u[:, None] ** (i + 1) / (i + 1)                  # d Q / d m_i
+        self.ln_s0 = math.log(-prob.x0)
+
+    def eval(self, z: np.ndarray):
+        m, ts = z[:-1], z[-1]
+        p = self.p
+        q = p.m0 + self.U @ m
+        dq = self.dU @ m
+        Q = p.m0 * self.u + self.IU @ m
+        S = np.exp(np.minimum(self.ln_s0 + ts * Q, 50.0))  # far-off seeds must not overflow
+        dS = S[:, None] * np.hstack([ts * self.IU, Q[:, None]])   # d S / d z
+        dq_z = np.hstack([self.U, np.zeros((len(q), 1))])
+        ddq_z = np.hstack([self.dU, np.zeros((len(q), 1))])
+        V = -S * q
+        dV = -(dS * q[:, None] + S[:, None] * dq_z)
+        g = dq / ts + q * q
+        dg = ddq_z / ts + 2 * q[:, None] * dq_z
+        dg[:, -1] -= dq / ts ** 2
+        A = -S * g
+        dA = -(dS * g[:, None] + S[:, None] * dg)
+        return q, dq_z, V, dV, A, dA
+
+    def constraints(self, z: np.ndarray) -> np.ndarray:
+        return self._both(z)[0]
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray:
+        return self._both(z)[1]
+
+    def _both(self, z):
+        key = z.tobytes()
+        if getattr(self, "_key", None) != key:
+            self._key, self._val = key, self._assemble(z)
+        return self._val
+
+    def _assemble(self, z):
+        q, dq, V, dV, A, dA = self.eval(z)
+        lo, hi = self.p.limits.v_contact
+        inner = slice(0, -1)
+        rows = [
+            (self.v_max - V, -dV),
+            (self.a_max - A, -dA),
+            (self.a_max + A, dA),
+            (-q, -dq),                                    # closing, tau negative
+            (q[inner] - 1.0 / self.p.tau_s, dq[inner]),   # tau_s not reached before t_s
+            (V[-1:] - lo, dV[-1:]),                       # V(t_s) = V_c within limits
+            (hi - V[-1:], -dV[-1:]),
+        ]
+        return np.concatenate([r[0] for r in rows]), np.vstack([r[1] for r in rows])
+
+
+def _seed_from_bound(prob: Problem, v_c: float, a_max: float, v_max: float) -> np.ndarray | None:
+    """Fit q(u) to the tau of the bang-bang profile ending at V_c: a start near the optimum."""
+    hold = -prob.tau_s
+    gap = -prob.x0 - v_c * hold
+    t, x, v = _bang_bang(gap, prob.v0, v_c, a_max, v_max)
+    if t is None:
+        return None
+    ts = t[-1]
+    u = t / ts
+    return _fit(prob, u, v / (prob.x0 + x), ts)  # p = V / X along the profile
+
+
+def _bang_bang(gap, v0, v_c, a, v_max, n: int = 200):
+    brake = (v0 * v0 - v_c * v_c) / (2 * a)
+    if gap < brake:
+        return None, None, None
+    vp = min(math.sqrt((2 * a * gap + v0 * v0 + v_c * v_c) / 2), v_max)
+    t1, t3 = (vp - v0) / a, (vp - v_c) / a
+    d1, d3 = (vp * vp - v0 * v0) / (2 * a), (vp * vp - v_c * v_c) / (2 * a)
+    t2 = (gap - d1 - d3) / vp
+    t = np.linspace(0.0, t1 + t2 + t3, n)
+    v = np.where(t < t1, v0 + a * t, np.where(t < t1 + t2, vp, vp - a * (t - t1 - t2)))
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    return t, x, v
+
+
+def _fit(prob: Problem, u, target, ts) -> np.ndarray:
+    """Least squares for m_1..m_n with the switch equality sum m_i = m_sum enforced."""
+    U = u[:, None] ** np.arange(1, prob.order + 1)
+    r = target - prob.m0
+    # Eliminate m_n through the equality: m_n = m_sum - sum_{i<n} m_i.
+    B = U[:, :-1] - U[:, -1:]
+    rhs = r - U[:, -1] * prob.m_sum
+    head = np.linalg.lstsq(B, rhs, rcond=None)[0] if prob.order > 1 else np.zeros(0)
+    m = np.append(head, prob.m_sum - head.sum())
+    return np.append(m, ts)
+
+
+def _random_seeds(prob: Problem, ts0: float, count: int, rng) -> list[np.ndarray]:
+    seeds = []
+    for _ in range(count):
+        m = rng.normal(0.0, 2.0 * abs(prob.m_sum), prob.order)
+        m[-1] = prob.m_sum - m[:-1].sum()
+        seeds.append(np.append(m, ts0 * rng.uniform(0.8, 1.6)))
+    return seeds
+
+
+def _solve_from(model: _Model, z0: np.ndarray, prob: Problem):
+    from scipy.optimize import minimize
+
+    n = prob.order
+    eq = {"type": "eq", "fun": lambda z: np.array([z[:-1].sum() - prob.m_sum]),
+          "jac": lambda z: np.append(np.ones(n), 0.0)[None, :]}
+    ineq = {"type": "ineq", "fun": model.constraints, "jac": model.jacobian}
+    obj_grad = np.append(np.zeros(n), 1.0)
+    bounds = [(None, None)] * n + [(1e-3, 60.0)]
+    res = minimize(lambda z: z[-1], z0, jac=lambda z: obj_grad, method="SLSQP",
+                   bounds=bounds, constraints=[eq, ineq],
+                   options={"maxiter": 300, "ftol": 1e-12})
+    ok = res.success and model.constraints(res.x).min() > -1e-7
+    return res.x if ok else None
+
+
+def _to_plan(prob: Problem, z: np.ndarray) -> Plan | None:
+    m, ts = z[:-1], z[-1]
+    k = [prob.m0] + [mi / ts ** i for i, mi in enumerate(m, start=1)]
+    try:
+        plan = make_plan("ipts", prob.x0, prob.v0, prob.tau_s, prob.limits, k=k)
+    except PlanError:
+        return None
+    lo, hi = prob.limits.v_contact
+    return plan if lo - 1e-9 <= plan.v_contact <= hi + 1e-9 else None
+
+
+def plan_ipts(x0: float, v0: float, tau_s: float, v_contact: tuple[float, float],
+              v_max: float | None, a_max: float | None, order: int = 3, *,
+              seed: int = 0, starts: int = RANDOM_SEEDS) -> Plan:
+    """The minimum-time IPTS plan of `order` (1..7) meeting every limit, verified densely."""
+    prob = _problem(x0, v0, tau_s, v_contact, v_max, a_max, order)
+    a_lim = a_max if a_max is not None else UNBOUNDED
+    v_lim = v_max if v_max is not None else UNBOUNDED
+    seeds, _ = _seeds(prob, a_lim, v_lim, starts, seed)
+    model = _Model(prob, _grid(), a_lim, v_lim)
+    found = sorted((z for z0 in seeds if (z := _solve_from(model, z0, prob)) is not None),
+                   key=lambda z: z[-1])
+    for z in found[:CANDIDATES]:
+        plan = _verified(prob, z, a_lim, v_lim)
+        if plan is not None:
+            return plan
+    raise PlanError(_infeasible_reason(prob, a_lim, v_lim))
+
+
+def _verified(prob: Problem, z: np.ndarray, a_lim: float, v_lim: float) -> Plan | None:
+    """Check the grid solution densely; where a peak slipped between nodes, tighten that
+    limit by the overshoot and re-solve from here, a few times at most."""
+    a_eff, v_eff = a_lim, v_lim
+    for _ in range(6):
+        plan = _to_plan(prob, z)
+        if plan is None:
+            return None
+        over_a, over_v = plan.peaks.a / a_lim, plan.peaks.v / v_lim
+        if over_a <= 1 + VERIFY_TOL and over_v <= 1 + VERIFY_TOL:
+            return plan
+        a_eff /= max(over_a, 1.0) * (1 + 1e-10)
+        v_eff /= max(over_v, 1.0) * (1 + 1e-10)
+        z = _solve_from(_Model(prob, _grid(), a_eff, v_eff), z, prob)
+        if z is None:
+            return None
+    return None
+
+
+def _problem(x0, v0, tau_s, v_contact, v_max, a_max, order) -> Problem:
+    check_trigger(x0, v0)
+    if not 1 <= order <= MAX_ORDER:
+        raise PlanError(f"order must be 1..{MAX_ORDER}, got {order}")
+    tau0 = x0 / v0
+    if not (math.isfinite(tau_s) and tau0 < tau_s < 0):
+        raise PlanError(f"tau_s = {tau_s:g} s must lie in (tau_0, 0) = ({tau0:g}, 0)")
+    lo, hi = v_contact
+    if -x0 - lo * -tau_s <= 0:
+        raise PlanError(f"x0 = {x0:g} m is too close: stage 2 alone at V_l = {lo:g} m/s "
+                        f"for |tau_s| = {-tau_s:g} s covers {lo * -tau_s:g} m")
+    return Problem(x0, v0, tau_s, Limits(tuple(v_contact), v_max, a_max), order)
+
+
+def _seeds(prob, a_lim, v_lim, starts, seed):
+    lo, hi = prob.limits.v_contact
+    seeds = [s for v_c in np.linspace(lo, hi, 4)
+             if (s := _seed_from_bound(prob, float(v_c), a_lim, v_lim)) is not None]
+    ts0 = float(np.median([s[-1] for s in seeds])) if seeds else -prob.x0 / prob.v0
+    return seeds + _random_seeds(prob, ts0, starts, np.random.default_rng(seed)), ts0
+
+
+def _infeasible_reason(prob: Problem, a_lim: float, v_lim: float) -> str:
+    bound, _ = min_time_bound(prob.x0, prob.v0, prob.tau_s, prob.limits.v_contact, a_lim, v_lim)
+    lo, hi = prob.limits.v_contact
+    if not math.isfinite(bound):
+        need = (prob.v0 ** 2 - hi ** 2) / (2 * (-prob.x0 - hi * -prob.tau_s))
+        return (f"a_max = {a_lim:g} m/s^2 cannot brake from v0 = {prob.v0:g} to V_u = {hi:g} "
+                f"m/s in time: it needs at least {need:.4f} m/s^2 "
+                f"(short by {need - a_lim:.4f} m/s^2)")
+    return (f"no order-{prob.order} IPTS plan meets v_contact [{lo:g}, {hi:g}] m/s, "
+            f"v_max {v_lim:g} m/s and a_max {a_lim:g} m/s^2 from x0 = {prob.x0:g} m, "
+            f"v0 = {prob.v0:g} m/s; try a higher --order")

@@ -1,0 +1,135 @@
+"""The Plan: a tau reference from trigger to contact, and what it implies (X, V, A, peaks).
+
+Stage 1 follows the strategy's closed form (perchd.tau.profiles); stage 2 (two-stage plans)
+holds the contact speed V_c for |tau_s| seconds, so tau_ref = tau_s + (t - t_switch).
+Times t are seconds since trigger; every method accepts scalars or numpy arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from perchd.errors import PlanError
+from perchd.tau.limits import Limits
+from perchd.tau.profiles import ConstantTauDot, InversePolynomial
+
+STRATEGIES = ("ctds", "ctdts", "ipts")
+PEAK_SAMPLES = 4001  # coarse scan of stage 1, then refined around the peak
+
+
+@dataclass(frozen=True)
+class Peaks:
+    """v: [m/s] peak closing speed.  a: [m/s^2] peak |acceleration| along X."""
+
+    v: float
+    a: float
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A perching plan (CONTRACTS 1). Build it with perchd.tau.make_plan or a strategy.
+
+    x0 [m] < 0 and v0 [m/s] > 0: trigger state.  tau_s [s]: stage switch (None for ctds).
+    c: tau-dot of ctds/ctdts.  k: (k_0..k_n) of ipts.  t_switch, duration [s] from trigger.
+    v_contact [m/s].  robust: ((x0_lo, x0_hi), (v0_lo, v0_hi)) box k_1..k_n is certified for.
+    """
+
+    strategy: str
+    x0: float
+    v0: float
+    tau_s: float | None
+    c: float | None
+    k: tuple[float, ...] | None
+    t_switch: float
+    duration: float
+    v_contact: float
+    limits: Limits
+    peaks: Peaks
+    robust: tuple[tuple[float, float], tuple[float, float]] | None = None
+    extra: dict = field(default_factory=dict, compare=False, hash=False)
+
+    @cached_property
+    def stage1(self) -> ConstantTauDot | InversePolynomial:
+        return stage1_profile(self.strategy, self.x0, self.v0, self.c, self.k)
+
+    @property
+    def order(self) -> int | None:
+        return None if self.k is None else len(self.k) - 1
+
+    def stage(self, t) -> int:
+        return 1 if float(t) < self.t_switch else 2
+
+    def _split(self, t, first, second):
+        t = np.asarray(t, float)
+        one = t < self.t_switch
+        out = np.where(one, first(np.where(one, t, 0.0)), second(t))
+        return out if out.ndim else float(out)
+
+    def tau_ref(self, t):
+        return self._split(t, self.stage1.tau, lambda s: self.tau_s + (s - self.t_switch))
+
+    def x(self, t):
+        return self._split(t, self.stage1.x, lambda s: -self.v_contact * (self.duration - s))
+
+    def v(self, t):
+        return self._split(t, self.stage1.v, lambda s: np.full_like(s, self.v_contact))
+
+    def a(self, t):
+        return self._split(t, self.stage1.a, np.zeros_like)
+
+
+def stage1_profile(strategy, x0, v0, c, k):
+    if strategy in ("ctds", "ctdts"):
+        return ConstantTauDot(x0, v0, c)
+    return InversePolynomial(x0, tuple(k))
+
+
+def peak_abs(f, t_end: float) -> float:
+    """max |f| over [0, t_end], scanned densely and refined around the coarse maximum."""
+    t = np.linspace(0.0, t_end, PEAK_SAMPLES)
+    y = np.abs(f(t))
+    i = int(np.argmax(y))
+    step = t_end / (PEAK_SAMPLES - 1)
+    fine = np.linspace(max(0.0, t[i] - step), min(t_end, t[i] + step), 201)
+    return float(max(y[i], np.abs(f(fine)).max()))
+
+
+def check_trigger(x0: float, v0: float) -> None:
+    if not (math.isfinite(x0) and x0 < 0):
+        raise PlanError(f"x0 must be a negative gap [m] (surface at X = 0), got {x0:g}")
+    if not (math.isfinite(v0) and v0 > 0):
+        raise PlanError(f"v0 must be a positive closing speed [m/s], got {v0:g}")
+
+
+def make_plan(strategy: str, x0: float, v0: float, tau_s: float | None, limits: Limits, *,
+              c: float | None = None, k=None, robust=None) -> Plan:
+    """Derive every figure of a plan from its parameters (used by planners and the loader)."""
+    if strategy not in STRATEGIES:
+        raise PlanError(f"strategy must be one of {', '.join(STRATEGIES)}, got {strategy!r}")
+    check_trigger(x0, v0)
+    profile = stage1_profile(strategy, x0, v0, c, k)
+    if strategy == "ctds":
+        t_switch = duration = -profile.tau0 / c
+        v_contact = 0.0
+    else:
+        t_switch = switch_time(profile, tau_s)
+        v_contact = float(profile.v(t_switch))
+        duration = t_switch - tau_s
+    peaks = Peaks(peak_abs(profile.v, t_switch), peak_abs(profile.a, t_switch))
+    return Plan(strategy, x0, v0, tau_s, c, None if k is None else tuple(map(float, k)),
+                float(t_switch), float(duration), v_contact, limits, peaks, robust)
+
+
+def switch_time(profile, tau_s: float | None) -> float:
+    if tau_s is None or not (math.isfinite(tau_s) and tau_s < 0):
+        raise PlanError(f"tau_s must be a negative number of seconds, got {tau_s!r}")
+    if isinstance(profile, ConstantTauDot):
+        return (tau_s - profile.tau0) / profile.c
+    t_s = profile.first_switch(tau_s)
+    if t_s is None:
+        raise PlanError(f"stage1.k: tau never reaches tau_s = {tau_s:g} s from the trigger")
+    return t_s

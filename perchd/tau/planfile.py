@@ -1,0 +1,134 @@
+"""Plan files (CONTRACTS 1, schema perchd.plan/1): save, and load with every figure re-derived.
+
+A file's stored figures (t_switch, duration, v_contact, peaks) must agree with what its
+parameters imply, so a tampered, stale or hand-edited plan is refused naming the field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from perchd.errors import PlanError
+from perchd.tau.limits import Limits
+from perchd.tau.plan import STRATEGIES, Plan, make_plan
+
+SCHEMA = "perchd.plan/1"
+REL_TOL = 1e-6  # stored figures are written at full precision; this absorbs re-derivation round-off
+
+
+def plan_to_json(plan: Plan) -> dict:
+    stage1 = {"c": plan.c} if plan.strategy in ("ctds", "ctdts") else {"k": list(plan.k)}
+    doc = {"schema": SCHEMA, "strategy": plan.strategy, "x0": plan.x0, "v0": plan.v0,
+           "tau_s": plan.tau_s, "stage1": stage1, "t_switch": plan.t_switch,
+           "duration": plan.duration, "v_contact": plan.v_contact,
+           "limits": plan.limits.to_json(), "peaks": {"v": plan.peaks.v, "a": plan.peaks.a}}
+    if plan.robust is not None:
+        doc["robust"] = {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])}
+    doc.update(plan.extra)
+    return doc
+
+
+def save_plan(plan: Plan, path: str | Path) -> None:
+    Path(path).write_text(json.dumps(plan_to_json(plan), indent=2) + "\n")
+
+
+def load_plan(path: str | Path) -> Plan:
+    try:
+        text = Path(path).read_text()
+    except OSError as err:
+        raise PlanError(f"{path}: cannot read plan file ({err.strerror})") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise PlanError(f"{path}: not JSON ({err.msg} at line {err.lineno})") from None
+    try:
+        return plan_from_json(doc)
+    except PlanError as err:
+        raise PlanError(f"{path}: {err}") from None
+
+
+def plan_from_json(doc: object) -> Plan:
+    if not isinstance(doc, dict):
+        raise PlanError("a plan file holds one JSON object")
+    if doc.get("schema") != SCHEMA:
+        raise PlanError(f"schema: expected {SCHEMA!r}, got {doc.get('schema')!r}")
+    strategy = doc.get("strategy")
+    if strategy not in STRATEGIES:
+        raise PlanError(f"strategy: expected one of {', '.join(STRATEGIES)}, got {strategy!r}")
+    stage1 = _field(doc, "stage1", dict)
+    params = {"c": _number(stage1, "c", "stage1.c")} if strategy != "ipts" else \
+        {"k": _numbers(stage1, "k", "stage1.k")}
+    tau_s = None if strategy == "ctds" else _number(doc, "tau_s")
+    plan = make_plan(strategy, _number(doc, "x0"), _number(doc, "v0"), tau_s, _limits(doc),
+                     robust=_robust(doc), **params)
+    _agree(doc, plan)
+    extra = {key: doc[key] for key in doc.keys() - KNOWN}
+    return Plan(**{**plan.__dict__, "extra": extra}) if extra else plan
+
+
+KNOWN = {"schema", "strategy", "x0", "v0", "tau_s", "stage1", "t_switch", "duration",
+         "v_contact", "limits", "peaks", "robust"}
+
+
+def _agree(doc: dict, plan: Plan) -> None:
+    peaks = _field(doc, "peaks", dict)
+    for name, stored, derived in (
+            ("t_switch", _number(doc, "t_switch"), plan.t_switch),
+            ("duration", _number(doc, "duration"), plan.duration),
+            ("v_contact", _number(doc, "v_contact"), plan.v_contact),
+            ("peaks.v", _number(peaks, "v", "peaks.v"), plan.peaks.v),
+            ("peaks.a", _number(peaks, "a", "peaks.a"), plan.peaks.a)):
+        if not math.isclose(stored, derived, rel_tol=REL_TOL, abs_tol=1e-9):
+            raise PlanError(f"{name}: file says {stored:.6g} but its parameters give "
+                            f"{derived:.6g} (tampered or stale plan)")
+
+
+def _field(doc: dict, key: str, kind: type, name: str | None = None):
+    if key not in doc:
+        raise PlanError(f"{name or key}: missing")
+    value = doc[key]
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise PlanError(f"{name or key}: expected {kind.__name__}, got {value!r}")
+    return value
+
+
+def _number(doc: dict, key: str, name: str | None = None) -> float:
+    value = _field(doc, key, (int, float), name or key)
+    if not math.isfinite(value):
+        raise PlanError(f"{name or key}: must be finite, got {value!r}")
+    return float(value)
+
+
+def _numbers(doc: dict, key: str, name: str) -> list[float]:
+    values = _field(doc, key, list, name)
+    if not 2 <= len(values) <= 8:
+        raise PlanError(f"{name}: expected 2..8 coefficients k_0..k_n, got {len(values)}")
+    return [_number({"v": v}, "v", f"{name}[{i}]") for i, v in enumerate(values)]
+
+
+def _limits(doc: dict) -> Limits:
+    lim = _field(doc, "limits", dict)
+    pair = _numbers_pair(lim, "v_contact", "limits.v_contact")
+    optional = {k: None if lim.get(k) is None else _number(lim, k, f"limits.{k}")
+                for k in ("v_max", "a_max")}
+    return Limits(pair, **optional)
+
+
+def _numbers_pair(doc: dict, key: str, name: str) -> tuple[float, float]:
+    values = _field(doc, key, list, name)
+    if len(values) != 2:
+        raise PlanError(f"{name}: expected [low, high], got {values!r}")
+    return tuple(_number({"v": v}, "v", f"{name}[{i}]") for i, v in enumerate(values))
+
+
+def _robust(doc: dict):
+    if doc.get("robust") is None:
+        return None
+    box = _field(doc, "robust", dict)
+    pairs = tuple(_numbers_pair(box, k, f"robust.{k}") for k in ("x0", "v0"))
+    for key, (lo, hi) in zip(("x0", "v0"), pairs):
+        if lo > hi:
+            raise PlanError(f"robust.{key}: low {lo:g} above high {hi:g}")
+    return pairs

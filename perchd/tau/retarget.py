@@ -1,0 +1,29 @@
+"""Fly a plan's strategy and limits from the trigger state actually measured."""
+
+from __future__ import annotations
+
+from perchd.tau.plan import Plan, make_plan
+
+
+def retarget(plan: Plan, x0: float, v0: float) -> Plan:
+    """The same strategy and limits from (x0 [m], v0 [m/s]).
+
+    A robust IPTS plan keeps k_1..k_n and takes k_0 = v0/x0; its certificate covers the box,
+    and a state outside it is refused. Other plans are replanned: CTDS keeps c, CTDTS keeps
+    tau_s and V_c, IPTS is re-optimised at the same order. PlanError names what fails.
+    """
+    from perchd.tau.ctds import plan_ctds, plan_ctdts
+    from perchd.tau.ipts import plan_ipts
+
+    lim = plan.limits
+    if plan.robust is not None:
+        from perchd.tau.certify import Box
+        from perchd.tau.robust import retarget_k
+
+        k = retarget_k(plan.k[1:], Box(*plan.robust), x0, v0)
+        return make_plan("ipts", x0, v0, plan.tau_s, lim, k=k, robust=plan.robust)
+    if plan.strategy == "ctds":
+        return plan_ctds(x0, v0, plan.c, lim)
+    if plan.strategy == "ctdts":
+        return plan_ctdts(x0, v0, plan.tau_s, plan.v_contact, lim.a_max, lim.v_max)
+    return plan_ipts(x0, v0, plan.tau_s, lim.v_contact, lim.v_max, lim.a_max, plan.order)
