@@ -19,7 +19,10 @@ COMMANDS = ("plan", "fly", "mocap", "sim", "serve", "ctl", "log", "bench")
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that exits 2 with one line (its default), never printing a traceback."""
+    """argparse whose usage errors are one line (no usage block) and exit code 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:

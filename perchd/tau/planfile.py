@@ -90,7 +90,8 @@ def _field(doc: dict, key: str, kind: type, name: str | None = None):
         raise PlanError(f"{name or key}: missing")
     value = doc[key]
     if not isinstance(value, kind) or isinstance(value, bool):
-        raise PlanError(f"{name or key}: expected {kind.__name__}, got {value!r}")
+        expected = "a number" if isinstance(kind, tuple) else f"a JSON {kind.__name__}"
+        raise PlanError(f"{name or key}: expected {expected}, got {value!r}")
     return value
 
 

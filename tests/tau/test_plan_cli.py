@@ -1,0 +1,69 @@
+"""`perchd plan`: figures out, and every bad input as one line with exit code 2."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PLANS = Path(__file__).resolve().parents[2] / "plans"
+
+
+def perchd(*args):
+    return subprocess.run([sys.executable, "-m", "perchd", *args], capture_output=True, text=True)
+
+
+def test_plan_check_json_holds_the_contract_fields():
+    out = perchd("plan", "check", str(PLANS / "case1-ipts-n3.json"), "--json")
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    for key in ("strategy", "duration", "t_switch", "v_contact", "v_peak", "a_peak",
+                "bound", "ratio", "feasible"):
+        assert key in doc
+    assert doc["ratio"] == pytest.approx(doc["duration"] / doc["bound"])
+    assert doc["feasible"] is True
+
+
+def test_plan_ipts_writes_a_file_that_checks(tmp_path):
+    out = perchd("plan", "ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5",
+                 "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4",
+                 "--order", "3", "--out", str(tmp_path / "p.json"))
+    assert out.returncode == 0, out.stderr
+    assert "2.014" in out.stdout
+    assert perchd("plan", "check", str(tmp_path / "p.json")).returncode == 0
+
+
+def test_plan_check_draws_the_four_panels(tmp_path):
+    out = perchd("plan", "check", str(PLANS / "case1-ctdts.json"), "--plot", str(tmp_path / "f.png"))
+    assert out.returncode == 0 and (tmp_path / "f.png").stat().st_size > 10_000
+
+
+BAD = [
+    (["ctds", "--x0", "-3", "--v0", "1.5", "--c", "0.7"], "infinite"),
+    (["ctds", "--x0", "-3", "--v0", "1.5", "--c", "-0.1"], "never arrives"),
+    (["ctds", "--x0", "3", "--v0", "1.5"], "x0 must be a negative"),
+    (["ctdts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "1.0",
+      "--a-max", "0.4"], r"a_max = 0.4 m/s\^2 by 0.05"),
+    (["ctdts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "2.0"],
+     "only decelerate"),
+    (["ctdts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-3", "--v-contact", "1.0"], "tau_s"),
+    (["ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0",
+      "--v-max", "2.5", "--a-max", "0.2"], "a_max = 0.2"),
+    (["ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0",
+      "--order", "9"], "order"),
+    (["check", "/nonexistent/plan.json"], "cannot read"),
+    (["ipts", "--x0", "-3"], "required"),
+]
+
+
+@pytest.mark.parametrize("args, message", BAD, ids=[" ".join(a[:2]) + m for a, m in BAD])
+def test_bad_input_is_one_line_and_exit_2(args, message):
+    import re
+
+    out = perchd("plan", *args)
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr
+    line = out.stderr.strip().splitlines()[-1]
+    assert re.search(message, line), out.stderr
+    assert len([l for l in out.stderr.strip().splitlines() if not l.startswith("usage")]) == 1
