@@ -13,12 +13,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from pathlib import Path
-
-import numpy as np
 
 from perchd.errors import PlanError
-from perchd.tau.certify import Box, first_switch, scale_functions
+from perchd.tau.certify import Box
 
 METHOD = ("certify_box: monotone t_s in k0, mean-value enclosures on adaptive k0 x t cells "
           "(perchd/tau/certify.py)")
@@ -92,28 +89,29 @@ def run(args) -> int:
         result = largest_box(args.order, lim, dom, seed=args.seed, maxiter=args.maxiter,
                              start=_start(args.start, lim))
         mode = "grow" if nominal else "largest"
-    record = plan_record(result, lim, nominal)
-    Path(args.out).write_text(json.dumps(record, indent=2) + "\n")
-    summary = {"mode": mode, "order": args.order, "k": record["stage1"]["k"][1:],
-               "robust": record["robust"], "area": record["certificate"]["area"],
-               "duration_worst": record["certificate"]["duration"][1], "out": args.out}
+    from perchd.tau.planfile import save_plan
+
+    plan = certified_plan(result, lim, nominal)
+    save_plan(plan, args.out)
+    cert = plan.extra["certificate"]
+    summary = {"mode": mode, "order": args.order, "k": list(plan.k[1:]),
+               "robust": {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])},
+               "area": cert["area"], "duration_worst": cert["duration"][1], "out": args.out}
     print(json.dumps(summary) if args.json else _table(summary))
     return 0
 
 
 def _start(path, lim):
-    """A RobustResult from a plan file, to seed a higher-order search."""
+    """A RobustResult from a robust plan file, to seed a higher-order search."""
+    from perchd.tau.planfile import load_plan
     from perchd.tau.robust import RobustResult
 
     if path is None:
         return None
-    try:
-        record = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as err:
-        raise PlanError(f"--start {path}: {err}") from None
-    cert = check_record(record)
-    box = Box(tuple(record["robust"]["x0"]), tuple(record["robust"]["v0"]))
-    return RobustResult(tuple(record["stage1"]["k"][1:]), box, cert)
+    plan = load_plan(path)
+    if plan.robust is None:
+        raise PlanError(f"--start {path}: not a robust plan (no robust box)")
+    return RobustResult(tuple(plan.k[1:]), Box(*plan.robust), check_plan(plan))
 
 
 def _table(s: dict) -> str:
@@ -129,92 +127,55 @@ def _table(s: dict) -> str:
 def _inward(box: Box, digits: int = 4) -> Box:
     """The box with edges rounded inward (a sub-box of a certified box is certified)."""
     f = 10 ** digits
-    return Box((math.ceil(box.x0[0] * f) / f, math.floor(box.x0[1] * f) / f),
-               (math.ceil(box.v0[0] * f) / f, math.floor(box.v0[1] * f) / f))
+    up, down = (lambda e: math.ceil(round(e * f, 6)) / f), (lambda e: math.floor(round(e * f, 6)) / f)
+    return Box((up(box.x0[0]), down(box.x0[1])), (up(box.v0[0]), down(box.v0[1])))
 
 
-def nominal_profile(k, x0: float, v0: float, tau_s: float, n: int = 20001) -> dict:
-    """t_switch, duration, v_contact and peaks of the IPTS plan from (x0, v0)."""
-    k0 = v0 / x0
-    ts, why = first_switch(np.asarray(k, float), k0, tau_s)
-    if ts is None:
-        raise PlanError(f"tau never reaches tau_s from x0 = {x0:g} m, v0 = {v0:g} m/s ({why})")
-    _, f1, f2 = scale_functions(np.asarray(k, float), k0, np.linspace(0.0, ts, n))
-    s = -x0
-    return {"t_switch": ts, "duration": ts + abs(tau_s), "v_contact": float(s * f1[-1]),
-            "peaks": {"v": float(s * f1.max()), "a": float(s * np.abs(f2).max())}}
+def robust_plan(k, box: Box, lim, x0: float, v0: float, extra: dict | None = None):
+    """The Plan (perchd.tau.make_plan) of k flown from (x0, v0), carrying its certified box."""
+    from dataclasses import replace
+
+    from perchd.tau import Limits, make_plan
+    from perchd.tau.robust import retarget_k
+
+    plan = make_plan("ipts", x0, v0, lim.tau_s, Limits(lim.v_contact, lim.v_max, lim.a_max),
+                     k=retarget_k(k, box, x0, v0), robust=(box.x0, box.v0))
+    return replace(plan, extra=extra) if extra else plan
 
 
-def plan_record(result, lim, nominal=None) -> dict:
-    """The CONTRACTS 1 plan file of a robust result, flown from `nominal` (default: centre)."""
+def certified_plan(result, lim, nominal=None):
+    """The plan file's Plan for a robust result, flown from `nominal` (default: box centre),
+    its box rounded inward to 0.1 mm, re-certified, and the certificate in plan.extra."""
     box = _inward(result.box)
     cert = lim.certify(result.k, box)
     if not cert.certified:
         raise PlanError(f"rounded box lost its certificate: {cert.reason}")
     x0, v0 = nominal or (round(sum(box.x0) / 2, 4), round(sum(box.v0) / 2, 4))
-    prof = nominal_profile(result.k, x0, v0, lim.tau_s)
-    return {
-        "schema": "perchd.plan/1", "strategy": "ipts", "x0": x0, "v0": v0, "tau_s": lim.tau_s,
-        "stage1": {"k": [v0 / x0, *result.k]},
-        "t_switch": prof["t_switch"], "duration": prof["duration"],
-        "v_contact": prof["v_contact"],
-        "limits": {"v_contact": list(lim.v_contact), "v_max": lim.v_max, "a_max": lim.a_max},
-        "peaks": prof["peaks"],
-        "robust": {"x0": list(box.x0), "v0": list(box.v0)},
-        "certificate": {"method": METHOD, "area": box.area, "v_peak": cert.bounds["v_peak"],
-                        "a_peak": cert.bounds["a_peak"],
-                        "v_contact": [float(v) for v in cert.bounds["v_contact"]],
-                        "duration": [float(d) for d in cert.duration]},
-    }
+    record = {"method": METHOD, "area": box.area, "v_peak": cert.bounds["v_peak"],
+              "a_peak": cert.bounds["a_peak"],
+              "v_contact": [float(v) for v in cert.bounds["v_contact"]],
+              "duration": [float(d) for d in cert.duration]}
+    return robust_plan(result.k, box, lim, x0, v0, {"certificate": record})
 
 
 def check_plan(plan):
-    """`check_record` for a loaded Plan object (Plan API attributes: x0, v0, tau_s, k,
-    limits, robust)."""
-    lim = plan.limits
-    return check_record({"x0": plan.x0, "v0": plan.v0, "tau_s": plan.tau_s,
-                         "stage1": {"k": list(plan.k)},
-                         "robust": {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])},
-                         "limits": {"v_contact": list(lim.v_contact), "v_max": lim.v_max,
-                                    "a_max": lim.a_max}})
-
-
-def check_record(record: dict):
-    """Re-certify a robust plan file over its whole box (for `perchd plan check`).
-    Returns the Certificate; PlanError names the field or the violated limit and state."""
+    """Re-certify a robust Plan over its whole box (`perchd plan check` calls this).
+    Returns the Certificate; PlanError names the broken limit and the state, or the field."""
     from perchd.tau.robust import RobustLimits
 
-    try:
-        rb, lim_d, k = record["robust"], record["limits"], record["stage1"]["k"]
-        box = Box(tuple(map(float, rb["x0"])), tuple(map(float, rb["v0"])))
-        lim = RobustLimits(float(record["tau_s"]), tuple(lim_d["v_contact"]),
-                           float(lim_d["v_max"]), float(lim_d["a_max"]))
-    except (KeyError, TypeError, ValueError) as err:
-        raise PlanError(f"robust plan: missing or malformed field {err}") from None
+    lim = plan.limits
+    if plan.strategy != "ipts" or plan.tau_s is None:
+        raise PlanError(f"robust: only two-stage ipts plans can be robust, got {plan.strategy}")
+    if lim.v_max is None or lim.a_max is None:
+        raise PlanError("robust: limits.v_max and limits.a_max are needed to certify a box")
+    box = Box(tuple(plan.robust[0]), tuple(plan.robust[1]))
     if not box.x0[0] < box.x0[1] < 0 < box.v0[0] < box.v0[1]:
-        raise PlanError(f"robust: box must have x0 lo < hi < 0 < v0 lo < hi, got {rb}")
-    if not math.isclose(k[0], record["v0"] / record["x0"], rel_tol=1e-9):
-        raise PlanError(f"stage1.k[0] = {k[0]:g} is not v0/x0 = {record['v0'] / record['x0']:g}")
-    cert = lim.certify(k[1:], box)
+        raise PlanError(f"robust: box must have x0 lo < hi < 0 < v0 lo < hi, got {plan.robust}")
+    if not math.isclose(plan.k[0], plan.v0 / plan.x0, rel_tol=1e-9):
+        raise PlanError(f"stage1.k[0] = {plan.k[0]:g} is not v0/x0 = {plan.v0 / plan.x0:g}")
+    cert = RobustLimits(plan.tau_s, tuple(lim.v_contact), lim.v_max, lim.a_max).certify(
+        plan.k[1:], box)
     if not cert.certified:
-        raise PlanError(f"robust box not certified: {cert.reason}")
+        raise PlanError(f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} "
+                        f"m/s {cert.reason}")
     return cert
-
-
-def main(argv=None) -> int:
-    """`python -m perchd.tau.robust_cli robust ...` until `perchd plan` carries it."""
-    from perchd.errors import PerchdError
-    import sys
-
-    parser = argparse.ArgumentParser(prog="perchd plan")
-    register(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    try:
-        return args.run(args)
-    except PerchdError as err:
-        print(f"perchd plan robust: {err}", file=sys.stderr)
-        return err.exit_code
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

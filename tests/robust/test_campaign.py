@@ -4,7 +4,6 @@ through the supervisor's 'robust' trigger policy (retarget at the measured state
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 from pathlib import Path
 
@@ -12,12 +11,10 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "closedloop"))
-import refplans  # noqa: E402  (closed-form Plan API stand-in, independent of perchd.tau)
-from simflight import Sim  # noqa: E402
+from simflight import Sim  # noqa: E402  (the closed-loop tests' simulated flight)
 
 from perchd.flightconfig import FlightConfig, TriggerConfig, TriggerPolicy  # noqa: E402
-from perchd.tau.certify import Box  # noqa: E402
-from perchd.tau.robust import retarget_k  # noqa: E402
+from perchd.tau import load_plan, retarget  # noqa: E402
 from perchd.types import EndReason  # noqa: E402
 
 PLANS = Path(__file__).parents[2] / "plans"
@@ -25,42 +22,22 @@ START = "sim://?start=-7.8,0,1"       # far enough back to reach v0 = 2.5 m/s by
 ROBUST = FlightConfig(trigger=TriggerConfig(policy=TriggerPolicy.ROBUST))
 
 
-def _stand_in_retarget(plan, x0, v0):
-    """perchd.tau.retarget for a robust IPTS plan, until the planning code lands: k_1..k_n
-    kept, k_0 = v0/x0, PlanError outside the box (perchd.tau.robust.retarget_k)."""
-    k = retarget_k(plan.k[1:], Box(*plan.robust), x0, v0)
-    return dataclasses.replace(refplans.ipts(x0, v0, plan.tau_s, tuple(k[1:])), robust=plan.robust)
-
-
-@pytest.fixture(autouse=True)
-def retarget(monkeypatch):
-    try:
-        from perchd.tau import retarget as real  # noqa: F401
-    except ImportError:
-        import perchd.tau
-
-        monkeypatch.setattr(perchd.tau, "retarget", _stand_in_retarget, raising=False)
-
-
 def robust_plan(name: str, x0: float, v0: float):
-    """The plan file's k flown towards trigger state (x0, v0), carrying the file's box."""
-    rec = json.loads((PLANS / name).read_text())
-    box = (tuple(rec["robust"]["x0"]), tuple(rec["robust"]["v0"]))
-    plan = refplans.ipts(x0, v0, rec["tau_s"], tuple(rec["stage1"]["k"][1:]))
-    return dataclasses.replace(plan, robust=box), rec
+    """The plan file retargeted to (x0, v0): the approach aims there, and at trigger the
+    supervisor retargets again to the state it measures (same k_1..k_n, same box)."""
+    return retarget(load_plan(PLANS / name), x0, v0)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["robust-n3-largest.json", "robust-n5-largest.json"])
 def test_a_hundred_flights_across_the_box_all_perch_inside_the_speed_window(name, tmp_path):
-    rec = json.loads((PLANS / name).read_text())
-    (xl, xh), (vl, vh) = rec["robust"]["x0"], rec["robust"]["v0"]
+    (xl, xh), (vl, vh) = load_plan(PLANS / name).robust
     rng = np.random.default_rng(7)
     inset = 0.04   # the vehicle triggers within ~2 cm, 1 cm/s of where it aimed
     speeds = []
     for i in range(100):
         x0, v0 = rng.uniform(xl + inset, xh - inset), rng.uniform(vl + inset, vh - inset)
-        plan, _ = robust_plan(name, x0, v0)
+        plan = robust_plan(name, x0, v0)
         res = Sim(START).fly(plan, tmp_path / f"{i}.jsonl", ROBUST)
         assert res.outcome is EndReason.CONTACT, (x0, v0, res.detail)
         assert "retargeted" in res.trigger.action
@@ -69,7 +46,7 @@ def test_a_hundred_flights_across_the_box_all_perch_inside_the_speed_window(name
 
 
 def test_a_trigger_outside_the_box_is_refused_before_stage_one(tmp_path):
-    plan, rec = robust_plan("robust-n3-largest.json", -3.0, 1.5)
+    plan = robust_plan("robust-n3-largest.json", -3.0, 1.5)
     (xl, xh), (vl, vh) = plan.robust
     plan = dataclasses.replace(plan, robust=((xl, xh), (vl, 1.4)))   # 1.5 m/s is now outside
     res = Sim(START).fly(plan, tmp_path / "f.jsonl", ROBUST)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -12,13 +13,16 @@ from perchd.errors import PlanError
 from perchd.tau.certify import Box
 from perchd.tau.robust import (RobustLimits, contact_ratio, fastest_k, retarget_k,
                                shrink_until_certified)
-from perchd.tau.robust_cli import check_record, main, nominal_profile
+from perchd.cli import main as perchd
+from perchd.tau import Limits
+from perchd.tau.planfile import load_plan, plan_from_json
+from perchd.tau.robust_cli import check_plan, robust_plan
 from robust_brute import fly, worst_over_box
 
 LIM = RobustLimits(-0.5, (0.7, 1.0), 2.5, 1.4)
 PLANS = sorted((Path(__file__).parents[2] / "plans").glob("robust-*.json"))
 K3 = (-0.3111, -0.3082, 0.02853)
-ARGS = ["robust", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4"]
+ARGS = ["plan", "robust", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4"]
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +83,7 @@ def test_retarget_keeps_k1_to_kn_and_takes_k0_from_the_measured_state():
     (["--order", "9"], "--order must be 1..7"),
 ])
 def test_bad_input_is_one_line_and_exit_2(extra, words, tmp_path, capsys):
-    assert main(ARGS + extra + ["--out", str(tmp_path / "P.json")]) == 2
+    assert perchd(ARGS + extra + ["--out", str(tmp_path / "P.json")]) == 2
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1 and not (tmp_path / "P.json").exists()
 
@@ -88,56 +92,71 @@ def test_plan_robust_writes_a_plan_file_plan_check_recertifies(tmp_path, capsys)
     out = tmp_path / "P.json"
     argv = ARGS + ["--x0", "-3.9", "-3.7", "--v0", "1.8", "2.0", "--maxiter", "8",
                    "--out", str(out), "--json"]
-    assert main(argv) == 0
+    assert perchd(argv) == 0
     summary = json.loads(capsys.readouterr().out)
-    rec = json.loads(out.read_text())
-    assert rec["robust"] == {"x0": [-3.9, -3.7], "v0": [1.8, 2.0]} == summary["robust"]
-    assert rec["stage1"]["k"][0] == pytest.approx(1.9 / -3.8)
-    assert check_record(rec).certified
-    f = fly(rec["stage1"]["k"][1:], rec["x0"], rec["v0"], -0.5)
-    assert rec["duration"] == pytest.approx(f.t_s + 0.5, abs=1e-5)
-    assert rec["v_contact"] == pytest.approx(f.v_contact, rel=1e-5)
+    plan = load_plan(out)
+    assert plan.robust == ((-3.9, -3.7), (1.8, 2.0))
+    assert summary["robust"] == {"x0": [-3.9, -3.7], "v0": [1.8, 2.0]}
+    assert plan.k[0] == pytest.approx(1.9 / -3.8)
+    assert check_plan(plan).certified
+    f = fly(plan.k[1:], plan.x0, plan.v0, -0.5)
+    assert plan.duration == pytest.approx(f.t_s + 0.5, abs=1e-5)
+    assert plan.v_contact == pytest.approx(f.v_contact, rel=1e-5)
+    assert perchd(["plan", "check", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["feasible"] is True
 
 
-def test_a_tampered_box_fails_the_check_naming_the_broken_limit_and_state():
+def test_plan_check_refuses_a_plan_whose_box_was_grown_naming_limit_and_state(tmp_path, capsys):
     rec = json.loads(PLANS[0].read_text())
     rec["robust"]["x0"][0] -= 0.4
     with pytest.raises(PlanError, match=r"not certified: .* at x0=-\d"):
-        check_record(rec)
-    rec = json.loads(PLANS[0].read_text())
-    rec["stage1"]["k"][0] *= 1.1
+        check_plan(plan_from_json(rec))
+    bad = tmp_path / "grown.json"
+    bad.write_text(json.dumps(rec))
+    assert perchd(["plan", "check", str(bad)]) != 0
+    captured = capsys.readouterr()
+    assert "not certified: contact speed above V_u" in captured.out + captured.err
+
+
+def test_a_robust_plan_whose_k0_is_not_its_v0_over_x0_is_refused():
+    plan = load_plan(PLANS[0])
+    k = (plan.k[0] * 1.1, *plan.k[1:])
     with pytest.raises(PlanError, match="stage1.k"):
-        check_record(rec)
+        check_plan(dataclasses.replace(plan, k=k))
 
 
 @pytest.mark.parametrize("path", PLANS, ids=[p.name for p in PLANS])
-def test_every_robust_plan_in_plans_is_certified_and_its_figures_reproduce(path):
-    rec = json.loads(path.read_text())
-    cert = check_record(rec)
+def test_every_robust_plan_in_plans_loads_is_certified_and_flies_inside_its_limits(path):
+    plan = load_plan(path)                 # re-derives every stored figure
+    cert = check_plan(plan)
     assert cert.certified
-    assert rec["certificate"]["area"] == pytest.approx(Box(tuple(rec["robust"]["x0"]),
-                                                           tuple(rec["robust"]["v0"])).area)
-    prof = nominal_profile(rec["stage1"]["k"][1:], rec["x0"], rec["v0"], rec["tau_s"])
-    for key in ("t_switch", "duration", "v_contact"):
-        assert rec[key] == pytest.approx(prof[key], rel=1e-9)
+    assert plan.extra["certificate"]["area"] == pytest.approx(Box(*plan.robust).area)
+    nominal = fly(plan.k[1:], plan.x0, plan.v0, -0.5)
+    assert plan.duration == pytest.approx(nominal.t_s + 0.5, abs=1e-5)
+    assert plan.peaks.a == pytest.approx(nominal.a_peak, rel=1e-3)
     rng = np.random.default_rng(1)
-    (xl, xh), (vl, vh) = rec["robust"]["x0"], rec["robust"]["v0"]
+    (xl, xh), (vl, vh) = plan.robust
     for x0, v0 in [(xl, vl), (xh, vh), (xl, vh), (xh, vl)] + [
             (rng.uniform(xl, xh), rng.uniform(vl, vh)) for _ in range(3)]:
-        f = fly(rec["stage1"]["k"][1:], x0, v0, -0.5)
+        f = fly(plan.k[1:], x0, v0, -0.5)
         assert f.reaches and f.v_peak <= 2.5 and f.a_peak <= 1.4 + 1e-4
         assert 0.7 <= f.v_contact <= 1.0
 
 
-def test_a_loaded_plan_object_is_rechecked_the_same_way():
-    from types import SimpleNamespace as NS
-
-    from perchd.tau.robust_cli import check_plan
-
-    rec = json.loads(PLANS[0].read_text())
-    plan = NS(x0=rec["x0"], v0=rec["v0"], tau_s=rec["tau_s"], k=tuple(rec["stage1"]["k"]),
-              robust=(tuple(rec["robust"]["x0"]), tuple(rec["robust"]["v0"])),
-              limits=NS(v_contact=(0.7, 1.0), v_max=2.5, a_max=1.4))
-    assert check_plan(plan).certified
+def test_a_tighter_a_max_on_a_loaded_plan_is_refused_naming_a_max():
+    plan = load_plan(PLANS[0])
     with pytest.raises(PlanError, match="a_max"):
-        check_plan(NS(**{**vars(plan), "limits": NS(v_contact=(0.7, 1.0), v_max=2.5, a_max=1.2)}))
+        check_plan(dataclasses.replace(plan, limits=Limits((0.7, 1.0), 2.5, 1.2)))
+
+
+def test_perchd_retarget_of_a_robust_plan_keeps_k_and_refuses_outside_the_box():
+    from perchd.tau.retarget import retarget
+
+    plan = load_plan(PLANS[0])
+    (xl, xh), (vl, vh) = plan.robust
+    x0, v0 = (xl + xh) / 2 + 0.01, (vl + vh) / 2 - 0.02
+    new = retarget(plan, x0, v0)
+    assert new.k[1:] == plan.k[1:] and new.k[0] == pytest.approx(v0 / x0)
+    assert new.robust == plan.robust and new.duration == pytest.approx(fly(new.k[1:], x0, v0, -0.5).t_s + 0.5, abs=1e-5)
+    with pytest.raises(PlanError, match="outside the robust box"):
+        retarget(plan, xl - 0.01, v0)
