@@ -113,7 +113,11 @@ class Certificate:
 
 def first_switch(k: np.ndarray, k0: float, tau_s: float) -> tuple[float | None, str]:
     """t_s [s]: first t > 0 with p(t) = 1/tau_s, or (None, limit name) if tau never gets there
-    or p reaches 0 (tau infinite, then positive) first.  k = (k_1..k_n)."""
+    or p reaches 0 (tau infinite, then positive) first.  k = (k_1..k_n).
+
+    Stricter than InversePolynomial.first_switch, as a proof needs: a near-real root pair
+    counts only if p really gets to the level, and p < 0 on [0, t_s] is shown by p's maximum
+    there (ends and critical points), so a tangential touch of 0 is caught too."""
     q = np.concatenate(([0.0], k))
     poly = q.copy()
     poly[0] = k0 - 1.0 / tau_s
@@ -143,7 +147,8 @@ def _polish(poly: np.ndarray, t: float) -> float:
 # --- point evaluation -------------------------------------------------------------
 
 def scale_functions(k: np.ndarray, k0, t):
-    """(p, f1, f2) at k0, t (broadcast): V = |x0| f1, A = |x0| f2 (see module docstring)."""
+    """(p, f1, f2) at k0, t (broadcast): V = |x0| f1, A = |x0| f2 (see module docstring).
+    Vectorised over k0 too (one per cell centre), which InversePolynomial (one k) is not."""
     q = np.concatenate(([0.0], k))
     big_q = np.concatenate(([0.0, 0.0], np.asarray(k) / np.arange(2, len(k) + 2)))
     p = k0 + npoly.polyval(t, q)

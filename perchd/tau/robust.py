@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from perchd.errors import PlanError
-from perchd.tau.certify import Box, Certificate, certify_box, first_switch, scale_functions
+from perchd.tau.certify import Box, Certificate, certify_box, first_switch
 
 T_SAMPLES = 97          # time samples per trajectory in the search (certifier bounds between)
 SEARCH_MARGIN = 2e-3    # relative slack the search keeps from every limit
@@ -49,14 +49,16 @@ class RobustResult:
 
 def admissible(k, k0s: np.ndarray, lim: RobustLimits, margin: float = SEARCH_MARGIN):
     """Sampled (L, U) [m] of admissible |x0| for each k_0 (nan where tau misses tau_s)."""
-    k = np.asarray(k, float)
+    from perchd.tau.profiles import InversePolynomial
+
     lo, hi = np.full(len(k0s), np.nan), np.full(len(k0s), np.nan)
     u = np.linspace(0.0, 1.0, T_SAMPLES)
     for j, k0 in enumerate(k0s):
-        ts, _ = first_switch(k, k0, lim.tau_s)
+        unit = InversePolynomial(-1.0, (float(k0), *map(float, k)))   # |x0| = 1 m
+        ts = unit.first_switch(lim.tau_s)
         if ts is None:
             continue
-        _, f1, f2 = scale_functions(k, k0, u * ts)
+        f1, f2 = unit.v(u * ts), unit.a(u * ts)
         vc = f1[-1]
         lo[j] = lim.v_contact[0] / vc * (1 + margin)
         hi[j] = min(lim.v_contact[1] / vc, lim.v_max / f1.max(), lim.a_max / np.abs(f2).max()) * (1 - margin)
