@@ -163,7 +163,8 @@ def _score(k, lim, dom) -> float:
     return float(max(lo[0] + x0, -x0 - hi[0], 0.0)) + 1e-3
 
 
-def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain) -> tuple[np.ndarray, Box]:
+def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain,
+           evals: int | None = None) -> tuple[np.ndarray, Box]:
     """Grow the box and adjust k together (Nelder-Mead; sampled boundary must keep a margin)."""
     from scipy.optimize import minimize
 
@@ -182,7 +183,7 @@ def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain) -> tuple[np.ndarra
         return -b.area if box_margin(kk, b, lim) >= SEARCH_MARGIN else 1.0
 
     res = minimize(cost, z0, method="Nelder-Mead",
-                   options={"maxfev": 600 * (n + 4), "xatol": 1e-6, "fatol": 1e-7, "adaptive": True})
+                   options={"maxfev": evals or 600 * (n + 4), "xatol": 1e-6, "fatol": 1e-7, "adaptive": True})
     z = res.x if res.fun < cost(z0) else z0
     kk, b = unpack(z)
     return np.asarray(kk), b
@@ -211,7 +212,7 @@ def shrink_until_certified(k, box: Box, lim: RobustLimits, about=None, steps: in
 
 def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(), *,
                 seed: int = 0, maxiter: int = 60, popsize: int = 12, k_bound: float = 2.0,
-                start: RobustResult | None = None) -> RobustResult:
+                start: RobustResult | None = None, polish_evals: int | None = None) -> RobustResult:
     """k_1..k_n (n = order) and the largest certified box for them (see module docstring).
     `start` (e.g. the order n-1 result, padded with zeros) seeds the search, so a higher
     order never does worse than the lower one it contains."""
@@ -229,7 +230,7 @@ def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(
     found = []
     for k, box in candidates:
         if box is not None:
-            k, box = polish(k, box, lim, dom)
+            k, box = polish(k, box, lim, dom, polish_evals)
             try:
                 found.append(shrink_until_certified(k, box, lim, dom.contains))
             except PlanError:

@@ -160,3 +160,15 @@ def test_perchd_retarget_of_a_robust_plan_keeps_k_and_refuses_outside_the_box():
     assert new.robust == plan.robust and new.duration == pytest.approx(fly(new.k[1:], x0, v0, -0.5).t_s + 0.5, abs=1e-5)
     with pytest.raises(PlanError, match="outside the robust box"):
         retarget(plan, xl - 0.01, v0)
+
+
+def test_the_box_search_seeded_with_a_certified_box_returns_a_certified_larger_one():
+    from perchd.tau.robust import RobustResult, largest_box
+
+    seed_box = Box((-3.65, -2.94), (0.67, 2.49))
+    r = largest_box(3, LIM, maxiter=1, popsize=3, polish_evals=150,
+                    start=RobustResult(K3, seed_box, LIM.certify(K3, seed_box)))
+    assert r.certificate.certified and r.box.area >= seed_box.area
+    w = worst_over_box(r.k, r.box.x0, r.box.v0, -0.5, n=4)
+    assert w["reaches"] and w["v_peak"] <= 2.5 and w["a_peak"] <= 1.4 + 1e-4
+    assert 0.7 <= w["vc_lo"] and w["vc_hi"] <= 1.0
