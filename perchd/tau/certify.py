@@ -19,17 +19,19 @@ Method (what `certify_box` implements, nothing sampled is trusted):
      t_s(K) lies in [t_s(a), t_s(b)] for every k_0-cell K = [a, b].
   2. Contact speed: on each k_0-cell, g(K) is enclosed by the mean-value form
      g(c) + g'(K) [-h, h] with g' = t_s + t_s'/tau_s = t_s - 1/(tau_s p'(t_s)) (implicit
-     differentiation of p(t_s) = 1/tau_s), enclosed by interval arithmetic over t in [t_s(a), t_s(b)]; cells that do not
-     prove V_l <= V(t_s) <= V_u are bisected.
+     differentiation of p(t_s) = 1/tau_s), g' enclosed by interval arithmetic over t in
+     [t_s(a), t_s(b)]; cells that do not prove V_l <= V(t_s) <= V_u are bisected.
   3. Speed and acceleration: 2-D cells K x [t1, t2] tile {(k_0, t): t <= t_s(b)}.
      On each cell sup f <= f(centre) + sup|df/dk_0| h_k + sup|df/dt| h_t (mean-value
      theorem on a convex cell); the derivative bounds come from interval arithmetic
      (t >= 0 makes t^i monotone).  Cells where p < 1/tau_s throughout lie after t_s and
      are dropped.  A cell that fails is split along the dimension contributing most.
-  A cell that cannot be decided at the minimum size is evaluated at its centre: a real
-  violation there is reported with its state, limit and time; otherwise the box is
-  reported as not certified.  Floating point is covered by a relative slack of
-  1e-9 on every bound (no directed rounding).
+  Before a failing cell is split its centre is evaluated exactly (at the largest |x0| of
+  its ray, or both segment ends for the contact speed): a real violation there is reported
+  at once with its state, limit and time.  A cell still undecided at the minimum size
+  (within the slack of a limit) leaves the box not certified.  Floating point: every
+  bound carries a relative slack of 1e-9 (no directed rounding); t_s values come from
+  numpy's polynomial roots refined by Newton steps.
 """
 
 from __future__ import annotations

@@ -9,7 +9,8 @@ Search (sampled, never trusted on its own):
     linear in |x0| along each ray v0/x0 = const, so the boundary of a box decides it).
   * `fastest_k` minimises the worst-case duration t_s(k_max) + |tau_s| over the box
     (t_s is nondecreasing in k_0, so the worst state is the box's largest k_0).
-Every result is then shrunk about its centre until `certify_box` proves it.
+Every result is then shrunk (about its centre, or about the state it must hold) until
+`certify_box` proves it; only certified boxes are returned.
 """
 
 from __future__ import annotations
