@@ -17,8 +17,9 @@ Conversions (perchd SI -> cflib send_setpoint):
 - thrust [N] -> 0..65535 through drivers.thrust.CrazyflieThrust.
 
 URI options (removed before cflib sees the URI): mass=KG, hover=UNITS (thrust model
-calibration), timeout=S (link silent this long = lost, default 0.5), extpose=1 (forward
-observed poses to the on-board estimator).
+calibration), timeout=S (link silent this long = lost, default 0.5), wait=S (connect
+waits this long for the echo, default 2), extpose=1 (forward observed poses to the
+on-board estimator).
 """
 
 from __future__ import annotations
@@ -61,7 +62,8 @@ def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
     timeout = float_param(uri, "timeout", 0.5, 0.01, 10.0, " s")
     model = CrazyflieThrust(hover_units=hover, mass_kg=mass)
     return CrazyflieDriver(uri.raw, without_query(uri), runtime, model, timeout,
-                           extpose=bool_param(uri, "extpose"))
+                           extpose=bool_param(uri, "extpose"),
+                           wait=float_param(uri, "wait", 2.0, 0.05, 60.0, " s"))
 
 
 def _init_cflib() -> Any:
@@ -103,13 +105,14 @@ class _LinkPort:
 
 class CrazyflieDriver(DriverBase):
     def __init__(self, uri: str, link_uri: str, runtime: Runtime, model: CrazyflieThrust,
-                 timeout: float, extpose: bool = False) -> None:
+                 timeout: float, extpose: bool = False, wait: float = 2.0) -> None:
         self.uri = uri
         self.link_uri = link_uri
         self.clock = runtime.clock
         self.model = model
         self.timeout = timeout
         self.extpose = extpose
+        self.wait = wait
         self._port: _LinkPort | None = None
         self._commander: Any = None
         self._loc: Any = None
@@ -140,8 +143,8 @@ class CrazyflieDriver(DriverBase):
         self._stopped = False
         self._start_threads()
         self._ping()
-        if not self._echoed.wait(2.0) or self._link_error:
-            why = self._link_error or "no answer to a link echo within 2.0 s"
+        if not self._echoed.wait(self.wait) or self._link_error:
+            why = self._link_error or f"no answer to a link echo within {self.wait:g} s"
             self._close_link()
             raise LinkError(f"{self.uri}: connection failed: {why}")
         self._send_cmd((0.0, 0.0, 0.0, 0))  # thrust 0 unlocks the firmware's thrust lock

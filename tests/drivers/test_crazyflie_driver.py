@@ -147,8 +147,8 @@ def test_closing_a_flying_driver_stops_the_motors(responder):
 
 def test_a_vehicle_that_never_answers_fails_the_connect_with_a_named_cause(responder):
     responder.mute()
-    driver = open_driver(responder.uri, Runtime.real())
-    with pytest.raises(LinkError, match="connection failed: no answer to a link echo"):
+    driver = open_driver(responder.uri + "?wait=0.3", Runtime.real())
+    with pytest.raises(LinkError, match="connection failed: no answer to a link echo within 0.3 s"):
         driver.connect()
 
 
