@@ -37,8 +37,8 @@ def bridge(rig, world, stop: threading.Event) -> None:
 def kill_after(rig, world, n_setpoints: int, killed: list[float]) -> None:
     while len(world.sent) < n_setpoints:
         time.sleep(0.001)
-    killed.append(time.monotonic())
     rig.kill()
+    killed.append(time.monotonic())  # the peer's socket is closed: the link is dead now
 
 
 @pytest.mark.parametrize("rig_cls", [CrazyflieRig, MavlinkRig, ZmqRig],

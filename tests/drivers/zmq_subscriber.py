@@ -29,7 +29,7 @@ class SetpointSubscriber:
 
     def _serve(self) -> None:
         while self._alive:
-            if not self.sock.poll(20):
+            if not self.sock.poll(5):
                 continue
             topic, body = self.sock.recv_multipart()
             with self._lock:
