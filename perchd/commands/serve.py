@@ -1,0 +1,24 @@
+"""`perchd serve [--config perchd.toml] [--socket PATH] [--driver URI] [--mocap URI]`:
+the flight agent as a service (systemd Type=notify); see perchd.daemon."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("serve", help="run the flight agent as a service (systemd)",
+                              description=__doc__.splitlines()[0])
+    p.add_argument("--config", help="service configuration (TOML, see systemd/perchd.toml)")
+    p.add_argument("--socket", help="control socket path (default from the config, "
+                                    "else /run/perchd/control.sock)")
+    p.add_argument("--driver", help="vehicle URI (overrides [service] driver)")
+    p.add_argument("--mocap", help="mocap URI (overrides [service] mocap)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from perchd.daemon import serve
+
+    return serve(args.config, {"socket": args.socket, "driver": args.driver,
+                               "mocap": args.mocap})
