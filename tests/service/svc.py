@@ -1,0 +1,141 @@
+"""Helpers for the service tests: a notify socket standing in for systemd, `perchd serve`
+and `perchd sim` as child processes, and a config file writer."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+PLANS = Path(__file__).resolve().parents[2] / "plans"
+PLAN = PLANS / "case1-ipts-n3.json"
+
+
+class NotifyListener:
+    """An AF_UNIX datagram socket playing systemd's NOTIFY_SOCKET; collects the messages."""
+
+    def __init__(self, path: Path | None = None, abstract: str | None = None) -> None:
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        if abstract:
+            self.sock.bind("\0" + abstract)
+            self.address = "@" + abstract
+        else:
+            self.sock.bind(str(path))
+            self.address = str(path)
+        self.messages: list[str] = []
+
+    def wait_for(self, field: str, timeout: float = 10.0) -> str:
+        """The first message (from now on, or already seen) holding the line `field`."""
+        deadline = time.monotonic() + timeout
+        while True:
+            for m in self.messages:
+                if field in m.split("\n"):
+                    return m
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise AssertionError(f"no {field} within {timeout} s; got {self.messages}")
+            self.sock.settimeout(left)
+            try:
+                self.messages.append(self.sock.recv(4096).decode())
+            except socket.timeout:
+                pass
+
+    def count(self, field: str) -> int:
+        return sum(field in m.split("\n") for m in self.messages)
+
+    def drain(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            self.sock.settimeout(left)
+            try:
+                self.messages.append(self.sock.recv(4096).decode())
+            except socket.timeout:
+                return
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def write_config(tmp: Path, **service: str) -> Path:
+    lines = ["version = 1", "[service]",
+             f'socket = "{tmp / "control.sock"}"', f'log_dir = "{tmp / "logs"}"',
+             f'plan_dir = "{PLANS}"', *(f'{k} = "{v}"' for k, v in service.items())]
+    path = tmp / "perchd.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def perchd(*args: str, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "perchd", *args], capture_output=True,
+                          text=True, timeout=30, **kw)
+
+
+def ctl(sock: Path, *args: str) -> dict:
+    done = perchd("ctl", "--socket", str(sock), *args)
+    assert done.stdout, done.stderr
+    return json.loads(done.stdout)
+
+
+class Serve:
+    """`perchd serve` under a test notify socket; .sock is its control socket."""
+
+    def __init__(self, tmp: Path, notify: NotifyListener, *extra: str, **service: str) -> None:
+        self.config = write_config(tmp, **service)
+        self.sock = tmp / "control.sock"
+        env = {**os.environ, "NOTIFY_SOCKET": notify.address, "WATCHDOG_USEC": "2000000"}
+        self.proc = subprocess.Popen([sys.executable, "-m", "perchd", "serve", "--config",
+                                      str(self.config), *extra], env=env,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def wait_phase(self, phases: set[str], timeout: float = 10.0) -> dict:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            st = ctl(self.sock, "status")
+            if st.get("phase") in phases:
+                return st
+            time.sleep(0.05)
+        raise AssertionError(f"never reached {phases}; last status {st}")
+
+    def stop(self, timeout: float = 15.0) -> tuple[int, str]:
+        try:
+            _, err = self.proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            _, err = self.proc.communicate()
+        return self.proc.returncode, err
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.communicate()
+
+
+class SimProcess:
+    """`perchd sim` in its own process (real clock); .mocap and .driver URIs to fly it."""
+
+    def __init__(self) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "perchd", "sim", "--pose-out", "natnet://127.0.0.1:0",
+             "--setpoint-in", "zmq://127.0.0.1:0", "--json"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        line = self.proc.stderr.readline()
+        found = re.search(r"ready: mocap (\S+) driver (\S+)", line)
+        if found is None:
+            self.proc.kill()
+            raise AssertionError(f"perchd sim did not start: {line}")
+        self.mocap, self.driver = found.groups()
+
+    def summary(self) -> dict:
+        self.proc.terminate()
+        out, _ = self.proc.communicate(timeout=10)
+        return json.loads(out)
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.communicate()

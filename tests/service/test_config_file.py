@@ -1,0 +1,98 @@
+"""perchd.toml: versioned, every key documented, unknown keys and bad values name the key."""
+
+import dataclasses
+import math
+import re
+from pathlib import Path
+
+import pytest
+
+from perchd.config import ServiceConfig, config_from_dict, load_config
+from perchd.errors import ConfigError
+from perchd.flightconfig import FlightConfig, TriggerPolicy
+from svc import perchd
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "systemd" / "perchd.toml"
+
+
+def leaves(obj, prefix=""):
+    """Every scalar field of a nested dataclass as 'section.key'."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            yield from leaves(value, f"{prefix}{f.name}.")
+        else:
+            yield prefix + f.name
+
+
+def test_the_example_documents_every_key_with_its_default():
+    text = EXAMPLE.read_text()
+    documented = set(re.findall(r"^#? ?(\w+) = ", text, re.M))
+    wanted = {k.rsplit(".", 1)[-1] for k in leaves(FlightConfig())} | set(
+        f.name for f in dataclasses.fields(ServiceConfig)) | {"version"}
+    wanted = {k[:-4] + "_deg" if k.endswith("_rad") else k for k in wanted}
+    assert wanted - documented == set()
+    cfg = load_config(EXAMPLE)
+    assert cfg.service == ServiceConfig()
+    for key in leaves(FlightConfig()):
+        got, default = cfg.flight, FlightConfig()
+        for part in key.split("."):
+            got, default = getattr(got, part), getattr(default, part)
+        assert got == (pytest.approx(default, rel=1e-6) if isinstance(default, float) else default), key
+
+
+def test_values_map_onto_flight_config_with_degrees_converted():
+    cfg = config_from_dict({"version": 1, "flight": {"rate_hz": 200, "tilt_limit_deg": 20},
+                            "safety": {"tilt_max_deg": 30.0}, "trigger": {"policy": "robust"},
+                            "lateral": {"y": {"kp": 2.0}}, "surface": {"point": [1, 2, 0]},
+                            "service": {"mocap": "natnet://10.0.0.2", "body": "cf7"}})
+    f = cfg.flight
+    assert f.rate_hz == 200.0 and f.tilt_limit_rad == pytest.approx(math.radians(20))
+    assert f.safety.tilt_max_rad == pytest.approx(math.radians(30))
+    assert f.trigger.policy is TriggerPolicy.ROBUST
+    assert f.lateral.y.kp == 2.0 and f.lateral.y.ki == FlightConfig().lateral.y.ki
+    assert f.surface.point == (1.0, 2.0, 0.0)
+    assert cfg.service.mocap_uri() == "natnet://10.0.0.2?body=cf7"
+
+
+@pytest.mark.parametrize("doc, message", [
+    ({"safety": {"tilt_max_deg": "x"}}, "[safety] tilt_max_deg: expected a number, got 'x'"),
+    ({"flight": {"rate_hz": 1000}}, "rate_hz = 1000 is above 500 by 500"),
+    ({"limits": {}}, "unknown table or key 'limits'"),
+    ({"service": {"drver": "sim://"}}, "[service] drver: unknown key"),
+    ({"lateral": {"y": {"kq": 1}}}, "[lateral.y] kq: unknown key"),
+    ({"trigger": {"policy": "maybe"}}, "[trigger] policy: expected 'robust' or 'replan' or 'refuse'"),
+    ({"surface": {"normal": [1, 0]}}, "[surface] normal: expected a list of 3 numbers"),
+    ({"safety": {"overrun_streak": 2.5}}, "[safety] overrun_streak: expected an integer, got 2.5"),
+    ({"tau_gains": {"feedforward": 1}}, "[tau_gains] feedforward: expected true or false"),
+    ({"service": {"socket": 3}}, "[service] socket: expected a string, got 3"),
+])
+def test_a_bad_key_or_value_is_one_error_naming_it(doc, message):
+    with pytest.raises(ConfigError) as err:
+        config_from_dict({"version": 1, **doc})
+    assert message in str(err.value) and str(err.value).startswith("perchd.toml: ")
+
+
+def test_the_version_is_required():
+    with pytest.raises(ConfigError, match=r"version: expected 1, got None \(missing\)"):
+        config_from_dict({})
+    with pytest.raises(ConfigError, match="version: expected 1, got 2"):
+        config_from_dict({"version": 2})
+
+
+def test_serve_with_a_bad_config_exits_2_with_one_line(tmp_path):
+    bad = tmp_path / "perchd.toml"
+    bad.write_text('version = 1\n[safety]\ntilt_max_deg = "x"\n')
+    done = perchd("serve", "--config", str(bad), "--socket", str(tmp_path / "s"))
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "perchd serve: perchd.toml: [safety] tilt_max_deg: expected a number, got 'x'"]
+    assert not (tmp_path / "s").exists()
+
+
+def test_fly_reads_the_flight_part_of_the_same_file(tmp_path):
+    cfg = tmp_path / "perchd.toml"
+    cfg.write_text('version = 1\n[flight]\nrate_hz = 5\n')
+    done = perchd("fly", "plans/case1-ipts-n3.json", "--driver", "sim://", "--mocap", "sim://",
+                  "--config", str(cfg), cwd=EXAMPLE.parents[1])
+    assert done.returncode == 2 and "rate_hz = 5 is below 20 by 15" in done.stderr
