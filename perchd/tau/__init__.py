@@ -1,7 +1,8 @@
 """Tau planning: CTDS, CTDTS and IPTS plans, their bound, files and verification."""
 
 from perchd.tau.bound import min_time_bound, plan_bound
-from perchd.tau.ctds import plan_ctds, plan_ctdts
+from perchd.tau.ctds import plan_ctds
+from perchd.tau.ctdts import plan_ctdts
 from perchd.tau.ipts import plan_ipts
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Peaks, Plan, make_plan

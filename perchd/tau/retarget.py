@@ -12,7 +12,8 @@ def retarget(plan: Plan, x0: float, v0: float) -> Plan:
     and a state outside it is refused. Other plans are replanned: CTDS keeps c, CTDTS keeps
     tau_s and V_c, IPTS is re-optimised at the same order. PlanError names what fails.
     """
-    from perchd.tau.ctds import plan_ctds, plan_ctdts
+    from perchd.tau.ctds import plan_ctds
+    from perchd.tau.ctdts import plan_ctdts
     from perchd.tau.ipts import plan_ipts
 
     lim = plan.limits

@@ -86,3 +86,24 @@ def test_the_bound_is_bang_bang_by_hand():
     v_p = math.sqrt((2 * 1.4 * 2.5 + 1.5 ** 2 + 1.0) / 2)
     expected = (2 * v_p - 1.5 - 1.0) / 1.4 + 0.5
     assert plan_bound(plan_ipts(X0, V0, TAU_S, (0.7, 1.0), 2.5, 1.4, 3)) == pytest.approx(expected)
+
+
+def _order1_least_peak_acceleration(v_lo=0.7, v_hi=1.0):
+    """Order 1 has one free coefficient, fixed by t_s: scan t_s, integrate each profile and
+    keep the least peak |a| among those contacting within [V_l, V_u]."""
+    best = math.inf
+    for t_s in np.linspace(1.3, 1.9, 61):
+        k = (V0 / X0, (1 / TAU_S - V0 / X0) / t_s)
+        _, _, v, a = fly_tau(ipts_tau(k), X0, t_s, n=801)
+        if v_lo <= v[-1] <= v_hi:
+            best = min(best, np.abs(a[1:-1]).max())
+    return best
+
+
+@pytest.mark.parametrize("v_max, a_max", [(2.5, 1.4), (2.0, 1.0)])
+def test_order1_is_refused_because_no_single_coefficient_meets_a_max(v_max, a_max):
+    from perchd.errors import PlanError
+
+    assert _order1_least_peak_acceleration() > a_max + 0.4   # about 1.87 m/s^2
+    with pytest.raises(PlanError, match="order-1"):
+        plan_ipts(X0, V0, TAU_S, (0.7, 1.0), v_max, a_max, order=1)
