@@ -1,0 +1,119 @@
+"""`perchd serve` as systemd runs it: notify socket, control socket, signals.
+
+The flights are real-time: serve flies against `perchd sim` in another process (zmq://
+driver, natnet:// mocap over loopback), or against sim:// in its own process, which the
+service paces on the real clock.
+"""
+
+import os
+import signal
+import time
+
+import pytest
+
+from perchd.flightlog import read_log
+from svc import PLAN, NotifyListener, Serve, SimProcess, ctl
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture
+def notify(tmp_path):
+    n = NotifyListener(tmp_path / "notify")
+    yield n
+    n.close()
+
+
+@pytest.fixture
+def sim():
+    s = SimProcess()
+    yield s
+    s.kill()
+
+
+def test_sigterm_mid_flight_sends_the_failsafe_closes_the_log_and_exits_0(tmp_path, notify, sim):
+    serve = Serve(tmp_path, notify, "--driver", sim.driver, "--mocap", sim.mocap)
+    try:
+        ready = notify.wait_for("READY=1")
+        assert "STATUS=cf1: idle" in ready.split("\n")
+        notify.wait_for("WATCHDOG=1")
+        started = ctl(serve.sock, "fly", str(PLAN))
+        assert started["ok"] and started["flying"]
+        assert ctl(serve.sock, "fly", str(PLAN)) == {
+            "ok": False, "error": "a flight is in progress; abort it or wait"}
+        mid = serve.wait_phase({"stage1"})
+        assert mid["state"] == "flying" and mid["x"] < 0
+        pings = notify.count("WATCHDOG=1")
+        notify.drain(0.6)  # the flight's own tick callback pings while flying
+        assert notify.count("WATCHDOG=1") > pings
+        assert any(m.startswith("STATUS=cf1: flying, stage1") for m in notify.messages)
+        serve.proc.send_signal(signal.SIGTERM)
+        code, err = serve.stop()
+    finally:
+        serve.kill()
+    assert code == 0, err
+    assert "SIGTERM: stopping" in err and "flight ended: SIGNAL" in err
+    notify.wait_for("STOPPING=1", 2.0)
+    log = read_log(started["log"])
+    assert log.complete and log.end["outcome"] == "SIGNAL"
+    assert log.end["summary"]["failsafe_sent"] is True
+    assert log.rows[-1].end == "SIGNAL" and log.rows[-1].phase in ("stage1", "stage2", "abort")
+    assert sim.summary()["stops"] >= 1 and not os.path.exists(serve.sock)
+
+
+def test_abort_over_the_socket_ends_the_flight_and_the_service_flies_again(tmp_path, notify):
+    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://")
+    try:
+        notify.wait_for("READY=1")
+        first = ctl(serve.sock, "fly", PLAN.name)  # a name in plan_dir
+        serve.wait_phase({"takeoff", "hold", "approach"})
+        assert ctl(serve.sock, "abort")["aborting"] is True
+        deadline = time.monotonic() + 5
+        while (st := ctl(serve.sock, "status"))["state"] == "flying" and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert st["last"]["outcome"] == "OPERATOR_ABORT" and st["last"]["failsafe_sent"]
+        assert ctl(serve.sock, "abort") == {"ok": True, "flying": False, "failsafe_sent": True}
+        second = ctl(serve.sock, "fly", str(PLAN))
+        assert second["ok"] and second["log"] != first["log"]
+        serve.proc.send_signal(signal.SIGINT)
+        code, _ = serve.stop()
+    finally:
+        serve.kill()
+    assert code == 0
+    assert read_log(first["log"]).end["outcome"] == "OPERATOR_ABORT"
+    assert read_log(second["log"]).end["outcome"] == "SIGNAL"
+
+
+def test_sighup_reloads_the_config_and_a_bad_one_is_kept_out(tmp_path, notify):
+    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://")
+    try:
+        notify.wait_for("READY=1")
+        serve.config.write_text(serve.config.read_text() + 'vehicle = "cf9"\n')
+        serve.proc.send_signal(signal.SIGHUP)
+        notify.wait_for("STATUS=cf9: idle, config reloaded")
+        assert ctl(serve.sock, "status")["vehicle"] == "cf9"
+        serve.config.write_text(serve.config.read_text() + "bogus = 1\n")
+        serve.proc.send_signal(signal.SIGHUP)
+        time.sleep(0.5)
+        assert ctl(serve.sock, "status")["vehicle"] == "cf9"
+        serve.proc.send_signal(signal.SIGTERM)
+        code, err = serve.stop()
+    finally:
+        serve.kill()
+    assert code == 0 and "config not reloaded, keeping the old one" in err and "bogus" in err
+
+
+def test_sigkill_loses_at_most_100_ms_of_the_log(tmp_path, notify):
+    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://")
+    try:
+        notify.wait_for("READY=1")
+        started = ctl(serve.sock, "fly", str(PLAN))
+        serve.wait_phase({"approach", "stage1"})
+        killed_at = time.monotonic()  # CLOCK_MONOTONIC: the same clock the service logs on
+        serve.proc.kill()
+        serve.proc.communicate()
+    finally:
+        serve.kill()
+    log = read_log(started["log"])
+    assert not log.complete and len(log.rows) > 50
+    assert 0 <= killed_at - log.rows[-1].t <= 0.100
