@@ -67,3 +67,29 @@ def test_bad_input_is_one_line_and_exit_2(args, message):
     line = out.stderr.strip().splitlines()[-1]
     assert re.search(message, line), out.stderr
     assert len([l for l in out.stderr.strip().splitlines() if not l.startswith("usage")]) == 1
+
+
+def _edited(edit):
+    doc = json.loads((PLANS / "case1-ipts-n3.json").read_text())
+    edit(doc)
+    return json.dumps(doc)
+
+
+BAD_FILES = [
+    ("{oops", "not JSON"),
+    ("[1, 2]", "one JSON object"),
+    (_edited(lambda d: d.update(schema="perchd.plan/2")), "schema"),
+    (_edited(lambda d: d.update(duration=1.9)), "duration: file says 1.9"),
+    (_edited(lambda d: d["stage1"]["k"].__setitem__(2, -0.3)), "t_switch"),
+    (_edited(lambda d: d["peaks"].update(a=1.0)), "peaks.a"),
+    (_edited(lambda d: d.pop("limits")), "limits"),
+]
+
+
+@pytest.mark.parametrize("text, message", BAD_FILES, ids=[m for _, m in BAD_FILES])
+def test_a_bad_plan_file_is_one_line_naming_the_field_and_exit_2(tmp_path, text, message):
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    out = perchd("plan", "check", str(path), "--json")
+    assert (out.returncode, out.stdout) == (2, "")
+    assert out.stderr.count("\n") == 1 and message in out.stderr, out.stderr
