@@ -5,8 +5,11 @@ driver, natnet:// mocap over loopback), or against sim:// in its own process, wh
 service paces on the real clock.
 """
 
+import json
 import os
 import signal
+import subprocess
+import sys
 import time
 
 import pytest
@@ -117,3 +120,42 @@ def test_sigkill_loses_at_most_100_ms_of_the_log(tmp_path, notify):
     log = read_log(started["log"])
     assert not log.complete and len(log.rows) > 50
     assert 0 <= killed_at - log.rows[-1].t <= 0.100
+
+
+def test_the_idle_watchdog_stops_when_the_link_to_the_vehicle_dies(tmp_path, notify, sim):
+    serve = Serve(tmp_path, notify, "--driver", sim.driver, "--mocap", sim.mocap)
+    try:
+        notify.wait_for("READY=1")
+        notify.drain(1.2)
+        assert notify.count("WATCHDOG=1") >= 2  # every WATCHDOG_USEC / 4 = 0.5 s while healthy
+        sim.kill()
+        deadline = time.monotonic() + 5
+        while ctl(serve.sock, "status")["link_ok"] and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert ctl(serve.sock, "status")["link_ok"] is False
+        notify.drain(0.1)  # pings already on their way
+        notify.messages.clear()
+        notify.drain(1.5)
+        assert notify.count("WATCHDOG=1") == 0  # systemd would now restart the service
+        assert ctl(serve.sock, "fly", str(PLAN)) == {"ok": False, "error": "the link to the vehicle is down"}
+        serve.proc.send_signal(signal.SIGTERM)
+        code, _ = serve.stop()
+    finally:
+        serve.kill()
+    assert code == 0
+
+
+def test_a_flight_through_ctl_wait_perches(tmp_path, notify):
+    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://")
+    try:
+        notify.wait_for("READY=1")
+        done = subprocess.run([sys.executable, "-m", "perchd", "ctl", "fly", str(PLAN), "--wait",
+                               "--socket", str(serve.sock)], capture_output=True, text=True, timeout=30)
+        serve.proc.send_signal(signal.SIGTERM)
+        serve.stop()
+    finally:
+        serve.kill()
+    out = json.loads(done.stdout)
+    assert done.returncode == 0 and out["outcome"] == "CONTACT"
+    assert 0.7 <= out["contact_speed"] <= 1.0 and abs(out["perch_time"] / out["plan_duration"] - 1) < 0.05
+    assert out["loop"]["jitter_median_s"] < 0.005  # paced on the real clock, not simulated time
