@@ -30,6 +30,10 @@ class ControlServer:
         old = os.umask(0o777 & ~mode)  # never world-accessible, not even between bind and chmod
         try:
             self.sock.bind(str(self.path))
+        except OSError as err:
+            self.sock.close()
+            from perchd.errors import ConfigError
+            raise ConfigError(f"--socket {self.path}: cannot listen: {err.strerror}") from None
         finally:
             os.umask(old)
         os.chmod(self.path, mode)

@@ -102,3 +102,8 @@ def test_a_stale_socket_file_is_replaced_but_a_live_one_is_not_stolen(served, tm
     (tmp_path / "file").write_text("x")
     with pytest.raises(ConfigError, match="exists and is not a socket"):
         ControlServer(tmp_path / "file", dict)
+
+
+def test_a_socket_in_a_missing_directory_is_one_clear_error(tmp_path):
+    with pytest.raises(ConfigError, match="cannot listen: No such file or directory"):
+        ControlServer(tmp_path / "no" / "c.sock", dict)
