@@ -46,9 +46,10 @@ class Links:
     """The connected driver and started pose source, on the real clock. Simulated links
     (sim:// on both) get a fresh simulated world per flight, paced in real time."""
 
-    def __init__(self, service: ServiceConfig) -> None:
+    def __init__(self, service: ServiceConfig, surface: Any = None) -> None:
         from perchd.uri import parse_uri
 
+        self.surface = surface  # SurfaceConfig: where a simulated world puts its wall
         self.driver_uri, self.mocap_uri = service.driver, service.mocap_uri()
         sims = (parse_uri(self.driver_uri).scheme == "sim", parse_uri(self.mocap_uri).scheme == "sim")
         if sims[0] != sims[1]:
@@ -64,6 +65,8 @@ class Links:
         from perchd.runtime import Runtime
 
         self.runtime = Runtime.real()
+        if self.simulated and self.surface is not None:
+            self.runtime.sim = self._world()
         self.source = open_source(self.mocap_uri, self.runtime)
         try:
             self.source.start()
@@ -72,6 +75,14 @@ class Links:
         except BaseException:
             self.source.close()
             raise
+
+    def _world(self) -> Any:
+        from perchd.sim.world import SimWorld, world_params_from_uri
+        from perchd.uri import parse_uri
+
+        params = world_params_from_uri(parse_uri(self.driver_uri))
+        return SimWorld(dataclasses.replace(params, surface_point=self.surface.point,
+                                            surface_normal=self.surface.normal), self.runtime.clock)
 
     def fresh(self) -> None:
         """Before a flight: a new simulated world (a real link is kept)."""
@@ -174,7 +185,7 @@ class Daemon:
         svc = self.config.service
         self.server = ControlServer(svc.socket, self.dispatch)
         self.notifier.status(f"{svc.vehicle}: connecting {svc.mocap_uri()} and {svc.driver}")
-        self.links = Links(svc)
+        self.links = Links(svc, self.config.flight.surface)
         self.notifier.ready(f"{svc.vehicle}: idle")
         say(f"ready: vehicle {svc.vehicle}, driver {svc.driver}, mocap {svc.mocap_uri()}, "
             f"socket {svc.socket}")
@@ -241,9 +252,10 @@ class Daemon:
                     f"{self.config.service.socket}")
                 new = dataclasses.replace(new, service=dataclasses.replace(
                     new.service, socket=self.config.service.socket))
-            if (new.service.driver, new.service.mocap_uri()) != (self.links.driver_uri,
-                                                                 self.links.mocap_uri):
-                links = Links(new.service)
+            moved = self.links.simulated and new.flight.surface != self.links.surface
+            if moved or (new.service.driver, new.service.mocap_uri()) != (self.links.driver_uri,
+                                                                          self.links.mocap_uri):
+                links = Links(new.service, new.flight.surface)
                 self.links.close()
                 self.links = links
         except PerchdError as err:

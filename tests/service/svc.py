@@ -61,12 +61,12 @@ class NotifyListener:
         self.sock.close()
 
 
-def write_config(tmp: Path, **service: str) -> Path:
+def write_config(tmp: Path, tables: str = "", **service: str) -> Path:
     lines = ["version = 1", "[service]",
              f'socket = "{tmp / "control.sock"}"', f'log_dir = "{tmp / "logs"}"',
              f'plan_dir = "{PLANS}"', *(f'{k} = "{v}"' for k, v in service.items())]
     path = tmp / "perchd.toml"
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(lines) + "\n" + tables)
     return path
 
 
@@ -84,8 +84,9 @@ def ctl(sock: Path, *args: str) -> dict:
 class Serve:
     """`perchd serve` under a test notify socket; .sock is its control socket."""
 
-    def __init__(self, tmp: Path, notify: NotifyListener, *extra: str, **service: str) -> None:
-        self.config = write_config(tmp, **service)
+    def __init__(self, tmp: Path, notify: NotifyListener, *extra: str, tables: str = "",
+                 **service: str) -> None:
+        self.config = write_config(tmp, tables, **service)
         self.sock = tmp / "control.sock"
         env = {**os.environ, "NOTIFY_SOCKET": notify.address, "WATCHDOG_USEC": "2000000"}
         self.proc = subprocess.Popen([sys.executable, "-m", "perchd", "serve", "--config",

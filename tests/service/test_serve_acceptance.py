@@ -145,8 +145,9 @@ def test_the_idle_watchdog_stops_when_the_link_to_the_vehicle_dies(tmp_path, not
     assert code == 0
 
 
-def test_a_flight_through_ctl_wait_perches(tmp_path, notify):
-    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://")
+def test_a_flight_through_ctl_wait_perches_on_the_configured_surface(tmp_path, notify):
+    wall = "[surface]\npoint = [2.0, 1.0, 0.0]\nnormal = [0.0, 1.0, 0.0]\n"
+    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://", tables=wall)
     try:
         notify.wait_for("READY=1")
         done = subprocess.run([sys.executable, "-m", "perchd", "ctl", "fly", str(PLAN), "--wait",
@@ -157,5 +158,6 @@ def test_a_flight_through_ctl_wait_perches(tmp_path, notify):
         serve.kill()
     out = json.loads(done.stdout)
     assert done.returncode == 0 and out["outcome"] == "CONTACT"
+    assert out["true_contact_speed"] is not None  # the simulated wall is where the config says
     assert 0.7 <= out["contact_speed"] <= 1.0 and abs(out["perch_time"] / out["plan_duration"] - 1) < 0.05
     assert out["loop"]["jitter_median_s"] < 0.005  # paced on the real clock, not simulated time
