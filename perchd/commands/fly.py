@@ -82,9 +82,9 @@ def make_runtime(args: argparse.Namespace, cfg):
 class StatusLine:
     """The live status on stderr: rewritten in place on a terminal, else a line per 0.5 s."""
 
-    def __init__(self, stream=sys.stderr) -> None:
-        self.stream = stream
-        self.tty = stream.isatty()
+    def __init__(self, stream=None) -> None:
+        self.stream = sys.stderr if stream is None else stream  # looked up now, not at import
+        self.tty = self.stream.isatty()
         self.every = 0.1 if self.tty else 0.5
         self._next = 0.0
 

@@ -42,6 +42,8 @@ def _ctdts(plan_sub) -> None:
     _common(p)
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
     p.add_argument("--v-contact", type=float, required=True, help="contact speed [m/s]")
+    p.add_argument("--v-window", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="contact speeds the vehicle tolerates [m/s] (default: V_c only)")
     p.add_argument("--a-max", type=float, help="[m/s^2]")
     p.add_argument("--v-max", type=float, help="[m/s]")
     p.set_defaults(run=lambda a: _emit(a, _plan_ctdts(a)))
@@ -67,7 +69,7 @@ def _plan_ctds(a):
 def _plan_ctdts(a):
     from perchd.tau import plan_ctdts
 
-    return plan_ctdts(a.x0, a.v0, a.tau_s, a.v_contact, a.a_max, a.v_max)
+    return plan_ctdts(a.x0, a.v0, a.tau_s, a.v_contact, a.a_max, a.v_max, a.v_window)
 
 
 def _plan_ipts(a):

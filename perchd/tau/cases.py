@@ -38,7 +38,8 @@ def make(case: Case, kind: str) -> Plan:
     if kind == "ctds":
         return plan_ctds(case.x0, case.v0, 0.5, Limits((0.0, 0.0), case.v_max, case.a_max))
     if kind == "ctdts":
-        return plan_ctdts(case.x0, case.v0, case.tau_s, case.ctdts_v_c, case.a_max, case.v_max)
+        return plan_ctdts(case.x0, case.v0, case.tau_s, case.ctdts_v_c, case.a_max, case.v_max,
+                          case.v_contact)
     order = int(kind.split("-n")[1])
     return plan_ipts(case.x0, case.v0, case.tau_s, case.v_contact, case.v_max, case.a_max, order)
 

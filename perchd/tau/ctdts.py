@@ -24,9 +24,15 @@ def ctdts_c(x0: float, v0: float, tau_s: float, v_c: float) -> float:
 
 
 def plan_ctdts(x0: float, v0: float, tau_s: float, v_c: float, a_max: float | None,
-               v_max: float | None = None) -> Plan:
-    """Two stages: constant tau-dot down to V_c at tau_s, then constant speed to contact."""
+               v_max: float | None = None,
+               window: tuple[float, float] | None = None) -> Plan:
+    """Two stages: constant tau-dot down to V_c at tau_s, then constant speed to contact.
+
+    window [m/s]: the contact speeds the vehicle tolerates, recorded in the plan's limits so
+    the flight can aim inside it (V_c on the window's edge leaves no room for tracking
+    error); default (V_c, V_c). V_c must lie inside it."""
     check_trigger(x0, v0)
     c = ctdts_c(x0, v0, tau_s, v_c)
-    plan = make_plan("ctdts", x0, v0, tau_s, Limits((v_c, v_c), v_max, a_max), c=c)
+    window = (v_c, v_c) if window is None else (float(window[0]), float(window[1]))
+    plan = make_plan("ctdts", x0, v0, tau_s, Limits(window, v_max, a_max), c=c)
     return check_limits(plan)
