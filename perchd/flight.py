@@ -93,12 +93,18 @@ class _Run:
         self.driver, self.source, self.log = driver, source, log
         self.abort, self.on_tick = abort, on_tick
         self.failsafe_sent = False
+        # Drivers that steer yaw or feed the vehicle's own estimator (Crazyflie extpose)
+        # want every pose the flight uses; the rest do not implement the hook.
+        self.observe = getattr(driver, "observe_pose", None)
         self.t0: float | None = None
         self._events = 0
 
     def tick(self, k: int, t: float) -> bool:
         self.t0 = t if self.t0 is None else self.t0
-        self.est.offer(self.source.latest())
+        pose = self.source.latest()
+        self.est.offer(pose)
+        if pose is not None and self.observe is not None:
+            self.observe(pose)
         state = self.est.state(t)
         last = self.est.last_pose
         arrival_age = None if last is None else t - (last.t + last.latency)
