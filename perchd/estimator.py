@@ -66,8 +66,8 @@ class Estimator:
 
     def offer(self, pose: Pose | None) -> bool:
         """Fuse `pose` if it is new, valid and believable; returns whether it was used."""
-        if pose is None or not pose.valid:
-            return False
+        if pose is None or not pose.valid or not all(map(math.isfinite, (*pose.p, *pose.q))):
+            return False  # a NaN/inf frame would poison the filter (and hide the tilt)
         if self._last is not None and (pose.seq == self._last.seq or pose.t <= self._t):
             return False
         z = np.array(self.frame.to_frame(pose.p))
