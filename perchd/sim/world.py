@@ -13,16 +13,17 @@ attitude_tau [s], motor_tau [s], seed.
 
 from __future__ import annotations
 
+import heapq
 import math
 import random
 import threading
-from collections import deque
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from perchd.errors import UriError
 from perchd.mocap.base import SourceStats
 from perchd.runtime import Runtime
+from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
 from perchd.types import Pose, Setpoint, Vec3
 from perchd.uri import Uri
@@ -70,11 +71,13 @@ class Contact:
 class Faults:
     """Things a test can break: mocap outages [(t0, t1)] (no pose measured in between),
     link_ok (the driver's health), and `at`: (t, fn(world)) disturbances applied once when
-    simulated time reaches t (a gust: fn changes plant.v; a knock: plant.att)."""
+    simulated time reaches t (a gust: fn changes plant.v; a knock: plant.att); mocap: frame
+    faults (perchd.sim.faults) every measured frame passes through, in order."""
 
     mocap_outages: list[tuple[float, float]] = field(default_factory=list)
     link_ok: bool = True
     at: list[tuple[float, Callable[["SimWorld"], None]]] = field(default_factory=list)
+    mocap: list[MocapFault] = field(default_factory=list)
 
 
 class SimWorld:
@@ -99,7 +102,8 @@ class SimWorld:
         period = 1.0 / params.mocap.rate_hz
         self._period = period
         self._next_frame = 0  # index k of the next exposure at t0 + k * period
-        self._in_flight: deque[Pose] = deque()  # measured, not yet arrived
+        self._in_flight: list[tuple[float, int, Pose]] = []  # heap by arrival: not arrived yet
+        self._sent = 0  # tie-break of the heap
         self._latest: Pose | None = None
         self._seq = 0
 
@@ -167,12 +171,14 @@ class SimWorld:
         p = tuple(c + (self._rng.gauss(0.0, noise) if noise > 0 else 0.0) for c in self.plant.p)
         q = quaternion(*self.plant.att)
         self._seq += 1
-        self._in_flight.append(Pose(self.params.body, self._seq, t, p, q, True,
-                                    self.params.mocap.latency_s))
+        pose = Pose(self.params.body, self._seq, t, p, q, True, self.params.mocap.latency_s)
+        for arrive, out in shape(self.faults.mocap, t + pose.latency, pose):
+            self._sent += 1
+            heapq.heappush(self._in_flight, (arrive, self._sent, out))
 
     def _deliver(self, t: float) -> None:
-        while self._in_flight and self._in_flight[0].t + self._in_flight[0].latency <= t + 1e-12:
-            self._latest = self._in_flight.popleft()
+        while self._in_flight and self._in_flight[0][0] <= t + 1e-12:
+            self._latest = heapq.heappop(self._in_flight)[2]
 
     def latest_pose(self) -> Pose | None:
         with self._lock:
@@ -183,7 +189,7 @@ class SimWorld:
         """[s] when the next pose will arrive (assuming no outage)."""
         with self._lock:
             if self._in_flight:
-                return self._in_flight[0].t + self._in_flight[0].latency
+                return self._in_flight[0][0]
             return self.t0 + self._next_frame * self._period + self.params.mocap.latency_s
 
 
