@@ -57,7 +57,8 @@ class Estimator:
 
     @property
     def mocap_period(self) -> float | None:
-        """[s] smoothed interval between accepted poses (None before two)."""
+        """[s] smoothed source frame period: interval between accepted poses over the
+        frames (seq numbers) between them (None before two)."""
         return self._period
 
     @property
@@ -106,6 +107,10 @@ class Estimator:
         self._x = x + np.outer(k, z - x[0])
         self._P = P - np.outer(k, P[0, :])
         self._t = pose.t
+        # per source frame: frames the loop never saw (it polls slower than mocap sends)
+        # do not make the mocap slower, or the stale limit grows with the loop's period
+        frames = pose.seq - self._last.seq
+        dt = dt / frames if 0 < frames <= 100 else dt
         self._period = dt if self._period is None else 0.9 * self._period + 0.1 * dt
 
     def _accept(self, pose: Pose, z: np.ndarray) -> None:
