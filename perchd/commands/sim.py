@@ -14,6 +14,9 @@ Port 0 picks a free port. Once serving, one line on stderr says where:
     perchd sim: ready: mocap <URI for perchd fly --mocap> driver <URI for --driver>
 On exit (SIGINT/SIGTERM, --duration, or --exit-on-stop) a summary: text, or with --json
 exactly one JSON object on stdout (contact time [s] and speed [m/s], counts).
+
+`perchd sim --campaign P.json ...` flies many simulated flights in this process instead
+(no sockets; see perchd.campaign_cli): --pose-out and --setpoint-in are then not wanted.
 """
 
 from __future__ import annotations
@@ -36,8 +39,10 @@ STOP_GRACE_S = 0.5
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("sim", help="run the simulated vehicle as its own process",
                               description=__doc__.splitlines()[0])
-    p.add_argument("--pose-out", required=True, help="natnet://HOST[:PORT] or zmq://HOST:PORT")
-    p.add_argument("--setpoint-in", required=True, help="zmq://HOST:PORT to bind for setpoints")
+    p.add_argument("--pose-out", help="natnet://HOST[:PORT] or zmq://HOST:PORT (required "
+                                       "without --campaign)")
+    p.add_argument("--setpoint-in", help="zmq://HOST:PORT to bind for setpoints (required "
+                                          "without --campaign)")
     p.add_argument("--body", default="cf1", help="rigid body name (default cf1)")
     p.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="[m] start position, hovering when Z > 0 (default 4.5 m before the "
@@ -52,6 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--exit-on-stop", action="store_true",
                    help="exit once the agent has sent `stop` (the flight ended)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    from perchd.campaign_cli import add_arguments
+    add_arguments(p)
     p.set_defaults(run=run)
 
 
@@ -159,7 +166,12 @@ def summary(world: Any, counts: Counts, mocap_uri: str, driver_uri: str) -> dict
 
 
 def run(args: argparse.Namespace) -> int:
+    from perchd import campaign_cli
     from perchd.mocap.outputs import open_pose_output
+
+    campaign_cli.check_mode(args)
+    if args.campaign:
+        return campaign_cli.run(args)
     world = make_world(args)
     counts = Counts()
     output = open_pose_output(args.pose_out, [args.body], world.clock)
