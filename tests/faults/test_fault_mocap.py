@@ -1,0 +1,103 @@
+"""Mocap faults, one at a time, in simulated time: frames that stop, arrive late, out of
+order, twice, frozen, displaced, invalid, at 20 % of the rate, or full of NaN and huge
+numbers. A fault that leaves the agent more than 3 frame periods without a usable frame ends
+the flight as STALE_MOCAP on the next control tick (failsafe sent, log closed); anything
+less is flown through and the vehicle still perches."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from faultsim import PERIOD, TICK, fly, report
+from test_aborts import assert_failsafe_and_closed_log
+from perchd.sim.faults import (Corrupt, Freeze, Invalid, Late, Outliers, RateDrop, Reorder,
+                               Repeat, Stop)
+from perchd.types import EndReason
+
+ONSETS = {"hold": 0.3, "approach": 1.5, "stage1": 3.0, "stage1+": 3.003, "stage2": 4.2}
+"""[s] simulated fault onsets: the flight triggers at 2.57 s, switches stage at 4.07 s and
+touches at 4.57 s; 3.0 and 3.003 put the onset at two phases of the frame/tick beat."""
+
+STALE = {
+    "frames stop": lambda t: Stop(t),
+    "frames 30 ms late": lambda t: Late(t, math.inf, 0.030),
+    "same frame replayed": lambda t: Freeze(t),
+    "tracking lost (invalid)": lambda t: Invalid(t),
+    "rate drops to 20 %": lambda t: RateDrop(t, keep_every=5),
+    "NaN in every frame": lambda t: Corrupt(t),
+    "huge values (1e12 m)": lambda t: Corrupt(t, value=1e12),
+    "position jumps 0.5 m for good": lambda t: Outliers(t, every=1),
+}
+
+
+@pytest.fixture(scope="module")
+def nominal(tmp_path_factory):
+    return fly(tmp_path_factory.mktemp("nominal")).res
+
+
+@pytest.mark.parametrize("name", STALE)
+def test_a_fault_that_starves_the_estimator_is_stale_mocap_on_the_first_tick_after_3_periods(
+        name, tmp_path):
+    delays = []
+    for phase, onset in ONSETS.items():
+        f = fly(tmp_path, STALE[name](onset), name=phase)
+        assert_failsafe_and_closed_log(f.sim, f.res, EndReason.STALE_MOCAP)
+        assert f.sim.world.contact is None
+        # more than 3 periods since the newest usable frame, and at most one tick more
+        assert 3 * PERIOD < f.since_last_fused <= 3 * PERIOD + TICK + 1e-9, phase
+        delays.append(f.since_last_fused)
+    report(f"mocap: {name}", "> 3 frame periods (25 ms) without a usable frame, checked "
+           "every tick", "STALE_MOCAP, failsafe", "motors off (stop setpoint)", delays)
+
+
+def test_a_gap_of_two_frames_is_flown_through(tmp_path, nominal):
+    f = fly(tmp_path, Stop(3.0, 3.0 + 2 * PERIOD))
+    assert f.res.outcome is EndReason.CONTACT
+    assert f.res.contact_speed == pytest.approx(nominal.contact_speed, abs=1e-3)
+    report("mocap: 2 frames missing", "none needed", "estimator predicts across the gap",
+           "perches")
+
+
+@pytest.mark.parametrize("name, faults", [
+    ("frames 15 ms late", (Late(3.0, 3.3, 0.015),)),
+    ("pairs out of order all flight", (Reorder(),)),
+    ("every frame 3 times", (Repeat(times=3),)),
+    ("outlier (0.5 m) every 10th frame", (Outliers(every=10),)),
+    ("outlier (0.5 m) every 3rd frame", (Outliers(every=3),)),
+    ("invalid for 2 frames", (Invalid(3.0, 3.0 + 2 * PERIOD),)),
+    ("rate drops to 50 %", (RateDrop(keep_every=2),)),
+    ("NaN in every 10th frame", (Corrupt(every=10),)),
+    ("inf in every 10th frame", (Corrupt(value=math.inf, every=10),)),
+    ("1e12 m in every 10th frame", (Corrupt(value=1e12, every=10),)),
+], ids=lambda v: v if isinstance(v, str) else "")
+def test_faults_within_the_estimator_s_tolerance_still_perch(name, faults, tmp_path, nominal):
+    f = fly(tmp_path, *faults)
+    assert f.res.outcome is EndReason.CONTACT and not f.res.failsafe_sent
+    assert f.res.true_contact_speed == pytest.approx(nominal.true_contact_speed, abs=0.01)
+    assert f.res.contact_speed == pytest.approx(nominal.contact_speed, abs=0.01)
+    seqs = [r.pose_seq for r in f.log.rows if r.pose_seq >= 0]
+    assert seqs == sorted(seqs)  # an older frame never replaced a newer one
+    report(f"mocap: {name}", "per frame (dropped: older, same seq, non-finite, or a jump "
+           "> 10 m/s)", "frame ignored; the filter predicts", "perches")
+
+
+def test_repeated_frames_change_nothing_at_all(tmp_path, nominal):
+    f = fly(tmp_path, Repeat(times=3))
+    assert f.res.contact_speed == nominal.contact_speed
+    assert f.res.perch_time == nominal.perch_time
+
+
+def test_a_frozen_tracker_that_restamps_its_frames_is_caught_by_the_tau_watch(tmp_path):
+    """Old position, fresh time: the frames look good, the vehicle seems to stop. Nothing
+    stale about them; the tau watch sees tau leave its reference and ends the flight."""
+    onset = 3.0
+    f = fly(tmp_path, Freeze(onset, restamp=True))
+    assert_failsafe_and_closed_log(f.sim, f.res, EndReason.TAU_DIVERGENCE)
+    took = f.end_t - onset
+    assert took <= 0.3 + 0.1  # tau_error_s plus the filter's settling
+    assert f.sim.world.contact is None
+    report("mocap: frozen position, fresh stamps (stage 1)", "tau off its reference for "
+           "tau_error_s = 0.3 s", "TAU_DIVERGENCE, failsafe", "motors off before the wall",
+           [took])
