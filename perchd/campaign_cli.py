@@ -150,7 +150,8 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
     if args.grid:
         specs = cp.grid_specs(spread, *args.grid, plan.duration)
     else:
-        specs = cp.random_specs(spread, args.flights or DEFAULT_FLIGHTS, plan.duration)
+        flights = DEFAULT_FLIGHTS if args.flights is None else args.flights
+        specs = cp.random_specs(spread, flights, plan.duration)
     return plan, cfg, spread, specs
 
 
