@@ -68,6 +68,7 @@ class Estimator:
         self.accepted = 0
         self._period = None  # [s] smoothed interval between accepted poses
         self._r = cfg.meas_std_m ** 2
+        self._origin, self._axes = frame.point, (frame.ex, frame.ey, frame.ez)
         self._gate = 6.0 * cfg.meas_std_m
 
     @property
@@ -85,7 +86,7 @@ class Estimator:
             return False
         if self._last is not None and (pose.seq == self._last.seq or pose.t <= self._t):
             return False
-        z = self.frame.to_frame(pose.p)
+        z = self._to_frame(pose.p)
         if self._pos is None or self._is_outlier(pose, z):
             if self._pos is not None:
                 self.rejected += 1
@@ -97,6 +98,14 @@ class Estimator:
             self._update(pose, z)
         self._accept(pose, z)
         return True
+
+    def _to_frame(self, p: tuple[float, float, float]) -> tuple[float, float, float]:
+        """frame.to_frame(p), unrolled: it runs on every pose."""
+        o = self._origin
+        dx, dy, dz = p[0] - o[0], p[1] - o[1], p[2] - o[2]
+        ex, ey, ez = self._axes
+        return (dx * ex[0] + dy * ex[1] + dz * ex[2], dx * ey[0] + dy * ey[1] + dz * ey[2],
+                dx * ez[0] + dy * ez[1] + dz * ez[2])
 
     def _is_outlier(self, pose: Pose, z: tuple[float, float, float]) -> bool:
         dt = pose.t - self._last.t

@@ -26,6 +26,7 @@ from perchd.errors import PlanError
 from perchd.flightconfig import FlightConfig, PostContact, TriggerPolicy
 from perchd.flightlog import LogEvent
 from perchd.perchframe import PerchFrame
+from perchd.planrefs import PlanSampler
 from perchd.types import EndReason, Phase, Setpoint, State
 
 
@@ -56,6 +57,10 @@ class Refs:
     x: float | None = None
     v: float | None = None
     a: float | None = None
+
+
+NO_REFS = Refs()
+NO_U = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,6 +121,9 @@ class Supervisor:
         self._z_ref = 0.0
         self._a_app = 0.0
         self._x: float | None = None  # [m] measured X of the tick in hand
+        self._sampler = PlanSampler(plan)
+        self._refs_memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
+        self._up = (frame.ex[2], frame.ey[2], frame.ez[2])  # world Z of the frame's axes
 
     # --- helpers ----------------------------------------------------------------------------
     def _enter(self, phase: Phase, t: float, detail: str = "", **values: float) -> None:
@@ -144,7 +152,7 @@ class Supervisor:
         if self.end is not None:
             return self._ended(t, state)
         if state is None:  # waiting for the first pose (bounded by the stale-mocap rule)
-            return TickReport(self.phase, None, None, False, Refs(), (0.0, 0.0, 0.0), None)
+            return TickReport(self.phase, None, None, False, NO_REFS, NO_U, None)
         return self._fly(t, dt, state)
 
     def _check(self, t, state, health, streak, abort, mocap_period, arrival_age):
@@ -180,7 +188,8 @@ class Supervisor:
     def _limits(self, st: State):
         s = self.cfg.safety
         airborne = self.phase not in (Phase.IDLE, Phase.TAKEOFF)
-        height = self.frame.point[2] + self.frame.rotate_out((st.x, st.y, st.z))[2]
+        ux, uy, uz = self._up
+        height = self.frame.point[2] + (st.x * ux + st.y * uy + st.z * uz)
         if not s.x_min_m <= st.x <= s.x_max_m:
             return EndReason.GEOFENCE, f"X = {st.x:.3f} m outside {s.x_min_m:g}..{s.x_max_m:g} m"
         if self._hold is not None:
@@ -230,7 +239,7 @@ class Supervisor:
         if self.end is not EndReason.CONTACT:
             if self.phase is not Phase.ABORT:
                 self._enter(Phase.ABORT, t, self.end.value)
-            return TickReport(Phase.ABORT, None, self.end, True, Refs(), (0.0, 0.0, 0.0), None)
+            return TickReport(Phase.ABORT, None, self.end, True, NO_REFS, NO_U, None)
         done = t - self._t_end >= self.cfg.post_contact_s
         yaw = self.frame.yaw_facing
         if self.cfg.post_contact is PostContact.IDLE:
@@ -241,7 +250,7 @@ class Supervisor:
             sp = Setpoint(t, 0.0, 0.0, yaw, 0.0, seq, Phase.CONTACT)
         if done and self.phase is not Phase.DONE:
             self._enter(Phase.DONE, t, self.cfg.post_contact.value)
-        return TickReport(self.phase, sp, self.end, done, Refs(), (0.0, 0.0, 0.0), None)
+        return TickReport(self.phase, sp, self.end, done, NO_REFS, NO_U, None)
 
     # --- flying -----------------------------------------------------------------------------
     def _fly(self, t: float, dt: float, st: State) -> TickReport:
@@ -260,7 +269,7 @@ class Supervisor:
             self.t_stage2 = t
             self._enter(Phase.STAGE2, t, "measured tau reached tau_s", tau=st.tau,
                         since_trigger=t - self.trigger.t)
-        refs, ux, e, vz_ref = Refs(), 0.0, None, 0.0
+        refs, ux, e, vz_ref = NO_REFS, 0.0, None, 0.0
         if self.phase in (Phase.STAGE1, Phase.STAGE2):
             refs = self._refs(t)
             g = self.cfg.tau_gains
@@ -333,6 +342,8 @@ class Supervisor:
         late = (st.x - plan.x0) / st.xdot if st.xdot > 0 else 0.0
         t0 = t - min(max(late, 0.0), 1.0 / self.cfg.rate_hz)
         self.plan = plan
+        if plan is not self._sampler.plan:
+            self._sampler = PlanSampler(plan)
         self.trigger = Trigger(t0, st.x, st.xdot, plan.x0, plan.v0, action)
         self.ctl.tau.reset()
         self._enter(Phase.STAGE1, t, action, x=st.x, v=st.xdot, plan_x0=plan.x0, plan_v0=plan.v0)
@@ -363,16 +374,25 @@ class Supervisor:
         return new, f"{tr.policy.value}: retargeted to x0 = {st.x:.3f} m, v0 = {st.xdot:.3f} m/s", ""
 
     def _refs(self, t: float) -> Refs:
+        """The references at tick time t; computed once per tick (the tau watch and the
+        controller both ask), again only if the stage or the plan changed in between."""
+        key = (t, self.t_stage2, self.trigger, self._x)
+        if self._refs_memo[0] != key:
+            self._refs_memo = (key, self._compute_refs(t))
+        return self._refs_memo[1]
+
+    def _compute_refs(self, t: float) -> Refs:
         plan = self.plan
         s = min(max(t - self.trigger.t, 0.0), plan.duration)
+        here = self._sampler.at(s)
         if self.t_stage2 is None:
-            tau_ref = float(plan.tau_ref(s))
-            s_ff = min(s + self.cfg.tau_gains.ff_lead_s, plan.duration)
-            a = float(plan.a(s_ff)) if plan.stage(s_ff) == 1 else 0.0
+            tau_ref = here.tau_ref
+            ahead = self._sampler.at(min(s + self.cfg.tau_gains.ff_lead_s, plan.duration))
+            a = ahead.a if ahead.stage == 1 else 0.0
         elif self.cfg.tau_gains.stage2_hold_speed and self._x is not None:
             tau_ref = min(self._x, 0.0) / self.v_hold
             a = 0.0
         else:
             tau_ref = self._tau_s + (t - self.t_stage2)
             a = 0.0
-        return Refs(tau_ref, float(plan.x(s)), float(plan.v(s)), a)
+        return Refs(tau_ref, here.x, here.v, a)
