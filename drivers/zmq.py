@@ -2,7 +2,8 @@
 
 `zmq://HOST:PORT[?vehicle=cf1&bind=1&wait=2]`: by default the driver connects to a
 subscriber that has bound the port (`perchd sim --setpoint-in` binds, like a mocap bridge
-binds its pose port); bind=1 binds instead. The socket is an XPUB, so the driver sees its
+binds its pose port); bind=1 binds instead, on loopback only unless public=1 is added
+(perchd.netbind). The socket is an XPUB, so the driver sees its
 subscribers come and go: connect() waits up to `wait` seconds for one to subscribe to
 `setpoint` (nothing is sent into the void), and health() is not ok once none is left.
 """
@@ -17,6 +18,7 @@ from typing import Any
 from perchd.drivers.base import DriverBase, LinkHealth
 from perchd.drivers.uriparams import bool_param, float_param
 from perchd.errors import LinkError, UriError
+from perchd.netbind import check_bind
 from perchd.runtime import Runtime
 from perchd.types import EndReason, Phase, Setpoint
 from perchd.uri import Uri
@@ -27,6 +29,8 @@ SETPOINT, STOP = b"setpoint", b"stop"
 def open_zmq_driver(uri: Uri, runtime: Runtime) -> "ZmqSetpointDriver":
     if not uri.host or uri.port is None:
         raise UriError(f"{uri.raw}: a zmq driver needs host and port, e.g. zmq://127.0.0.1:5556")
+    if bool_param(uri, "bind"):
+        check_bind(uri.host, bool_param(uri, "public"), uri.raw)
     return ZmqSetpointDriver(
         uri.raw, f"tcp://{uri.host}:{uri.port}", runtime,
         vehicle=uri.param("vehicle", "cf1") or "cf1",
@@ -51,6 +55,8 @@ def parse_setpoint_message(body: bytes) -> tuple[str, int, Setpoint]:
         msg = json.loads(body)
     except (ValueError, UnicodeDecodeError) as err:
         raise BadSetpoint(f"setpoint message is not JSON: {err}") from None
+    except RecursionError:
+        raise BadSetpoint("setpoint message is not JSON: nested too deeply") from None
     if not isinstance(msg, dict):
         raise BadSetpoint("setpoint message is not a JSON object")
     values = {}

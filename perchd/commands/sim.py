@@ -80,6 +80,9 @@ class SetpointInbox:
         uri = parse_uri(text)
         if uri.scheme != "zmq" or not uri.host or uri.port is None:
             raise UriError(f"--setpoint-in {text}: expected zmq://HOST:PORT")
+        from perchd.drivers.uriparams import bool_param
+        from perchd.netbind import check_bind
+        check_bind(uri.host, bool_param(uri, "public"), f"--setpoint-in {text}")
         self.world, self.body, self.counts = world, body, counts
         self.sock = zmq.Context.instance().socket(zmq.SUB)
         self.sock.setsockopt(zmq.LINGER, 0)
@@ -99,7 +102,11 @@ class SetpointInbox:
     def _serve(self) -> None:
         while self._alive:
             if self.sock.poll(50):
-                self.handle(*self.sock.recv_multipart()[:2])
+                frames = self.sock.recv_multipart()
+                if len(frames) != 2:  # not [topic, JSON]: counted, never fatal
+                    self.counts.rejected += 1
+                    continue
+                self.handle(*frames)
 
     def handle(self, topic: bytes, body: bytes) -> None:
         from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message

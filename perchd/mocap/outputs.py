@@ -2,8 +2,8 @@
 
     natnet://HOST[:PORT][?version=4.1][&multicast=1][&group=239.255.42.99][&rate=120][&up=y]
         a NatNet server emulator on HOST's command PORT (1510; 0 = any free port)
-    zmq://HOST:PORT
-        a ZMQ publisher bound there (CONTRACTS 3 topic `pose`)
+    zmq://HOST:PORT[?public=1]
+        a ZMQ publisher bound there (CONTRACTS 3 topic `pose`); loopback unless public=1
 
     out = open_pose_output("natnet://127.0.0.1:0", ["cf1"], clock)
     out.publish(pose); out.uri("cf1")  # the URI `perchd fly --mocap` opens to read it back
@@ -39,9 +39,9 @@ def open_pose_output(text: str, bodies: list[str], clock: Clock) -> PoseOutput:
     uri = parse_uri(text)
     if uri.scheme == "zmq":
         from perchd.mocap.zmq import ZmqPosePublisher
-        if not uri.host or uri.port is None or uri.query:
-            raise UriError(f"{text}: a zmq pose output is zmq://HOST:PORT")
-        return ZmqPosePublisher(f"tcp://{uri.host}:{uri.port}")
+        if not uri.host or uri.port is None or set(uri.query) - {"public"}:
+            raise UriError(f"{text}: a zmq pose output is zmq://HOST:PORT[?public=1]")
+        return ZmqPosePublisher(f"tcp://{uri.host}:{uri.port}", public=bool_param(uri, "public"))
     if uri.scheme == "natnet":
         return _natnet_output(uri, bodies, clock)
     raise UriError(f"{text}: a pose output is natnet://HOST[:PORT] or zmq://HOST:PORT")

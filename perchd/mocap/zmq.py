@@ -1,6 +1,6 @@
 """`zmq://` pose source and the pose publisher (CONTRACTS 3, topic `pose`).
 
-    zmq://HOST:PORT?body=NAME[&bind=1][&clock=local|remote][&max_age=0.5]
+    zmq://HOST:PORT?body=NAME[&bind=1[&public=1]][&clock=local|remote][&max_age=0.5]
 
 Messages are multipart `[b"pose", JSON]` with body, seq, t, p (world, Z up, metres),
 q (x, y, z, w) and valid. The source SUBscribes, by default connecting to a publisher that
@@ -9,7 +9,8 @@ sender's `t` is on this machine's clock (the simulator, a bridge on this host us
 time.monotonic), so latency = arrival - t; `clock=remote` takes t for ordering only
 (latency 0, the pose measured on arrival). Validation and staleness are those of every socket
 source (perchd.mocap.stream): malformed, non-finite, huge, stale, out-of-order and
-other-body messages are counted and dropped, never raised.
+other-body messages are counted and dropped, never raised. Binding (the source with bind=1,
+the publisher) is on loopback only unless public=1 / public=True opts in (perchd.netbind).
 
     pub = ZmqPosePublisher("tcp://127.0.0.1:0")     # ephemeral port; pub.uri("cf1")
     pub.wait_for_subscriber(2.0)
@@ -28,6 +29,7 @@ from typing import Any
 from perchd.clock import Clock
 from perchd.drivers.uriparams import bool_param, float_param
 from perchd.errors import LinkError, UriError
+from perchd.netbind import check_bind
 from perchd.mocap.stream import (
     Drop, PoseLimits, PoseStream, RateLimitedWarning, ThreadedSource)
 from perchd.runtime import Runtime
@@ -39,7 +41,7 @@ log = logging.getLogger("perchd.mocap.zmq")
 TOPIC = b"pose"
 MAX_MESSAGE = 64 * 1024  # a pose is ~150 bytes; anything this big is not one
 CLOCK_SKEW_S = 0.005  # [s] a local-clock t this far in the future is rounding, not an error
-_PARAMS = ("body", "bind", "clock", "max_age")
+_PARAMS = ("body", "bind", "clock", "max_age", "public")
 
 
 def open_zmq(uri: Uri, runtime: Runtime) -> "ZmqPoseSource":
@@ -57,6 +59,8 @@ def open_zmq(uri: Uri, runtime: Runtime) -> "ZmqPoseSource":
     if clock not in ("local", "remote"):
         raise UriError(f"{uri.raw}: clock={clock!r} must be local or remote")
     max_age = float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")
+    if bool_param(uri, "bind"):
+        check_bind(uri.host, bool_param(uri, "public"), uri.raw)
     return ZmqPoseSource(f"tcp://{uri.host}:{uri.port}", body, runtime.clock,
                          bind=bool_param(uri, "bind"), local_clock=clock == "local",
                          limits=PoseLimits(max_age_s=max_age), name=uri.raw)
@@ -195,11 +199,16 @@ class ZmqPosePublisher:
 
     endpoint: "tcp://HOST:PORT" or "zmq://HOST:PORT"; port 0 picks a free port (read it back
     from `endpoint`). An XPUB underneath lets `wait_for_subscriber` avoid sending into the void.
+    A bind on anything but loopback needs public=True.
     """
 
-    def __init__(self, endpoint: str = "tcp://127.0.0.1:0", *, bind: bool = True) -> None:
+    def __init__(self, endpoint: str = "tcp://127.0.0.1:0", *, bind: bool = True,
+                 public: bool = False) -> None:
         import zmq  # a core dependency, imported late to keep `perchd --help` fast
         address = endpoint.replace("zmq://", "tcp://", 1).split("?", 1)[0]
+        if bind:
+            check_bind(address.split("://", 1)[-1].rsplit(":", 1)[0], public,
+                       f"pose publisher {address}")
         if address.endswith(":0"):
             address = address[:-2] + ":*"
         self._sock = zmq.Context.instance().socket(zmq.XPUB)
