@@ -1,7 +1,8 @@
 """The service configuration: a versioned TOML file onto ServiceConfig + FlightConfig.
 
     version = 1
-    [service]   vehicle, driver, mocap, body, socket, plan_dir, log_dir
+    [service]   vehicle, driver, mocap, body, socket, plan_dir, log_dir,
+                allowed_users, allowed_groups
     [flight]    rate_hz, tilt_limit_deg, post_contact, post_contact_s, idle_thrust_n
     [vehicle] [surface] [tau_gains] [lateral.y] [lateral.z] [approach] [trigger] [safety]
     [estimator]  the FlightConfig sections, keys named as its fields
@@ -22,10 +23,13 @@ import types
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from perchd.errors import ConfigError
 from perchd.flightconfig import FlightConfig
+
+if TYPE_CHECKING:
+    from perchd.control_socket import PeerPolicy
 
 VERSION = 1
 FLIGHT_TOP = "flight"  # FlightConfig's own scalar fields live in [flight]
@@ -35,7 +39,9 @@ FLIGHT_TOP = "flight"  # FlightConfig's own scalar fields live in [flight]
 class ServiceConfig:
     """vehicle: a name for logs and STATUS; driver, mocap: link URIs; body: mocap rigid body
     (added to the mocap URI as ?body= when it names none); socket: control socket path;
-    plan_dir: relative plan paths in `fly` requests resolve here; log_dir: flight logs."""
+    plan_dir: plans in `fly` requests must lie here (relative names resolve here); log_dir:
+    flight logs. allowed_users, allowed_groups: names or numeric ids let onto the control
+    socket besides the service's own user and root (checked by SO_PEERCRED)."""
 
     vehicle: str = "cf1"
     driver: str = "sim://"
@@ -44,6 +50,19 @@ class ServiceConfig:
     socket: str = "/run/perchd/control.sock"
     plan_dir: str = "/var/lib/perchd/plans"
     log_dir: str = "/var/log/perchd"
+    allowed_users: tuple[int | str, ...] = ()
+    allowed_groups: tuple[int | str, ...] = ()
+
+    def peer_policy(self, name: str = "perchd.toml") -> "PeerPolicy":
+        """The control socket's PeerPolicy; ConfigError naming an unknown user or group."""
+        import grp
+        import pwd
+
+        from perchd.control_socket import PeerPolicy
+
+        uids = _ids(self.allowed_users, lambda n: pwd.getpwnam(n).pw_uid, name, "allowed_users", "user")
+        gids = _ids(self.allowed_groups, lambda n: grp.getgrnam(n).gr_gid, name, "allowed_groups", "group")
+        return PeerPolicy.owner(uids, gids)
 
     def mocap_uri(self) -> str:
         if not self.body or "body=" in self.mocap:
@@ -58,16 +77,29 @@ class Config:
     path: str = ""
 
 
+def _ids(values: tuple[int | str, ...], lookup: Any, name: str, key: str, kind: str) -> frozenset[int]:
+    out = set()
+    for v in values:
+        try:
+            out.add(v if isinstance(v, int) else lookup(v))
+        except KeyError:
+            raise ConfigError(f"{name}: [service] {key}: no {kind} named {v!r} on this host") from None
+    return frozenset(out)
+
+
 def load_config(path: str | os.PathLike) -> Config:
-    """Parse and check a perchd.toml; raise ConfigError naming the key on any problem."""
+    """Parse and check a perchd.toml; raise ConfigError naming the key on any problem.
+    The file must be a regular file of at most 1 MiB of UTF-8 (perchd.safefile)."""
+    from perchd.safefile import read_regular
+
     name = Path(path).name
+    text = read_regular(path, "config", ConfigError)
     try:
-        with open(path, "rb") as f:
-            doc = tomllib.load(f)
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read: {err.strerror}") from None
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{name}: not valid TOML: {err}") from None
+    except RecursionError:
+        raise ConfigError(f"{name}: not valid TOML: nested too deeply") from None
     return config_from_dict(doc, name, str(path))
 
 
@@ -83,6 +115,7 @@ def config_from_dict(doc: dict[str, Any], name: str = "perchd.toml", path: str =
         raise ConfigError(f"{name}: version: expected {VERSION}, got {version!r}"
                           + (" (missing)" if version is None else ""))
     service = _build(ServiceConfig, doc.pop("service", {}), name, "service")
+    service.peer_policy(name)  # unknown users and groups fail here, not when serving
     flight_doc = dict(doc.pop(FLIGHT_TOP, {}) or {})
     if not isinstance(flight_doc, dict):
         raise ConfigError(f"{name}: [{FLIGHT_TOP}] must be a table")
@@ -165,9 +198,23 @@ def _coerce(tp: Any, raw: Any, name: str, where: str, key: str) -> Any:
         if raw not in choices:
             raise bad(" or ".join(repr(c) for c in choices))
         return tp(raw)
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        return _coerce_ids(raw, bad)
     if origin is tuple:
         if (not isinstance(raw, list) or len(raw) != len(args)
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in raw)):
             raise bad(f"a list of {len(args)} numbers")
         return tuple(float(v) for v in raw)
     raise bad(f"a value of type {tp}")  # a FlightConfig field type this loader lacks
+
+
+def _coerce_ids(raw: Any, bad: Any) -> tuple[int | str, ...]:
+    """A list of user/group names or numeric ids (allowed_users, allowed_groups)."""
+    expected = "a list of names or numeric ids"
+    if not isinstance(raw, list):
+        raise bad(expected)
+    for v in raw:
+        number = isinstance(v, int) and not isinstance(v, bool) and 0 <= v < 2 ** 32
+        if not (number or (isinstance(v, str) and v.strip() == v and v and ":" not in v)):
+            raise bad(expected)
+    return tuple(raw)

@@ -4,6 +4,11 @@ ControlServer is polled from the daemon's select loop (no threads): `fds()` to w
 `handle(fd)` when one is readable. Each complete line is parsed with json.loads only (never
 eval or unpickle) and handed to `dispatch(request) -> reply`; a malformed line, an unknown
 command or a dispatch error gets {"ok": false, "error": ...} and the service carries on.
+
+Access is checked twice: the socket file is mode 0660 (owner and group may connect), and each
+connection's peer credentials (SO_PEERCRED) must pass a PeerPolicy: by default the service's
+own user and root only; other users and groups are let in only when configured
+([service] allowed_users / allowed_groups). A refused peer gets one error line and is closed.
 """
 
 from __future__ import annotations
@@ -12,19 +17,73 @@ import json
 import os
 import socket
 import stat
+import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
 MAX_LINE = 65536
 """[bytes] a longer request line is refused and the client dropped."""
+MAX_CLIENTS = 32
+"""Connections served at once; more are refused (select() and the fd table stay bounded)."""
 
 Dispatch = Callable[[dict[str, Any]], dict[str, Any]]
+_UCRED = struct.Struct("3i")  # struct ucred {pid_t pid; uid_t uid; gid_t gid;}
+
+
+@dataclass(frozen=True)
+class Peer:
+    """The credentials the kernel reports for a connected client (SO_PEERCRED)."""
+
+    pid: int
+    uid: int
+    gid: int
+
+
+def peer_of(conn: socket.socket) -> Peer:
+    return Peer(*_UCRED.unpack(conn.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, _UCRED.size)))
+
+
+@dataclass(frozen=True)
+class PeerPolicy:
+    """Who may talk to the control socket: these uids, or members (primary group, or
+    supplementary per the user database) of these gids. `owner()` is the default."""
+
+    uids: frozenset[int]
+    gids: frozenset[int] = frozenset()
+
+    @classmethod
+    def owner(cls, uids: frozenset[int] = frozenset(), gids: frozenset[int] = frozenset()) -> "PeerPolicy":
+        """The service's own user and root, plus the configured users and groups."""
+        return cls(frozenset({os.geteuid(), 0}) | uids, gids)
+
+    def refusal(self, peer: Peer) -> str | None:
+        """None if `peer` may connect, else the reason it may not."""
+        if peer.uid in self.uids or (self.gids and not self.gids.isdisjoint(_groups_of(peer))):
+            return None
+        return (f"uid {peer.uid} (gid {peer.gid}) may not use this control socket; allow it "
+                "with [service] allowed_users or allowed_groups")
+
+
+def _groups_of(peer: Peer) -> set[int]:
+    import pwd
+
+    try:
+        name = pwd.getpwuid(peer.uid).pw_name
+    except KeyError:  # a uid with no passwd entry has only the gid the kernel reports
+        return {peer.gid}
+    return {peer.gid, *os.getgrouplist(name, peer.gid)}
 
 
 class ControlServer:
-    def __init__(self, path: str | os.PathLike, dispatch: Dispatch, mode: int = 0o660) -> None:
+    def __init__(self, path: str | os.PathLike, dispatch: Dispatch, mode: int = 0o660,
+                 peers: PeerPolicy | None = None,
+                 on_refuse: Callable[[str], None] | None = None) -> None:
         self.path = Path(path)
         self.dispatch = dispatch
+        self.peers = peers or PeerPolicy.owner()
+        self.on_refuse = on_refuse
+        self.refused = 0
         _remove_stale(self.path)
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
         old = os.umask(0o777 & ~mode)  # never world-accessible, not even between bind and chmod
@@ -75,6 +134,8 @@ class ControlServer:
             req = json.loads(line.decode("utf-8"))
         except (UnicodeDecodeError, ValueError) as err:
             return {"ok": False, "error": f"malformed request, not one JSON object: {err}"}
+        except RecursionError:  # json.loads of "[[[[..." recurses per level
+            return {"ok": False, "error": "malformed request, not one JSON object: nested too deeply"}
         if not isinstance(req, dict) or not isinstance(req.get("cmd"), str):
             return {"ok": False, "error": 'a request is a JSON object with a "cmd" string'}
         try:
@@ -94,7 +155,17 @@ class ControlServer:
     def _accept(self) -> None:
         try:
             conn, _ = self.sock.accept()
-        except (BlockingIOError, InterruptedError):
+        except OSError:  # nothing to accept after all, or out of fds: the service carries on
+            return
+        refusal = self.peers.refusal(peer_of(conn))
+        if refusal is None and len(self.clients) >= MAX_CLIENTS:
+            refusal = f"{MAX_CLIENTS} clients connected already; try again"
+        if refusal is not None:
+            self.refused += 1
+            if self.on_refuse is not None:
+                self.on_refuse(refusal)
+            self._reply(conn, {"ok": False, "error": refusal})
+            conn.close()
             return
         conn.setblocking(False)
         self.clients[conn.fileno()] = (conn, bytearray())

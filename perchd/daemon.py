@@ -183,7 +183,8 @@ class Daemon:
 
     def _start(self) -> None:
         svc = self.config.service
-        self.server = ControlServer(svc.socket, self.dispatch)
+        self.server = ControlServer(svc.socket, self.dispatch, peers=svc.peer_policy(),
+                                    on_refuse=lambda why: say(f"control socket: refused {why}"))
         self.notifier.status(f"{svc.vehicle}: connecting {svc.mocap_uri()} and {svc.driver}")
         self.links = Links(svc, self.config.flight.surface)
         self.notifier.ready(f"{svc.vehicle}: idle")
@@ -263,6 +264,7 @@ class Daemon:
             self.notifier.status(f"{self.config.service.vehicle}: idle, reload failed: {err}")
             return
         self.config = new
+        self.server.peers = new.service.peer_policy()
         say(f"SIGHUP: reloaded {self.config_path}")
         self.notifier.status(f"{new.service.vehicle}: idle, config reloaded")
 
@@ -275,21 +277,16 @@ class Daemon:
         return handler(req)
 
     def cmd_fly(self, req: dict[str, Any]) -> dict[str, Any]:
-        from perchd.tau import load_plan
-
         if self.stopping:
             return {"ok": False, "error": "the service is stopping"}
         if self.job is not None:
             return {"ok": False, "error": "a flight is in progress; abort it or wait"}
         if not isinstance(req.get("plan"), str) or not req["plan"]:
             return {"ok": False, "error": 'fly needs "plan": a plan file path'}
-        path = Path(self.config.service.plan_dir) / req["plan"]  # absolute paths stay as given
         try:
-            plan = load_plan(path)
+            plan, path = self._read_plan(req["plan"])
         except PerchdError as err:
             return {"ok": False, "error": str(err)}
-        except OSError as err:
-            return {"ok": False, "error": f"plan {path}: {err.strerror}"}
         if not self.links.healthy():
             return {"ok": False, "error": "the link to the vehicle is down"}
         self.links.fresh()
@@ -300,6 +297,18 @@ class Daemon:
         self.job.start()
         say(f"flying {path}; log {log}")
         return {"ok": True, "flying": True, "plan": str(path), "log": str(log)}
+
+    def _read_plan(self, name: str) -> tuple[Any, Path]:
+        """The plan a request names: inside plan_dir once symlinks are resolved, a regular
+        file of bounded size (perchd.safefile); PlanError naming the refusal."""
+        from perchd.errors import PlanError
+        from perchd.safefile import confine, read_regular
+        from perchd.tau import load_plan
+
+        if "\0" in name:
+            raise PlanError("plan: a path with a NUL byte")
+        path = confine(name, self.config.service.plan_dir, "plan", PlanError)
+        return load_plan(path, read_regular(path, "plan", PlanError)), path
 
     def cmd_abort(self, req: dict[str, Any]) -> dict[str, Any]:
         if self.job is not None:

@@ -34,15 +34,22 @@ def save_plan(plan: Plan, path: str | Path) -> None:
     Path(path).write_text(json.dumps(plan_to_json(plan), indent=2) + "\n")
 
 
-def load_plan(path: str | Path) -> Plan:
-    try:
-        text = Path(path).read_text()
-    except OSError as err:
-        raise PlanError(f"{path}: cannot read plan file ({err.strerror})") from None
+def load_plan(path: str | Path, text: str | None = None) -> Plan:
+    """The plan in file `path`; `text`: its contents when the caller has read them already
+    (the service reads plans through perchd.safefile)."""
+    if text is None:
+        try:
+            text = Path(path).read_text()
+        except OSError as err:
+            raise PlanError(f"{path}: cannot read plan file ({err.strerror})") from None
+        except UnicodeDecodeError as err:
+            raise PlanError(f"{path}: not UTF-8 text (byte {err.start})") from None
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as err:
         raise PlanError(f"{path}: not JSON ({err.msg} at line {err.lineno})") from None
+    except RecursionError:
+        raise PlanError(f"{path}: not JSON (nested too deeply)") from None
     try:
         return plan_from_json(doc)
     except PlanError as err:
