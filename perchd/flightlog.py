@@ -94,6 +94,14 @@ def jsonable(obj: Any) -> Any:
     return obj
 
 
+_ROW_FIELDS = tuple(f.name for f in dataclasses.fields(LogRow))
+
+
+def _finite(value: Any) -> Any:
+    """A LogRow value as JSON: non-finite floats become None, as jsonable makes them."""
+    return None if isinstance(value, float) and not math.isfinite(value) else value
+
+
 class FlightLogWriter:
     """Open with the header; `row`, `event` as the flight goes; `close(end)` once."""
 
@@ -115,7 +123,8 @@ class FlightLogWriter:
         self._f.flush()
 
     def row(self, row: LogRow) -> None:
-        self._write({"row": jsonable(row)})
+        # LogRow is flat (numbers, strings, None): skip jsonable's recursion, once per tick.
+        self._write({"row": {name: _finite(getattr(row, name)) for name in _ROW_FIELDS}})
         self.rows += 1
 
     def event(self, ev: LogEvent) -> None:
