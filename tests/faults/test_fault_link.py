@@ -1,0 +1,226 @@
+"""Link faults: the driver's peer stops answering, answers slowly, goes away and comes back.
+
+Simulated time (the loopback driver's fault switch) for detection-time sweeps; real drivers
+on loopback sockets in real time (cflib's udp:// link to the CRTP responder and the MAVLink
+double, through a delaying/pausing UDP relay; ZMQ to a subscriber) for what the drivers'
+own health rules do. A lost link ends the flight LOST_LINK within 3 ticks of the driver
+declaring it, with one failsafe; a link that comes back never gets thrust again."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+import zmq
+
+from caseplans import case1_ipts
+from faultsim import TICK, fly, injected, report
+from rigs import MASS, CrazyflieRig, MavlinkRig
+from test_aborts import TRIGGER_T, assert_failsafe_and_closed_log
+from test_lost_link_flight import bridge
+from udp_relay import UdpRelay
+from zmq_subscriber import SetpointSubscriber
+from perchd.drivers.base import open_driver
+from perchd.flight import FlightAbort, fly as fly_real
+from perchd.flightlog import read_log
+from perchd.mocap.base import open_source
+from perchd.runtime import Runtime
+from perchd.types import EndReason
+
+PING_S = 0.02
+"""[s] the crazyflie driver's echo period: its 'last heard' is at most this old when the
+peer falls silent (drivers/crazyflie.PING_S)."""
+
+
+# --- simulated time: the loopback driver's switch -------------------------------------------
+def cut_between(t0: float, t1: float):
+    def setup(sim):
+        sim.world.faults.at += [(t0, lambda w: setattr(w.faults, "link_ok", False)),
+                                (t1, lambda w: setattr(w.faults, "link_ok", True))]
+    return setup
+
+
+def test_a_cut_link_ends_the_flight_on_the_next_tick_in_every_phase(tmp_path):
+    delays = []
+    for at in (0.3, 1.5, TRIGGER_T + 0.2, 3.005, 4.2):
+        f = fly(tmp_path, setup=cut_between(at, at + 0.05))
+        injected("link cut")
+        assert_failsafe_and_closed_log(f.sim, f.res, EndReason.LOST_LINK)
+        assert 0.0 <= f.end_t - at <= TICK + 1e-9  # the tick at or right after the cut
+        delays.append(f.end_t - at)
+    report("link: loopback link cut (fault switch)", "driver health not ok, checked every "
+           "tick", "LOST_LINK, failsafe", "motors off (stop setpoint)", delays)
+
+
+def test_a_link_that_comes_back_after_the_abort_gets_no_thrust(tmp_path):
+    f = fly(tmp_path, setup=cut_between(3.0, 3.03))
+    injected("link cut", "link back")
+    assert f.res.outcome is EndReason.LOST_LINK
+    fail = f.sim.world.sent.index(next(s for s in f.sim.world.sent if s.phase.value == "abort"))
+    assert all(s.thrust == 0.0 for s in f.sim.world.sent[fail:])
+    f.sim.world.advance(f.end_t + 0.5)
+    assert f.sim.world.plant.thrust < 0.01  # the motors spun down and stayed down
+    report("link: loopback link back after the abort", "-", "failsafe is latched: the "
+           "driver sends nothing more", "motors stay off")
+
+
+@pytest.mark.parametrize("latency", [0.05, 0.1])
+def test_a_slow_link_up_to_100_ms_still_perches_inside_the_contact_window(latency, tmp_path):
+    f = fly(tmp_path, uri=f"sim://?latency={latency}")
+    injected("slow link")
+    assert f.res.outcome is EndReason.CONTACT
+    assert 0.7 - 0.02 <= f.res.true_contact_speed <= 1.0 + 0.02
+    report(f"link: commands {1000 * latency:.0f} ms late (loopback)", "none needed",
+           "flown (the setpoints lead by ff_lead_s)", "perches "
+           f"({f.res.true_contact_speed:.3f} m/s)")
+
+
+# --- real drivers, real time ----------------------------------------------------------------
+class RealFlight:
+    """fly() in real time against a real driver; the peer's commands drive a simulated world
+    whose mocap the agent reads (tests/drivers/test_lost_link_flight.bridge)."""
+
+    def __init__(self, rig, uri: str) -> None:
+        self.rig = rig
+        self.runtime = Runtime.real()
+        self.source = open_source("sim://", self.runtime)
+        self.world = self.runtime.sim
+        self.driver = open_driver(uri, self.runtime)
+        self.abort = FlightAbort()
+        self.marks: dict[str, float] = {}
+        self._stop = threading.Event()
+
+    def at_setpoint(self, n: int, name: str, fn) -> None:
+        """Run fn once n setpoints have reached the world; remember when (monotonic)."""
+        def wait():
+            while len(self.world.sent) < n and not self._stop.is_set():
+                time.sleep(0.001)
+            fn()
+            self.marks[name] = time.monotonic()
+        threading.Thread(target=wait, daemon=True).start()
+
+    def fly(self, tmp_path, abort_after_s: float | None = None, close: bool = True):
+        if abort_after_s is not None:
+            self.at_setpoint(int(abort_after_s * 100), "abort", self.abort.request)
+        threading.Thread(target=bridge, args=(self.rig, self.world, self._stop), daemon=True).start()
+        try:
+            self.driver.connect()
+            self.source.start()
+            return fly_real(case1_ipts(), self.driver, self.source, self.runtime.clock,
+                            tmp_path / "f.jsonl", abort=self.abort, world=self.world)
+        finally:
+            self._stop.set()
+            if close:
+                self.close()
+
+    def close(self) -> None:
+        self.source.close()
+        self.driver.close()
+
+
+def crazyflie(timeout: float, relay_delay: float | None = None):
+    rig = CrazyflieRig()
+    relay = None if relay_delay is None else UdpRelay(rig.peer.port, relay_delay)
+    port = rig.peer.port if relay is None else relay.port
+    return rig, relay, f"udp://127.0.0.1:{port}?timeout={timeout}"
+
+
+def mavlink(timeout: float):
+    rig = MavlinkRig()
+    return rig, None, f"mavlink:udpout:127.0.0.1:{rig.peer.port}?mass={MASS}&timeout={timeout}"
+
+
+def closing(rig, relay):
+    if relay is not None:
+        relay.close()
+    rig.close()
+
+
+@pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
+def test_a_peer_that_stops_answering_is_lost_link_within_3_ticks_of_the_timeout(make, tmp_path):
+    timeout = 0.1
+    rig, relay, uri = make(timeout)
+    flight = RealFlight(rig, uri)
+    flight.at_setpoint(30, "mute", rig.peer.mute)
+    try:
+        res = flight.fly(tmp_path)
+    finally:
+        closing(rig, relay)
+    injected("peer mute")
+    assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
+    assert flight.driver.failsafe_reasons == [EndReason.LOST_LINK]
+    rows, mute = read_log(res.log).rows, flight.marks["mute"]
+    assert rows[-1].end == "LOST_LINK"
+    assert rows[-1].t > mute + timeout - PING_S - 2 * TICK  # not before the silence rule
+    assert len([r for r in rows if r.t > mute + timeout]) <= 3  # and then within 3 ticks
+    assert rig.stopped()
+    report(f"link: {make.__name__} peer stops answering", f"silent > timeout "
+           f"(URI timeout=, here {timeout:g} s)", "LOST_LINK, failsafe",
+           "stop sent (Crazyflie: stop setpoint; MAVLink: LAND)", [rows[-1].t - mute])
+
+
+def test_a_slow_peer_is_not_a_lost_link(tmp_path):
+    rig, relay, uri = crazyflie(timeout=0.5, relay_delay=0.1)
+    flight = RealFlight(rig, uri)
+    try:
+        res = flight.fly(tmp_path, abort_after_s=1.0)
+    finally:
+        closing(rig, relay)
+    injected("slow peer")
+    assert res.outcome is EndReason.OPERATOR_ABORT  # flown until the operator stopped it
+    assert relay.forwarded["down"] > 20 and len(rig.peer.setpoints()) > 50
+    report("link: crazyflie-udp answers 100 ms late each way", "none: answers keep the link "
+           "alive (a silence rule, not a latency rule)", "flown", "flies on")
+
+
+def test_a_short_outage_is_ridden_out_and_a_long_one_is_lost_link_for_good(tmp_path):
+    rig, relay, uri = crazyflie(timeout=0.1, relay_delay=0.0)
+    flight = RealFlight(rig, uri)
+    blip = lambda: (relay.pause(), threading.Timer(0.03, relay.resume).start())  # noqa: E731
+    flight.at_setpoint(30, "pause1", blip)  # 30 ms: less than the timeout
+    flight.at_setpoint(60, "pause2", relay.pause)
+    try:
+        res = flight.fly(tmp_path, close=False)
+        stopped = time.monotonic()
+        relay.resume()  # the link comes back after the abort, the driver still open
+        time.sleep(0.15)
+    finally:
+        flight.close()
+        closing(rig, relay)
+    injected("link blip", "link outage", "link back")
+    assert res.outcome is EndReason.LOST_LINK
+    rows = read_log(res.log).rows
+    assert rows[-1].t > flight.marks["pause2"]  # the first, short outage was flown through
+    after = [s for s in rig.peer.setpoints() if s.t > stopped]
+    assert all(s.thrust == 0 for s in after)  # back, and the vehicle gets no thrust
+    report("link: crazyflie-udp outage shorter than the timeout", "-", "flown", "flies on")
+    report("link: crazyflie-udp outage longer than the timeout, then back", "silent > "
+           "timeout (0.1 s)", "LOST_LINK, failsafe latched", "stop; no thrust after the "
+           "link returns", [rows[-1].t - flight.marks["pause2"]])
+
+
+def test_a_zmq_subscriber_that_returns_on_the_same_port_gets_no_setpoint(tmp_path):
+    rig = type("ZmqPeer", (), {})()
+    rig.peer = SetpointSubscriber()
+    rig.commanded = lambda: (lambda s: (s[-1]["roll"], s[-1]["pitch"], s[-1]["thrust"])
+                             if s else None)(rig.peer.of("setpoint"))
+    flight = RealFlight(rig, rig.peer.uri)
+    flight.at_setpoint(30, "die", rig.peer.die)
+    try:
+        res = flight.fly(tmp_path, close=False)
+        back = zmq.Context.instance().socket(zmq.SUB)
+        back.setsockopt(zmq.LINGER, 0)
+        back.bind(f"tcp://127.0.0.1:{rig.peer.port}")
+        back.setsockopt(zmq.SUBSCRIBE, b"")
+        got = back.poll(300)
+        back.close(0)
+    finally:
+        flight.close()
+        rig.peer.close()
+    injected("subscriber gone", "subscriber back")
+    assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
+    assert len([r for r in read_log(res.log).rows if r.t > flight.marks["die"]]) <= 3
+    assert not got  # the driver, still open, sends nothing after its failsafe
+    report("link: zmq subscriber gone, then back on the same port", "XPUB sees the "
+           "unsubscription", "LOST_LINK, failsafe", "stop published; nothing after")
