@@ -8,7 +8,7 @@ and a 3 s flight runs in a few hundred milliseconds of wall time.
 
 URI options (read by whichever factory creates the world): latency [s] command delay,
 noise [m] mocap noise std, mocap_rate [Hz], mocap_latency [s], start=X,Y,Z [m],
-attitude_tau [s], motor_tau [s], seed.
+attitude_tau [s], motor_tau [s], seed, stall=AT,FOR [s] (perchd.sim.stall: a hung link).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from perchd.mocap.base import SourceStats
 from perchd.runtime import Runtime
 from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
+from perchd.sim.stall import Stall, stall_from_uri
 from perchd.types import Pose, Setpoint, Vec3
 from perchd.uri import Uri
 
@@ -46,7 +47,7 @@ class WorldParams:
     """plant, mocap; start [m] world position, hovering there when start z > 0 (None: 4.5 m
     back from the surface point along the normal, 1 m above it);
     surface_point [m] and surface_normal (towards the surface, i.e. the approach direction);
-    body: the mocap body name; seed for the noise."""
+    body: the mocap body name; seed for the noise; stall: a hung link (perchd.sim.stall)."""
 
     plant: PlantParams = PlantParams()
     mocap: MocapParams = MocapParams()
@@ -55,6 +56,7 @@ class WorldParams:
     surface_normal: Vec3 = (1.0, 0.0, 0.0)
     body: str = "cf1"
     seed: int = 0
+    stall: Stall | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +93,8 @@ class SimWorld:
         self.t0 = clock.now()
         self.plant = Plant(params.plant, self.start, self.t0)
         self.faults = Faults()
+        if params.stall is not None:
+            self.faults.at.append((self.t0 + params.stall.at_s, params.stall))
         self.contact: Contact | None = None
         self.sent: list[Setpoint] = []
         self.failsafes: list[Any] = []
@@ -220,7 +224,8 @@ def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldPar
             raise UriError(f"{uri.raw}: start={text!r} must be X,Y,Z in metres")
     seed = int(float_param(uri, "seed", float(wp.seed), 0, 2 ** 31, ""))
     return replace(wp, plant=plant, mocap=mocap, start=start, seed=seed,
-                   body=uri.param("body", wp.body) or wp.body)
+                   body=uri.param("body", wp.body) or wp.body,
+                   stall=stall_from_uri(uri) or wp.stall)
 
 
 def world_for(uri: Uri, runtime: Runtime) -> SimWorld:
