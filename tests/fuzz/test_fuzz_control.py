@@ -1,0 +1,97 @@
+"""Control-socket lines (CONTRACTS 4) under fuzzing, against a running `perchd serve` over its
+real Unix socket: every line gets exactly one reply, a bad one {"ok": false, "error": ...};
+the service never stops and answers the next good request."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from mutate import json_values
+
+HOSTILE_PLANS = ["../../../etc/passwd", "/etc/shadow", "/dev/zero", "/dev/stdin", "/proc/self/fd/0",
+                 "", ".", "..", "/", "a" * 5000, "plan\0.json", "~root/p.json", "*.json"]
+requests = st.fixed_dictionaries(
+    {"cmd": st.sampled_from(["fly", "abort", "status", "FLY", "", "__class__", "eval"]) | json_values},
+    optional={"plan": st.sampled_from(HOSTILE_PLANS) | json_values, "x": json_values})
+lines = st.one_of(
+    st.binary(max_size=300).map(lambda b: b.replace(b"\n", b"")),
+    requests.map(lambda r: json.dumps(r).encode()),
+    json_values.map(lambda v: json.dumps(v).encode()),
+    st.sampled_from([b"[" * 60000, b'{"cmd":' * 5000, b"\xff\xfe", b'{"cmd": "status"}' * 2,
+                     b'{"cmd": "status", "cmd": 1}', b"\0" * 100]),
+)
+
+
+class Service:
+    """`perchd serve` on sim:// with an empty plan_dir, talked to over its control socket."""
+
+    def __init__(self, tmp) -> None:
+        (tmp / "plans").mkdir()
+        self.sock = tmp / "control.sock"
+        config = tmp / "perchd.toml"
+        config.write_text(f'version = 1\n[service]\nsocket = "{self.sock}"\n'
+                          f'plan_dir = "{tmp / "plans"}"\nlog_dir = "{tmp / "logs"}"\n')
+        self.proc = subprocess.Popen([sys.executable, "-m", "perchd", "serve", "--config", str(config)],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + 20
+        while not self.sock.exists():
+            assert self.proc.poll() is None and time.monotonic() < deadline, "serve did not start"
+            time.sleep(0.05)
+
+    def talk(self, payload: bytes, replies: int) -> list[dict]:
+        with socket.socket(socket.AF_UNIX) as c:
+            c.settimeout(5)
+            c.connect(str(self.sock))
+            c.sendall(payload)
+            buf = b""
+            while buf.count(b"\n") < replies:
+                chunk = c.recv(65536)
+                if not chunk:
+                    break
+                buf += chunk
+        return [json.loads(x) for x in buf.splitlines()]
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory):
+    s = Service(tmp_path_factory.mktemp("serve"))
+    yield s
+    s.proc.terminate()
+    _, err = s.proc.communicate(timeout=10)
+    assert s.proc.returncode == 0, err.decode()
+
+
+@settings(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.lists(lines, min_size=1, max_size=4))
+def test_each_bad_line_gets_one_error_reply_and_the_next_good_request_is_answered(service, batch):
+    replies = service.talk(b"".join(line + b"\n" for line in batch), len(batch))
+    assert len(replies) == len(batch)
+    for line, reply in zip(batch, replies):
+        assert set(reply) >= {"ok"} and isinstance(reply["ok"], bool)
+        if not reply["ok"]:
+            assert isinstance(reply["error"], str) and reply["error"]
+        event("accepted" if reply["ok"] else "rejected")
+    assert not any(r.get("flying") and "plan" in r for r in replies), "no fuzzed line starts a flight"
+    status = service.talk(b'{"cmd": "status"}\n', 1)[0]
+    assert status["ok"] is True and status["state"] == "idle"
+    assert service.proc.poll() is None
+
+
+def test_a_deeply_nested_line_is_answered_and_the_service_lives_on(service):
+    reply = service.talk(b"[" * 60000 + b"\n", 1)[0]
+    assert reply == {"ok": False, "error": "malformed request, not one JSON object: nested too deeply"}
+    assert service.talk(b'{"cmd": "status"}\n', 1)[0]["ok"] is True
+
+
+def test_an_overlong_line_drops_only_that_client(service):
+    reply = service.talk(b"x" * 70000, 1)[0]
+    assert "longer than 65536 bytes" in reply["error"]
+    assert service.talk(b'{"cmd": "status"}\n', 1)[0]["state"] == "idle"
