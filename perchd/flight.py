@@ -8,6 +8,7 @@ driver.failsafe(reason) with the log closed; an exception is re-raised after tha
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -16,7 +17,7 @@ from perchd.clock import Clock
 from perchd.estimator import Estimator
 from perchd.flightconfig import FlightConfig
 from perchd.flightlog import FlightLogWriter, LogRow, jsonable
-from perchd.loop import FixedRateLoop, LoopSummary
+from perchd.loop import LoopSummary, make_loop
 from perchd.perchframe import PerchFrame
 from perchd.supervisor import FlightAbort, Supervisor, TickReport, Trigger
 from perchd.types import EndReason, Phase, State
@@ -89,7 +90,8 @@ class _Run:
         self.frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
         self.est = Estimator(cfg.estimator, self.frame)
         self.sup = Supervisor(plan, cfg, self.frame)
-        self.loop = FixedRateLoop(clock, cfg.rate_hz)
+        self.loop = make_loop(cfg.sync.value, clock, cfg.rate_hz, source)
+        self.clock = clock
         self.driver, self.source, self.log = driver, source, log
         self.abort, self.on_tick = abort, on_tick
         self.failsafe_sent = False
@@ -98,22 +100,29 @@ class _Run:
         self.observe = getattr(driver, "observe_pose", None)
         self.t0: float | None = None
         self._events = 0
+        self._sent_seq = -1  # newest pose a setpoint has been sent for (latency is per pose)
 
     def tick(self, k: int, t: float) -> bool:
         self.t0 = t if self.t0 is None else self.t0
+        health = self.driver.health()
         pose = self.source.latest()
-        self.est.offer(pose)
         if pose is not None and self.observe is not None:
-            self.observe(pose)
+            self.observe(pose)  # before send: the Crazyflie's yaw loop uses the newest yaw
+        w0 = time.perf_counter()
+        self.est.offer(pose)
         state = self.est.state(t)
         last = self.est.last_pose
         arrival_age = None if last is None else t - (last.t + last.latency)
-        rep = self.sup.tick(t, state, self.driver.health(), self.loop.stats.streak,
+        rep = self.sup.tick(t, state, health, self.loop.stats.streak,
                             self.abort.reason, self.est.mocap_period, arrival_age)
+        self.loop.stats.agent.append(time.perf_counter() - w0)
         if rep.end is not None and rep.end is not EndReason.CONTACT:
             self.failsafe(rep.end)
         elif rep.setpoint is not None:
             self.driver.send(rep.setpoint)
+            if last is not None and last.seq != self._sent_seq:
+                self._sent_seq = last.seq
+                self.loop.stats.latency.append(self.clock.now() - (last.t + last.latency))
         self._log(k, t, state, rep)
         if self.on_tick is not None:
             self.on_tick(TickStatus(t - self.t0, rep.phase, state and state.x,
@@ -182,5 +191,5 @@ def _result(run: _Run, world: Any, log_path: str) -> FlightResult:
         sup.end or EndReason.SOFTWARE_ERROR, sup.end_detail,
         contact.speed if contact else None, perch, float(sup.plan.duration),
         float(sup.plan.v_contact), trig, true_speed, true_perch, log_path,
-        run.loop.stats.summary(), run.failsafe_sent)
+        run.loop.summary(), run.failsafe_sent)
 

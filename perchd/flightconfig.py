@@ -150,6 +150,20 @@ class TriggerConfig:
     v_tol_mps: float = 0.10
 
 
+class LoopSync(enum.Enum):
+    """What releases a control tick.
+
+    FIXED: a clock at rate_hz; a pose waits up to one period for the tick that uses it.
+    MOCAP: the arrival of each new pose (mocap-synchronous): the setpoint follows the pose by
+        the compute time only. rate_hz is then the expected mocap rate: a tick overruns when
+        it ends a period after its pose arrived, and runs anyway after 1.5 periods without
+        a pose (so stale mocap is still detected). Set it to the mocap system's rate.
+    """
+
+    FIXED = "fixed"
+    MOCAP = "mocap"
+
+
 class PostContact(enum.Enum):
     """After contact: CUT the motors, or IDLE at the vehicle's minimum thrust."""
 
@@ -222,7 +236,9 @@ class SurfaceConfig:
 class FlightConfig:
     """Everything one flight needs besides the plan and the two links.
 
-    rate_hz: [Hz] control loop rate, 20..500.  tilt_limit_rad: [rad] setpoint saturation
+    rate_hz: [Hz] control loop rate, 20..500 (with sync MOCAP: the mocap rate).
+    sync: what releases a tick (LoopSync: a fixed-rate clock, or each mocap frame).
+    tilt_limit_rad: [rad] setpoint saturation
     (eq. 25, 25 deg).  post_contact_s: [s] the post-contact action is held this long.
     idle_thrust_n: [N] thrust of PostContact.IDLE (None: the vehicle's thrust_min_n).
     """
@@ -236,6 +252,7 @@ class FlightConfig:
     estimator: EstimatorConfig = EstimatorConfig()
     surface: SurfaceConfig = SurfaceConfig()
     rate_hz: float = 100.0
+    sync: LoopSync = LoopSync.FIXED
     tilt_limit_rad: float = math.radians(25.0)
     post_contact: PostContact = PostContact.CUT
     post_contact_s: float = 0.2

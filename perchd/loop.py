@@ -1,10 +1,20 @@
-"""The fixed-rate control loop: absolute deadlines on an injected clock, timing statistics.
+"""The control loops, on an injected clock, with their timing statistics.
 
-Tick k is due at start + k * period (absolute, so errors never accumulate). A tick that
-ends after the next deadline is an overrun; the missed deadlines are skipped rather than run
-back to back, and `streak` counts consecutive overruns for the supervisor. Jitter (actual
-start - deadline) is read on the injected clock; compute time on a separate wall timer,
-because a simulated clock does not move while the tick computes.
+FixedRateLoop: tick k is due at start + k * period (absolute, so errors never accumulate).
+A tick that ends after the next deadline is an overrun; the missed deadlines are skipped
+rather than run back to back, and `streak` counts consecutive overruns for the supervisor.
+A pose waits up to one period for the tick that uses it.
+
+MocapSyncLoop: a tick is released by the arrival of a new pose (PoseSource.wait), so the
+setpoint follows the pose by the tick's compute time only. The tick's deadline is the pose's
+arrival; it overruns when it ends more than a period (1 / rate_hz, the expected mocap
+interval) after it; `missed` counts pose numbers skipped between two ticks. With no pose
+for `timeout_periods` periods it ticks anyway, so the supervisor's stale-mocap rule still runs.
+
+Jitter (actual start - deadline) is read on the injected clock; compute time on a separate
+wall timer, because a simulated clock does not move while the tick computes. Over the run,
+the process CPU time (all threads: the pose receiver too) over the wall time is the agent's
+CPU load.
 """
 
 from __future__ import annotations
@@ -12,18 +22,20 @@ from __future__ import annotations
 import statistics
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 from perchd.clock import Clock
 
 RATE_MIN_HZ, RATE_MAX_HZ = 1.0, 500.0
+NO_SEQ = -(1 << 62)
+"""A pose sequence number below any real one (NatNet frames may start at 0)."""
 
 
 @dataclass(frozen=True, slots=True)
 class TickTiming:
     """k: tick index; deadline, start [s] on the clock; jitter_s = start - deadline;
     compute_s [s] wall time the tick took; overrun: it ended after the next deadline;
-    missed: deadlines skipped after it."""
+    missed: deadlines (fixed rate) or poses (mocap-synchronous) skipped after it."""
 
     k: int
     deadline: float
@@ -37,7 +49,12 @@ class TickTiming:
 @dataclass(frozen=True, slots=True)
 class LoopSummary:
     """Over a run: ticks, overruns, missed deadlines, longest overrun streak; jitter and
-    compute time [s] as median, 99th percentile and maximum."""
+    compute time [s] (the whole tick) as median, 99th percentile and maximum; agent_* [s]:
+    the estimator + supervisor + controller part of the tick; latency_* [s]: from a pose's
+    arrival to the setpoint computed from it handed to the driver (each pose's first; the
+flight records it);
+    cpu_fraction: process CPU time / wall time over the run (1.0 = one core);
+    wall_s [s]; sync: "fixed" or "mocap"."""
 
     ticks: int
     overruns: int
@@ -49,21 +66,42 @@ class LoopSummary:
     compute_median_s: float
     compute_p99_s: float
     compute_max_s: float
+    agent_median_s: float = 0.0
+    agent_p99_s: float = 0.0
+    agent_max_s: float = 0.0
+    latency_median_s: float = 0.0
+    latency_p99_s: float = 0.0
+    latency_max_s: float = 0.0
+    cpu_fraction: float = 0.0
+    wall_s: float = 0.0
+    sync: str = "fixed"
 
 
-def _p99(values: list[float]) -> float:
+def p99(values: list[float]) -> float:
+    """99th percentile by nearest rank (0.0 for no values)."""
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))] if ordered else 0.0
+
+
+def _spread(values: list[float]) -> tuple[float, float, float]:
+    """(median, p99, max), zeros for no values."""
+    if not values:
+        return 0.0, 0.0, 0.0
+    return statistics.median(values), p99(values), max(values)
 
 
 class LoopStats:
     def __init__(self) -> None:
         self.jitter: list[float] = []
         self.compute: list[float] = []
+        self.agent: list[float] = []
+        self.latency: list[float] = []
         self.overruns = 0
         self.missed = 0
         self.streak = 0
         self.max_streak = 0
+        self.cpu_s = 0.0
+        self.wall_s = 0.0
 
     def add(self, timing: TickTiming) -> None:
         self.jitter.append(timing.jitter_s)
@@ -73,19 +111,20 @@ class LoopStats:
         self.streak = self.streak + 1 if timing.overrun else 0
         self.max_streak = max(self.max_streak, self.streak)
 
-    def summary(self) -> LoopSummary:
-        j, c = self.jitter or [0.0], self.compute or [0.0]
+    def summary(self, sync: str = "fixed") -> LoopSummary:
         return LoopSummary(len(self.jitter), self.overruns, self.missed, self.max_streak,
-                           statistics.median(j), _p99(j), max(j),
-                           statistics.median(c), _p99(c), max(c))
+                           *_spread(self.jitter), *_spread(self.compute),
+                           *_spread(self.agent), *_spread(self.latency),
+                           self.cpu_s / self.wall_s if self.wall_s > 0 else 0.0,
+                           self.wall_s, sync)
 
 
-class FixedRateLoop:
-    """Calls tick(k, t) at rate_hz until it returns False; `last` is the previous tick's
-    timing (the tick being run cannot know its own compute time yet)."""
+class _Loop:
+    """What both loops share: the rate, the timed tick, the statistics and the CPU meter."""
 
-    def __init__(self, clock: Clock, rate_hz: float,
-                 timer: Callable[[], float] = time.perf_counter) -> None:
+    sync = "fixed"
+
+    def __init__(self, clock: Clock, rate_hz: float, timer: Callable[[], float]) -> None:
         if not RATE_MIN_HZ <= rate_hz <= RATE_MAX_HZ:
             raise ValueError(f"loop rate {rate_hz:g} Hz is outside "
                              f"{RATE_MIN_HZ:g}..{RATE_MAX_HZ:g} Hz")
@@ -96,23 +135,103 @@ class FixedRateLoop:
         self.last: TickTiming | None = None
 
     def run(self, tick: Callable[[int, float], bool]) -> LoopStats:
+        """Call tick(k, t) until it returns False; `last` is the previous tick's timing (the
+        tick being run cannot know its own compute time yet)."""
+        cpu0, wall0 = time.process_time(), time.perf_counter()
+        try:
+            self._run(tick)
+        finally:
+            self.stats.cpu_s += time.process_time() - cpu0
+            self.stats.wall_s += time.perf_counter() - wall0
+        return self.stats
+
+    def summary(self) -> LoopSummary:
+        return self.stats.summary(self.sync)
+
+    def _run(self, tick: Callable[[int, float], bool]) -> None:
+        raise NotImplementedError
+
+    def _timed(self, tick: Callable[[int, float], bool], k: int,
+               start: float) -> tuple[bool, float, float]:
+        """Run tick k at clock time `start`: (go on, its end on the clock, compute time [s])."""
+        w0 = self.timer()
+        go_on = tick(k, start)
+        compute = self.timer() - w0
+        return go_on, self.clock.now(), compute
+
+    def _record(self, k: int, deadline: float, start: float, compute: float, overrun: bool,
+                missed: int) -> None:
+        self.last = TickTiming(k, deadline, start, start - deadline, compute, overrun, missed)
+        self.stats.add(self.last)
+
+
+class FixedRateLoop(_Loop):
+    """Calls tick(k, t) at rate_hz on absolute deadlines."""
+
+    def __init__(self, clock: Clock, rate_hz: float,
+                 timer: Callable[[], float] = time.perf_counter) -> None:
+        super().__init__(clock, rate_hz, timer)
+
+    def _run(self, tick: Callable[[int, float], bool]) -> None:
         origin = self.clock.now()
         k = 0
         while True:
             deadline = origin + k * self.period
             self.clock.sleep_until(deadline)
             start = self.clock.now()
-            w0 = self.timer()
-            go_on = tick(k, start)
-            compute = self.timer() - w0
-            end = self.clock.now()
+            go_on, end, compute = self._timed(tick, k, start)
             nxt = k + 1
             while origin + nxt * self.period < end:
                 nxt += 1
-            missed = nxt - k - 1
-            self.last = TickTiming(k, deadline, start, start - deadline, compute,
-                                   end > origin + (k + 1) * self.period, missed)
-            self.stats.add(self.last)
+            self._record(k, deadline, start, compute, end > origin + (k + 1) * self.period,
+                         nxt - k - 1)
             if not go_on:
-                return self.stats
+                return
             k = nxt
+
+
+class MocapSyncLoop(_Loop):
+    """Calls tick(k, t) as soon as `source` has a pose newer than the last one ticked on.
+
+    rate_hz: the expected mocap rate (it sets the overrun deadline and the timeout);
+    timeout_periods: periods without a pose after which a tick runs anyway."""
+
+    sync = "mocap"
+
+    def __init__(self, clock: Clock, rate_hz: float, source: Any,
+                 timer: Callable[[], float] = time.perf_counter,
+                 timeout_periods: float = 1.5) -> None:
+        super().__init__(clock, rate_hz, timer)
+        if timeout_periods <= 0:
+            raise ValueError(f"timeout_periods {timeout_periods:g} must be positive")
+        self.source = source
+        self.timeout = timeout_periods * self.period
+
+    def _run(self, tick: Callable[[int, float], bool]) -> None:
+        seq, k = NO_SEQ, 0
+        while True:
+            pose = self.source.wait(seq, self.timeout)
+            start = self.clock.now()
+            missed = 0
+            if pose is None:  # no frame in time: tick anyway (the stale-mocap rule runs)
+                release = start
+                newest = self.source.latest()
+                seq = seq if newest is None else newest.seq  # follows a restarted sender
+            else:
+                release = pose.t + pose.latency  # its arrival on the agent's clock
+                missed = max(0, pose.seq - seq - 1) if seq != NO_SEQ else 0
+                seq = pose.seq
+            go_on, end, compute = self._timed(tick, k, start)
+            self._record(k, release, start, compute, end > release + self.period, missed)
+            if not go_on:
+                return
+            k += 1
+
+
+def make_loop(sync: str, clock: Clock, rate_hz: float, source: Any) -> _Loop:
+    """The loop a flight configuration asks for: "fixed" or "mocap"."""
+    if sync == "mocap":
+        return MocapSyncLoop(clock, rate_hz, source)
+    if sync == "fixed":
+        return FixedRateLoop(clock, rate_hz)
+    raise ValueError(f"loop sync {sync!r} is neither 'fixed' nor 'mocap'")
