@@ -93,7 +93,7 @@ class Progress:
         self.outcomes[row.outcome] += 1
         if self.tty:
             fill = self.WIDTH * self.done // self.total
-            self.stream.write(f"\r[{'#' * fill}{'.' * (self.WIDTH - fill)}] {self.line()}")
+            self.stream.write(f"\r[{'#' * fill}{'.' * (self.WIDTH - fill)}] {self.line()}\x1b[K")
         elif self.done % self._step == 0 or self.done == self.total:
             self.stream.write(f"perchd sim: {self.line()}\n")
         self.stream.flush()

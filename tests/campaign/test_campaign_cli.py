@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
+import pty
 import statistics
 import subprocess
 import sys
@@ -107,6 +109,7 @@ def test_on_a_terminal_the_bar_is_rewritten_in_place_and_ends_the_line():
     bar.close()
     text = term.getvalue()
     assert text.count("\r") == 4 and text.endswith("\n") and text.count("\n") == 1
+    assert text.count("\x1b[K") == 4   # each bar clears what a longer one left
     last = text.split("\r")[-1]
     assert last.startswith("[" + "#" * 30 + "] 4/4 flights (CONTACT 3, GEOFENCE 1)")
     assert text.split("\r")[2].startswith("[" + "#" * 15 + "." * 15 + "] 2/4")
@@ -122,3 +125,26 @@ def test_elsewhere_a_line_comes_at_every_tenth_of_the_campaign():
     assert [line.split()[2] for line in lines] == [f"{n}/25" for n in (2, 4, 6, 8, 10, 12, 14,
                                                                        16, 18, 20, 22, 24, 25)]
     assert "\r" not in out.getvalue()
+
+
+def test_the_command_draws_the_bar_when_stderr_is_a_real_terminal(tmp_path):
+    leader, follower = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "perchd", "sim", "--campaign", BOX,
+                             "--flights", "3", "--table", str(tmp_path / "t.csv")],
+                            stdout=subprocess.PIPE, stderr=follower, text=True)
+    os.close(follower)
+    seen = b""
+    while True:
+        try:
+            chunk = os.read(leader, 4096)
+        except OSError:   # EIO: the child closed the terminal
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(leader)
+    out, _ = proc.communicate(timeout=60)
+    bars = seen.decode().split("\r")
+    assert proc.returncode == 0 and out.startswith("flights: 3 in ")
+    assert [b.split("] ")[1].split()[0] for b in bars[1:4]] == ["1/3", "2/3", "3/3"]
+    assert "perchd sim:" not in seen.decode()   # no line-per-tenth form on a terminal
