@@ -349,13 +349,14 @@ class Stat:
 @dataclass(frozen=True)
 class Summary:
     """flights; outcomes: EndReason name -> count; in_window: contacts inside their plan's
-    window; contact_speed [m/s], perch_error_s [s] and perch_error_pct [%] of the
-    contacts; trigger_dx_m [m] / trigger_dv_mps [m/s]: measured minus aimed trigger state."""
+    window; contact_speed [m/s], speed_error_mps [m/s] (contact speed - the plan's),
+    perch_error_s [s] and perch_error_pct [%] of the contacts; trigger_dx_m [m] / trigger_dv_mps [m/s]: measured minus aimed trigger state."""
 
     flights: int
     outcomes: dict[str, int]
     in_window: int
     contact_speed: Stat
+    speed_error_mps: Stat
     perch_error_s: Stat
     perch_error_pct: Stat
     trigger_dx_m: Stat
@@ -368,6 +369,7 @@ def summarize(rows: list[FlightRow]) -> Summary:
     return Summary(
         len(rows), dict(Counter(r.outcome for r in rows).most_common()),
         sum(r.in_window for r in rows), Stat.of([r.contact_speed for r in hits]),
+        Stat.of([r.contact_speed - r.plan_v_contact for r in hits]),
         Stat.of([r.perch_error_s for r in hits]),
         Stat.of([100.0 * r.perch_error_s / r.plan_duration for r in hits]),
         Stat.of([r.trigger_x - r.x0_aim for r in trig]),

@@ -122,7 +122,7 @@ def summary_text(summary: Any, table: Path, wall_s: float) -> str:
         f"flights: {summary.flights} in {wall_s:.1f} s; {outcomes}",
         f"contact inside the plan's window: {summary.in_window} of {summary.flights}",
         f"contact speed min / median / max: {_stat(summary.contact_speed, '.3f')} m/s "
-        f"({contacts} contacts)",
+        f"({contacts} contacts); - plan: {_stat(summary.speed_error_mps, '+.3f')} m/s",
         f"perch time - plan: {_stat(summary.perch_error_s, '+.1f', 1e3)} ms "
         f"({_stat(summary.perch_error_pct, '+.2f')} %)",
         f"trigger - aim: x {_stat(summary.trigger_dx_m, '+.3f')} m, "

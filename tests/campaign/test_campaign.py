@@ -182,6 +182,9 @@ def test_the_table_and_the_summary_agree_with_the_rows(tmp_path):
     assert (s.contact_speed.min, s.contact_speed.max) == pytest.approx((speeds[0], speeds[-1]), abs=1e-6)
     assert s.contact_speed.median == pytest.approx((speeds[1] + speeds[2]) / 2, abs=1e-6)
     assert s.perch_error_s.median == pytest.approx((errors[1] + errors[2]) / 2, abs=1e-6)
+    dv = sorted(float(t["contact_speed"]) - float(t["plan_v_contact"]) for t in table
+                if t["contact_speed"])
+    assert (s.speed_error_mps.min, s.speed_error_mps.max) == pytest.approx((dv[0], dv[-1]), abs=1e-6)
     pct = sorted(100 * float(t["perch_error_s"]) / float(t["plan_duration"])
                  for t in table if t["perch_error_s"])
     assert s.perch_error_pct.max == pytest.approx(pct[-1], abs=1e-4)
