@@ -73,7 +73,8 @@ class Estimator:
 
     @property
     def mocap_period(self) -> float | None:
-        """[s] smoothed interval between accepted poses (None before two)."""
+        """[s] smoothed source frame period: interval between accepted poses over the
+        frames (seq numbers) between them (None before two)."""
         return self._period
 
     @property
@@ -82,8 +83,8 @@ class Estimator:
 
     def offer(self, pose: Pose | None) -> bool:
         """Fuse `pose` if it is new, valid and believable; returns whether it was used."""
-        if pose is None or not pose.valid:
-            return False
+        if pose is None or not pose.valid or not all(map(math.isfinite, (*pose.p, *pose.q))):
+            return False  # a NaN/inf frame would poison the filter (and hide the tilt)
         if self._last is not None and (pose.seq == self._last.seq or pose.t <= self._t):
             return False
         z = self._to_frame(pose.p)
@@ -136,6 +137,10 @@ class Estimator:
                    P[3] - k1 * r0, P[4] - k1 * r1, P[5] - k1 * r2,
                    P[6] - k2 * r0, P[7] - k2 * r1, P[8] - k2 * r2)
         self._t = pose.t
+        # per source frame: frames the loop never saw (it polls slower than mocap sends)
+        # do not make the mocap slower, or the stale limit grows with the loop's period
+        frames = pose.seq - self._last.seq
+        dt = dt / frames if 0 < frames <= 100 else dt
         self._period = dt if self._period is None else 0.9 * self._period + 0.1 * dt
 
     def _accept(self, pose: Pose, z: tuple[float, float, float]) -> None:
