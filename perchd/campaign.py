@@ -258,20 +258,18 @@ def _gust_hook(world: Any, spec: FlightSpec) -> Callable[[Any], None] | None:
 
 
 def _row(spec: FlightSpec, spread: Spread, plan: Any, res: Any, why: str) -> FlightRow:
+    """The table row of a flight result, or (res None) of an aim no plan could be made for."""
     lo, hi = plan.limits.v_contact
-    outcome = res.outcome.name if res else EndReason.TRIGGER_REFUSED.name
-    speed = res.true_contact_speed if res else None
-    perch = res.true_perch_time if res else None
-    duration = res.plan_duration if res else float(plan.duration)
     trig = res.trigger if res else None
-    contact = outcome == EndReason.CONTACT.name and speed is not None
+    hit = res is not None and res.outcome is EndReason.CONTACT and res.true_contact_speed is not None
+    speed, perch = (res.true_contact_speed, res.true_perch_time) if hit else (None, None)
+    duration = res.plan_duration if res else float(plan.duration)
     return FlightRow(
         spec.index, spec.x0, spec.v0, spread.latency_s, spread.noise_m, spec.gust_s,
-        *spec.gust_dv, spec.seed, outcome, trig and trig.x, trig and trig.v,
-        speed if contact else None, res.contact_speed if contact else None,
-        perch if contact else None, duration, res.v_contact_plan if res else float(plan.v_contact),
-        lo, hi, bool(contact and lo <= speed <= hi),
-        perch - duration if contact and perch is not None else None,
+        *spec.gust_dv, spec.seed, res.outcome.name if res else EndReason.TRIGGER_REFUSED.name,
+        trig and trig.x, trig and trig.v, speed, res.contact_speed if hit else None, perch,
+        duration, res.v_contact_plan if res else float(plan.v_contact), lo, hi,
+        hit and lo <= speed <= hi, None if perch is None else perch - duration,
         trig.action if trig else "", res.detail if res else why)
 
 
