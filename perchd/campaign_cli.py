@@ -31,9 +31,10 @@ CAMPAIGN_DEFAULTS = {"flights": None, "grid": None, "x0": None, "v0": None, "gus
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("campaign (many simulated flights in this process, on a "
-                             "simulated clock; --latency, --noise, --start, --surface, "
-                             "--normal and --json apply too)")
+    g = p.add_argument_group(
+        "campaign", "many simulated flights of one plan in this process, on a simulated "
+        "clock; --latency, --noise, --surface, --normal and --json apply too, and --start "
+        "(default: far enough back for each trigger state)")
     g.add_argument("--campaign", metavar="P.json", help="fly this plan file many times")
     n = g.add_mutually_exclusive_group()
     n.add_argument("--flights", type=int, help=f"random trigger states (default {DEFAULT_FLIGHTS})")
