@@ -35,9 +35,11 @@ class Arrivals:
 
     def __init__(self) -> None:
         self.at: dict[int, float] = {}
+        self.claimed: dict[int, float] = {}  # measured + the latency the frame states
 
     def apply(self, arrive: float, pose: Pose) -> list[tuple[float, Pose]]:
         self.at.setdefault(pose.seq, arrive)
+        self.claimed.setdefault(pose.seq, pose.t + pose.latency)
         return [(arrive, pose)]
 
 
@@ -58,6 +60,13 @@ class Flown:
     def since_last_fused(self) -> float:
         """[s] from the arrival of the newest frame the estimator fused to the end tick."""
         return self.end_t - self.arrivals.at[self.log.rows[-1].pose_seq]
+
+    @property
+    def age_of_last_fused(self) -> float:
+        """[s] from when the newest fused frame says it arrived (measured + its latency) to
+        the end tick: what the stale rule reads. Equals since_last_fused unless the frame
+        was delayed on the way (late, reordered)."""
+        return self.end_t - self.arrivals.claimed[self.log.rows[-1].pose_seq]
 
 
 def fly(tmp_path: Path, *faults: Any, cfg: FlightConfig = FlightConfig(), uri: str = "sim://",

@@ -101,3 +101,17 @@ def test_a_frozen_tracker_that_restamps_its_frames_is_caught_by_the_tau_watch(tm
     report("mocap: frozen position, fresh stamps (stage 1)", "tau off its reference for "
            "tau_error_s = 0.3 s", "TAU_DIVERGENCE, failsafe", "motors off before the wall",
            [took])
+
+
+def test_the_stale_limit_counts_mocap_frames_not_the_loop_s_polls():
+    """At 120 Hz mocap a 100 Hz loop sees 5 frames in 6; the frame period the stale rule
+    multiplies by 3 is still 1/120 s (from the frames' seq numbers), not ~1/100 s."""
+    from perchd.estimator import Estimator
+    from perchd.flightconfig import EstimatorConfig
+    from perchd.perchframe import PerchFrame
+    from perchd.types import Pose
+    est = Estimator(EstimatorConfig(), PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)))
+    seen = [k for k in range(120) if k % 6 != 5]
+    for k in seen:
+        est.offer(Pose("cf1", k + 1, k * PERIOD, (-3.0 + 0.01 * k, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0)))
+    assert est.mocap_period == pytest.approx(PERIOD, rel=1e-9)
