@@ -146,3 +146,28 @@ def test_a_stalled_control_loop_stops_the_watchdog_and_a_resumed_one_pings_again
     row_gaps = [b.t - a.t for a, b in zip(log.rows, log.rows[1:])]
     assert length - 0.05 < max(row_gaps) < length + 0.2  # the stalled tick, in the log
     assert log.end["summary"]["loop"]["missed"] >= 100 * length - 10  # 100 Hz deadlines skipped
+
+
+@pytest.mark.slow
+def test_sigterm_while_the_loop_is_stalled_ends_the_flight_once_it_resumes(tmp_path, notify):
+    at, length = STALL
+    serve = Serve(tmp_path, notify, "--driver", f"sim://?stall={at},{length}", "--mocap", "sim://")
+    try:
+        notify.wait_for("READY=1")
+        started = ctl(serve.sock, "fly", str(PLAN))
+        time.sleep(at + 0.5)                               # inside the stall
+        frozen = ctl(serve.sock, "status")["t"]
+        sent = time.monotonic()
+        serve.proc.send_signal(signal.SIGTERM)
+        code, err = serve.stop()
+        took = time.monotonic() - sent
+    finally:
+        serve.kill()
+    assert code == 0, err
+    assert "flight ended: SIGNAL" in err and "sending the failsafe directly" not in err
+    assert 1.0 < took < length                             # waited for the stall, no longer
+    log = read_log(started["log"])
+    assert log.complete and log.end["outcome"] == "SIGNAL"
+    assert log.end["summary"]["failsafe_sent"] is True
+    assert log.rows[-1].end == "SIGNAL"                   # the stalled tick ended the flight
+    assert frozen < log.rows[-1].t - log.rows[0].t < frozen + 0.05  # the tick after `frozen`
