@@ -37,14 +37,17 @@ def read_regular(path: str | os.PathLike, what: str, error: type[PerchdError],
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOCTTY)
     except OSError as err:
         raise error(f"{what} {path}: cannot read ({err.strerror})") from None
-    with os.fdopen(fd, "rb") as f:
+    try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
             raise error(f"{what} {path}: not a regular file ({_kind(st.st_mode)})")
         if st.st_size > max_bytes:
             raise error(f"{what} {path}: {st.st_size} bytes, over the {max_bytes} byte limit "
                         f"by {st.st_size - max_bytes}")
-        data = f.read(max_bytes + 1)
+        with os.fdopen(os.dup(fd), "rb") as f:
+            data = f.read(max_bytes + 1)
+    finally:
+        os.close(fd)
     if len(data) > max_bytes:  # grew after the check
         raise error(f"{what} {path}: over the {max_bytes} byte limit")
     try:

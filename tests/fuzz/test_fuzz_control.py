@@ -5,16 +5,13 @@ the service never stops and answers the next good request."""
 from __future__ import annotations
 
 import json
-import socket
-import subprocess
-import sys
-import time
 
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from mutate import json_values
+from served import Service
 
 HOSTILE_PLANS = ["../../../etc/passwd", "/etc/shadow", "/dev/zero", "/dev/stdin", "/proc/self/fd/0",
                  "", ".", "..", "/", "a" * 5000, "plan\0.json", "~root/p.json", "*.json"]
@@ -30,43 +27,11 @@ lines = st.one_of(
 )
 
 
-class Service:
-    """`perchd serve` on sim:// with an empty plan_dir, talked to over its control socket."""
-
-    def __init__(self, tmp) -> None:
-        (tmp / "plans").mkdir()
-        self.sock = tmp / "control.sock"
-        config = tmp / "perchd.toml"
-        config.write_text(f'version = 1\n[service]\nsocket = "{self.sock}"\n'
-                          f'plan_dir = "{tmp / "plans"}"\nlog_dir = "{tmp / "logs"}"\n')
-        self.proc = subprocess.Popen([sys.executable, "-m", "perchd", "serve", "--config", str(config)],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        deadline = time.monotonic() + 20
-        while not self.sock.exists():
-            assert self.proc.poll() is None and time.monotonic() < deadline, "serve did not start"
-            time.sleep(0.05)
-
-    def talk(self, payload: bytes, replies: int) -> list[dict]:
-        with socket.socket(socket.AF_UNIX) as c:
-            c.settimeout(5)
-            c.connect(str(self.sock))
-            c.sendall(payload)
-            buf = b""
-            while buf.count(b"\n") < replies:
-                chunk = c.recv(65536)
-                if not chunk:
-                    break
-                buf += chunk
-        return [json.loads(x) for x in buf.splitlines()]
-
-
 @pytest.fixture(scope="module")
 def service(tmp_path_factory):
     s = Service(tmp_path_factory.mktemp("serve"))
     yield s
-    s.proc.terminate()
-    _, err = s.proc.communicate(timeout=10)
-    assert s.proc.returncode == 0, err.decode()
+    s.stop()
 
 
 @settings(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
