@@ -34,32 +34,46 @@ peer falls silent (drivers/crazyflie.PING_S)."""
 
 
 # --- simulated time: the loopback driver's switch -------------------------------------------
-def cut_between(t0: float, t1: float):
-    def setup(sim):
-        sim.world.faults.at += [(t0, lambda w: setattr(w.faults, "link_ok", False)),
-                                (t1, lambda w: setattr(w.faults, "link_ok", True))]
-    return setup
+class CutAfterTick:
+    """An on_tick hook: right after the first tick at or past t0 [s] the link dies (so it is
+    dead from the next tick on); it comes back `back_s` [s] later."""
+
+    def __init__(self, t0: float, back_s: float = 0.05) -> None:
+        self.t0, self.back_s = t0, back_s
+        self.cut_at: float | None = None
+
+    def __call__(self, sim):
+        def on_tick(st):
+            now = sim.runtime.clock.now()
+            if self.cut_at is None and now >= self.t0 - 1e-9:
+                self.cut_at = now
+                sim.world.faults.link_ok = False
+                sim.world.faults.at.append(
+                    (now + self.back_s, lambda w: setattr(w.faults, "link_ok", True)))
+        return on_tick
 
 
 def test_a_cut_link_ends_the_flight_on_the_next_tick_in_every_phase(tmp_path):
     delays = []
-    for at in (0.3, 1.5, TRIGGER_T + 0.2, 3.005, 4.2):
-        f = fly(tmp_path, setup=cut_between(at, at + 0.05))
+    for at in (0.3, 1.5, TRIGGER_T + 0.2, 3.0, 4.2):
+        cut = CutAfterTick(at)
+        f = fly(tmp_path, on_tick=cut)
         injected("link cut")
         assert_failsafe_and_closed_log(f.sim, f.res, EndReason.LOST_LINK)
-        assert 0.0 <= f.end_t - at <= TICK + 1e-9  # the tick at or right after the cut
-        delays.append(f.end_t - at)
-    report("link: loopback link cut (fault switch)", "driver health not ok, checked every "
-           "tick", "LOST_LINK, failsafe", "motors off (stop setpoint)", delays)
+        assert f.end_t - cut.cut_at == pytest.approx(TICK)  # the very next tick
+        delays.append(f.end_t - cut.cut_at)
+    report("link: loopback link cut (fault switch)", "driver health not ok, read at the "
+           "start of every tick", "LOST_LINK, failsafe", "motors off (stop setpoint)", delays)
 
 
 def test_a_link_that_comes_back_after_the_abort_gets_no_thrust(tmp_path):
-    f = fly(tmp_path, setup=cut_between(3.0, 3.03))
+    f = fly(tmp_path, on_tick=CutAfterTick(3.0, back_s=0.03))
     injected("link cut", "link back")
     assert f.res.outcome is EndReason.LOST_LINK
+    f.sim.world.advance(f.end_t + 0.5)
+    assert f.sim.world.faults.link_ok  # it did come back
     fail = f.sim.world.sent.index(next(s for s in f.sim.world.sent if s.phase.value == "abort"))
     assert all(s.thrust == 0.0 for s in f.sim.world.sent[fail:])
-    f.sim.world.advance(f.end_t + 0.5)
     assert f.sim.world.plant.thrust < 0.01  # the motors spun down and stayed down
     report("link: loopback link back after the abort", "-", "failsafe is latched: the "
            "driver sends nothing more", "motors stay off")
