@@ -49,7 +49,7 @@ class TickTiming:
 @dataclass(frozen=True, slots=True)
 class LoopSummary:
     """Over a run: ticks, overruns, missed deadlines, longest overrun streak; jitter and
-    compute time [s] (the whole tick) as median, 99th percentile and maximum; agent_* [s]:
+    compute time [s] (the whole tick) as min, median, 99th percentile and maximum; agent_* [s]:
     the estimator + supervisor + controller part of the tick; latency_* [s]: from a pose's
     arrival to the setpoint computed from it handed to the driver (each pose's first; the
 flight records it);
@@ -66,9 +66,13 @@ flight records it);
     compute_median_s: float
     compute_p99_s: float
     compute_max_s: float
+    jitter_min_s: float = 0.0
+    compute_min_s: float = 0.0
+    agent_min_s: float = 0.0
     agent_median_s: float = 0.0
     agent_p99_s: float = 0.0
     agent_max_s: float = 0.0
+    latency_min_s: float = 0.0
     latency_median_s: float = 0.0
     latency_p99_s: float = 0.0
     latency_max_s: float = 0.0
@@ -83,11 +87,11 @@ def p99(values: list[float]) -> float:
     return ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))] if ordered else 0.0
 
 
-def _spread(values: list[float]) -> tuple[float, float, float]:
-    """(median, p99, max), zeros for no values."""
+def spread(values: list[float]) -> tuple[float, float, float, float]:
+    """(min, median, p99, max), zeros for no values."""
     if not values:
-        return 0.0, 0.0, 0.0
-    return statistics.median(values), p99(values), max(values)
+        return 0.0, 0.0, 0.0, 0.0
+    return min(values), statistics.median(values), p99(values), max(values)
 
 
 class LoopStats:
@@ -112,9 +116,10 @@ class LoopStats:
         self.max_streak = max(self.max_streak, self.streak)
 
     def summary(self, sync: str = "fixed") -> LoopSummary:
+        (j0, *jitter), (c0, *compute) = spread(self.jitter), spread(self.compute)
         return LoopSummary(len(self.jitter), self.overruns, self.missed, self.max_streak,
-                           *_spread(self.jitter), *_spread(self.compute),
-                           *_spread(self.agent), *_spread(self.latency),
+                           *jitter, *compute, j0, c0, *spread(self.agent),
+                           *spread(self.latency),
                            self.cpu_s / self.wall_s if self.wall_s > 0 else 0.0,
                            self.wall_s, sync)
 
