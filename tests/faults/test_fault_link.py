@@ -90,6 +90,16 @@ def test_a_slow_link_up_to_100_ms_still_perches_inside_the_contact_window(latenc
            f"({f.res.true_contact_speed:.3f} m/s)")
 
 
+@pytest.mark.xfail(strict=True, reason="known gap (docs/safety.md): no driver measures command "
+                   "latency, so a link 200 ms slow is flown, and the perch lands too fast")
+def test_a_link_200_ms_slow_is_caught_or_still_perches_inside_the_window(tmp_path):
+    f = fly(tmp_path, uri="sim://?latency=0.2")
+    report("link: commands 200 ms late (loopback) KNOWN GAP", "not detected",
+           f"{f.res.outcome.name}", f"contact at {f.res.true_contact_speed:.2f} m/s "
+           "(window 0.7..1.0)")
+    assert f.res.outcome is not EndReason.CONTACT or f.res.true_contact_speed <= 1.0 + 0.02
+
+
 # --- real drivers, real time ----------------------------------------------------------------
 class RealFlight:
     """fly() in real time against a real driver; the peer's commands drive a simulated world
