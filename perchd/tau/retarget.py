@@ -26,5 +26,6 @@ def retarget(plan: Plan, x0: float, v0: float) -> Plan:
     if plan.strategy == "ctds":
         return plan_ctds(x0, v0, plan.c, lim)
     if plan.strategy == "ctdts":
-        return plan_ctdts(x0, v0, plan.tau_s, plan.v_contact, lim.a_max, lim.v_max)
+        return plan_ctdts(x0, v0, plan.tau_s, plan.v_contact, lim.a_max, lim.v_max,
+                          lim.v_contact)
     return plan_ipts(x0, v0, plan.tau_s, lim.v_contact, lim.v_max, lim.a_max, plan.order)
