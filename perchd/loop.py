@@ -19,14 +19,19 @@ CPU load.
 
 from __future__ import annotations
 
+import contextlib
 import statistics
+import sys
 import time
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 from perchd.clock import Clock
 
 RATE_MIN_HZ, RATE_MAX_HZ = 1.0, 500.0
+TIMER_SLACK_NS = 1000
+"""Linux lets a sleep overrun by the thread's timer slack (50 us by default) to batch
+wake-ups; the loop's thread asks for 1 us (measured here: median lateness 75 -> 30 us)."""
 NO_SEQ = -(1 << 62)
 """A pose sequence number below any real one (NatNet frames may start at 0)."""
 
@@ -124,6 +129,27 @@ class LoopStats:
                            self.wall_s, sync)
 
 
+@contextlib.contextmanager
+def timer_slack(ns: int) -> Iterator[None]:
+    """The calling thread's timer slack set to `ns` [ns] inside the block (Linux only;
+    elsewhere, or if prctl refuses, nothing changes)."""
+    prctl = None
+    if sys.platform.startswith("linux"):
+        import ctypes
+        prctl = getattr(ctypes.CDLL(None), "prctl", None)
+    if prctl is None:
+        yield
+        return
+    PR_SET_TIMERSLACK, PR_GET_TIMERSLACK = 29, 30
+    before = prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0)
+    prctl(PR_SET_TIMERSLACK, ns, 0, 0, 0)
+    try:
+        yield
+    finally:
+        if before > 0:
+            prctl(PR_SET_TIMERSLACK, before, 0, 0, 0)
+
+
 class _Loop:
     """What both loops share: the rate, the timed tick, the statistics and the CPU meter."""
 
@@ -144,7 +170,8 @@ class _Loop:
         tick being run cannot know its own compute time yet)."""
         cpu0, wall0 = time.process_time(), time.perf_counter()
         try:
-            self._run(tick)
+            with timer_slack(TIMER_SLACK_NS):
+                self._run(tick)
         finally:
             self.stats.cpu_s += time.process_time() - cpu0
             self.stats.wall_s += time.perf_counter() - wall0

@@ -1,6 +1,6 @@
-"""`perchd bench planner [--json]`: timing figures with min/median/p99 (issue 7).
+"""`perchd bench planner|loop [--json]`: timing figures with min/median/p99 (issue 7).
 
-The loop engineer adds `perchd bench loop` as another subparser in `register` (see LOOP HERE).
+The loop figures are measured by perchd.loopbench (also `python benchmarks/loop.py`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,13 @@ def register(sub) -> None:
     p.add_argument("--repeat", type=int, default=5, help="solves per (case, order)")
     p.add_argument("--json", action="store_true", help="print one JSON list")
     p.set_defaults(run=run_planner)
-    # LOOP HERE: bench_sub.add_parser("loop", ...) with set_defaults(run=run_loop)
+    lp = bench_sub.add_parser("loop", help="control loop: 500 Hz jitter, agent compute, "
+                                            "pose-to-setpoint latency over ZMQ, CPU")
+    lp.add_argument("--seconds", type=float, default=5.0,
+                    help="[s] length of the 500 Hz run and of each ZMQ mode (default 5; "
+                         "60 for the issue's overrun figure)")
+    lp.add_argument("--json", action="store_true", help="print one JSON object")
+    lp.set_defaults(run=run_loop)
 
 
 def percentiles_ms(times_s: list[float]) -> dict:
@@ -58,4 +64,14 @@ def run_planner(args) -> int:
     for r in rows:
         print(f"{r['case']:6} {r['order']:>2} {r['duration_s']:>11.5f} {r['ratio']:>7.4f} "
               f"{r['min_ms']:>8.1f} {r['median_ms']:>10.1f} {r['p99_ms']:>8.1f}")
+    return 0
+
+
+def run_loop(args) -> int:
+    from perchd.errors import ConfigError
+    from perchd import loopbench
+    if not 0.1 <= args.seconds <= 3600:
+        raise ConfigError(f"--seconds {args.seconds:g} is outside 0.1..3600 s")
+    figures = loopbench.measure(args.seconds)
+    print(json.dumps(figures) if args.json else loopbench.text(figures))
     return 0
