@@ -28,6 +28,7 @@ TICK = 0.01
 TABLE: list[dict[str, Any]] = []
 INJECTED: list[str] = []
 """One entry per fault injected (a flight with two faults counts two)."""
+FLIGHTS = {"simulated": 0, "real time": 0}
 
 
 class Arrivals:
@@ -75,6 +76,7 @@ def fly(tmp_path: Path, *faults: Any, cfg: FlightConfig = FlightConfig(), uri: s
     arrivals = Arrivals()
     sim.world.faults.mocap[:] = [*faults, arrivals]
     INJECTED.extend(type(f).__name__ for f in faults)
+    FLIGHTS["simulated"] += 1
     if setup is not None:
         setup(sim)
     res = sim.fly(case1(strategy), tmp_path / f"{name}.jsonl", cfg,
@@ -82,9 +84,11 @@ def fly(tmp_path: Path, *faults: Any, cfg: FlightConfig = FlightConfig(), uri: s
     return Flown(sim, res, read_log(res.log), arrivals)
 
 
-def injected(*names: str) -> None:
-    """Count faults injected outside `fly` (links, signals, limits)."""
+def injected(*names: str, real_time: bool = False) -> None:
+    """Count faults injected outside `fly` (links, signals, limits); real_time: in a flight
+    of its own flown in real time."""
     INJECTED.extend(names)
+    FLIGHTS["real time"] += real_time
 
 
 def report(fault: str, detection: str, action: str, vehicle: str,
@@ -98,11 +102,13 @@ def report(fault: str, detection: str, action: str, vehicle: str,
                   "action": action, "vehicle": vehicle})
     out = os.environ.get("PERCHD_FAULT_TABLE")
     if out:
-        Path(out).write_text(json.dumps({"table": TABLE, "injected": len(INJECTED)}, indent=1))
+        Path(out).write_text(json.dumps({"table": TABLE, "injected": len(INJECTED),
+                                         "flights": FLIGHTS}, indent=1))
 
 
 def table_lines() -> list[str]:
-    lines = [f"faults injected: {len(INJECTED)}",
+    lines = [f"faults injected: {len(INJECTED)}; flights: {FLIGHTS['simulated']} simulated, "
+             f"{FLIGHTS['real time']} real time",
              "fault | detection | measured min/median/max | action | vehicle"]
     lines += [" | ".join((r["fault"], r["detection"], r["measured"] or "-", r["action"],
                           r["vehicle"])) for r in TABLE]

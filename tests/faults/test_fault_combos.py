@@ -90,12 +90,12 @@ def test_a_signal_and_stale_mocap_on_the_same_tick_end_as_signal(tmp_path):
     sim = Sim()
     sim.world.faults.mocap.append(Stop(3.0))
 
-    def on_tick(st):
-        if st.t >= 3.0 - 0.5 and st.phase is Phase.STAGE1:
+    def on_tick(st):  # the signal lands just before the tick on which mocap turns stale
+        if st.t >= 3.02 - 1e-9:
             abort.request(EndReason.SIGNAL)
     res = sim.fly(case1("ipts"), tmp_path / "f.jsonl", abort=abort, on_tick=on_tick)
     assert_failsafe_and_closed_log(sim, res, EndReason.SIGNAL)
-    assert read_log(res.log).complete
+    assert read_log(res.log).rows[-1].t == pytest.approx(3.03)  # stale from this tick too
 
 
 def test_an_overrun_streak_during_mocap_trouble_still_names_the_overrun(tmp_path):

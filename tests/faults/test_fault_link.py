@@ -171,7 +171,7 @@ def test_a_peer_that_stops_answering_is_lost_link_within_3_ticks_of_the_timeout(
         res = flight.fly(tmp_path)
     finally:
         closing(rig, relay)
-    injected("peer mute")
+    injected("peer mute", real_time=True)
     assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
     assert flight.driver.failsafe_reasons == [EndReason.LOST_LINK]
     rows, mute = read_log(res.log).rows, flight.marks["mute"]
@@ -191,7 +191,7 @@ def test_a_slow_peer_is_not_a_lost_link(tmp_path):
         res = flight.fly(tmp_path, abort_after_s=1.0)
     finally:
         closing(rig, relay)
-    injected("slow peer")
+    injected("slow peer", real_time=True)
     assert res.outcome is EndReason.OPERATOR_ABORT  # flown until the operator stopped it
     assert relay.forwarded["down"] > 20 and len(rig.peer.setpoints()) > 50
     report("link: crazyflie-udp answers 100 ms late each way", "none: answers keep the link "
@@ -212,7 +212,7 @@ def test_a_short_outage_is_ridden_out_and_a_long_one_is_lost_link_for_good(tmp_p
     finally:
         flight.close()
         closing(rig, relay)
-    injected("link blip", "link outage", "link back")
+    injected("link blip", "link outage", "link back", real_time=True)
     assert res.outcome is EndReason.LOST_LINK
     rows = read_log(res.log).rows
     assert rows[-1].t > flight.marks["pause2"]  # the first, short outage was flown through
@@ -242,7 +242,7 @@ def test_a_zmq_subscriber_that_returns_on_the_same_port_gets_no_setpoint(tmp_pat
     finally:
         flight.close()
         rig.peer.close()
-    injected("subscriber gone", "subscriber back")
+    injected("subscriber gone", "subscriber back", real_time=True)
     assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
     assert len([r for r in read_log(res.log).rows if r.t > flight.marks["die"]]) <= 3
     assert not got  # the driver, still open, sends nothing after its failsafe

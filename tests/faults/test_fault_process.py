@@ -72,7 +72,7 @@ def test_a_signal_mid_flight_ends_it_on_the_next_tick_with_the_failsafe(sig, sim
         code, out = flight.finish()
     finally:
         flight.kill()
-    injected(sig.name)
+    injected(sig.name, real_time=True)
     assert code == 1 and out["outcome"] == "SIGNAL" and out["failsafe_sent"] is True
     log = read_log(out["log"])
     assert log.complete and log.end["outcome"] == "SIGNAL"
@@ -93,7 +93,7 @@ def test_sigkill_mid_flight_leaves_a_readable_log_up_to_the_kill(sim, tmp_path):
         flight.proc.communicate(timeout=10)
     finally:
         flight.kill()
-    injected("SIGKILL")
+    injected("SIGKILL", real_time=True)
     log = read_log(tmp_path / "f.jsonl")
     assert not log.complete and log.end is None  # cut short, and says so
     assert [r.k for r in log.rows] == sorted({r.k for r in log.rows})
@@ -140,7 +140,7 @@ def test_a_loop_starved_of_cpu_ends_in_a_named_abort_with_the_failsafe(sim, tmp_
             h.kill()
             h.wait()
         flight.kill()
-    injected("CPU starvation")
+    injected("CPU starvation", real_time=True)
     assert code == 1
     reason = EndReason[out["outcome"]]
     assert reason in (EndReason.DEADLINE_OVERRUN, EndReason.STALE_MOCAP)
@@ -163,7 +163,7 @@ def test_a_busy_process_beside_the_loop_does_not_stop_a_perch(sim, tmp_path):
     finally:
         hog.kill()
         hog.wait()
-    injected("CPU contention")
+    injected("CPU contention", real_time=True)
     assert code == 0 and out["outcome"] == "CONTACT", out and out["detail"]
     loop = out["loop"]
     report("process: one busy process beside the loop", "-", "flown "
