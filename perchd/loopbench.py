@@ -13,7 +13,9 @@
    first setpoint per pose), so it includes both socket hops; the agent's own view (arrival
    to driver.send) and its CPU load (process CPU / wall time over the flight loop, all its
    threads) come from its `--json` loop summary. Perches are flown back to back until S
-   seconds have passed; one still flying then is stopped with SIGINT.
+   seconds have passed; one still flying then (and at least MIN_FLIGHT_S after its first
+   setpoint) is stopped with SIGINT.
+The load average before and after is printed: figures from a busy machine say so.
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ from perchd.loop import FixedRateLoop, spread
 
 LOOP_HZ = 500.0
 RIG_HZ = 100.0
+MIN_FLIGHT_S = 1.0
+"""[s] a flight is never interrupted sooner than this after its first setpoint."""
 
 
 def stats_us(values_s: list[float]) -> dict[str, float]:
@@ -164,14 +168,15 @@ class Rig:
         world, flight = self._world(), Flight()
         sent: dict[int, float] = {}
         answered: set[int] = set()
-        last_seq, interrupted = -1, False
+        last_seq, interrupted, first = -1, False, None
         while agent.poll() is None:
             pose = world.latest_pose()
             if pose is not None and pose.seq != last_seq:
                 sent[pose.seq], last_seq = time.monotonic(), pose.seq
                 self.pub.publish(pose)
             now = time.monotonic()
-            if now >= stop_at and not interrupted:
+            if first is not None and now >= max(stop_at, first + MIN_FLIGHT_S) \
+                    and not interrupted:
                 agent.send_signal(signal.SIGINT)
                 interrupted = True
             wait_s = max(0.0, min(world.next_arrival() - world.clock.now(), 0.05))
@@ -184,6 +189,7 @@ class Rig:
                     world.command(Setpoint.stop(world.clock.now()))
                     continue
                 _, _, sp = parse_setpoint_message(body)
+                first = arrival if first is None else first
                 if sp.pose_seq in sent and sp.pose_seq not in answered:
                     answered.add(sp.pose_seq)
                     flight.latency.append(arrival - sent[sp.pose_seq])
@@ -259,11 +265,13 @@ def measure(seconds: float) -> dict[str, Any]:
         tmp = Path(tmp_name)
         plan_file = tmp / "case1-ipts-n3.json"
         save_plan(plan, plan_file)
-        return {"seconds": seconds,
+        load = os.getloadavg()[0]
+        return {"seconds": seconds, "load_before": load,
                 "agent_compute_hot": hot_compute(plan),
                 "fixed_500hz": fixed_rate_figures(plan, seconds),
                 "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp),
-                "zmq_fixed": zmq_mode_figures(plan_file, "fixed", seconds, tmp)}
+                "zmq_fixed": zmq_mode_figures(plan_file, "fixed", seconds, tmp),
+                "load_after": os.getloadavg()[0]}
 
 
 # ------------------------------------------------------------------ report
@@ -291,7 +299,9 @@ def rows(fig: dict[str, Any]) -> list[tuple[str, dict[str, float], str]]:
 
 def text(fig: dict[str, Any]) -> str:
     f5, zm, zf = fig["fixed_500hz"], fig["zmq_mocap"], fig["zmq_fixed"]
-    out = [f"{'figure [us]':36} {'min':>8} {'median':>8} {'p99':>8} {'max':>8}   target"]
+    out = [f"load average {fig['load_before']:.2f} before, {fig['load_after']:.2f} after "
+           f"({os.cpu_count()} cores; targets are for an idle machine)",
+           f"{'figure [us]':36} {'min':>8} {'median':>8} {'p99':>8} {'max':>8}   target"]
     for name, s, target in rows(fig):
         out.append(f"{name:36} {s['min_us']:8.1f} {s['median_us']:8.1f} {s['p99_us']:8.1f} "
                    f"{s['max_us']:8.1f}   {target}")
