@@ -116,9 +116,10 @@ def config_from_dict(doc: dict[str, Any], name: str = "perchd.toml", path: str =
                           + (" (missing)" if version is None else ""))
     service = _build(ServiceConfig, doc.pop("service", {}), name, "service")
     service.peer_policy(name)  # unknown users and groups fail here, not when serving
-    flight_doc = dict(doc.pop(FLIGHT_TOP, {}) or {})
+    flight_doc = doc.pop(FLIGHT_TOP, {})
     if not isinstance(flight_doc, dict):
-        raise ConfigError(f"{name}: [{FLIGHT_TOP}] must be a table")
+        raise ConfigError(f"{name}: [{FLIGHT_TOP}] must be a table, got {flight_doc!r}"[:200])
+    flight_doc = dict(flight_doc)
     sections = {f.name for f in dataclasses.fields(FlightConfig)
                 if dataclasses.is_dataclass(_hints(FlightConfig)[f.name])}
     for key, value in doc.items():

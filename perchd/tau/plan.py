@@ -84,6 +84,9 @@ class Plan:
 
 def stage1_profile(strategy, x0, v0, c, k):
     if strategy in ("ctds", "ctdts"):
+        if c is None or not (math.isfinite(c) and c > 0):  # also keeps 1/c defined
+            raise PlanError(f"stage1.c must be a positive tau-dot (with c <= 0 the vehicle "
+                            f"never arrives), got {c!r}")
         return ConstantTauDot(x0, v0, c)
     return InversePolynomial(x0, tuple(k))
 
@@ -119,6 +122,9 @@ def make_plan(strategy: str, x0: float, v0: float, tau_s: float | None, limits: 
         t_switch = switch_time(profile, tau_s)
         v_contact = float(profile.v(t_switch))
         duration = t_switch - tau_s
+    if not (math.isfinite(duration) and 0 < t_switch <= duration):
+        raise PlanError(f"stage1: switch at {t_switch:g} s and contact at {duration:g} s "
+                        "after the trigger; both must be positive and in that order")
     peaks = Peaks(peak_abs(profile.v, t_switch), peak_abs(profile.a, t_switch))
     return Plan(strategy, x0, v0, tau_s, c, None if k is None else tuple(map(float, k)),
                 float(t_switch), float(duration), v_contact, limits, peaks, robust)

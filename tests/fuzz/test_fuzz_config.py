@@ -70,3 +70,14 @@ def test_deeply_nested_toml_is_one_config_error(tmp_path):
         assert str(err) == "deep.toml: not valid TOML: nested too deeply"
     else:
         raise AssertionError("a deeply nested config loaded")
+
+
+def test_a_flight_key_that_is_not_a_table_is_one_config_error():
+    # found by the mutation test above: `flight = true` raised TypeError, `flight = [""]` ValueError
+    for value in (True, [""], 3):
+        try:
+            config_from_dict({"version": 1, "flight": value})
+        except ConfigError as err:
+            assert str(err) == f"perchd.toml: [flight] must be a table, got {value!r}"
+        else:
+            raise AssertionError(f"flight = {value!r} loaded")

@@ -71,3 +71,15 @@ def test_deeply_nested_json_is_a_plan_error_not_a_recursion_error(tmp_path):
         assert "nested too deeply" in str(err)
     else:
         raise AssertionError("a deeply nested file loaded")
+
+
+def test_a_tau_dot_of_zero_or_below_is_a_plan_error_not_a_division_by_zero():
+    # found by the mutation test above: stage1.c = 0 raised ZeroDivisionError
+    for strategy, c in (("ctds", 0.0), ("ctdts", 0.0), ("ctdts", -0.5)):
+        doc = {**next(d for d in DOCS if d["strategy"] == strategy), "stage1": {"c": c}}
+        try:
+            plan_from_json(doc)
+        except PlanError as err:
+            assert str(err) == f"stage1.c must be a positive tau-dot (with c <= 0 the vehicle never arrives), got {c!r}"
+        else:
+            raise AssertionError(f"{strategy} with c = {c} loaded")
