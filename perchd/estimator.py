@@ -61,6 +61,7 @@ class Estimator:
         self._t = 0.0
         self._last: Pose | None = None
         self._last_p: tuple[float, float, float] | None = None
+        self._moved_t = 0.0
         self._yaw = 0.0
         self._tilt = 0.0
         self._rejects = 0
@@ -88,6 +89,9 @@ class Estimator:
         if self._last is not None and (pose.seq == self._last.seq or pose.t <= self._t):
             return False
         z = self._to_frame(pose.p)
+        if z == self._last_p and math.hypot(*self._vel) > self.cfg.min_speed_mps:
+            self.rejected += 1  # moving, yet not moved at all: a tracker re-sending a frame
+            return False
         if self._pos is None or self._is_outlier(pose, z):
             if self._pos is not None:
                 self.rejected += 1
@@ -144,6 +148,8 @@ class Estimator:
         self._period = dt if self._period is None else 0.9 * self._period + 0.1 * dt
 
     def _accept(self, pose: Pose, z: tuple[float, float, float]) -> None:
+        if z != self._last_p:
+            self._moved_t = pose.t  # measured when the position last changed
         self._rejects = 0
         self.accepted += 1
         self._last, self._last_p = pose, z
@@ -161,4 +167,5 @@ class Estimator:
         X, Xd = px + dt * vx + h * ax, vx + dt * ax
         tau = X / Xd if Xd > self.cfg.min_speed_mps else None
         return State(t, X, Xd, ax, py + dt * vy + h * ay, pz + dt * vz + h * az, vy + dt * ay,
-                     vz + dt * az, tau, self._yaw, self._tilt, t - self._last.t, self._last.seq)
+                     vz + dt * az, tau, self._yaw, self._tilt, t - self._last.t, self._last.seq,
+                     self._last.t - self._moved_t)

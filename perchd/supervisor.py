@@ -30,6 +30,14 @@ from perchd.planrefs import PlanSampler
 from perchd.types import EndReason, Phase, Setpoint, State
 
 
+FROZEN_MAX_S = 0.3
+"""[s] once the approach has begun, poses with a bit-identical position for longer than this
+are a stuck tracker re-sending its last position with fresh stamps, not a vehicle (noise
+alone moves a real measurement; a commanded vehicle moves a noiseless simulated one within
+its command latency and attitude response, well under this)."""
+_MOVING = (Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
+
+
 class FlightAbort:
     """The external abort hook: any thread (a signal handler, the control socket) calls
     request(); the supervisor ends the flight on its next tick with that reason."""
@@ -165,6 +173,9 @@ class Supervisor:
                 return EndReason.STALE_MOCAP, f"no pose in {t - self.t_start:.3f} s"
         elif arrival_age is not None and arrival_age > limit:
             return EndReason.STALE_MOCAP, f"newest pose arrived {arrival_age * 1000:.0f} ms ago"
+        elif self.phase in _MOVING and min(state.frozen_s, t - self._t_moving) > FROZEN_MAX_S:
+            return EndReason.STALE_MOCAP, (f"mocap frozen: the same position for "
+                                           f"{state.frozen_s * 1000:.0f} ms while flying")
         if not health.ok:
             return EndReason.LOST_LINK, health.detail
         if state is not None:
@@ -324,7 +335,7 @@ class Supervisor:
                          f"X = {st.x:.2f} m needs {need:.2f} m/s^2 > approach limit "
                          f"{self.cfg.approach.accel_max_mps2:g} m/s^2")
             return
-        self._a_app = need
+        self._a_app, self._t_moving = need, t
         self._enter(Phase.APPROACH, t, "", accel=need)
 
     def _approach_accel(self, st: State) -> float:

@@ -81,6 +81,8 @@ class State:
     yaw: [rad] heading of the body in the world frame.  tilt: [rad] angle of body z from up.
     age: [s] since the newest accepted pose was measured (staleness).
     pose_seq: sequence number of the newest pose used.
+    frozen_s: [s] how long the newest poses used have had a bit-identical position (0 when
+        the last one moved): a flying body never stays bit-still, a stuck tracker does.
     """
 
     t: float
@@ -96,6 +98,7 @@ class State:
     tilt: float
     age: float
     pose_seq: int
+    frozen_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -172,7 +172,11 @@ def test_an_exception_in_the_loop_still_sends_the_failsafe_and_closes_the_log(tm
 def test_a_wall_nearer_than_configured_stops_the_vehicle_short_and_the_plan_completes(tmp_path):
     from perchd.flightconfig import SurfaceConfig
     cfg = dataclasses.replace(safety(tau_error_s=100.0), surface=SurfaceConfig(point=(0.5, 0.0, 0.0)))
-    sim, res = fly(tmp_path, cfg)
+
+    def noisy(sim):  # real mocap sees a perched body jitter; bit-still reads as a frozen tracker
+        wp = sim.world.params
+        sim.world.params = dataclasses.replace(wp, mocap=dataclasses.replace(wp.mocap, noise_m=1e-4))
+    sim, res = fly(tmp_path, cfg, setup=noisy)
     assert sim.world.contact is not None  # it hit the real wall, 0.5 m before the configured one
     assert_failsafe_and_closed_log(sim, res, EndReason.PLAN_COMPLETE)
     assert "X = -0.49" in res.detail or "X = -0.50" in res.detail
