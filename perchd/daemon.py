@@ -248,6 +248,7 @@ class Daemon:
             return
         try:
             new = apply_overrides(load_config(self.config_path), self.overrides)
+            peers = new.service.peer_policy()
             if new.service.socket != self.config.service.socket:
                 say("SIGHUP: [service] socket changes only on restart; keeping "
                     f"{self.config.service.socket}")
@@ -264,7 +265,7 @@ class Daemon:
             self.notifier.status(f"{self.config.service.vehicle}: idle, reload failed: {err}")
             return
         self.config = new
-        self.server.peers = new.service.peer_policy()
+        self.server.peers = peers
         say(f"SIGHUP: reloaded {self.config_path}")
         self.notifier.status(f"{new.service.vehicle}: idle, config reloaded")
 
