@@ -16,6 +16,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -141,6 +142,25 @@ def test_another_user_in_the_sockets_group_is_refused_by_peer_credentials(served
                                     PeerPolicy.owner(gids=frozenset({0}))], indirect=True)
 def test_a_configured_user_or_group_is_let_in(served):
     assert connect_as(served.path, NOBODY, 0) == {"ok": True, "cmd": "status"}
+
+
+def test_more_clients_than_the_cap_are_refused_and_the_others_still_served(served):
+    from perchd.control_socket import MAX_CLIENTS
+
+    held = [socket.socket(socket.AF_UNIX) for _ in range(MAX_CLIENTS)]
+    try:
+        for c in held:
+            c.connect(str(served.path))
+        deadline = time.monotonic() + 5
+        while len(served.server.clients) < MAX_CLIENTS and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert connect_as(served.path, os.geteuid(), os.getegid()) == {
+            "ok": False, "error": f"{MAX_CLIENTS} clients connected already; try again"}
+        held[0].sendall(b'{"cmd": "status"}\n')
+        assert json.loads(held[0].makefile("rb").readline()) == {"ok": True, "cmd": "status"}
+    finally:
+        for c in held:
+            c.close()
 
 
 def test_allowed_users_and_groups_resolve_names_and_ids():
