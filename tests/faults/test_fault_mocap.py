@@ -89,18 +89,35 @@ def test_repeated_frames_change_nothing_at_all(tmp_path, nominal):
     assert f.res.perch_time == nominal.perch_time
 
 
-def test_a_frozen_tracker_that_restamps_its_frames_is_caught_by_the_tau_watch(tmp_path):
-    """Old position, fresh time: the frames look good, the vehicle seems to stop. Nothing
-    stale about them; the tau watch sees tau leave its reference and ends the flight."""
-    onset = 3.0
-    f = fly(tmp_path, Freeze(onset, restamp=True))
-    assert_failsafe_and_closed_log(f.sim, f.res, EndReason.TAU_DIVERGENCE)
-    took = f.end_t - onset
-    assert took <= 0.3 + 0.1  # tau_error_s plus the filter's settling
-    assert f.sim.world.contact is None
-    report("mocap: frozen position, fresh stamps (stage 1)", "tau off its reference for "
-           "tau_error_s = 0.3 s", "TAU_DIVERGENCE, failsafe", "motors off before the wall",
-           [took])
+def test_a_frozen_tracker_with_fresh_stamps_is_stale_while_the_vehicle_moves(tmp_path):
+    """Old position, fresh time: each frame looks new. A body the filter sees moving cannot
+    repeat its position to the bit, so those frames are dropped and the flight ends stale
+    3 periods later; this fault once flew the vehicle into the wall at 2.1 m/s."""
+    delays = []
+    for onset in (ONSETS["approach"], ONSETS["stage1+"], 4.1, ONSETS["stage2"]):
+        f = fly(tmp_path, Freeze(onset, restamp=True))
+        assert_failsafe_and_closed_log(f.sim, f.res, EndReason.STALE_MOCAP)
+        assert f.sim.world.contact is None
+        assert 3 * PERIOD < f.since_last_fused <= 3 * PERIOD + TICK + 1e-9
+        delays.append(f.since_last_fused)
+    report("mocap: frozen position, fresh stamps, vehicle moving", "bit-identical position "
+           "while the estimate moves: frame dropped, then > 3 periods", "STALE_MOCAP",
+           "motors off, short of the wall", delays)
+
+
+def test_a_tracker_frozen_while_hovering_is_stale_once_the_approach_should_move_it(tmp_path):
+    """Frozen during the hold the frames are believable (a hovering body), until the
+    approach has commanded motion for FROZEN_MAX_S without the position changing a bit."""
+    from perchd.supervisor import FROZEN_MAX_S
+    f = fly(tmp_path, Freeze(ONSETS["hold"], restamp=True))
+    assert_failsafe_and_closed_log(f.sim, f.res, EndReason.STALE_MOCAP)
+    assert "mocap frozen" in f.res.detail and f.sim.world.contact is None
+    approach = next(e.t for e in f.log.events if e.kind == "approach")
+    assert FROZEN_MAX_S <= f.end_t - approach <= FROZEN_MAX_S + TICK + 1e-9
+    assert f.sim.world.gap(f.sim.world.plant.p) < -4.0  # it had barely started to move
+    report("mocap: frozen position, fresh stamps, from the hold", f"position bit-identical "
+           f"for > {FROZEN_MAX_S:g} s of approach", "STALE_MOCAP ('mocap frozen')",
+           "motors off near the start point", [f.end_t - approach])
 
 
 def test_the_stale_limit_counts_mocap_frames_not_the_loop_s_polls():
@@ -115,17 +132,3 @@ def test_the_stale_limit_counts_mocap_frames_not_the_loop_s_polls():
     for k in seen:
         est.offer(Pose("cf1", k + 1, k * PERIOD, (-3.0 + 0.01 * k, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0)))
     assert est.mocap_period == pytest.approx(PERIOD, rel=1e-9)
-
-
-@pytest.mark.xfail(strict=True, reason="known gap (docs/safety.md): fresh stamps on a frozen "
-                   "position look like a hovering vehicle; nothing compares the response to "
-                   "the commands, so it flies blind to the wall")
-@pytest.mark.parametrize("onset", [0.3, 4.1], ids=["hold", "stage2"])
-def test_a_frozen_tracker_with_fresh_stamps_is_caught_before_the_wall(onset, tmp_path):
-    f = fly(tmp_path, Freeze(onset, restamp=True))
-    contact = f.sim.world.contact
-    report(f"mocap: frozen position, fresh stamps ({'hold' if onset < 1 else 'stage 2'}) "
-           "KNOWN GAP", "not detected in time" if contact else "detected",
-           f"{f.res.outcome.name} at {f.end_t:.2f} s", "hits the wall at "
-           f"{contact.speed:.1f} m/s" if contact else "stops")
-    assert contact is None or contact.speed <= 1.0 + 0.05
