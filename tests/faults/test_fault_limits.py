@@ -50,8 +50,8 @@ LIMITS = {
                                          EndReason.SPEED_LIMIT, "m/s >", SEEN + 0.05),
     "geofence X < x_min (blown back at 1 m/s)": (safety(x_min_m=-4.6), push(0, -1.0), (0.3,),
                                                  EndReason.GEOFENCE, "outside", None),
-    "geofence floor (motors weaken to 75 % of the weight)": (FlightConfig(), weaken(0.75), (0.3, 1.0),
-                                           EndReason.GEOFENCE, "below the floor", None),
+    "geofence floor (motors weaken to 75 % of the weight)": (
+        FlightConfig(), weaken(0.75), (0.3, 1.0), EndReason.GEOFENCE, "below the floor", None),
 }
 
 
@@ -124,7 +124,6 @@ def test_no_limit_is_crossed_by_a_nominal_flight(tmp_path):
 
 
 def test_tight_limits_still_name_their_reason_not_a_crash(tmp_path):
-    cfg = dataclasses.replace(safety(tilt_max_rad=math.radians(5.0)))
-    f = fly(tmp_path, cfg=cfg)
+    f = fly(tmp_path, cfg=safety(tilt_max_rad=math.radians(5.0)))
     injected("tight tilt limit")
     assert_failsafe_and_closed_log(f.sim, f.res, EndReason.TILT_LIMIT)

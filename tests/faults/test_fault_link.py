@@ -127,7 +127,8 @@ class RealFlight:
     def fly(self, tmp_path, abort_after_s: float | None = None, close: bool = True):
         if abort_after_s is not None:
             self.at_setpoint(int(abort_after_s * 100), "abort", self.abort.request)
-        threading.Thread(target=bridge, args=(self.rig, self.world, self._stop), daemon=True).start()
+        threading.Thread(target=bridge, args=(self.rig, self.world, self._stop),
+                         daemon=True).start()
         try:
             self.driver.connect()
             self.source.start()

@@ -21,7 +21,6 @@ import pytest
 
 from faultsim import TICK, fly, injected, report
 from svc import PLAN, SimProcess
-from test_aborts import assert_failsafe_and_closed_log
 from perchd.flightlog import read_log
 from perchd.types import EndReason
 

@@ -49,7 +49,8 @@ class UdpRelay:
 
     def _queue(self, way: str, data: bytes) -> None:
         with self._wake:
-            heapq.heappush(self._due, (time.monotonic() + self.delay_s, next(self._order), way, data))
+            due = time.monotonic() + self.delay_s
+            heapq.heappush(self._due, (due, next(self._order), way, data))
             self._wake.notify()
 
     def _up(self) -> None:
