@@ -14,6 +14,7 @@ from faultsim import PERIOD, TICK, fly, report
 from test_aborts import assert_failsafe_and_closed_log
 from perchd.sim.faults import (Corrupt, Freeze, Invalid, Late, Outliers, RateDrop, Reorder,
                                Repeat, Stop)
+from perchd.flightconfig import FlightConfig, LoopSync
 from perchd.types import EndReason
 
 ONSETS = {"hold": 0.3, "approach": 1.5, "stage1": 3.0, "stage1+": 3.003, "stage2": 4.2}
@@ -32,30 +33,41 @@ STALE = {
 }
 
 
+LOOPS = {
+    "fixed 100 Hz": (FlightConfig(), TICK),
+    "mocap-sync 120 Hz": (FlightConfig(sync=LoopSync.MOCAP, rate_hz=120.0), 1.5 * PERIOD),
+}
+"""The two loops (FlightConfig.sync) and the longest gap between their ticks [s]: the fixed
+loop's period; the mocap-synchronous loop ticks on every frame, or 1.5 periods without one."""
+
+
 @pytest.fixture(scope="module")
 def nominal(tmp_path_factory):
-    return fly(tmp_path_factory.mktemp("nominal")).res
+    return {loop: fly(tmp_path_factory.mktemp("nominal"), cfg=cfg).res
+            for loop, (cfg, _) in LOOPS.items()}
 
 
+@pytest.mark.parametrize("loop", LOOPS)
 @pytest.mark.parametrize("name", STALE)
 def test_a_fault_that_starves_the_estimator_is_stale_mocap_on_the_first_tick_after_3_periods(
-        name, tmp_path):
+        name, loop, tmp_path):
+    cfg, tick = LOOPS[loop]
     delays = []
     for phase, onset in ONSETS.items():
-        f = fly(tmp_path, STALE[name](onset), name=phase)
+        f = fly(tmp_path, STALE[name](onset), cfg=cfg, name=phase)
         assert_failsafe_and_closed_log(f.sim, f.res, EndReason.STALE_MOCAP)
         assert f.sim.world.contact is None
         # more than 3 periods since the newest usable frame, and at most one tick more
-        assert 3 * PERIOD < f.since_last_fused <= 3 * PERIOD + TICK + 1e-9, phase
+        assert 3 * PERIOD - 1e-9 < f.since_last_fused <= 3 * PERIOD + tick + 1e-9, phase
         delays.append(f.since_last_fused)
-    report(f"mocap: {name}", "> 3 frame periods (25 ms) without a usable frame, checked "
-           "every tick", "STALE_MOCAP, failsafe", "motors off (stop setpoint)", delays)
+    report(f"mocap: {name} ({loop} loop)", "> 3 frame periods (25 ms) without a usable frame, "
+           "checked every tick", "STALE_MOCAP, failsafe", "motors off (stop setpoint)", delays)
 
 
 def test_a_gap_of_two_frames_is_flown_through(tmp_path, nominal):
     f = fly(tmp_path, Stop(3.0, 3.0 + 2 * PERIOD))
     assert f.res.outcome is EndReason.CONTACT
-    assert f.res.contact_speed == pytest.approx(nominal.contact_speed, abs=1e-3)
+    assert f.res.contact_speed == pytest.approx(nominal["fixed 100 Hz"].contact_speed, abs=1e-3)
     report("mocap: 2 frames missing", "none needed", "estimator predicts across the gap",
            "perches")
 
@@ -72,21 +84,28 @@ def test_a_gap_of_two_frames_is_flown_through(tmp_path, nominal):
     ("inf in every 10th frame", (Corrupt(value=math.inf, every=10),)),
     ("1e12 m in every 10th frame", (Corrupt(value=1e12, every=10),)),
 ], ids=lambda v: v if isinstance(v, str) else "")
-def test_faults_within_the_estimator_s_tolerance_still_perch(name, faults, tmp_path, nominal):
-    f = fly(tmp_path, *faults)
+@pytest.mark.parametrize("loop", LOOPS)
+def test_faults_within_the_estimator_s_tolerance_still_perch(loop, name, faults, tmp_path,
+                                                             nominal, request):
+    if loop.startswith("mocap-sync") and "late" in name:
+        request.applymarker(pytest.mark.xfail(strict=True, reason=(
+            "known bug (docs/safety.md): the mocap-synchronous loop times its deadline from "
+            "the frame's claimed arrival, so frames late on the network count as loop "
+            "overruns and 10 in a row end the flight DEADLINE_OVERRUN")))
+    f = fly(tmp_path, *faults, cfg=LOOPS[loop][0])
     assert f.res.outcome is EndReason.CONTACT and not f.res.failsafe_sent
-    assert f.res.true_contact_speed == pytest.approx(nominal.true_contact_speed, abs=0.01)
-    assert f.res.contact_speed == pytest.approx(nominal.contact_speed, abs=0.01)
+    assert f.res.true_contact_speed == pytest.approx(nominal[loop].true_contact_speed, abs=0.01)
+    assert f.res.contact_speed == pytest.approx(nominal[loop].contact_speed, abs=0.01)
     seqs = [r.pose_seq for r in f.log.rows if r.pose_seq >= 0]
     assert seqs == sorted(seqs)  # an older frame never replaced a newer one
-    report(f"mocap: {name}", "per frame (dropped: older, same seq, non-finite, or a jump "
-           "> 10 m/s)", "frame ignored; the filter predicts", "perches")
+    report(f"mocap: {name} ({loop} loop)", "per frame (dropped: older, same seq, non-finite, "
+           "or a jump > 10 m/s)", "frame ignored; the filter predicts", "perches")
 
 
 def test_repeated_frames_change_nothing_at_all(tmp_path, nominal):
     f = fly(tmp_path, Repeat(times=3))
-    assert f.res.contact_speed == nominal.contact_speed
-    assert f.res.perch_time == nominal.perch_time
+    assert f.res.contact_speed == nominal["fixed 100 Hz"].contact_speed
+    assert f.res.perch_time == nominal["fixed 100 Hz"].perch_time
 
 
 def test_a_frozen_tracker_with_fresh_stamps_is_stale_while_the_vehicle_moves(tmp_path):
