@@ -151,9 +151,11 @@ def crazyflie(timeout: float, relay_delay: float | None = None):
     return rig, relay, f"udp://127.0.0.1:{port}?timeout={timeout}"
 
 
-def mavlink(timeout: float):
+def mavlink(timeout: float, relay_delay: float | None = None):
     rig = MavlinkRig()
-    return rig, None, f"mavlink:udpout:127.0.0.1:{rig.peer.port}?mass={MASS}&timeout={timeout}"
+    relay = None if relay_delay is None else UdpRelay(rig.peer.port, relay_delay)
+    port = rig.peer.port if relay is None else relay.port
+    return rig, relay, f"mavlink:udpout:127.0.0.1:{port}?mass={MASS}&timeout={timeout}"
 
 
 def closing(rig, relay):
@@ -185,8 +187,9 @@ def test_a_peer_that_stops_answering_is_lost_link_within_3_ticks_of_the_timeout(
            "stop sent (Crazyflie: stop setpoint; MAVLink: LAND)", [rows[-1].t - mute])
 
 
-def test_a_slow_peer_is_not_a_lost_link(tmp_path):
-    rig, relay, uri = crazyflie(timeout=0.5, relay_delay=0.1)
+@pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
+def test_a_slow_peer_is_not_a_lost_link(make, tmp_path):
+    rig, relay, uri = make(timeout=0.5, relay_delay=0.1)
     flight = RealFlight(rig, uri)
     try:
         res = flight.fly(tmp_path, abort_after_s=1.0)
@@ -194,35 +197,62 @@ def test_a_slow_peer_is_not_a_lost_link(tmp_path):
         closing(rig, relay)
     injected("slow peer", real_time=True)
     assert res.outcome is EndReason.OPERATOR_ABORT  # flown until the operator stopped it
-    assert relay.forwarded["down"] > 20 and len(rig.peer.setpoints()) > 50
-    report("link: crazyflie-udp answers 100 ms late each way", "none: answers keep the link "
-           "alive (a silence rule, not a latency rule)", "flown", "flies on")
+    assert relay.forwarded["down"] > 20 and relay.forwarded["up"] > 50
+    assert rig.commanded() is not None  # the vehicle got the (late) setpoints
+    report(f"link: {make.__name__} peer answers 100 ms late each way", "none: answers keep "
+           "the link alive (a silence rule, not a latency rule)", "flown", "flies on")
 
 
-def test_a_short_outage_is_ridden_out_and_a_long_one_is_lost_link_for_good(tmp_path):
-    rig, relay, uri = crazyflie(timeout=0.1, relay_delay=0.0)
+def thrust_after(rig, since: float) -> list[float]:
+    """[N or normalised] thrust the vehicle received after `since` (monotonic)."""
+    if isinstance(rig, CrazyflieRig):
+        return [s.thrust for s in rig.peer.setpoints() if s.t > since]
+    return [t.thrust for t in rig.peer.targets if t.t > since]
+
+
+def outage_then_back(make, tmp_path):
+    """A 30 ms outage (shorter than the 0.15 s timeout), later one that lasts, and the link
+    back 0.3 s after the abort, the driver still open. Returns (rig, result, marks, ended)."""
+    rig, relay, uri = make(timeout=0.15, relay_delay=0.0)
     flight = RealFlight(rig, uri)
     blip = lambda: (relay.pause(), threading.Timer(0.03, relay.resume).start())  # noqa: E731
-    flight.at_setpoint(30, "pause1", blip)  # 30 ms: less than the timeout
+    flight.at_setpoint(30, "pause1", blip)
     flight.at_setpoint(60, "pause2", relay.pause)
     try:
         res = flight.fly(tmp_path, close=False)
-        stopped = time.monotonic()
-        relay.resume()  # the link comes back after the abort, the driver still open
-        time.sleep(0.15)
+        ended = time.monotonic()
+        relay.resume()
+        time.sleep(0.3)
     finally:
         flight.close()
         closing(rig, relay)
     injected("link blip", "link outage", "link back", real_time=True)
-    assert res.outcome is EndReason.LOST_LINK
+    return rig, res, flight.marks, ended
+
+
+@pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
+def test_a_short_outage_is_ridden_out_and_a_long_one_is_lost_link_for_good(make, tmp_path):
+    rig, res, marks, ended = outage_then_back(make, tmp_path)
+    assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
     rows = read_log(res.log).rows
-    assert rows[-1].t > flight.marks["pause2"]  # the first, short outage was flown through
-    after = [s for s in rig.peer.setpoints() if s.t > stopped]
-    assert all(s.thrust == 0 for s in after)  # back, and the vehicle gets no thrust
-    report("link: crazyflie-udp outage shorter than the timeout", "-", "flown", "flies on")
-    report("link: crazyflie-udp outage longer than the timeout, then back", "silent > "
-           "timeout (0.1 s)", "LOST_LINK, failsafe latched", "stop; no thrust after the "
-           "link returns", [rows[-1].t - flight.marks["pause2"]])
+    assert rows[-1].t > marks["pause2"]  # the first, short outage was flown through
+    assert all(t == 0 for t in thrust_after(rig, ended))  # back, and no thrust
+    report(f"link: {make.__name__} outage of 30 ms (< timeout)", "-", "flown", "flies on")
+    report(f"link: {make.__name__} outage longer than the timeout, then back", "silent > "
+           "timeout (0.15 s)", "LOST_LINK, failsafe latched", "no thrust after the link "
+           "returns", [rows[-1].t - marks["pause2"]])
+
+
+@pytest.mark.xfail(strict=True, reason="known gap (docs/safety.md): a failsafe sent while the "
+                   "link is down is lost, and not repeated when the link returns")
+@pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
+def test_a_failsafe_sent_into_a_dead_link_reaches_the_vehicle_when_it_returns(make, tmp_path):
+    rig, res, marks, ended = outage_then_back(make, tmp_path)
+    assert res.outcome is EndReason.LOST_LINK
+    report(f"link: {make.__name__} failsafe sent while the link is down KNOWN GAP",
+           "-", "stop/LAND lost, not repeated when the link returns",
+           "its own watchdog (Crazyflie firmware, autopilot GUIDED timeout)")
+    assert rig.stopped()
 
 
 def test_a_zmq_subscriber_that_returns_on_the_same_port_gets_no_setpoint(tmp_path):
