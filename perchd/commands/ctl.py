@@ -19,7 +19,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--socket", default=DEFAULT_SOCKET, help=f"control socket (default {DEFAULT_SOCKET})")
     sub = p.add_subparsers(dest="cmd", required=True)
     fly = sub.add_parser("fly", help="start a flight along a plan file")
-    fly.add_argument("plan", help="plan file: a path here, or a name in the service's plan_dir")
+    fly.add_argument("plan", help="plan file inside the service's plan_dir: a name there, or a path under it")
     fly.add_argument("--wait", action="store_true", help="wait for the flight to end; print its outcome")
     sub.add_parser("abort", help="abort the flight (failsafe), or make an idle vehicle safe")
     sub.add_parser("status", help="the service's state and the flight in progress")
