@@ -102,31 +102,9 @@ def realtime_jitter(logdir: Path) -> dict:
 
 def agent_tick_us(n: int = 5000) -> dict:
     """The agent's own work per tick, no simulator: estimator update and prediction, then
-    supervisor + controller in stage 1 (median and p99 over n ticks) [us]."""
-    from perchd.drivers.base import LinkHealth
-    from perchd.estimator import Estimator
-    from perchd.flightconfig import FlightConfig
-    from perchd.perchframe import PerchFrame
-    from perchd.supervisor import Supervisor
-    from perchd.types import Pose
-    cfg, plan = FlightConfig(), case1("ipts")
-    frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
-    ok, times = LinkHealth(True), []
-    while len(times) < n:  # synthetic 4 s flights: accelerate to the trigger, then coast
-        est, sup = Estimator(cfg.estimator, frame), Supervisor(plan, cfg, frame)
-        for k in range(400):
-            t = k * 0.01
-            x = -4.5 + 0.375 * t * t if t < 2.0 else -3.0 + 1.5 * (t - 2.0)
-            w0 = time.perf_counter()
-            est.offer(Pose("cf1", k + 1, t - 0.004, (x, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), True,
-                           0.004))
-            rep = sup.tick(t, est.state(t), ok, 0, None, est.mocap_period, 0.004)
-            times.append(time.perf_counter() - w0)
-            if rep.end is not None:
-                break
-    times = sorted(times)
-    return {"ticks": len(times), "median_us": 1e6 * statistics.median(times),
-            "p99_us": 1e6 * times[int(0.99 * (len(times) - 1))]}
+    supervisor + controller, over synthetic perches back to back (perchd.loopbench) [us]."""
+    from perchd.loopbench import hot_compute
+    return hot_compute(case1("ipts"), n)
 
 
 def _loop_p99(logdir: Path) -> float:

@@ -14,7 +14,10 @@
    to driver.send) and its CPU load (process CPU / wall time over the flight loop, all its
    threads) come from its `--json` loop summary. Perches are flown back to back until S
    seconds have passed; one still flying then (and at least MIN_FLIGHT_S after its first
-   setpoint) is stopped with SIGINT.
+   setpoint) is stopped with SIGINT. The same rig and sockets with the agent replaced by an
+   echo (each pose's seq sent straight back as a setpoint: `python -m perchd.loopbench echo`)
+   give the sockets' own share, so what the agent adds is the difference.
+4. The machine's own wake-up tail: the 500 Hz loop with an empty tick (at most 20 s).
 The load average before and after is printed: figures from a busy machine say so.
 """
 
@@ -115,6 +118,16 @@ def fixed_rate_figures(plan: Any, seconds: float) -> dict[str, Any]:
             "cpu_fraction": stats.cpu_s / stats.wall_s}
 
 
+def idle_loop_figures(seconds: float) -> dict[str, Any]:
+    """The 500 Hz loop with nothing to do: what the machine's scheduler alone costs."""
+    from perchd.clock import MonotonicClock
+    loop = FixedRateLoop(MonotonicClock(), LOOP_HZ)
+    end = time.monotonic() + seconds
+    stats = loop.run(lambda k, t: t < end)
+    return {"seconds": stats.wall_s, "ticks": len(stats.jitter), "overruns": stats.overruns,
+            "missed": stats.missed, "lateness": stats_us(stats.jitter)}
+
+
 def hot_compute(plan: Any, ticks: int = 5000) -> dict[str, Any]:
     """The agent's tick back to back (what an in-process simulated flight measures)."""
     agent = SyntheticAgent(plan, RIG_HZ)
@@ -201,6 +214,10 @@ class Rig:
 
 def _agent(plan_file: Path, rig: Rig, sync: str, rate_hz: float, tmp: Path,
            n: int) -> subprocess.Popen:
+    if sync == "echo":
+        cmd = [sys.executable, "-m", "perchd.loopbench", "echo", rig.mocap_uri, rig.driver_uri]
+        return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                text=True)
     config = tmp / f"{sync}.toml"
     config.write_text(f'version = 1\n[flight]\nsync = "{sync}"\nrate_hz = {rate_hz}\n')
     cmd = [sys.executable, "-m", "perchd", "fly", str(plan_file), "--driver", rig.driver_uri,
@@ -212,7 +229,7 @@ def _agent(plan_file: Path, rig: Rig, sync: str, rate_hz: float, tmp: Path,
 
 def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path) -> dict[str, Any]:
     """Fly perches back to back over ZMQ in one loop mode for `seconds` (at least one)."""
-    mocap_hz = RIG_HZ if sync == "mocap" else 120.0
+    mocap_hz = 120.0 if sync == "fixed" else RIG_HZ
     rig = Rig(mocap_hz)
     flights: list[Flight] = []
     end = time.monotonic() + seconds
@@ -238,6 +255,33 @@ def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path) -> d
             "jitter": _loop_us(loops, "jitter"),
             "overruns": sum(lp["overruns"] for lp in loops),
             "cpu_fraction": _weighted_cpu(loops)}
+
+
+def echo(mocap_uri: str, driver_uri: str) -> None:
+    """Send each pose's seq straight back as a hover setpoint until SIGINT (no agent work)."""
+    from perchd.drivers.base import open_driver
+    from perchd.flightconfig import VehicleConfig
+    from perchd.loop import NO_SEQ
+    from perchd.mocap.base import open_source
+    from perchd.runtime import Runtime
+    from perchd.types import Phase, Setpoint
+    rt = Runtime.real()
+    source, driver = open_source(mocap_uri, rt), open_driver(driver_uri, rt)
+    hover = VehicleConfig().mass_kg * VehicleConfig().g
+    source.start()
+    driver.connect()
+    seq = NO_SEQ
+    try:
+        while True:
+            pose = source.wait(seq, 0.1)
+            if pose is not None:
+                seq = pose.seq
+                driver.send(Setpoint(pose.t, 0.0, 0.0, 0.0, hover, seq, Phase.HOLD))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        driver.close()
+        source.close()
 
 
 def _loop_us(loops: list[dict], name: str) -> dict[str, float]:
@@ -271,6 +315,8 @@ def measure(seconds: float) -> dict[str, Any]:
                 "fixed_500hz": fixed_rate_figures(plan, seconds),
                 "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp),
                 "zmq_fixed": zmq_mode_figures(plan_file, "fixed", seconds, tmp),
+                "zmq_echo": zmq_mode_figures(plan_file, "echo", min(seconds, 20.0), tmp),
+                "idle_500hz": idle_loop_figures(min(seconds, 20.0)),
                 "load_after": os.getloadavg()[0]}
 
 
@@ -294,6 +340,8 @@ def rows(fig: dict[str, Any]) -> list[tuple[str, dict[str, float], str]]:
         ("latency mocap-sync, in agent", zm["latency_agent"], ""),
         ("latency fixed 100 Hz, sockets", zf["latency_sockets"], TARGETS["latency_fixed"]),
         ("latency fixed 100 Hz, in agent", zf["latency_agent"], ""),
+        ("latency floor: echo, sockets", fig["zmq_echo"]["latency_sockets"], ""),
+        ("500 Hz loop, empty tick: lateness", fig["idle_500hz"]["lateness"], ""),
     ]
 
 
@@ -308,9 +356,18 @@ def text(fig: dict[str, Any]) -> str:
     out.append(f"500 Hz loop: {f5['ticks']} ticks in {f5['seconds']:.1f} s, {f5['overruns']} "
                f"overruns, {f5['missed']} missed deadlines (target 0), "
                f"CPU {100 * f5['cpu_fraction']:.1f} % of a core")
+    idle = fig["idle_500hz"]
+    out.append(f"500 Hz loop with an empty tick: {idle['ticks']} ticks in {idle['seconds']:.1f} "
+               f"s, {idle['overruns']} overruns (the machine's own wake-up tail)")
     for z in (zm, zf):
         out.append(f"ZMQ {z['sync']:5} {z['rate_hz']:g} Hz loop, {z['mocap_hz']:g} Hz mocap: "
                    f"{z['flights']} flight(s) {', '.join(map(str, z['outcomes']))}; "
                    f"{z['setpoints_matched']} poses matched; {z['overruns']} overruns; agent "
                    f"CPU {100 * z['cpu_fraction']:.1f} % of a core (target <= 10 %)")
     return "\n".join(out)
+
+
+if __name__ == "__main__":  # the echo agent: python -m perchd.loopbench echo MOCAP DRIVER
+    if sys.argv[1:2] != ["echo"] or len(sys.argv) != 4:
+        sys.exit("usage: python -m perchd.loopbench echo MOCAP_URI DRIVER_URI")
+    echo(sys.argv[2], sys.argv[3])

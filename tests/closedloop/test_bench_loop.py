@@ -28,7 +28,7 @@ def test_a_short_json_run_has_every_figure_and_they_come_from_real_runs():
     assert out.returncode == 0, out.stderr
     fig = json.loads(out.stdout)
     assert set(fig) == {"seconds", "load_before", "agent_compute_hot", "fixed_500hz",
-                        "zmq_mocap", "zmq_fixed", "load_after"}
+                        "zmq_mocap", "zmq_fixed", "zmq_echo", "idle_500hz", "load_after"}
     assert fig["seconds"] == 0.4
 
     f5 = fig["fixed_500hz"]
@@ -55,6 +55,15 @@ def test_a_short_json_run_has_every_figure_and_they_come_from_real_runs():
         assert z["latency_sockets"]["min_us"] > z["latency_agent"]["min_us"] > 0.0
         assert 0.0 < z["cpu_fraction"] < 1.0
 
+    echo = fig["zmq_echo"]  # the sockets alone: an echo, not an agent, so no loop summary
+    assert echo["sync"] == "echo" and echo["setpoints_matched"] >= 50
+    assert_spread(echo["latency_sockets"])
+    assert echo["outcomes"] == [None] * echo["flights"] and echo["cpu_fraction"] == 0.0
+
+    idle = fig["idle_500hz"]
+    assert_spread(idle["lateness"])
+    assert idle["ticks"] + idle["missed"] == pytest.approx(500 * idle["seconds"], abs=3)
+
 
 def test_the_text_report_names_each_figure_and_its_target():
     from perchd.loopbench import rows, text
@@ -67,7 +76,9 @@ def test_the_text_report_names_each_figure_and_its_target():
            "fixed_500hz": {"lateness": s, "period_deviation": s, "agent_compute": s,
                            "ticks": 2500, "seconds": 5.0, "overruns": 0, "missed": 0,
                            "cpu_fraction": 0.04},
-           "zmq_mocap": z, "zmq_fixed": {**z, "sync": "fixed", "mocap_hz": 120.0}}
+           "zmq_mocap": z, "zmq_fixed": {**z, "sync": "fixed", "mocap_hz": 120.0},
+           "zmq_echo": {**z, "sync": "echo"},
+           "idle_500hz": {"lateness": s, "ticks": 2500, "seconds": 5.0, "overruns": 0}}
     report = text(fig)
     for name, _, target in rows(fig):
         assert f"{name}" in report and target in report
