@@ -16,11 +16,10 @@ import zmq
 
 from caseplans import case1_ipts
 from faultsim import TICK, fly, injected, report
-from rigs import MASS, CrazyflieRig, MavlinkRig
+from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig
 from test_aborts import TRIGGER_T, assert_failsafe_and_closed_log
 from test_lost_link_flight import bridge
 from udp_relay import UdpRelay
-from zmq_subscriber import SetpointSubscriber
 from perchd.drivers.base import open_driver
 from perchd.flight import FlightAbort, fly as fly_real
 from perchd.flightlog import read_log
@@ -263,11 +262,8 @@ def test_a_failsafe_sent_into_a_dead_link_reaches_the_vehicle_when_it_returns(ma
 
 
 def test_a_zmq_subscriber_that_returns_on_the_same_port_gets_no_setpoint(tmp_path):
-    rig = type("ZmqPeer", (), {})()
-    rig.peer = SetpointSubscriber()
-    rig.commanded = lambda: (lambda s: (s[-1]["roll"], s[-1]["pitch"], s[-1]["thrust"])
-                             if s else None)(rig.peer.of("setpoint"))
-    flight = RealFlight(rig, rig.peer.uri)
+    rig = ZmqRig()
+    flight = RealFlight(rig, rig.uri)
     flight.at_setpoint(30, "die", rig.peer.die)
     try:
         res = flight.fly(tmp_path, close=False)
