@@ -43,6 +43,10 @@ KEEPALIVE_S = 0.1
 """[s] silence after which the keep-alive re-sends (the firmware levels at 0.5 s, cuts at 2 s)."""
 PING_S = 0.02
 """[s] period of CRTP link-echo pings, the proof of life on links without acks (udp)."""
+FAILSAFE_REPEAT_S = 3.0
+"""[s] after failsafe() the stop goes out again with every ping for this long (or until
+close()): one sent into a dead link is lost, and a link back within this window still
+delivers it. Past it the firmware has cut the motors itself (2 s without a setpoint)."""
 K_YAW = 2.0
 """[1/s] yaw-rate gain on the yaw error when a measured yaw is known."""
 YAW_RATE_MAX = 90.0
@@ -124,6 +128,8 @@ class CrazyflieDriver(DriverBase):
         self._last_cmd = (0.0, 0.0, 0.0, 0)  # (roll deg, pitch deg, yawrate deg/s, units)
         self._yaw: float | None = None
         self._stopped = False
+        self._stop_until = 0.0  # time.monotonic() until which the stop is repeated
+        self._wire = threading.Lock()  # "stopped?" and the send that follows, as one step
         self.failsafe_reasons: list[EndReason] = []
 
     # -- Driver protocol ---------------------------------------------------------------
@@ -152,7 +158,10 @@ class CrazyflieDriver(DriverBase):
     def send(self, setpoint: Setpoint) -> None:
         if self._stopped or self._port is None:
             return  # after a failsafe nothing may re-arm thrust
-        self._send_cmd(self.command(setpoint))
+        cmd = self.command(setpoint)
+        with self._wire:
+            if not self._stopped:  # a failsafe from another thread may have come between
+                self._send_cmd(cmd)
 
     def failsafe(self, reason: EndReason) -> None:
         self.failsafe_reasons.append(reason)
@@ -202,11 +211,13 @@ class CrazyflieDriver(DriverBase):
         self._commander.send_setpoint(*cmd)
 
     def _stop(self) -> None:
-        self._stopped = True
-        if self._commander is not None:
-            # twice: on udp a pending ICMP error from an earlier datagram eats one send
-            for _ in range(2):
-                self._commander.send_stop_setpoint()
+        with self._wire:  # no keep-alive setpoint can follow the stop
+            self._stop_until = time.monotonic() + FAILSAFE_REPEAT_S
+            self._stopped = True
+            if self._commander is not None:
+                # twice: on udp a pending ICMP error from an earlier datagram eats one send
+                for _ in range(2):
+                    self._commander.send_stop_setpoint()
 
     def _ping(self) -> None:
         from cflib.crtp.crtpstack import CRTPPacket
@@ -235,11 +246,18 @@ class CrazyflieDriver(DriverBase):
 
     def _keepalive(self) -> None:
         """Ping, and never let KEEPALIVE_S pass without a setpoint: a stalled loop gets the
-        last thrust, levelled (a held tilt would keep accelerating the vehicle at the wall)."""
+        last thrust, levelled (a held tilt would keep accelerating the vehicle at the wall).
+        After a failsafe, repeat the stop (FAILSAFE_REPEAT_S) so a link back delivers it."""
         self._ping()
-        if (not self._stopped and self._commander is not None
-                and time.monotonic() - self._last_sent >= KEEPALIVE_S):
-            self._send_cmd((0.0, 0.0, 0.0, self._last_cmd[3]))
+        with self._wire:
+            now = time.monotonic()
+            if self._commander is None:
+                return
+            if self._stopped:
+                if now < self._stop_until:
+                    self._commander.send_stop_setpoint()
+            elif now - self._last_sent >= KEEPALIVE_S:
+                self._send_cmd((0.0, 0.0, 0.0, self._last_cmd[3]))
 
     def _close_link(self) -> None:
         for ticker in self._tickers:

@@ -44,6 +44,12 @@ KEEPALIVE_S = 0.1
 OFFBOARD after COM_OF_LOSS_T = 0.5 s without one; ArduPilot levels after 1 s)."""
 PX4_PRESTREAM_S = 1.2
 """[s] setpoints streamed before asking PX4 for OFFBOARD (it wants > 1 s of them)."""
+LAND_RETRY_S = 0.25
+"""[s] after failsafe() LAND is commanded again this often until a heartbeat shows the
+vehicle took it: a command sent into a dead link is lost, a link back still delivers it."""
+FAILSAFE_REPEAT_S = 10.0
+"""[s] at most this long (or until close()); ArduPilot's GUIDED timeout only levels the
+vehicle, so it is worth landing it well after its own watchdog has acted."""
 GUIDED_THRUST_BIT = 8
 """ArduPilot GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET thrust is thrust, not climb rate."""
 
@@ -154,6 +160,9 @@ class MavlinkDriver(DriverBase):
         self._last_sent = 0.0
         self._last_heartbeat = 0.0
         self._stopped = False
+        self._land_until = 0.0  # time.monotonic() until which LAND is repeated
+        self._land_sent = 0.0
+        self._armed_at_land = False
         self.failsafe_reasons: list[EndReason] = []
 
     # -- Driver protocol ---------------------------------------------------------------
@@ -275,7 +284,8 @@ class MavlinkDriver(DriverBase):
                 boot_ms, *self._target, IGNORE_BODY_RATES, list(q), 0.0, 0.0, 0.0, thrust)
 
     def _keepalive(self) -> None:
-        """Heartbeat at 2 Hz; repeat the last attitude target, levelled, if the loop is silent."""
+        """Heartbeat at 2 Hz; repeat the last attitude target, levelled, if the loop is silent;
+        after a failsafe, LAND every LAND_RETRY_S until the vehicle takes it."""
         now = time.monotonic()
         if now - self._last_heartbeat >= HEARTBEAT_S:
             self._last_heartbeat = now
@@ -283,15 +293,30 @@ class MavlinkDriver(DriverBase):
                 self._conn.mav.heartbeat_send(18, 8, 0, 0, 4)  # onboard controller, no autopilot, active
         if not self._stopped and self._last_target and now - self._last_sent >= KEEPALIVE_S:
             self._send_target((1.0, 0.0, 0.0, 0.0), self._last_target[1])
+        if (self._stopped and now < self._land_until and now - self._land_sent >= LAND_RETRY_S
+                and not self._land_taken()):
+            self._command_land(repeats=1)
 
     def _land(self) -> None:
-        """Stop streaming and hand the vehicle to the autopilot's own landing mode."""
+        """Stop streaming and hand the vehicle to the autopilot's own landing mode; the
+        keep-alive repeats the command until the vehicle shows it took it."""
         self._stopped = True
         if self._conn is None or self.autopilot is None:
             return
+        self._armed_at_land = self._armed
+        self._land_until = time.monotonic() + FAILSAFE_REPEAT_S
+        self._command_land(repeats=2)  # UDP: a lost command would leave the vehicle hovering
+
+    def _command_land(self, repeats: int) -> None:
+        self._land_sent = time.monotonic()
         main_sub = PX4_AUTO_LAND if self.autopilot == PX4 else (ARDUPILOT_LAND, 0)
-        for _ in range(2):  # UDP: a lost command would leave the vehicle hovering
+        for _ in range(repeats):
             self._set_mode(*main_sub)
+
+    def _land_taken(self) -> bool:
+        """The vehicle's heartbeat shows it no longer flies our setpoints: it left the mode
+        we flew in (LAND, or a mode the pilot or its own failsafe chose), or disarmed."""
+        return self._mode != self._flight_mode or (self._armed_at_land and not self._armed)
 
     # -- receiving ---------------------------------------------------------------------
     def _receive(self) -> None:

@@ -10,7 +10,7 @@ It behaves like the slice of ArduPilot or PX4 the driver talks to:
 - COMMAND_LONG COMPONENT_ARM_DISARM (400), SET_MESSAGE_INTERVAL (511) for ATTITUDE,
   both acknowledged; ATTITUDE is then streamed at the asked rate;
 - SET_ATTITUDE_TARGET recorded with its arrival time.
-mute() stops all sending (a hung autopilot); die() closes the socket.
+mute() stops all sending (a hung autopilot), unmute() resumes it; die() closes the socket.
 """
 
 from __future__ import annotations
@@ -135,6 +135,9 @@ class VehicleDouble:
 
     def mute(self) -> None:
         self._sending = False
+
+    def unmute(self) -> None:
+        self._sending = True
 
     def die(self) -> None:
         if self._alive:

@@ -11,7 +11,9 @@ import pytest
 
 from crtp_responder import STOP, CrtpResponder
 from ticks import level, ticks_until_lost
+from perchd.drivers import crazyflie
 from perchd.drivers.base import open_driver
+from perchd.drivers.crazyflie import PING_S
 from perchd.drivers.thrust import CrazyflieThrust
 from perchd.errors import LinkError, MissingExtraError, UriError
 from perchd.runtime import Runtime
@@ -134,8 +136,35 @@ def test_failsafe_sends_the_stop_setpoint_and_nothing_after_it(responder, cf):
     cf.send(level(HOVER_N))  # dropped: nothing re-arms thrust after a failsafe
     time.sleep(0.3)
     stops = responder.stops()
-    assert len(stops) == 4  # each failsafe sends the stop twice
+    assert len(stops) >= 4  # each failsafe sends the stop twice, then the repeats
     assert all(s.t < stops[0].t for s in responder.setpoints())
+
+
+def test_the_stop_is_repeated_at_the_ping_rate_until_close(responder, cf):
+    """A stop sent into a dead link is lost: the driver keeps sending it, so a link that
+    comes back delivers it (tests/faults: the relay's outage)."""
+    cf.failsafe(EndReason.LOST_LINK)
+    time.sleep(0.5)
+    first = len(responder.stops())
+    gaps = [b.t - a.t for a, b in zip(responder.stops()[2:], responder.stops()[3:])]
+    assert first >= 2 + 0.5 / PING_S * 0.5  # at least half the ping rate on a shared CPU
+    assert max(gaps) < 5 * PING_S
+    cf.close()
+    time.sleep(0.1)
+    closed = len(responder.stops())
+    time.sleep(0.2)
+    assert len(responder.stops()) == closed  # close() ends the repeats
+
+
+def test_the_stop_repeats_end_after_their_window(responder, monkeypatch):
+    monkeypatch.setattr(crazyflie, "FAILSAFE_REPEAT_S", 0.2)
+    with open_driver(responder.uri, Runtime.real()) as cf:
+        cf.failsafe(EndReason.LOST_LINK)
+        time.sleep(0.35)
+        ended = len(responder.stops())
+        time.sleep(0.2)
+        assert len(responder.stops()) == ended
+        assert 2 + 0.2 / PING_S * 0.5 <= ended <= 2 + 0.2 / PING_S + 1
 
 
 def test_closing_a_flying_driver_stops_the_motors(responder):

@@ -227,6 +227,7 @@ def outage_then_back(make, tmp_path, blip: bool = True):
         res = flight.fly(tmp_path, close=False)
         ended = time.monotonic()
         time.sleep(0.1)  # what was sent while the link was down is lost, not late
+        flight.marks["resume"] = time.monotonic()
         relay.resume()
         time.sleep(0.3)
     finally:
@@ -249,16 +250,26 @@ def test_a_short_outage_is_ridden_out_and_a_long_one_is_lost_link_for_good(make,
            "link returns", [rows[-1].t - marks["pause2"]])
 
 
-@pytest.mark.xfail(strict=True, reason="known gap (docs/safety.md): a failsafe sent while the "
-                   "link is down is lost, and not repeated when the link returns")
+def stops_heard(rig) -> list[float]:
+    """[s] time.monotonic() of each stop the vehicle heard (stop setpoint, LAND mode)."""
+    if isinstance(rig, CrazyflieRig):
+        return [d.t for d in rig.peer.stops()]
+    return [t for t, mode in rig.peer.modes if mode == 9]  # ARDUPILOT_LAND
+
+
 @pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
 def test_a_failsafe_sent_into_a_dead_link_reaches_the_vehicle_when_it_returns(make, tmp_path):
     rig, res, marks, ended = outage_then_back(make, tmp_path, blip=False)
-    assert res.outcome is EndReason.LOST_LINK
-    report(f"link: {make.__name__} failsafe sent while the link is down KNOWN GAP",
-           "-", "stop/LAND lost, not repeated when the link returns",
-           "its own watchdog (Crazyflie firmware, autopilot GUIDED timeout)")
+    assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
+    heard = stops_heard(rig)
+    assert heard and min(heard) > marks["resume"]  # the first stop went into the dead link
+    first = min(heard) - marks["resume"]
     assert rig.stopped()
+    assert all(t == 0 for t in thrust_after(rig, ended))  # and thrust never came back
+    report(f"link: {make.__name__} failsafe sent while the link is down, link back",
+           "-", "failsafe repeated (Crazyflie: stop every 20 ms for 3 s; MAVLink: LAND "
+           "every 0.25 s until a heartbeat shows it taken, 10 s at most)",
+           f"stop/LAND heard {1e3 * first:.0f} ms after the link is back")
 
 
 def test_a_zmq_subscriber_that_returns_on_the_same_port_gets_no_setpoint(tmp_path):
