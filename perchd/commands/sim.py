@@ -3,12 +3,17 @@
     perchd sim --pose-out natnet://127.0.0.1[:PORT] | zmq://127.0.0.1:5555
                --setpoint-in zmq://127.0.0.1:5556 [--body cf1] [--start X Y Z]
                [--latency S] [--noise M] [--surface X Y Z] [--normal NX NY NZ]
-               [--duration S] [--exit-on-stop] [--json]
+               [--watchdog LEVEL_S CUT_S] [--duration S] [--exit-on-stop] [--json]
 
 The simulated world (perchd.sim.world) runs in real time. Poses go out at the mocap rate
 through a NatNet server emulator or a ZMQ publisher (perchd.mocap.outputs); setpoints come
 in on a ZMQ SUB socket bound at --setpoint-in (CONTRACTS 3 topics `setpoint` and `stop`),
 which `perchd fly --driver zmq://...` connects to. A `stop` cuts the motors.
+
+The vehicle has the Crazyflie firmware's setpoint watchdog (perchd.sim.watchdog): once
+setpoints have come, LEVEL_S (0.5 s) without one levels it out at its last thrust and
+CUT_S (2 s) cuts the motors and locks the thrust until a zero-thrust setpoint; so an agent
+killed mid-flight leaves a vehicle that comes down, as a real one would.
 
 Port 0 picks a free port. Once serving, one line on stderr says where:
     perchd sim: ready: mocap <URI for perchd fly --mocap> driver <URI for --driver>
@@ -23,14 +28,18 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from perchd.errors import LinkError, UriError
+
+if TYPE_CHECKING:
+    from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
 
 STOP_GRACE_S = 0.5
 """[s] --exit-on-stop keeps serving this long after a stop (the agent's last messages)."""
@@ -53,6 +62,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    default=(0.0, 0.0, 0.0), help="[m] a point on the surface (default 0 0 0)")
     p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
                    default=(1.0, 0.0, 0.0), help="approach direction (default 1 0 0)")
+    p.add_argument("--watchdog", nargs=2, type=float, metavar=("LEVEL_S", "CUT_S"),
+                   default=(0.5, 2.0), help="[s] without a setpoint: level out after LEVEL_S, "
+                   "cut the motors and lock after CUT_S (default 0.5 2, the Crazyflie's)")
     p.add_argument("--duration", type=float, help="[s] stop serving after this long")
     p.add_argument("--exit-on-stop", action="store_true",
                    help="exit once the agent has sent `stop` (the flight ended)")
@@ -72,9 +84,12 @@ class Counts:
 
 
 class SetpointInbox:
-    """SUB bound at --setpoint-in: setpoints and stops for `body` go to the world."""
+    """SUB bound at --setpoint-in: setpoints and stops for `body` go to the world, through
+    the vehicle's setpoint watchdog (checked on this thread, between messages)."""
 
-    def __init__(self, text: str, world: Any, body: str, counts: Counts) -> None:
+    def __init__(self, text: str, world: Any, body: str, counts: Counts,
+                 watchdog: WatchdogParams | None = None) -> None:
+        from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
         from perchd.uri import parse_uri
         import zmq
         uri = parse_uri(text)
@@ -84,6 +99,7 @@ class SetpointInbox:
         from perchd.netbind import check_bind
         check_bind(uri.host, bool_param(uri, "public"), f"--setpoint-in {text}")
         self.world, self.body, self.counts = world, body, counts
+        self.watchdog = SetpointWatchdog(watchdog or WatchdogParams(), world.command)
         self.sock = zmq.Context.instance().socket(zmq.SUB)
         self.sock.setsockopt(zmq.LINGER, 0)
         try:
@@ -101,7 +117,9 @@ class SetpointInbox:
 
     def _serve(self) -> None:
         while self._alive:
-            if self.sock.poll(50):
+            due = self.watchdog.check(self.world.clock.now())
+            wait_ms = 50 if due is None else max(1, min(50, math.ceil(1000 * due)))
+            if self.sock.poll(wait_ms):
                 frames = self.sock.recv_multipart()
                 if len(frames) != 2:  # not [topic, JSON]: counted, never fatal
                     self.counts.rejected += 1
@@ -115,6 +133,7 @@ class SetpointInbox:
             self.counts.stops += 1
             self.counts.stop_at = self.counts.stop_at or time.monotonic()
             self.world.command(Setpoint.stop(self.world.clock.now()))
+            self.watchdog.stopped()
             return
         try:
             vehicle, _, sp = parse_setpoint_message(body)
@@ -122,8 +141,8 @@ class SetpointInbox:
             self.counts.rejected += 1  # counted, never fatal: the sim outlives a bad sender
             return
         if vehicle in ("", self.body):
-            self.counts.setpoints += 1
-            self.world.command(sp)
+            self.counts.setpoints += 1  # received; the thrust lock may refuse it
+            self.watchdog.feed(sp, self.world.clock.now())
 
     def close(self) -> None:
         self._alive = False
@@ -164,12 +183,20 @@ def serve(world: Any, output: Any, counts: Counts, done: threading.Event,
         done.wait(max(0.0, min(world.next_arrival() - world.clock.now(), 0.05)))
 
 
-def summary(world: Any, counts: Counts, mocap_uri: str, driver_uri: str) -> dict[str, Any]:
+def summary(world: Any, counts: Counts, mocap_uri: str, driver_uri: str,
+            watchdog: SetpointWatchdog | None = None) -> dict[str, Any]:
     c = world.contact
-    return {"contact": c is not None, "contact_t": c.t - world.t0 if c else None,
-            "contact_speed": c.speed if c else None, "setpoints": counts.setpoints,
-            "stops": counts.stops, "rejected": counts.rejected, "poses": counts.poses,
-            "mocap": mocap_uri, "driver": driver_uri}
+    st = world.state()
+    out = {"contact": c is not None, "contact_t": c.t - world.t0 if c else None,
+           "contact_speed": c.speed if c else None, "setpoints": counts.setpoints,
+           "stops": counts.stops, "rejected": counts.rejected, "poses": counts.poses,
+           "mocap": mocap_uri, "driver": driver_uri,
+           "vehicle": {"z_m": st.p[2], "thrust_n": st.thrust}}
+    if watchdog is not None:  # the silences [s] at which it acted
+        out["watchdog"] = {"level_s": watchdog.params.level_s, "cut_s": watchdog.params.cut_s,
+                           "levelled_after_s": watchdog.levels, "cut_after_s": watchdog.cuts,
+                           "locked": watchdog.locked, "refused": watchdog.refused}
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -179,11 +206,13 @@ def run(args: argparse.Namespace) -> int:
     campaign_cli.check_mode(args)
     if args.campaign:
         return campaign_cli.run(args)
+    from perchd.sim.watchdog import WatchdogParams
+    watchdog = WatchdogParams(*args.watchdog)
     world = make_world(args)
     counts = Counts()
     output = open_pose_output(args.pose_out, [args.body], world.clock)
     try:
-        inbox = SetpointInbox(args.setpoint_in, world, args.body, counts)
+        inbox = SetpointInbox(args.setpoint_in, world, args.body, counts, watchdog)
     except BaseException:
         output.close()
         raise
@@ -199,12 +228,13 @@ def run(args: argparse.Namespace) -> int:
         output.close()
         for s, handler in previous.items():
             signal.signal(s, handler)
-    result = summary(world, counts, mocap_uri, inbox.uri)
+    result = summary(world, counts, mocap_uri, inbox.uri, inbox.watchdog)
     if args.json:
         print(json.dumps(result))
     else:
         contact = (f"contact at {result['contact_speed']:.3f} m/s, {result['contact_t']:.3f} s "
                    "after start" if result["contact"] else "no contact")
         print(f"{contact}; {counts.setpoints} setpoints, {counts.stops} stops, "
-              f"{counts.rejected} rejected, {counts.poses} poses")
+              f"{counts.rejected} rejected, {counts.poses} poses; watchdog: "
+              f"{len(inbox.watchdog.levels)} levels, {len(inbox.watchdog.cuts)} cuts")
     return 0

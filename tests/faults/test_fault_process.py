@@ -25,6 +25,10 @@ from perchd.flightlog import read_log
 from perchd.types import EndReason
 
 ROOT = Path(__file__).resolve().parents[2]
+CUT_S = 2.0
+"""[s] perchd sim's default watchdog cut (Crazyflie firmware: COMMANDER_WDT_TIMEOUT_SHUTDOWN)."""
+FALL_S = 0.7
+"""[s] a vehicle at 1 m with its motors cut is on the floor within this (0.45 s free fall)."""
 
 
 @pytest.fixture
@@ -83,7 +87,7 @@ def test_a_signal_mid_flight_ends_it_on_the_next_tick_with_the_failsafe(sig, sim
            [log.rows[-1].t - sent])
 
 
-def test_sigkill_mid_flight_leaves_a_readable_log_up_to_the_kill(sim, tmp_path):
+def test_sigkill_mid_flight_leaves_a_readable_log_and_the_vehicle_s_watchdog_lands_it(sim, tmp_path):
     flight = Fly(sim, tmp_path / "f.jsonl")
     try:
         flight.wait_phase("approach")
@@ -98,11 +102,20 @@ def test_sigkill_mid_flight_leaves_a_readable_log_up_to_the_kill(sim, tmp_path):
     assert [r.k for r in log.rows] == sorted({r.k for r in log.rows})
     assert any(r.phase == "approach" for r in log.rows)
     assert log.rows[-1].t > killed - 0.1 - 2 * TICK  # at most the last 100 ms lost
+    time.sleep(max(0.0, killed + CUT_S + FALL_S - time.monotonic()))
     summary = sim.summary()
     assert summary["stops"] == 0  # nothing could be sent: the vehicle's own watchdog acts
+    wd = summary["watchdog"]
+    # silences [s] after the last setpoint heard; the sim checks between its messages
+    assert len(wd["levelled_after_s"]) == 1 and 0.5 <= wd["levelled_after_s"][0] < 0.5 + 0.1
+    assert len(wd["cut_after_s"]) == 1 and CUT_S <= wd["cut_after_s"][0] < CUT_S + 0.1
+    assert wd["locked"] and summary["vehicle"]["thrust_n"] < 1e-3  # motors off
+    assert summary["contact"] or summary["vehicle"]["z_m"] == 0.0  # down: floor (or perched)
     report("process: SIGKILL to perchd fly", "none possible in-process", "none; log "
-           "readable up to the kill (flushed per row)", "no stop: the vehicle's setpoint "
-           "watchdog must act (Crazyflie firmware, autopilot failsafe)")
+           "readable up to the kill (flushed per row)", "no stop; the vehicle's setpoint "
+           f"watchdog (perchd sim as Crazyflie firmware) levels it "
+           f"{1e3 * wd['levelled_after_s'][0]:.0f} ms and cuts the motors "
+           f"{1e3 * wd['cut_after_s'][0]:.0f} ms after the last setpoint")
 
 
 def ended(log: Path) -> bool:
