@@ -266,9 +266,10 @@ def test_a_failsafe_sent_into_a_dead_link_reaches_the_vehicle_when_it_returns(ma
     first = min(heard) - marks["resume"]
     assert rig.stopped()
     assert all(t == 0 for t in thrust_after(rig, ended))  # and thrust never came back
-    report(f"link: {make.__name__} failsafe sent while the link is down, link back",
-           "-", "failsafe repeated (Crazyflie: stop every 20 ms for 3 s; MAVLink: LAND "
-           "every 0.25 s until a heartbeat shows it taken, 10 s at most)",
+    repeat = {"crazyflie": "stop every 20 ms for 3 s", "mavlink": "LAND every 0.25 s until "
+              "the heartbeat shows it taken, 10 s at most"}[make.__name__]
+    report(f"link: {make.__name__} failsafe sent while the link is down, link back", "-",
+           f"LOST_LINK, failsafe repeated by the driver ({repeat})",
            f"stop/LAND heard {1e3 * first:.0f} ms after the link is back")
 
 
