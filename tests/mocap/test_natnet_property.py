@@ -4,6 +4,8 @@ perchd can express survives encode/decode in every supported version."""
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -16,6 +18,9 @@ from perchd.mocap.natnet_frame import (
     AnalogDevice, Frame, LabeledMarker, RigidBodySample, Skeleton, Timing, decode_frame,
     encode_frame)
 from perchd.mocap.natnet_wire import MalformedPacket
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fuzz"))
+from mutate import mutated_bytes  # noqa: E402  (the one byte mutator, shared with tests/fuzz)
 
 REAL = [r.data for r in session_frames()[:20]]
 VERSIONS = [(2, 5), (2, 6), (2, 7), (2, 9), (2, 10), (2, 11), (3, 0), (3, 1), (4, 0), (4, 1)]
@@ -48,25 +53,8 @@ def test_arbitrary_datagrams_never_raise_and_are_counted(datagrams):
     check_accounting(source)
 
 
-@st.composite
-def mutated_real_packet(draw) -> bytes:
-    data = bytearray(draw(st.sampled_from(REAL)))
-    for _ in range(draw(st.integers(1, 6))):
-        kind = draw(st.sampled_from(["flip", "cut", "insert", "splice"]))
-        at = draw(st.integers(0, max(0, len(data) - 1)))
-        if kind == "flip" and data:
-            data[at] ^= draw(st.integers(1, 255))
-        elif kind == "cut":
-            del data[at:at + draw(st.integers(1, 64))]
-        elif kind == "insert":
-            data[at:at] = draw(st.binary(min_size=1, max_size=16))
-        else:
-            data[at:at + 4] = draw(st.sampled_from([b"\xff\xff\xff\x7f", b"\0\0\0\x80", b"\0\0\0\0"]))
-    return bytes(data)
-
-
 @settings(max_examples=400, deadline=None)
-@given(st.lists(mutated_real_packet(), min_size=1, max_size=5))
+@given(st.lists(mutated_bytes(REAL), min_size=1, max_size=5))
 def test_mutated_real_packets_never_raise_and_are_counted(packets):
     source = fresh_client()
     for datagram in packets:
