@@ -6,9 +6,12 @@ rather than run back to back, and `streak` counts consecutive overruns for the s
 A pose waits up to one period for the tick that uses it.
 
 MocapSyncLoop: a tick is released by the arrival of a new pose (PoseSource.wait), so the
-setpoint follows the pose by the tick's compute time only. The tick's deadline is the pose's
-arrival; it overruns when it ends more than a period (1 / rate_hz, the expected mocap
-interval) after it; `missed` counts pose numbers skipped between two ticks. With no pose
+setpoint follows the pose by the tick's compute time only. Its jitter is start - the pose's
+arrival (latency added by the agent); it overruns when it ends more than a period
+(1 / rate_hz, the expected mocap interval) after it started, i.e. when the loop cannot keep
+up with the frames. Timing from the pose's claimed arrival instead would call frames that
+come late off the network loop overruns, and end a flight the agent kept up with. `missed`
+counts pose numbers skipped between two ticks. With no pose
 for `timeout_periods` periods it ticks anyway, so the supervisor's stale-mocap rule still runs.
 
 Jitter (actual start - deadline) is read on the injected clock; compute time on a separate
@@ -254,7 +257,7 @@ class MocapSyncLoop(_Loop):
                 missed = max(0, pose.seq - seq - 1) if seq != NO_SEQ else 0
                 seq = pose.seq
             go_on, end, compute = self._timed(tick, k, start)
-            self._record(k, release, start, compute, end > release + self.period, missed)
+            self._record(k, release, start, compute, end > start + self.period, missed)
             if not go_on:
                 return
             k += 1

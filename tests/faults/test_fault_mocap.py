@@ -86,12 +86,7 @@ def test_a_gap_of_two_frames_is_flown_through(tmp_path, nominal):
 ], ids=lambda v: v if isinstance(v, str) else "")
 @pytest.mark.parametrize("loop", LOOPS)
 def test_faults_within_the_estimator_s_tolerance_still_perch(loop, name, faults, tmp_path,
-                                                             nominal, request):
-    if loop.startswith("mocap-sync") and "late" in name:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=(
-            "known bug (docs/safety.md): the mocap-synchronous loop times its deadline from "
-            "the frame's claimed arrival, so frames late on the network count as loop "
-            "overruns and 10 in a row end the flight DEADLINE_OVERRUN")))
+                                                             nominal):
     f = fly(tmp_path, *faults, cfg=LOOPS[loop][0])
     assert f.res.outcome is EndReason.CONTACT and not f.res.failsafe_sent
     assert f.res.true_contact_speed == pytest.approx(nominal[loop].true_contact_speed, abs=0.01)
