@@ -154,11 +154,9 @@ class ZmqSetpointDriver(DriverBase):
     def _drain(self) -> None:
         """Count subscriptions to 'setpoint' (or to everything) from XPUB's notices."""
         import zmq
-        while True:
-            try:
-                note = self._sock.recv(zmq.NOBLOCK)
-            except zmq.Again:
-                return
+        # Asking EVENTS first: an empty recv would raise zmq.Again on nearly every tick.
+        while self._sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:
+            note = self._sock.recv(zmq.NOBLOCK)
             if note[:1] in (b"\x00", b"\x01") and SETPOINT.startswith(note[1:]):
                 self._subscribers += 1 if note[:1] == b"\x01" else -1
 
