@@ -136,10 +136,11 @@ def test_a_stalled_control_loop_stops_the_watchdog_and_a_resumed_one_pings_again
     assert code == 0, err
     longest = max(pings.gaps(flying_at))
     assert WATCHDOG_S < longest < length + 0.6           # systemd would have restarted it
-    assert max(pings.gaps(end=flying_at)) < 0.7          # every WATCHDOG_USEC / 4 = 0.5 s idle
+    # Pings every WATCHDOG_USEC / 4 = 0.5 s when healthy; the bound that matters is < 2 s.
+    assert max(pings.gaps(end=flying_at)) < 1.0
     stall_end = next(b for a, b in zip(pings.times, pings.times[1:]) if b - a == longest)
     after = [t for t in pings.times if stall_end <= t <= back_at]
-    assert len(after) >= 2 and max(pings.gaps(stall_end)) < 0.7   # resumed, idle after too
+    assert len(after) >= 2 and max(pings.gaps(stall_end)) < 1.0   # resumed, idle after too
     log = read_log(started["log"])
     assert log.complete and log.end["outcome"] == "OPERATOR_ABORT"
     assert log.end["summary"]["failsafe_sent"] is True
