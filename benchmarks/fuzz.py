@@ -51,7 +51,7 @@ from perchd.runtime import Runtime
 from perchd.types import Pose
 from perchd.uri import parse_uri
 
-FIXTURES = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "natnet"
+FIXTURES = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet"
 OLD_MOTIVE = {"1.5.0": (2, 5), "1.7.2": (2, 7), "1.9.0": (2, 9)}  # NatNet of each Motive 1.x
 EXTREME_WORDS = [b"\xff\xff\xff\x7f", b"\0\0\0\x80", b"\0\0\0\0", b"\xff\xff\xff\xff", b"\x01\0\0\0"]
 

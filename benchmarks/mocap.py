@@ -34,7 +34,7 @@ from perchd.runtime import Runtime
 from perchd.types import Pose
 from perchd.uri import parse_uri
 
-SESSION = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "natnet" / \
+SESSION = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet" / \
     "motive-2.1-session" / "packets"
 
 

@@ -19,7 +19,7 @@ from perchd.mocap.natnet_client import NatNetConfig, NatNetSource
 from perchd.mocap.natnet_server import NatNetServer
 from perchd.mocap.natnet_wire import MalformedPacket
 
-V3 = Path(__file__).resolve().parents[3] / "shared" / "fixtures" / "natnet" / "motive-2.1-natnet-3.0"
+V3 = Path(__file__).resolve().parents[1] / "fixtures" / "natnet" / "motive-2.1-natnet-3.0"
 MODELDEFS = [(V3 / f).read_bytes() for f in ("modeldef_packet_v3.bin", "modeldef_packet_v3_2.bin",
                                               "modeldef_packet_skeleton_v3.bin", "modeldef_packet_v2.bin")]
 SERVERINFO = [(V3 / f).read_bytes() for f in ("serverinfo_packet_v3.bin", "serverinfo_packet_v2.bin")]

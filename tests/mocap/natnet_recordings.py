@@ -14,8 +14,8 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-# the checkout (and CI's clone) has shared/ beside it
-FIXTURES = Path(__file__).resolve().parents[3] / "shared" / "fixtures" / "natnet"
+# a copy of shared/fixtures/natnet, kept in the repository so a clean clone tests alone
+FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "natnet"
 V3 = FIXTURES / "motive-2.1-natnet-3.0"
 V2X = FIXTURES / "motive-1.x-natnet-2.x"
 SESSION = FIXTURES / "motive-2.1-session"
