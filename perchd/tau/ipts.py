@@ -32,6 +32,7 @@ GRID = 96          # constraint nodes in u, clustered at both ends where peaks s
 RANDOM_SEEDS = 24  # random starts beside the bound-fitted ones
 CANDIDATES = 4     # best grid solutions tried through dense verification
 VERIFY_TOL = 1e-9  # relative overshoot of a limit accepted by the dense check
+TIGHTEN_MARGIN = 1e-8  # extra relative tightening when a peak slipped between grid nodes
 UNBOUNDED = 1e3    # stands in for an unset v_max [m/s] or a_max [m/s^2]
 
 
@@ -208,6 +209,21 @@ def plan_ipts(x0: float, v0: float, tau_s: float, v_contact: tuple[float, float]
     raise PlanError(_infeasible_reason(prob, a_lim, v_lim))
 
 
+def plan_ipts_from(x0: float, v0: float, tau_s: float, v_contact: tuple[float, float],
+                   v_max: float | None, a_max: float | None, k_start: list[float],
+                   t_switch_start: float) -> Plan | None:
+    """Warm start: one local solve from a nearby optimum's k and t_s (a plan library's
+    neighbours), verified densely like plan_ipts; None if it does not converge."""
+    prob = _problem(x0, v0, tau_s, v_contact, v_max, a_max, len(k_start) - 1)
+    a_lim = a_max if a_max is not None else UNBOUNDED
+    v_lim = v_max if v_max is not None else UNBOUNDED
+    z0 = np.array([ki * t_switch_start ** i for i, ki in enumerate(k_start)][1:]
+                  + [t_switch_start])
+    z0[-2] += prob.m_sum - z0[:-1].sum()  # onto the equality: reach tau_s at the switch
+    z = _solve_from(_Model(prob, _grid(), a_lim, v_lim), z0, prob)
+    return None if z is None else _verified(prob, z, a_lim, v_lim)
+
+
 def _verified(prob: Problem, z: np.ndarray, a_lim: float, v_lim: float) -> Plan | None:
     """Check the grid solution densely; where a peak slipped between nodes, tighten that
     limit by the overshoot and re-solve from here, a few times at most."""
@@ -219,8 +235,10 @@ def _verified(prob: Problem, z: np.ndarray, a_lim: float, v_lim: float) -> Plan 
         over_a, over_v = plan.peaks.a / a_lim, plan.peaks.v / v_lim
         if over_a <= 1 + VERIFY_TOL and over_v <= 1 + VERIFY_TOL:
             return plan
-        a_eff /= max(over_a, 1.0) * (1 + 1e-10)
-        v_eff /= max(over_v, 1.0) * (1 + 1e-10)
+        # A margin of 1e-8 past the overshoot: the next solve lands inside, rather than
+        # creeping up on the limit in steps SLSQP can no longer resolve (it fails near 1e-9).
+        a_eff /= max(over_a, 1.0) * (1 + TIGHTEN_MARGIN)
+        v_eff /= max(over_v, 1.0) * (1 + TIGHTEN_MARGIN)
         z = _solve_from(_Model(prob, _grid(), a_eff, v_eff), z, prob)
         if z is None:
             return None
