@@ -159,11 +159,12 @@ def fly(plan: Any, driver: Any, source: Any, clock: Clock, log_path: str | Path,
     when simulated, for the true contact figures. header: extra header fields for the log.
     """
     abort = abort or FlightAbort()
-    log = FlightLogWriter(log_path, {"plan": plan_summary(plan), "config": jsonable(cfg),
-                                     "driver": getattr(driver, "uri", ""),
-                                     "mocap_body": getattr(source, "body", ""),
-                                     **(header or {})})
-    run = _Run(plan, driver, source, clock, cfg, log, abort, on_tick)
+    run = _Run(plan, driver, source, clock, cfg, None, abort, on_tick)  # may refuse: no log yet
+    log = run.log = FlightLogWriter(log_path, {"plan": plan_summary(plan),
+                                               "config": jsonable(cfg),
+                                               "driver": getattr(driver, "uri", ""),
+                                               "mocap_body": getattr(source, "body", ""),
+                                               **(header or {})})
     try:
         run.loop.run(run.tick)
     except BaseException as err:

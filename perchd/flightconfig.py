@@ -143,11 +143,14 @@ class TriggerPolicy(enum.Enum):
 @dataclass(frozen=True)
 class TriggerConfig:
     """policy: see TriggerPolicy.  x_tol_m [m], v_tol_mps [m/s]: largest |measured - plan|
-    of x0 and v0 flown without a new plan under REFUSE."""
+    of x0 and v0 flown without a new plan under REFUSE.  library: a plan library file
+    (`perchd plan library`) for the plan's order and limits: REPLAN then warm-starts from it
+    (~2 ms) instead of a cold global solve (~60 ms at order 3, ~0.5 s at 7: many ticks)."""
 
     policy: TriggerPolicy = TriggerPolicy.REFUSE
     x_tol_m: float = 0.05
     v_tol_mps: float = 0.10
+    library: str | None = None
 
 
 class LoopSync(enum.Enum):
@@ -276,6 +279,9 @@ def validate(cfg: FlightConfig) -> None:
         if not lo <= value <= hi:
             side = f"below {lo:g} by {lo - value:g}" if value < lo else f"above {hi:g} by {value - hi:g}"
             raise ConfigError(f"{name} = {value:g} is {side}")
+    if cfg.trigger.library is not None and cfg.trigger.policy is not TriggerPolicy.REPLAN:
+        raise ConfigError(f"trigger.library is used by policy 'replan' only, "
+                          f"not {cfg.trigger.policy.value!r}")
     n = cfg.surface.normal
     horizontal = math.hypot(n[0], n[1])
     if horizontal < 1e-6 or abs(n[2]) > horizontal:

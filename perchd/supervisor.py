@@ -22,7 +22,7 @@ from typing import Any
 
 from perchd.control import AxisController, Controller
 from perchd.drivers.base import LinkHealth
-from perchd.errors import PlanError
+from perchd.errors import ConfigError, PlanError
 from perchd.flightconfig import FlightConfig, PostContact, TriggerPolicy
 from perchd.flightlog import LogEvent
 from perchd.perchframe import PerchFrame
@@ -132,6 +132,7 @@ class Supervisor:
         self._sampler = PlanSampler(plan)
         self._refs_memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
         self._up = (frame.ex[2], frame.ey[2], frame.ez[2])  # world Z of the frame's axes
+        self._library = _open_library(cfg.trigger.library, plan)
 
     # --- helpers ----------------------------------------------------------------------------
     def _enter(self, phase: Phase, t: float, detail: str = "", **values: float) -> None:
@@ -379,10 +380,12 @@ class Supervisor:
                                   f"plan's robust box x0 {xl:g}..{xh:g}, v0 {vl:g}..{vh:g}")
         from perchd.tau import retarget
         try:
-            new = retarget(plan, st.x, st.xdot)
+            new = (self._library.replan(st.x, st.xdot) if self._library is not None
+                   else retarget(plan, st.x, st.xdot))
         except PlanError as err:
             return None, "", f"no plan from x = {st.x:.3f} m, v = {st.xdot:.3f} m/s: {err}"
-        return new, f"{tr.policy.value}: retargeted to x0 = {st.x:.3f} m, v0 = {st.xdot:.3f} m/s", ""
+        how = f"{tr.policy.value}{' (library)' if self._library is not None else ''}"
+        return new, f"{how}: retargeted to x0 = {st.x:.3f} m, v0 = {st.xdot:.3f} m/s", ""
 
     def _refs(self, t: float) -> Refs:
         """The references at tick time t; computed once per tick (the tau watch and the
@@ -407,3 +410,16 @@ class Supervisor:
             tau_ref = self._tau_s + (t - self.t_stage2)
             a = 0.0
         return Refs(tau_ref, here.x, here.v, a)
+
+
+def _open_library(path: str | None, plan: Any) -> Any:
+    """The trigger's plan library, loaded before the flight and checked against its plan."""
+    if path is None:
+        return None
+    from perchd.tau.library import load_library
+
+    lib = load_library(path)
+    why = lib.matches(plan)
+    if why:
+        raise ConfigError(f"trigger.library {path}: {why}")
+    return lib

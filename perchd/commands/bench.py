@@ -16,6 +16,8 @@ def register(sub) -> None:
     p = bench_sub.add_parser("planner", help="IPTS cold solve time per order, both paper cases")
     p.add_argument("--orders", type=int, nargs="+", default=[3, 5, 7])
     p.add_argument("--repeat", type=int, default=5, help="solves per (case, order)")
+    p.add_argument("--replans", type=int, default=200,
+                   help="warm replans from each plan library (the first 10 also cold-solved)")
     p.add_argument("--json", action="store_true", help="print one JSON list")
     p.set_defaults(run=run_planner)
     lp = bench_sub.add_parser("loop", help="control loop: 500 Hz jitter, agent compute, "
@@ -36,6 +38,7 @@ def percentiles_ms(times_s: list[float]) -> dict:
 
 
 def planner_rows(orders: list[int], repeat: int) -> list[dict]:
+    """Cold global IPTS solves of both paper cases per order."""
     from perchd.tau import plan_bound, plan_ipts
     from perchd.tau.cases import CASES
 
@@ -49,21 +52,57 @@ def planner_rows(orders: list[int], repeat: int) -> list[dict]:
                                  case.a_max, order)
                 times.append(time.perf_counter() - start)
             bound = plan_bound(plan)
-            rows.append({"case": case.name, "order": order, "duration_s": plan.duration,
-                         "ratio": plan.duration / bound, **percentiles_ms(times)})
+            rows.append({"case": case.name, "order": order, "solve": "cold",
+                         "duration_s": plan.duration, "v_contact": plan.v_contact,
+                         "bound_s": bound, "ratio": plan.duration / bound,
+                         **percentiles_ms(times)})
+    return rows
+
+
+def replan_rows(states: int, compare: int, seed: int = 1) -> list[dict]:
+    """Warm replans from plans/libraries/<case>-ipts-n3.json at random trigger states of
+    the grid; the first `compare` of them are cold-solved too, for the largest gap [s]."""
+    import random
+    from pathlib import Path
+
+    from perchd.tau import plan_ipts
+    from perchd.tau.library import load_library
+
+    folder = Path(__file__).resolve().parents[2] / "plans" / "libraries"
+    rows = []
+    for path in sorted(folder.glob("*-ipts-n3.json")):
+        lib, rng, times, gap = load_library(path), random.Random(seed), [], 0.0
+        lim = lib.limits
+        for n in range(states):
+            x0 = rng.uniform(lib.x0s[0], lib.x0s[-1])
+            v0 = rng.uniform(lib.v0s[0], lib.v0s[-1])
+            start = time.perf_counter()
+            warm = lib.replan(x0, v0)
+            times.append(time.perf_counter() - start)
+            if n < compare:
+                cold = plan_ipts(x0, v0, lib.tau_s, lim.v_contact, lim.v_max, lim.a_max,
+                                 lib.order)
+                gap = max(gap, abs(warm.duration - cold.duration))
+        rows.append({"case": path.name.split("-")[0], "order": lib.order, "solve": "warm",
+                     "states": states, "max_gap_to_cold_s": gap, **percentiles_ms(times)})
     return rows
 
 
 def run_planner(args) -> int:
     rows = planner_rows(args.orders, args.repeat)
+    warm = replan_rows(args.replans, min(args.replans, 10))
     if args.json:
-        print(json.dumps(rows))
+        print(json.dumps(rows + warm))
         return 0
     print(f"{'case':6} {'n':>2} {'duration s':>11} {'ratio':>7} {'min ms':>8} "
-          f"{'median ms':>10} {'p99 ms':>8}")
+          f"{'median ms':>10} {'p99 ms':>8}   (cold global solve)")
     for r in rows:
         print(f"{r['case']:6} {r['order']:>2} {r['duration_s']:>11.5f} {r['ratio']:>7.4f} "
               f"{r['min_ms']:>8.1f} {r['median_ms']:>10.1f} {r['p99_ms']:>8.1f}")
+    for r in warm:
+        print(f"{r['case']:6} {r['order']:>2} warm replan from the library, {r['states']} states:"
+              f" min {r['min_ms']:.2f} median {r['median_ms']:.2f} p99 {r['p99_ms']:.2f} ms;"
+              f" largest gap to a cold solve {r['max_gap_to_cold_s']:.1e} s")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""`perchd plan ctds|ctdts|ipts|robust|check` (CONTRACTS 2)."""
+"""`perchd plan ctds|ctdts|ipts|robust|library|check` (CONTRACTS 2)."""
 
 from __future__ import annotations
 
@@ -16,6 +16,9 @@ def register(sub) -> None:
     from perchd.tau.robust_cli import register as register_robust
 
     register_robust(plan_sub)
+    from perchd.tau.library_cli import register as register_library
+
+    register_library(plan_sub)
     check = plan_sub.add_parser("check", help="re-derive and verify a plan file")
     check.add_argument("file")
     check.add_argument("--json", action="store_true", help="print one JSON object")

@@ -1,0 +1,53 @@
+"""`perchd plan library`: precompute minimum-time IPTS plans over a grid of trigger states
+into one file, so a flight can replan at its trigger within one control tick.
+
+    perchd plan library --x0 -3.5 -2.5 --v0 1.2 1.8 --nodes 11 13 --tau-s -0.5 \\
+        --v-contact 0.7 1.0 --v-max 2.5 --a-max 1.4 --order 3 --out L.json
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+
+def register(plan_sub) -> None:
+    """Add `library` to the `perchd plan` subparsers."""
+    p = plan_sub.add_parser("library", help="IPTS plans over a grid of trigger states, one file")
+    p.add_argument("--x0", type=float, nargs=2, required=True, metavar=("LO", "HI"), help="[m]")
+    p.add_argument("--v0", type=float, nargs=2, required=True, metavar=("LO", "HI"), help="[m/s]")
+    p.add_argument("--nodes", type=int, nargs=2, default=(11, 13), metavar=("NX", "NV"),
+                   help="grid nodes along x0 and v0 (default 11 13)")
+    p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
+    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
+    p.add_argument("--v-max", type=float, help="[m/s]")
+    p.add_argument("--a-max", type=float, help="[m/s^2]")
+    p.add_argument("--order", type=int, default=3, help="polynomial order 1..7")
+    p.add_argument("--out", required=True, help="library file to write")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=run)
+
+
+def run(a) -> int:
+    from perchd.tau.library import build_library, save_library
+
+    start = time.perf_counter()
+    lib = build_library(tuple(a.x0), tuple(a.v0), tuple(a.nodes), a.tau_s, tuple(a.v_contact),
+                        a.v_max, a.a_max, a.order, progress=None if a.json else _progress)
+    save_library(lib, a.out)
+    plans = sum(node is not None for row in lib.nodes for node in row)
+    out = {"library": a.out, "nodes": len(lib.x0s) * len(lib.v0s), "plans": plans,
+           "build_s": time.perf_counter() - start}
+    if a.json:
+        print(json.dumps(out))
+    else:
+        print(f"\n{out['library']}: {plans} of {out['nodes']} nodes have a plan "
+              f"(built in {out['build_s']:.1f} s)")
+    return 0  # nodes without a plan are reported; replans near them fall back on neighbours
+
+
+def _progress(done: int, total: int) -> None:
+    if sys.stderr.isatty():
+        sys.stderr.write(f"\rplanning node {done}/{total}")
+        sys.stderr.flush()
