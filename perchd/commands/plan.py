@@ -59,7 +59,7 @@ def _ipts(plan_sub) -> None:
     p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
     p.add_argument("--v-max", type=float, help="[m/s]")
     p.add_argument("--a-max", type=float, help="[m/s^2]")
-    p.add_argument("--order", type=int, default=3, help="polynomial order 1..7")
+    p.add_argument("--order", type=int, default=3, help="polynomial order 1..9")
     p.set_defaults(run=lambda a: _emit(a, _plan_ipts(a)))
 
 

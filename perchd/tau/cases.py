@@ -29,7 +29,7 @@ class Case:
 
 CASES = (Case("case1", -3.0, 1.5, -0.5, (0.7, 1.0), 2.5, 1.4, 1.0),
          Case("case2", -3.0, 1.5, -0.5, (0.7, 1.0), 2.0, 1.0, 0.94))
-FILES = ("ctds", "ctdts", "ipts-n3", "ipts-n5")
+FILES = ("ctds", "ctdts", "ipts-n3", "ipts-n5", "ipts-n8")
 
 
 def make(case: Case, kind: str) -> Plan:

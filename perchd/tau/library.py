@@ -163,8 +163,10 @@ def library_from_json(doc: object) -> PlanLibrary:
     if doc.get("strategy") != "ipts":
         raise PlanError("strategy must be 'ipts'")
     order, tau_s = doc.get("order"), _finite(doc.get("tau_s"), "tau_s")
-    if not (isinstance(order, int) and 1 <= order <= 7):
-        raise PlanError(f"order must be an integer 1..7, got {order!r}")
+    from perchd.tau.ipts import MAX_ORDER
+
+    if not (isinstance(order, int) and 1 <= order <= MAX_ORDER):
+        raise PlanError(f"order must be an integer 1..{MAX_ORDER}, got {order!r}")
     lim = doc.get("limits")
     if not isinstance(lim, dict):
         raise PlanError("limits must be an object")

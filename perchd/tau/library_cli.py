@@ -23,7 +23,7 @@ def register(plan_sub) -> None:
     p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
     p.add_argument("--v-max", type=float, help="[m/s]")
     p.add_argument("--a-max", type=float, help="[m/s^2]")
-    p.add_argument("--order", type=int, default=3, help="polynomial order 1..7")
+    p.add_argument("--order", type=int, default=3, help="polynomial order 1..9")
     p.add_argument("--out", required=True, help="library file to write")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)

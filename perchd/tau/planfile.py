@@ -110,9 +110,12 @@ def _number(doc: dict, key: str, name: str | None = None) -> float:
 
 
 def _numbers(doc: dict, key: str, name: str) -> list[float]:
+    from perchd.tau.ipts import MAX_ORDER
+
     values = _field(doc, key, list, name)
-    if not 2 <= len(values) <= 8:
-        raise PlanError(f"{name}: expected 2..8 coefficients k_0..k_n, got {len(values)}")
+    if not 2 <= len(values) <= MAX_ORDER + 1:
+        raise PlanError(f"{name}: expected 2..{MAX_ORDER + 1} coefficients k_0..k_n, "
+                        f"got {len(values)}")
     return [_number({"v": v}, "v", f"{name}[{i}]") for i, v in enumerate(values)]
 
 
