@@ -145,16 +145,9 @@ def save_library(lib: PlanLibrary, path: str | Path) -> None:
 
 def load_library(path: str | Path) -> PlanLibrary:
     """The library in `path`, every node checked; errors name the field."""
-    try:
-        doc = json.loads(Path(path).read_text())
-    except (OSError, UnicodeDecodeError) as err:
-        raise PlanError(f"{path}: cannot read plan library ({err})") from None
-    except (json.JSONDecodeError, RecursionError):
-        raise PlanError(f"{path}: not a JSON plan library") from None
-    try:
-        return library_from_json(doc)
-    except PlanError as err:
-        raise PlanError(f"{path}: {err}") from None
+    from perchd.tau.planfile import load_json
+
+    return load_json(path, library_from_json, "plan library")
 
 
 def library_from_json(doc: object) -> PlanLibrary:

@@ -37,11 +37,16 @@ def save_plan(plan: Plan, path: str | Path) -> None:
 def load_plan(path: str | Path, text: str | None = None) -> Plan:
     """The plan in file `path`; `text`: its contents when the caller has read them already
     (the service reads plans through perchd.safefile)."""
+    return load_json(path, plan_from_json, "plan file", text)
+
+
+def load_json(path: str | Path, parse, what: str, text: str | None = None):
+    """parse(JSON document of file `path`), every error one PlanError naming the file."""
     if text is None:
         try:
             text = Path(path).read_text()
         except OSError as err:
-            raise PlanError(f"{path}: cannot read plan file ({err.strerror})") from None
+            raise PlanError(f"{path}: cannot read {what} ({err.strerror})") from None
         except UnicodeDecodeError as err:
             raise PlanError(f"{path}: not UTF-8 text (byte {err.start})") from None
     try:
@@ -51,7 +56,7 @@ def load_plan(path: str | Path, text: str | None = None) -> Plan:
     except RecursionError:
         raise PlanError(f"{path}: not JSON (nested too deeply)") from None
     try:
-        return plan_from_json(doc)
+        return parse(doc)
     except PlanError as err:
         raise PlanError(f"{path}: {err}") from None
 
