@@ -104,23 +104,28 @@ def build_library(x0: tuple[float, float], v0: tuple[float, float], counts: tupl
                   a_max: float | None, order: int, progress=None) -> PlanLibrary:
     """Cold-solve the global minimum-time plan at every node of the grid (x0 [m], v0 [m/s]
     ranges with counts[0] x counts[1] nodes). progress(done, total) is called per node."""
-    from perchd.tau.ipts import plan_ipts
+    from perchd.tau.ipts import MAX_ORDER, plan_ipts
 
+    if not 1 <= order <= MAX_ORDER:
+        raise PlanError(f"order must be 1..{MAX_ORDER}, got {order}")
+    limits = Limits(tuple(v_contact), v_max, a_max)
     x0s, v0s = _axis(x0, counts[0], "x0"), _axis(v0, counts[1], "v0")
-    rows = []
+    rows, first_refusal = [], ""
     for i, x in enumerate(x0s):
         row = []
         for j, v in enumerate(v0s):
             try:
                 plan = plan_ipts(x, v, tau_s, v_contact, v_max, a_max, order)
                 row.append(Node(tuple(plan.k), plan.t_switch))
-            except PlanError:
+            except PlanError as err:  # infeasible here; the file records the hole
                 row.append(None)
+                first_refusal = first_refusal or f"at x0 = {x:g} m, v0 = {v:g} m/s: {err}"
             if progress is not None:
                 progress(i * len(v0s) + j + 1, len(x0s) * len(v0s))
         rows.append(tuple(row))
-    return PlanLibrary(order, tau_s, Limits(tuple(v_contact), v_max, a_max), x0s, v0s,
-                       tuple(rows))
+    if all(node is None for row in rows for node in row):
+        raise PlanError(f"no node of the grid has a plan; {first_refusal}")
+    return PlanLibrary(order, tau_s, limits, x0s, v0s, tuple(rows))
 
 
 def _axis(span: tuple[float, float], count: int, name: str) -> tuple[float, ...]:

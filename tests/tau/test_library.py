@@ -127,3 +127,14 @@ def test_a_library_for_another_plan_or_policy_is_refused_before_flying():
         Supervisor(load_plan(ROOT / "plans" / "case1-ctdts.json"), cfg, frame)
     with pytest.raises(ConfigError, match="used by policy 'replan' only, not 'refuse'"):
         FlightConfig(trigger=TriggerConfig(library=str(LIBRARY)))
+
+
+@pytest.mark.parametrize("order, a_max, message", [
+    (12, 1.4, "order must be 1..9, got 12"),
+    (3, 0.2, "no node of the grid has a plan; at x0 = -3.3 m, v0 = 1.3 m/s: no order-3 IPTS"),
+])
+def test_a_library_with_no_plan_to_hold_is_refused_not_written_empty(order, a_max, message):
+    from perchd.tau.library import build_library
+
+    with pytest.raises(PlanError, match=message):
+        build_library((-3.3, -2.7), (1.3, 1.7), (2, 2), -0.5, (0.7, 1.0), 2.5, a_max, order)
