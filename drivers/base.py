@@ -13,11 +13,14 @@ from perchd.uri import Registry
 @dataclass(frozen=True, slots=True)
 class LinkHealth:
     """ok: the link is up.  age: [s] since the vehicle was last heard from (0 if it never
-    answers, e.g. a one-way stream).  detail: why the link is down, if it is."""
+    answers, e.g. a one-way stream).  detail: why the link is down, if it is.
+    rtt_s: [s] the link's round trip, measured by the driver's own echo (median of its
+    recent samples), None where the driver cannot measure one."""
 
     ok: bool
     age: float = 0.0
     detail: str = ""
+    rtt_s: float | None = None
 
 
 class Driver(Protocol):

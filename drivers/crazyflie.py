@@ -25,8 +25,10 @@ on-board estimator).
 from __future__ import annotations
 
 import math
+import struct
 import threading
 import time
+from collections import deque
 from typing import Any
 
 from perchd.drivers.base import DriverBase, LinkHealth
@@ -42,6 +44,8 @@ from perchd.uri import Uri
 KEEPALIVE_S = 0.1
 """[s] silence after which the keep-alive re-sends (the firmware levels at 0.5 s, cuts at 2 s)."""
 PING_S = 0.02
+PING_TAG = b"pd"  # our echoes, told apart from anything else echoed on the link
+RTT_SAMPLES = 10  # the round trip is the median of the last 10 echoes (200 ms)
 """[s] period of CRTP link-echo pings, the proof of life on links without acks (udp)."""
 FAILSAFE_REPEAT_S = 3.0
 """[s] after failsafe() the stop goes out again with every ping for this long (or until
@@ -122,6 +126,7 @@ class CrazyflieDriver(DriverBase):
         self._loc: Any = None
         self._tickers: list[Ticker] = []
         self._echoed = threading.Event()
+        self._rtts: deque[float] = deque(maxlen=RTT_SAMPLES)  # [s] recent echo round trips
         self._link_error = ""
         self._last_heard: float | None = None
         self._last_sent = 0.0  # time.monotonic() of the last setpoint on the wire
@@ -175,7 +180,8 @@ class CrazyflieDriver(DriverBase):
             return LinkHealth(False, age, f"connection lost: {self._link_error}")
         if age > self.timeout:
             return LinkHealth(False, age, f"connection lost: silent for {age:.3f} s")
-        return LinkHealth(True, age)
+        rtts = sorted(self._rtts)
+        return LinkHealth(True, age, rtt_s=rtts[len(rtts) // 2] if rtts else None)
 
     def close(self) -> None:
         if self._port is None:
@@ -220,9 +226,11 @@ class CrazyflieDriver(DriverBase):
                     self._commander.send_stop_setpoint()
 
     def _ping(self) -> None:
+        """A CRTP echo stamped with its send time: the echo's return gives the round trip."""
         from cflib.crtp.crtpstack import CRTPPacket
         if self._port is not None:
-            self._port.send_packet(CRTPPacket(ECHO_HEADER, b"perchd"))
+            stamp = struct.pack("<d", time.monotonic())
+            self._port.send_packet(CRTPPacket(ECHO_HEADER, PING_TAG + stamp))
 
     def _on_link_error(self, message: str) -> None:
         """cflib's link error: connection_failed before the echo, connection_lost after."""
@@ -243,6 +251,12 @@ class CrazyflieDriver(DriverBase):
             self._last_heard = self.clock.now()
             if pk.header == ECHO_HEADER:
                 self._echoed.set()
+                self._note_round_trip(bytes(pk.data))
+
+    def _note_round_trip(self, data: bytes) -> None:
+        if len(data) == len(PING_TAG) + 8 and data.startswith(PING_TAG):
+            (sent,) = struct.unpack_from("<d", data, len(PING_TAG))
+            self._rtts.append(time.monotonic() - sent)
 
     def _keepalive(self) -> None:
         """Ping, and never let KEEPALIVE_S pass without a setpoint: a stalled loop gets the

@@ -46,7 +46,8 @@ class LoopbackDriver(DriverBase):
             return LinkHealth(False, 0.0, "not connected")
         if not self.world.faults.link_ok:
             return LinkHealth(False, 0.0, "simulated link cut")
-        return LinkHealth(True, 0.0)
+        # The simulated link's echo would cross its command latency both ways.
+        return LinkHealth(True, 0.0, rtt_s=2.0 * self.world.params.plant.latency_s)
 
     def close(self) -> None:
         if self._connected and not self._stopped:  # motors off, like every driver's close

@@ -188,6 +188,9 @@ class SafetyConfig:
     tau_error_max / tau_error_s: |tau - tau_ref| [s] beyond max(tau_error_max,
         tau_error_rel * |tau_ref|) for tau_error_s [s], or tau undefined that long, diverges.
     overrun_streak: consecutive missed loop deadlines that end the flight.
+    link_rtt_max_s: [s] a link round trip (LinkHealth.rtt_s, where the driver measures one)
+        above this ends the flight LOST_LINK: commands that late land the perch too fast
+        (tests/faults: 100 ms one way still perches in the window, 200 ms lands at 1.3 m/s).
     timeout_s: [s] longest flight; plan_grace_s: [s] after the plan's duration without contact.
     contact_margin_m: [m] contact is declared within one tick of travel plus this of X = 0.
     """
@@ -204,6 +207,7 @@ class SafetyConfig:
     tau_error_rel: float = 0.5
     tau_error_s: float = 0.3
     overrun_streak: int = 10
+    link_rtt_max_s: float = 0.25
     timeout_s: float = 30.0
     plan_grace_s: float = 1.0
     contact_margin_m: float = 0.005

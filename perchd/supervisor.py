@@ -179,6 +179,9 @@ class Supervisor:
                                            f"{state.frozen_s * 1000:.0f} ms while flying")
         if not health.ok:
             return EndReason.LOST_LINK, health.detail
+        if health.rtt_s is not None and health.rtt_s > s.link_rtt_max_s:
+            return EndReason.LOST_LINK, (f"link too slow: round trip {health.rtt_s * 1000:.0f} ms"
+                                         f" > {s.link_rtt_max_s * 1000:.0f} ms")
         if state is not None:
             why = self._limits(state)
             if why is not None:

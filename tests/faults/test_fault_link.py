@@ -89,14 +89,13 @@ def test_a_slow_link_up_to_100_ms_still_perches_inside_the_contact_window(latenc
            f"({f.res.true_contact_speed:.3f} m/s)")
 
 
-@pytest.mark.xfail(strict=True, reason="known gap (docs/safety.md): no driver measures command "
-                   "latency, so a link 200 ms slow is flown, and the perch lands too fast")
-def test_a_link_200_ms_slow_is_caught_or_still_perches_inside_the_window(tmp_path):
+def test_a_link_200_ms_slow_is_a_lost_link_before_it_flies(tmp_path):
     f = fly(tmp_path, uri="sim://?latency=0.2")
-    report("link: commands 200 ms late (loopback) KNOWN GAP", "not detected",
-           f"{f.res.outcome.name}", f"contact at {f.res.true_contact_speed:.2f} m/s "
-           "(window 0.7..1.0)")
-    assert f.res.outcome is not EndReason.CONTACT or f.res.true_contact_speed <= 1.0 + 0.02
+    report("link: commands 200 ms late (loopback)", "echo round trip > link_rtt_max_s (0.25 s)",
+           f"{f.res.outcome.name}, failsafe", "motors off before the approach")
+    assert f.res.outcome is EndReason.LOST_LINK and f.res.failsafe_sent
+    assert "link too slow: round trip 400 ms > 250 ms" in f.res.detail
+    assert f.res.trigger is None  # never reached the trigger: the slow link was seen at once
 
 
 # --- real drivers, real time ----------------------------------------------------------------
@@ -200,6 +199,20 @@ def test_a_slow_peer_is_not_a_lost_link(make, tmp_path):
     assert rig.commanded() is not None  # the vehicle got the (late) setpoints
     report(f"link: {make.__name__} peer answers 100 ms late each way", "none: answers keep "
            "the link alive (a silence rule, not a latency rule)", "flown", "flies on")
+
+
+def test_a_crazyflie_link_slower_than_the_round_trip_limit_is_lost_link(tmp_path):
+    rig, relay, uri = crazyflie(timeout=0.5, relay_delay=0.15)
+    flight = RealFlight(rig, uri)
+    try:
+        res = flight.fly(tmp_path, abort_after_s=2.0)
+    finally:
+        closing(rig, relay)
+    injected("slow crazyflie link", real_time=True)
+    assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
+    assert "link too slow: round trip" in res.detail and "> 250 ms" in res.detail
+    report("link: crazyflie echo 150 ms late each way", "echo round trip (median of 10) > "
+           "link_rtt_max_s 0.25 s", "LOST_LINK, failsafe", "stop sent (and repeated)")
 
 
 def thrust_after(rig, since: float) -> list[float]:
