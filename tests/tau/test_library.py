@@ -138,3 +138,20 @@ def test_a_library_with_no_plan_to_hold_is_refused_not_written_empty(order, a_ma
 
     with pytest.raises(PlanError, match=message):
         build_library((-3.3, -2.7), (1.3, 1.7), (2, 2), -0.5, (0.7, 1.0), 2.5, a_max, order)
+
+
+def test_retarget_with_a_library_is_the_warm_replan_and_equals_the_cold_one(lib):
+    from perchd.tau import retarget
+
+    base = load_plan(ROOT / "plans" / "case1-ipts-n3.json")
+    warm = retarget(base, -3.1, 1.55, library=lib)
+    cold = retarget(base, -3.1, 1.55)
+    assert (warm.x0, warm.v0) == (-3.1, 1.55)
+    assert warm.duration == pytest.approx(cold.duration, abs=1e-4)
+
+
+def test_retarget_refuses_a_library_made_for_another_plan(lib):
+    from perchd.tau import retarget
+
+    with pytest.raises(PlanError, match="library cannot retarget.*order 3.*order 5"):
+        retarget(load_plan(ROOT / "plans" / "case1-ipts-n5.json"), -3.0, 1.5, library=lib)
