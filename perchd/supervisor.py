@@ -383,8 +383,7 @@ class Supervisor:
                                   f"plan's robust box x0 {xl:g}..{xh:g}, v0 {vl:g}..{vh:g}")
         from perchd.tau import retarget
         try:
-            new = (self._library.replan(st.x, st.xdot) if self._library is not None
-                   else retarget(plan, st.x, st.xdot))
+            new = retarget(plan, st.x, st.xdot, library=self._library)
         except PlanError as err:
             return None, "", f"no plan from x = {st.x:.3f} m, v = {st.xdot:.3f} m/s: {err}"
         how = f"{tr.policy.value}{' (library)' if self._library is not None else ''}"
