@@ -138,6 +138,8 @@ class ZmqPoseSource(ThreadedSource):
         except zmq.ZMQError as err:
             sock.close(0)
             raise LinkError(f"{self._name}: cannot open {self.endpoint}: {err}") from None
+        if self._bind:  # port 0 binds an ephemeral port: say which
+            self.endpoint = sock.getsockopt(zmq.LAST_ENDPOINT).decode()
         self._sock = sock
         self._start_thread("zmq-pose-rx")
 

@@ -128,12 +128,10 @@ def test_bad_zmq_uris_get_one_clear_line(uri, message):
 
 def test_a_source_can_bind_and_the_publisher_connect():
     runtime = Runtime.real()
-    probe = ZmqPosePublisher()  # find a free port, then hand it to the binding source
-    port = probe.endpoint.rsplit(":", 1)[1]
-    probe.close()
-    source = open_source(f"zmq://127.0.0.1:{port}?body=cf1&bind=1", runtime)
+    source = open_source("zmq://127.0.0.1:0?body=cf1&bind=1", runtime)  # an ephemeral port
     source.start()
-    publisher = ZmqPosePublisher(f"tcp://127.0.0.1:{port}", bind=False)
+    assert not source.endpoint.endswith(":0")
+    publisher = ZmqPosePublisher(source.endpoint, bind=False)
     try:
         assert publisher.wait_for_subscriber(2.0)
         publisher.publish(Pose("cf1", 1, runtime.clock.now(), (0.0, 0.0, 1.0), LEVEL))
