@@ -131,7 +131,6 @@ class Controller:
         self.saturated = False
         self.last_u: Vec3 = (0.0, 0.0, 0.0)
         self._yaw = frame.yaw_facing
-        self._axes = (frame.ex, frame.ey, frame.ez)
 
     def lateral(self, state: State, y_ref: float, z_ref: float, dt: float,
                 vz_ref: float = 0.0) -> tuple[float, float]:
@@ -142,10 +141,7 @@ class Controller:
     def setpoint(self, u: Vec3, t: float, pose_seq: int, phase: Phase) -> Setpoint:
         """Map the perching-frame acceleration u [m/s^2] to an attitude/thrust setpoint."""
         v = self.cfg.vehicle
-        ex, ey, ez = self._axes  # frame.rotate_out(u), without a generator per tick
-        world = (u[0] * ex[0] + u[1] * ey[0] + u[2] * ez[0], u[0] * ex[1] + u[1] * ey[1]
-                 + u[2] * ez[1], u[0] * ex[2] + u[1] * ey[2] + u[2] * ez[2])
-        att = map_attitude(world, self._yaw, v.mass_kg, v.g,
+        att = map_attitude(self.frame.rotate_out(u), self._yaw, v.mass_kg, v.g,
                            self.cfg.tilt_limit_rad, v.thrust_min_n, v.thrust_max_n)
         self.saturated = att.saturated
         self.last_u = u

@@ -69,7 +69,6 @@ class Estimator:
         self.accepted = 0
         self._period = None  # [s] smoothed interval between accepted poses
         self._r = cfg.meas_std_m ** 2
-        self._origin, self._axes = frame.point, (frame.ex, frame.ey, frame.ez)
         self._gate = 6.0 * cfg.meas_std_m
 
     @property
@@ -88,7 +87,7 @@ class Estimator:
             return False  # a NaN/inf frame would poison the filter (and hide the tilt)
         if self._last is not None and (pose.seq == self._last.seq or pose.t <= self._t):
             return False
-        z = self._to_frame(pose.p)
+        z = self.frame.to_frame(pose.p)
         if z == self._last_p and math.hypot(*self._vel) > self.cfg.min_speed_mps:
             self.rejected += 1  # moving, yet not moved at all: a tracker re-sending a frame
             return False
@@ -103,14 +102,6 @@ class Estimator:
             self._update(pose, z)
         self._accept(pose, z)
         return True
-
-    def _to_frame(self, p: tuple[float, float, float]) -> tuple[float, float, float]:
-        """frame.to_frame(p), unrolled: it runs on every pose."""
-        o = self._origin
-        dx, dy, dz = p[0] - o[0], p[1] - o[1], p[2] - o[2]
-        ex, ey, ez = self._axes
-        return (dx * ex[0] + dy * ex[1] + dz * ex[2], dx * ey[0] + dy * ey[1] + dz * ey[2],
-                dx * ez[0] + dy * ez[1] + dz * ez[2])
 
     def _is_outlier(self, pose: Pose, z: tuple[float, float, float]) -> bool:
         dt = pose.t - self._last.t

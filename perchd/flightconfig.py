@@ -159,7 +159,7 @@ class LoopSync(enum.Enum):
     FIXED: a clock at rate_hz; a pose waits up to one period for the tick that uses it.
     MOCAP: the arrival of each new pose (mocap-synchronous): the setpoint follows the pose by
         the compute time only. rate_hz is then the expected mocap rate: a tick overruns when
-        it ends a period after its pose arrived, and runs anyway after 1.5 periods without
+        it ends a period after it started, and runs anyway after 1.5 periods without
         a pose (so stale mocap is still detected). Set it to the mocap system's rate.
     """
 

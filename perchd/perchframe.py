@@ -50,11 +50,17 @@ class PerchFrame:
         d = (p[0] - self.point[0], p[1] - self.point[1], p[2] - self.point[2])
         return self.rotate_in(d)
 
+    # Written out, not as generators: these run several times in every control tick.
     def rotate_in(self, v: Vec3) -> Vec3:
         """World vector -> perching-frame components."""
-        return (sum(v[i] * self.ex[i] for i in range(3)), sum(v[i] * self.ey[i] for i in range(3)),
-                sum(v[i] * self.ez[i] for i in range(3)))
+        ex, ey, ez = self.ex, self.ey, self.ez
+        return (v[0] * ex[0] + v[1] * ex[1] + v[2] * ex[2],
+                v[0] * ey[0] + v[1] * ey[1] + v[2] * ey[2],
+                v[0] * ez[0] + v[1] * ez[1] + v[2] * ez[2])
 
     def rotate_out(self, v: Vec3) -> Vec3:
         """Perching-frame components -> world vector."""
-        return tuple(v[0] * self.ex[i] + v[1] * self.ey[i] + v[2] * self.ez[i] for i in range(3))
+        ex, ey, ez = self.ex, self.ey, self.ez
+        return (v[0] * ex[0] + v[1] * ey[0] + v[2] * ez[0],
+                v[0] * ex[1] + v[1] * ey[1] + v[2] * ez[1],
+                v[0] * ex[2] + v[1] * ey[2] + v[2] * ez[2])

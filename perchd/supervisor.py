@@ -131,7 +131,6 @@ class Supervisor:
         self._x: float | None = None  # [m] measured X of the tick in hand
         self._sampler = PlanSampler(plan)
         self._refs_memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
-        self._up = (frame.ex[2], frame.ey[2], frame.ez[2])  # world Z of the frame's axes
         self._library = _open_library(cfg.trigger.library, plan)
 
     # --- helpers ----------------------------------------------------------------------------
@@ -203,8 +202,7 @@ class Supervisor:
     def _limits(self, st: State):
         s = self.cfg.safety
         airborne = self.phase not in (Phase.IDLE, Phase.TAKEOFF)
-        ux, uy, uz = self._up
-        height = self.frame.point[2] + (st.x * ux + st.y * uy + st.z * uz)
+        height = self.frame.point[2] + self.frame.rotate_out((st.x, st.y, st.z))[2]
         if not s.x_min_m <= st.x <= s.x_max_m:
             return EndReason.GEOFENCE, f"X = {st.x:.3f} m outside {s.x_min_m:g}..{s.x_max_m:g} m"
         if self._hold is not None:

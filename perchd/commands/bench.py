@@ -6,7 +6,6 @@ The loop figures are measured by perchd.loopbench (also `python benchmarks/loop.
 from __future__ import annotations
 
 import json
-import statistics
 import time
 
 
@@ -30,11 +29,11 @@ def register(sub) -> None:
 
 
 def percentiles_ms(times_s: list[float]) -> dict:
-    """min/median/p99 [ms] of solve times [s] (p99 by nearest rank)."""
-    ordered = sorted(times_s)
-    p99 = ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))]
-    return {"min_ms": 1e3 * ordered[0], "median_ms": 1e3 * statistics.median(ordered),
-            "p99_ms": 1e3 * p99}
+    """min/median/p99 [ms] of solve times [s] (p99 by nearest rank, as the loop's)."""
+    from perchd.loop import spread
+
+    lo, median, p99, _ = spread(times_s)
+    return {"min_ms": 1e3 * lo, "median_ms": 1e3 * median, "p99_ms": 1e3 * p99}
 
 
 def planner_rows(orders: list[int], repeat: int) -> list[dict]:
