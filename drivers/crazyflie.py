@@ -44,9 +44,9 @@ from perchd.uri import Uri
 KEEPALIVE_S = 0.1
 """[s] silence after which the keep-alive re-sends (the firmware levels at 0.5 s, cuts at 2 s)."""
 PING_S = 0.02
+"""[s] period of CRTP link-echo pings, the proof of life on links without acks (udp)."""
 PING_TAG = b"pd"  # our echoes, told apart from anything else echoed on the link
 RTT_SAMPLES = 10  # the round trip is the median of the last 10 echoes (200 ms)
-"""[s] period of CRTP link-echo pings, the proof of life on links without acks (udp)."""
 FAILSAFE_REPEAT_S = 3.0
 """[s] after failsafe() the stop goes out again with every ping for this long (or until
 close()): one sent into a dead link is lost, and a link back within this window still
@@ -127,6 +127,7 @@ class CrazyflieDriver(DriverBase):
         self._tickers: list[Ticker] = []
         self._echoed = threading.Event()
         self._rtts: deque[float] = deque(maxlen=RTT_SAMPLES)  # [s] recent echo round trips
+        self._rtt_s: float | None = None  # their median, kept by the receive thread
         self._link_error = ""
         self._last_heard: float | None = None
         self._last_sent = 0.0  # time.monotonic() of the last setpoint on the wire
@@ -180,8 +181,7 @@ class CrazyflieDriver(DriverBase):
             return LinkHealth(False, age, f"connection lost: {self._link_error}")
         if age > self.timeout:
             return LinkHealth(False, age, f"connection lost: silent for {age:.3f} s")
-        rtts = sorted(self._rtts)
-        return LinkHealth(True, age, rtt_s=rtts[len(rtts) // 2] if rtts else None)
+        return LinkHealth(True, age, rtt_s=self._rtt_s)
 
     def close(self) -> None:
         if self._port is None:
@@ -240,6 +240,8 @@ class CrazyflieDriver(DriverBase):
     def _start_threads(self) -> None:
         self._echoed.clear()
         self._link_error = ""
+        self._rtts.clear()  # a new link's round trip, not the last one's
+        self._rtt_s = None
         # receive: receive_packet blocks up to 50 ms, so a zero period is no busy loop
         self._tickers = [Ticker(0.0, self._receive, "crazyflie-receive").start(),
                          Ticker(PING_S, self._keepalive, "crazyflie-keepalive").start()]
@@ -257,6 +259,7 @@ class CrazyflieDriver(DriverBase):
         if len(data) == len(PING_TAG) + 8 and data.startswith(PING_TAG):
             (sent,) = struct.unpack_from("<d", data, len(PING_TAG))
             self._rtts.append(time.monotonic() - sent)
+            self._rtt_s = sorted(self._rtts)[len(self._rtts) // 2]
 
     def _keepalive(self) -> None:
         """Ping, and never let KEEPALIVE_S pass without a setpoint: a stalled loop gets the
