@@ -59,19 +59,15 @@ def planner_rows(orders: list[int], repeat: int) -> list[dict]:
 
 
 def replan_rows(states: int, compare: int, seed: int = 1) -> list[dict]:
-    """Warm replans from plans/libraries/<case>-ipts-n3.json at random trigger states of
-    the grid; the first `compare` of them are cold-solved too, for the largest gap [s]."""
+    """Warm replans from each paper case's order-3 plan library at random trigger states of
+    its grid; the first `compare` of them are cold-solved too, for the largest gap [s]."""
     import random
-    from pathlib import Path
 
     from perchd.tau import plan_ipts
-    from perchd.tau.library import load_library
 
-    folder = Path(__file__).resolve().parents[2] / "plans" / "libraries"
     rows = []
-    for path in sorted(folder.glob("*-ipts-n3.json")):
-        lib, rng, times, gap = load_library(path), random.Random(seed), [], 0.0
-        lim = lib.limits
+    for case, lib in _libraries():
+        rng, times, gap, lim = random.Random(seed), [], 0.0, lib.limits
         for n in range(states):
             x0 = rng.uniform(lib.x0s[0], lib.x0s[-1])
             v0 = rng.uniform(lib.v0s[0], lib.v0s[-1])
@@ -82,9 +78,34 @@ def replan_rows(states: int, compare: int, seed: int = 1) -> list[dict]:
                 cold = plan_ipts(x0, v0, lib.tau_s, lim.v_contact, lim.v_max, lim.a_max,
                                  lib.order)
                 gap = max(gap, abs(warm.duration - cold.duration))
-        rows.append({"case": path.name.split("-")[0], "order": lib.order, "solve": "warm",
+        rows.append({"case": case, "order": lib.order, "solve": "warm",
                      "states": states, "max_gap_to_cold_s": gap, **percentiles_ms(times)})
     return rows
+
+
+LIBRARY_GRID = ((-3.3, -2.7), (1.3, 1.7), (7, 9))
+"""x0 [m], v0 [m/s] ranges and node counts of plans/libraries/case{1,2}-ipts-n3.json."""
+
+
+def _libraries():
+    """(case name, library) for both paper cases: the checkout's plans/libraries files, or,
+    where those are not beside the package (an installed copy), the same grid built now."""
+    import sys
+    from pathlib import Path
+
+    from perchd.tau.cases import CASES
+    from perchd.tau.library import build_library, load_library
+
+    folder = Path(__file__).resolve().parents[2] / "plans" / "libraries"
+    for case in CASES:
+        path = folder / f"{case.name}-ipts-n3.json"
+        if path.exists():
+            yield case.name, load_library(path)
+            continue
+        print(f"perchd bench: {path} not found; building {case.name}'s library "
+              f"(63 cold solves)", file=sys.stderr)
+        yield case.name, build_library(*LIBRARY_GRID, case.tau_s, case.v_contact, case.v_max,
+                                       case.a_max, 3)
 
 
 def run_planner(args) -> int:
