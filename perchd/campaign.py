@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
 from perchd.errors import ConfigError
-from perchd.flightconfig import FlightConfig, TriggerConfig, TriggerPolicy
+from perchd.flightconfig import FlightConfig, TriggerPolicy
 from perchd.types import EndReason, Phase, Vec3
 
 Range = tuple[float, float]

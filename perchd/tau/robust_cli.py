@@ -10,7 +10,6 @@ given) with "robust": {"x0": [lo, hi], "v0": [lo, hi]} and a "certificate" recor
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 
