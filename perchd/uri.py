@@ -34,7 +34,10 @@ def parse_uri(text: str) -> Uri:
     scheme, rest = text.split(":", 1)
     if not rest.startswith("//"):
         return Uri(text, scheme.lower(), "", None, rest, {})
-    parts = urlsplit(text)
+    try:
+        parts = urlsplit(text)
+    except ValueError as err:  # e.g. an unclosed [IPv6 bracket
+        raise UriError(f"{text!r} is not a URI ({err})") from None
     try:
         port = parts.port
     except ValueError as err:

@@ -4,6 +4,8 @@ import subprocess
 import sys
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from perchd.clock import ManualClock
 from perchd.errors import MissingExtraError, UriError
@@ -50,3 +52,19 @@ def test_the_cli_prints_its_version():
     out = subprocess.run([sys.executable, "-m", "perchd", "--version"],
                          capture_output=True, text=True, check=True)
     assert out.stdout.startswith("perchd ")
+
+
+def test_an_unclosed_ipv6_bracket_is_a_uri_error_not_a_traceback():
+    with pytest.raises(UriError, match=r"'natnet://\[::1' is not a URI"):
+        parse_uri("natnet://[::1")
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(max_size=40) | st.builds(lambda s, t: f"{s}://{t}",
+                                         st.sampled_from(["sim", "zmq", "natnet", "radio"]),
+                                         st.text(max_size=30)))
+def test_any_text_parses_or_is_one_uri_error(text):
+    try:
+        parse_uri(text)
+    except UriError as err:
+        assert "\n" not in str(err)
