@@ -63,11 +63,22 @@ ATTITUDE_MSG_ID = 30
 CMD_DO_SET_MODE, CMD_ARM, CMD_SET_MESSAGE_INTERVAL = 176, 400, 511
 
 
+def _check_network_port(raw: str, device: str) -> None:
+    """udpout:/udpin:/udp:/tcp: devices end in :PORT; pymavlink would raise a bare
+    ValueError at connect time for anything else."""
+    if device.startswith(("/dev/", "COM")):
+        return
+    port = device.rsplit(":", 1)[1] if device.count(":") >= 2 else ""
+    if not (port.isdigit() and 0 < int(port) < 65536):
+        raise UriError(f"{raw}: {device!r} needs HOST:PORT with a port 1..65535, got {port!r}")
+
+
 def open_mavlink(uri: Uri, runtime: Runtime) -> "MavlinkDriver":
     require("pymavlink", "mavlink")
     device, query = split_query(uri.path)
     if not device.startswith(("udpout:", "udpin:", "udp:", "tcp:", "/dev/", "COM")):
         raise UriError(f"{uri.raw}: expected mavlink:udpout:HOST:PORT (or udpin:, tcp:, a serial device)")
+    _check_network_port(uri.raw, device)
     opts = Uri(uri.raw, uri.scheme, "", None, device, query)
     mass = float_param(opts, "mass", None, 0.01, 50.0, " kg")
     if mass is None:

@@ -209,6 +209,14 @@ def test_bad_uris_are_refused_by_name(uri, message):
         open_driver(uri, Runtime.real())
 
 
+@pytest.mark.parametrize("uri, port", [("mavlink:tcp:host:xx?mass=1", "'xx'"),
+                                       ("mavlink:udpout:127.0.0.1?mass=1", "''"),
+                                       ("mavlink:udpin:0.0.0.0:70000?mass=1", "'70000'")])
+def test_a_network_device_without_a_port_is_refused_before_pymavlink_sees_it(uri, port):
+    with pytest.raises(UriError, match=f"needs HOST:PORT with a port 1..65535, got {port}"):
+        open_driver(uri, Runtime.real())
+
+
 def test_a_hung_autopilot_is_lost_within_3_ticks_and_sent_to_land(ardupilot):
     drv = connected(ardupilot, "&timeout=0.06")
     try:
