@@ -35,7 +35,7 @@ from perchd.drivers.base import DriverBase, LinkHealth
 from perchd.drivers.thrust import CrazyflieThrust
 from perchd.drivers.ticker import Ticker
 from perchd.drivers.uriparams import bool_param, float_param, without_query
-from perchd.errors import LinkError
+from perchd.errors import LinkError, UriError
 from perchd.extras import require
 from perchd.runtime import Runtime
 from perchd.types import EndReason, Pose, Setpoint
@@ -65,6 +65,8 @@ _crtp_ready = False
 def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
     """Factory for `radio://` and `udp://` (not connected yet)."""
     require("cflib", "crazyflie")
+    if uri.scheme == "radio":
+        _check_radio(uri)
     hover = float_param(uri, "hover", 36000.0, 1000, 60000, " units")
     mass = float_param(uri, "mass", 0.030, 0.010, 0.100, " kg")
     timeout = float_param(uri, "timeout", 0.5, 0.01, 10.0, " s")
@@ -72,6 +74,20 @@ def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
     return CrazyflieDriver(uri.raw, without_query(uri), runtime, model, timeout,
                            extpose=bool_param(uri, "extpose"),
                            wait=float_param(uri, "wait", 2.0, 0.05, 60.0, " s"))
+
+
+def _check_radio(uri: Uri) -> None:
+    """radio://DONGLE/CHANNEL/RATE[/ADDRESS], checked here: cflib would only say "connection
+    failed" at connect time for a typo."""
+    parts = uri.path.strip("/").split("/") if uri.path.strip("/") else []
+    ok = ((uri.host.isdigit() or uri.host == "*") and len(parts) in (2, 3) and parts[0].isdigit()
+          and 0 <= int(parts[0]) <= 125 and parts[1] in ("250K", "1M", "2M"))
+    if ok and len(parts) == 3:
+        ok = len(parts[2]) == 10 and all(c in "0123456789abcdefABCDEF" for c in parts[2])
+    if not ok:
+        raise UriError(f"{uri.raw}: expected radio://DONGLE/CHANNEL/RATE[/ADDRESS], e.g. "
+                       "radio://0/80/2M/E7E7E7E7E7 (channel 0..125, rate 250K, 1M or 2M, "
+                       "address 10 hex digits)")
 
 
 def _init_cflib() -> Any:

@@ -189,6 +189,18 @@ def test_bad_options_are_refused_by_name(query, field):
         open_driver("udp://127.0.0.1:19850" + query, Runtime.real())
 
 
+@pytest.mark.parametrize("uri", ["radio://0/80/2M/ZZZ", "radio://0/200/2M", "radio://0/80/3M",
+                                 "radio://x/80/2M", "radio://0"])
+def test_a_radio_uri_typo_is_refused_before_connecting(uri):
+    with pytest.raises(UriError, match=r"expected radio://DONGLE/CHANNEL/RATE\[/ADDRESS\]"):
+        open_driver(uri, Runtime.real())
+
+
+def test_well_formed_radio_uris_open_without_a_dongle_until_connect():
+    for uri in ("radio://0/80/2M/E7E7E7E7E7", "radio://*/80/250K", "radio://1/0/1M"):
+        assert open_driver(uri, Runtime.real()).uri == uri
+
+
 def test_a_vehicle_that_dies_mid_flight_is_lost_within_3_ticks_and_gets_a_stop(responder):
     cf = open_driver(responder.uri, Runtime.real())
     cf.connect()
