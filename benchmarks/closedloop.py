@@ -45,7 +45,7 @@ def fly_once(plan, uri: str, log: Path):
 
 
 def measure(seeds: int, logdir: Path) -> dict:
-    from perchd.flightconfig import FlightConfig
+    from perchd.flight.config import FlightConfig
     out: dict = {"cases": {}, "compute_us": {}, "wall_per_sim_s": None}
     computes, walls, sim_s = [], [], 0.0
     for strategy in ("ctdts", "ipts"):
@@ -80,9 +80,9 @@ def measure(seeds: int, logdir: Path) -> dict:
 def realtime_jitter(logdir: Path) -> dict:
     """One noisy IPTS perch on the real clock: the loop's jitter and compute time [us]."""
     from perchd.drivers.base import open_driver
-    from perchd.flight import fly
+    from perchd.flight.run import fly
     from perchd.mocap.base import open_source
-    from perchd.runtime import Runtime
+    from perchd.core.runtime import Runtime
     rt = Runtime.real()
     driver = open_driver("sim://?latency=0.02&noise=0.001", rt)
     source = open_source("sim://", rt)
@@ -102,13 +102,13 @@ def realtime_jitter(logdir: Path) -> dict:
 
 def agent_tick_us(n: int = 5000) -> dict:
     """The agent's own work per tick, no simulator: estimator update and prediction, then
-    supervisor + controller, over synthetic perches back to back (perchd.loopbench) [us]."""
-    from perchd.loopbench import hot_compute
+    supervisor + controller, over synthetic perches back to back (perchd.sim.loopbench) [us]."""
+    from perchd.sim.loopbench import hot_compute
     return hot_compute(case1("ipts"), n)
 
 
 def _loop_p99(logdir: Path) -> float:
-    from perchd.flightlog import read_log
+    from perchd.logs.flightlog import read_log
     values = [r.compute_s for p in sorted(logdir.glob("*.jsonl")) for r in read_log(p).rows[1:]]
     values.sort()
     return 1e6 * values[int(0.99 * (len(values) - 1))]

@@ -5,7 +5,7 @@ receive path, and control-socket lines into a running `perchd serve`.
 
 (about 30 s; the issue asks for at least 1e5 NatNet packets and 1e4 control lines.)
 
-natnet: recorded Motive packets (shared/fixtures/natnet: 3 servers, NatNet 2.5 to 3.0),
+natnet: recorded Motive packets (tests/fixtures/natnet: 3 servers, NatNet 2.5 to 3.0),
     each mutated (bit flips, cuts, inserts, extreme words, a lying length field) or replaced
     by random bytes. Each goes through the decoders (accepted = decoded, rejected =
     MalformedPacket, crash = any other exception) and through NatNetSource.handle_datagram
@@ -40,16 +40,16 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from perchd.clock import ManualClock, MonotonicClock
-from perchd.mocap import natnet_models as natdefs, natnet_protocol as proto
-from perchd.mocap.natnet import NatNetServer, open_natnet
-from perchd.mocap.natnet_client import NatNetConfig, NatNetSource
-from perchd.mocap.natnet_clock import ClockSync
-from perchd.mocap.natnet_frame import decode_frame
-from perchd.mocap.natnet_wire import MalformedPacket
-from perchd.runtime import Runtime
-from perchd.types import Pose
-from perchd.uri import parse_uri
+from perchd.core.clock import ManualClock, MonotonicClock
+from perchd.mocap.natnet import models as natdefs, protocol as proto
+from perchd.mocap.natnet.uris import NatNetServer, open_natnet
+from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
+from perchd.mocap.natnet.clock import ClockSync
+from perchd.mocap.natnet.frame import decode_frame
+from perchd.mocap.natnet.wire import MalformedPacket
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
+from perchd.core.uri import parse_uri
 
 FIXTURES = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet"
 OLD_MOTIVE = {"1.5.0": (2, 5), "1.7.2": (2, 7), "1.9.0": (2, 9)}  # NatNet of each Motive 1.x

@@ -1,10 +1,10 @@
-"""Control-loop figures (issue 7): the same measurement as `perchd bench loop`.
+"""Control-loop figures: the same measurement as `perchd bench loop`.
 
     python benchmarks/loop.py [--json] [--seconds S]
 
 500 Hz fixed-rate loop jitter and overruns, the agent's compute per tick, pose-arrival to
 setpoint latency over real ZMQ sockets in mocap-synchronous and fixed-rate mode, and the
-agent's CPU load at 100 Hz; see perchd/loopbench.py for how each is taken.
+agent's CPU load at 100 Hz; see perchd/sim/loopbench.py for how each is taken.
 """
 
 from __future__ import annotations

@@ -21,18 +21,18 @@ import threading
 import time
 from pathlib import Path
 
-from perchd.clock import MonotonicClock
-from perchd.mocap import natnet_protocol as proto
+from perchd.core.clock import MonotonicClock
+from perchd.mocap.natnet import protocol as proto
 from perchd.mocap.frames import UpAxis
-from perchd.mocap.natnet import NatNetServer, open_natnet
-from perchd.mocap.natnet_client import NatNetConfig, NatNetSource
-from perchd.mocap.natnet_clock import ClockSync
-from perchd.mocap.natnet_frame import Frame, RigidBodySample, Timing, decode_frame, encode_frame
+from perchd.mocap.natnet.uris import NatNetServer, open_natnet
+from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
+from perchd.mocap.natnet.clock import ClockSync
+from perchd.mocap.natnet.frame import Frame, RigidBodySample, Timing, decode_frame, encode_frame
 from perchd.mocap.zmq import ZmqPosePublisher
 from perchd.mocap.base import open_source
-from perchd.runtime import Runtime
-from perchd.types import Pose
-from perchd.uri import parse_uri
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
+from perchd.core.uri import parse_uri
 
 SESSION = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet" / \
     "motive-2.1-session" / "packets"

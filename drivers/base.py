@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Setpoint
-from perchd.uri import Registry
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Setpoint
+from perchd.core.uri import Registry
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,10 +9,10 @@ link fault switch, so tests can cut the link.
 from __future__ import annotations
 
 from perchd.drivers.base import DriverBase, LinkHealth
-from perchd.runtime import Runtime
+from perchd.core.runtime import Runtime
 from perchd.sim.world import SimWorld, world_for
-from perchd.types import EndReason, Setpoint
-from perchd.uri import Uri
+from perchd.core.types import EndReason, Setpoint
+from perchd.core.uri import Uri
 
 
 def open_loopback(uri: Uri, runtime: Runtime) -> "LoopbackDriver":

@@ -30,12 +30,12 @@ from typing import Any, Callable
 from perchd.drivers.base import DriverBase, LinkHealth
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
-from perchd.drivers.uriparams import bool_param, float_param, split_query
-from perchd.errors import ConfigError, LinkError, UriError
-from perchd.extras import require
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Setpoint
-from perchd.uri import Uri
+from perchd.core.uriparams import bool_param, float_param, split_query
+from perchd.core.errors import ConfigError, LinkError, UriError
+from perchd.core.extras import require
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Setpoint
+from perchd.core.uri import Uri
 
 HEARTBEAT_S = 0.5
 """[s] our heartbeat period (MAVLink asks for at least 1 Hz)."""

@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 
 G = 9.81
-"""[m/s^2] gravity used for hover calibrations (the paper's ERRATA 8 value)."""
+"""[m/s^2] gravity used for hover calibrations (the paper's docs/errata.md §8 value)."""
 
 CF_UNITS_MAX = 0xFFFF
 """Largest thrust cflib's send_setpoint accepts (the firmware clamps to 60000 itself)."""
@@ -25,7 +25,7 @@ class CrazyflieThrust:
         f(u) = A u^2 + B u + C   [N per motor], four motors.
     Calibration: the curve is scaled by a single factor so that the vehicle's weight
     mass_kg * G maps exactly to hover_units. The default, 36000 units for 30 g at
-    9.81 m/s^2, is the paper's hover figure (ERRATA 8: about 36000 for a 27-30 g CF2.0)
+    9.81 m/s^2, is the paper's hover figure (docs/errata.md §8: about 36000 for a 27-30 g CF2.0)
     at the mass perchd's controller and simulator use (VehicleConfig, PlantParams: a
     CF2.0 with markers); the unscaled curve gives 36000 <-> 26.6 g, so the default
     factor is 1.1262 (a 30 g vehicle's motors run ~6 % harder than the bare curve says).

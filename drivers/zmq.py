@@ -1,9 +1,9 @@
-"""Setpoints published on ZMQ (CONTRACTS 3) for external simulators and HIL rigs.
+"""Setpoints published on ZMQ (docs/contracts.md §3) for external simulators and HIL rigs.
 
 `zmq://HOST:PORT[?vehicle=cf1&bind=1&wait=2]`: by default the driver connects to a
 subscriber that has bound the port (`perchd sim --setpoint-in` binds, like a mocap bridge
 binds its pose port); bind=1 binds instead, on loopback only unless public=1 is added
-(perchd.netbind). The socket is an XPUB, so the driver sees its
+(perchd.core.netbind). The socket is an XPUB, so the driver sees its
 subscribers come and go: connect() waits up to `wait` seconds for one to subscribe to
 `setpoint` (nothing is sent into the void), and health() is not ok once none is left.
 """
@@ -16,12 +16,12 @@ import time
 from typing import Any
 
 from perchd.drivers.base import DriverBase, LinkHealth
-from perchd.drivers.uriparams import bool_param, float_param
-from perchd.errors import LinkError, UriError
-from perchd.netbind import check_bind
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Phase, Setpoint
-from perchd.uri import Uri
+from perchd.core.uriparams import bool_param, float_param
+from perchd.core.errors import LinkError, UriError
+from perchd.core.netbind import check_bind
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.core.uri import Uri
 
 SETPOINT, STOP = b"setpoint", b"stop"
 
@@ -39,14 +39,14 @@ def open_zmq_driver(uri: Uri, runtime: Runtime) -> "ZmqSetpointDriver":
 
 
 def setpoint_message(vehicle: str, seq: int, sp: Setpoint) -> dict[str, Any]:
-    """The CONTRACTS 3 setpoint body: radians, newtons, world-frame Z-Y-X attitude."""
+    """The docs/contracts.md §3 setpoint body: radians, newtons, world-frame Z-Y-X attitude."""
     return {"vehicle": vehicle, "seq": seq, "t": sp.t, "pose_seq": sp.pose_seq,
             "roll": sp.roll, "pitch": sp.pitch, "yaw": sp.yaw, "thrust": sp.thrust,
             "phase": sp.phase.value}
 
 
 class BadSetpoint(ValueError):
-    """A setpoint message that does not follow CONTRACTS 3; the message names the field."""
+    """A setpoint message that does not follow docs/contracts.md §3; the message names the field."""
 
 
 def parse_setpoint_message(body: bytes) -> tuple[str, int, Setpoint]:

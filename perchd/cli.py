@@ -13,7 +13,7 @@ import sys
 from typing import Sequence
 
 from perchd import __version__
-from perchd.errors import PerchdError
+from perchd.core.errors import PerchdError
 
 COMMANDS = ("plan", "fly", "mocap", "sim", "serve", "ctl", "log", "bench")
 

@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from perchd.clock import ManualClock
-from perchd.errors import MissingExtraError, UriError
-from perchd.extras import require
-from perchd.uri import Registry, parse_uri
+from perchd.core.clock import ManualClock
+from perchd.core.errors import MissingExtraError, UriError
+from perchd.core.extras import require
+from perchd.core.uri import Registry, parse_uri
 
 
 def test_a_uri_splits_into_scheme_host_port_and_query():

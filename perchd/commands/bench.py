@@ -1,6 +1,6 @@
-"""`perchd bench planner|loop [--json]`: timing figures with min/median/p99 (issue 7).
+"""`perchd bench planner|loop [--json]`: timing figures with min/median/p99.
 
-The loop figures are measured by perchd.loopbench (also `python benchmarks/loop.py`).
+The loop figures are measured by perchd.sim.loopbench (also `python benchmarks/loop.py`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def register(sub) -> None:
 
 def percentiles_ms(times_s: list[float]) -> dict:
     """min/median/p99 [ms] of solve times [s] (p99 by nearest rank, as the loop's)."""
-    from perchd.loop import spread
+    from perchd.flight.loop import spread
 
     lo, median, p99, _ = spread(times_s)
     return {"min_ms": 1e3 * lo, "median_ms": 1e3 * median, "p99_ms": 1e3 * p99}
@@ -127,8 +127,8 @@ def run_planner(args) -> int:
 
 
 def run_loop(args) -> int:
-    from perchd.errors import ConfigError
-    from perchd import loopbench
+    from perchd.core.errors import ConfigError
+    from perchd.sim import loopbench
     if not 0.1 <= args.seconds <= 3600:
         raise ConfigError(f"--seconds {args.seconds:g} is outside 0.1..3600 s")
     figures = loopbench.measure(args.seconds)

@@ -1,5 +1,5 @@
 """`perchd ctl {fly P.json [--wait] | abort | status} [--socket PATH]`: talk to `perchd serve`
-over its control socket (CONTRACTS 4). Prints the reply as one JSON object; exit 0 when it
+over its control socket (docs/contracts.md §4). Prints the reply as one JSON object; exit 0 when it
 says ok (with --wait: when the flight ended in contact), 1 otherwise."""
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd.control_socket import request
+    from perchd.service.control_socket import request
 
     req: dict = {"cmd": args.cmd}
     if args.cmd == "fly":
@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _wait(socket_path: str, log: str) -> dict:
     """Poll status until the flight writing `log` has ended; its result."""
-    from perchd.control_socket import request
+    from perchd.service.control_socket import request
 
     while True:
         st = request(socket_path, {"cmd": "status"})

@@ -1,5 +1,5 @@
 """`perchd fly P.json --driver URI --mocap URI [--config F] [--surface X Y Z]
-[--normal NX NY NZ] [--log F] [--json]`: fly one perch and report it (CONTRACTS 2).
+[--normal NX NY NZ] [--log F] [--json]`: fly one perch and report it (docs/contracts.md §2).
 
 While flying, a one-line status on stderr (phase, X, Xdot, tau vs tau_ref); afterwards a
 summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise.
@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from perchd.errors import ConfigError, UriError
+from perchd.core.errors import ConfigError, UriError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -38,16 +38,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def load_config(args: argparse.Namespace):
-    """FlightConfig from --config (the TOML loader, perchd.config) and --surface/--normal."""
-    from perchd.flightconfig import FlightConfig, SurfaceConfig
+    """FlightConfig from --config (the TOML loader, perchd.service.config) and --surface/--normal."""
+    from perchd.flight.config import FlightConfig, SurfaceConfig
 
     cfg = FlightConfig()
     if args.config:
         try:
-            from perchd.config import load_flight_config
+            from perchd.service.config import load_flight_config
         except ImportError:
             raise ConfigError(f"--config {args.config}: this build has no TOML loader "
-                              "(perchd.config)") from None
+                              "(perchd.service.config)") from None
         cfg = load_flight_config(args.config)
     surface = cfg.surface
     if args.surface:
@@ -59,9 +59,9 @@ def load_config(args: argparse.Namespace):
 
 def make_runtime(args: argparse.Namespace, cfg):
     """A simulated clock and world when both links are sim://, real time otherwise."""
-    from perchd.clock import ManualClock
-    from perchd.runtime import Runtime
-    from perchd.uri import parse_uri
+    from perchd.core.clock import ManualClock
+    from perchd.core.runtime import Runtime
+    from perchd.core.uri import parse_uri
 
     driver_sim = parse_uri(args.driver).scheme == "sim"
     mocap_sim = parse_uri(args.mocap).scheme == "sim"
@@ -128,10 +128,10 @@ def summary_text(res) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from perchd.drivers.base import open_driver
-    from perchd.flight import FlightAbort, fly
+    from perchd.flight.run import FlightAbort, fly
     from perchd.mocap.base import open_source
     from perchd.tau import load_plan
-    from perchd.types import EndReason
+    from perchd.core.types import EndReason
 
     plan = load_plan(args.plan)
     cfg = load_config(args)

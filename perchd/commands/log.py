@@ -1,5 +1,5 @@
 """`perchd log summary F [--json]` and `perchd log plot F [--out PNG]`: read a flight log
-(CONTRACTS 5). The plot is the paper's figure 6 layout: distance, velocity and tau, each
+(docs/contracts.md §5). The plot is the paper's figure 6 layout: distance, velocity and tau, each
 measured against the reference."""
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _read(path: str):
-    from perchd.errors import PerchdError
-    from perchd.flightlog import read_log
+    from perchd.core.errors import PerchdError
+    from perchd.logs.flightlog import read_log
 
     try:
         return read_log(path)
@@ -35,12 +35,12 @@ def _read(path: str):
 
 def run(args: argparse.Namespace) -> int:
     if args.action == "summary":
-        from perchd.logsummary import summarize, summary_text
+        from perchd.logs.summary import summarize, summary_text
 
         s = summarize(_read(args.log))
         print(json.dumps(s.to_json()) if args.json else summary_text(s))
         return 0
-    from perchd.logplot import plot_flights
+    from perchd.logs.plot import plot_flights
 
     out = Path(args.out) if args.out else Path(args.log[0]).with_suffix(".png")
     plot_flights([_read(p) for p in args.log], out, [Path(p).name for p in args.log])

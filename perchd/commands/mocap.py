@@ -7,8 +7,8 @@ import argparse
 import json
 import sys
 
-from perchd.errors import LinkError
-from perchd.types import Pose
+from perchd.core.errors import LinkError
+from perchd.core.types import Pose
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -54,7 +54,7 @@ def pose_line(pose: Pose) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from perchd.mocap.base import open_source
-    from perchd.runtime import Runtime
+    from perchd.core.runtime import Runtime
 
     source = open_source(args.uri, Runtime.real())
     source.start()

@@ -1,4 +1,4 @@
-"""`perchd plan ctds|ctdts|ipts|robust|library|check` (CONTRACTS 2)."""
+"""`perchd plan ctds|ctdts|ipts|robust|library|check` (docs/contracts.md §2)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ def register(sub) -> None:
     _ctds(plan_sub)
     _ctdts(plan_sub)
     _ipts(plan_sub)
-    from perchd.tau.robust_cli import register as register_robust
+    from perchd.commands.plan_robust import register as register_robust
 
     register_robust(plan_sub)
-    from perchd.tau.library_cli import register as register_library
+    from perchd.commands.plan_library import register as register_library
 
     register_library(plan_sub)
     check = plan_sub.add_parser("check", help="re-derive and verify a plan file")
@@ -95,7 +95,7 @@ def run_check(args) -> int:
 
     plan = load_plan(args.file)
     if args.plot:
-        from perchd.tau.plot import plot_plan
+        from perchd.logs.planplot import plot_plan
 
         plot_plan(plan, args.plot)
     return _emit(argparse.Namespace(out=None, json=args.json), plan)

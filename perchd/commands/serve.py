@@ -1,5 +1,5 @@
 """`perchd serve [--config perchd.toml] [--socket PATH] [--driver URI] [--mocap URI]`:
-the flight agent as a service (systemd Type=notify); see perchd.daemon."""
+the flight agent as a service (systemd Type=notify); see perchd.service.daemon."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd.daemon import serve
+    from perchd.service.daemon import serve
 
     return serve(args.config, {"socket": args.socket, "driver": args.driver,
                                "mocap": args.mocap})

@@ -7,7 +7,7 @@
 
 The simulated world (perchd.sim.world) runs in real time. Poses go out at the mocap rate
 through a NatNet server emulator or a ZMQ publisher (perchd.mocap.outputs); setpoints come
-in on a ZMQ SUB socket bound at --setpoint-in (CONTRACTS 3 topics `setpoint` and `stop`),
+in on a ZMQ SUB socket bound at --setpoint-in (docs/contracts.md §3 topics `setpoint` and `stop`),
 which `perchd fly --driver zmq://...` connects to. A `stop` cuts the motors.
 
 The vehicle has the Crazyflie firmware's setpoint watchdog (perchd.sim.watchdog): once
@@ -21,7 +21,7 @@ On exit (SIGINT/SIGTERM, --duration, or --exit-on-stop) a summary: text, or with
 exactly one JSON object on stdout (contact time [s] and speed [m/s], counts).
 
 `perchd sim --campaign P.json ...` flies many simulated flights in this process instead
-(no sockets; see perchd.campaign_cli): --pose-out and --setpoint-in are then not wanted.
+(no sockets; see perchd.commands.campaign): --pose-out and --setpoint-in are then not wanted.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from perchd.errors import LinkError, UriError
+from perchd.core.errors import LinkError, UriError
 
 if TYPE_CHECKING:
     from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
@@ -69,7 +69,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--exit-on-stop", action="store_true",
                    help="exit once the agent has sent `stop` (the flight ended)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    from perchd.campaign_cli import add_arguments
+    from perchd.commands.campaign import add_arguments
     add_arguments(p)
     p.set_defaults(run=run)
 
@@ -90,13 +90,13 @@ class SetpointInbox:
     def __init__(self, text: str, world: Any, body: str, counts: Counts,
                  watchdog: WatchdogParams | None = None) -> None:
         from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
-        from perchd.uri import parse_uri
+        from perchd.core.uri import parse_uri
         import zmq
         uri = parse_uri(text)
         if uri.scheme != "zmq" or not uri.host or uri.port is None:
             raise UriError(f"--setpoint-in {text}: expected zmq://HOST:PORT")
-        from perchd.drivers.uriparams import bool_param
-        from perchd.netbind import check_bind
+        from perchd.core.uriparams import bool_param
+        from perchd.core.netbind import check_bind
         check_bind(uri.host, bool_param(uri, "public"), f"--setpoint-in {text}")
         self.world, self.body, self.counts = world, body, counts
         self.watchdog = SetpointWatchdog(watchdog or WatchdogParams(), world.command)
@@ -128,7 +128,7 @@ class SetpointInbox:
 
     def handle(self, topic: bytes, body: bytes) -> None:
         from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message
-        from perchd.types import Setpoint
+        from perchd.core.types import Setpoint
         if topic == b"stop":
             self.counts.stops += 1
             self.counts.stop_at = self.counts.stop_at or time.monotonic()
@@ -151,7 +151,7 @@ class SetpointInbox:
 
 
 def make_world(args: argparse.Namespace) -> Any:
-    from perchd.clock import MonotonicClock
+    from perchd.core.clock import MonotonicClock
     from perchd.sim.world import MocapParams, WorldParams, SimWorld
     from perchd.sim.plant import PlantParams
     if not 0.0 <= args.latency <= 1.0:
@@ -200,7 +200,7 @@ def summary(world: Any, counts: Counts, mocap_uri: str, driver_uri: str,
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd import campaign_cli
+    from perchd.commands import campaign as campaign_cli
     from perchd.mocap.outputs import open_pose_output
 
     campaign_cli.check_mode(args)

@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-from perchd.runtime import Runtime
-from perchd.types import Pose
-from perchd.uri import Registry
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
+from perchd.core.uri import Registry
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,7 +42,7 @@ class PoseSource(Protocol):
 
 SOURCES: Registry[PoseSource] = Registry("mocap", {
     "sim": "perchd.sim.world:open_sim_mocap",
-    "natnet": "perchd.mocap.natnet:open_natnet",
+    "natnet": "perchd.mocap.natnet.uris:open_natnet",
     "zmq": "perchd.mocap.zmq:open_zmq",
 })
 

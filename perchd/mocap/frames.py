@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import enum
 
-from perchd.errors import UriError
+from perchd.core.errors import UriError
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]

@@ -3,7 +3,7 @@
     natnet://HOST[:PORT][?version=4.1][&multicast=1][&group=239.255.42.99][&rate=120][&up=y]
         a NatNet server emulator on HOST's command PORT (1510; 0 = any free port)
     zmq://HOST:PORT[?public=1]
-        a ZMQ publisher bound there (CONTRACTS 3 topic `pose`); loopback unless public=1
+        a ZMQ publisher bound there (docs/contracts.md §3 topic `pose`); loopback unless public=1
 
     out = open_pose_output("natnet://127.0.0.1:0", ["cf1"], clock)
     out.publish(pose); out.uri("cf1")  # the URI `perchd fly --mocap` opens to read it back
@@ -14,11 +14,11 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from perchd.clock import Clock
-from perchd.drivers.uriparams import bool_param, float_param
-from perchd.errors import UriError
-from perchd.types import Pose
-from perchd.uri import parse_uri
+from perchd.core.clock import Clock
+from perchd.core.uriparams import bool_param, float_param
+from perchd.core.errors import UriError
+from perchd.core.types import Pose
+from perchd.core.uri import parse_uri
 
 _NATNET_PARAMS = ("version", "multicast", "group", "rate", "up")
 
@@ -48,7 +48,7 @@ def open_pose_output(text: str, bodies: list[str], clock: Clock) -> PoseOutput:
 
 
 def _natnet_output(uri, bodies: list[str], clock: Clock):
-    from perchd.mocap.natnet_server import NatNetServer
+    from perchd.mocap.natnet.server import NatNetServer
     unknown = sorted(set(uri.query) - set(_NATNET_PARAMS))
     if unknown:
         raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; "

@@ -17,8 +17,8 @@ from typing import Any
 
 from perchd.mocap.base import PoseSource, SourceStats
 from perchd.mocap.outputs import PoseOutput
-from perchd.runtime import Runtime
-from perchd.types import Pose
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
 
 
 class RelayedSource:

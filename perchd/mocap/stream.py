@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass, fields
 
 from perchd.mocap.base import SourceStats
-from perchd.types import Pose
+from perchd.core.types import Pose
 
 
 class Drop(enum.Enum):

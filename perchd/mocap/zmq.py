@@ -1,4 +1,4 @@
-"""`zmq://` pose source and the pose publisher (CONTRACTS 3, topic `pose`).
+"""`zmq://` pose source and the pose publisher (docs/contracts.md §3, topic `pose`).
 
     zmq://HOST:PORT?body=NAME[&bind=1[&public=1]][&clock=local|remote][&max_age=0.5]
 
@@ -10,7 +10,7 @@ time.monotonic), so latency = arrival - t; `clock=remote` takes t for ordering o
 (latency 0, the pose measured on arrival). Validation and staleness are those of every socket
 source (perchd.mocap.stream): malformed, non-finite, huge, stale, out-of-order and
 other-body messages are counted and dropped, never raised. Binding (the source with bind=1,
-the publisher) is on loopback only unless public=1 / public=True opts in (perchd.netbind).
+the publisher) is on loopback only unless public=1 / public=True opts in (perchd.core.netbind).
 
     pub = ZmqPosePublisher("tcp://127.0.0.1:0")     # ephemeral port; pub.uri("cf1")
     pub.wait_for_subscriber(2.0)
@@ -26,15 +26,15 @@ import threading
 import time
 from typing import Any
 
-from perchd.clock import Clock
-from perchd.drivers.uriparams import bool_param, float_param
-from perchd.errors import LinkError, UriError
-from perchd.netbind import check_bind
+from perchd.core.clock import Clock
+from perchd.core.uriparams import bool_param, float_param
+from perchd.core.errors import LinkError, UriError
+from perchd.core.netbind import check_bind
 from perchd.mocap.stream import (
     Drop, PoseLimits, PoseStream, RateLimitedWarning, ThreadedSource)
-from perchd.runtime import Runtime
-from perchd.types import Pose
-from perchd.uri import Uri
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
+from perchd.core.uri import Uri
 
 log = logging.getLogger("perchd.mocap.zmq")
 
@@ -69,13 +69,13 @@ def open_zmq(uri: Uri, runtime: Runtime) -> "ZmqPoseSource":
 # ---------------------------------------------------------------- message codec
 
 def pose_message(pose: Pose) -> bytes:
-    """The CONTRACTS 3 JSON body of a pose."""
+    """The docs/contracts.md §3 JSON body of a pose."""
     return json.dumps({"body": pose.body, "seq": pose.seq, "t": pose.t, "p": list(pose.p),
                        "q": list(pose.q), "valid": pose.valid}).encode()
 
 
 class BadMessage(ValueError):
-    """A message that is not a CONTRACTS 3 pose."""
+    """A message that is not a docs/contracts.md §3 pose."""
 
 
 def parse_pose_message(body: bytes) -> tuple[str, int, float, tuple, tuple, bool]:
@@ -197,7 +197,7 @@ class ZmqPoseSource(ThreadedSource):
 # ---------------------------------------------------------------- publisher
 
 class ZmqPosePublisher:
-    """Publishes CONTRACTS 3 poses; binds by default (the source connects).
+    """Publishes docs/contracts.md §3 poses; binds by default (the source connects).
 
     endpoint: "tcp://HOST:PORT" or "zmq://HOST:PORT"; port 0 picks a free port (read it back
     from `endpoint`). An XPUB underneath lets `wait_for_subscriber` avoid sending into the void.

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Protocol, Sequence
 
-from perchd.types import Pose
+from perchd.core.types import Pose
 
 Arrival = tuple[float, Pose]
 """([s] when the frame reaches the agent, the frame)."""

@@ -13,8 +13,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from perchd.errors import UriError
-from perchd.uri import Uri
+from perchd.core.errors import UriError
+from perchd.core.uri import Uri
 
 AT_MAX_S = 3600.0
 FOR_MAX_S = 60.0

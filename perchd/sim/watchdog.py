@@ -17,8 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from perchd.errors import ConfigError
-from perchd.types import Setpoint
+from perchd.core.errors import ConfigError
+from perchd.core.types import Setpoint
 
 
 @dataclass(frozen=True)

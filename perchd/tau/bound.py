@@ -1,4 +1,4 @@
-"""Minimum-time lower bound for any plan under the same limits (ERRATA, last note).
+"""Minimum-time lower bound for any plan under the same limits (docs/errata.md, the lower bound).
 
 Stage 1 flown bang-bang over the gap it must close, |x0| - V_c |tau_s|: accelerate at a_max,
 cruise at v_max if reached, decelerate at a_max to V_c; the best V_c in [V_l, V_u]; plus

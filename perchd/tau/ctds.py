@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan, check_trigger, make_plan
 from perchd.tau.verify import check_limits

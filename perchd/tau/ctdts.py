@@ -1,11 +1,11 @@
 """CTDTS planner: constant tau-dot to V_c at tau_s, then constant speed (paper section 2.2,
-ERRATA 1, 2, 4)."""
+docs/errata.md §1, §2, §4)."""
 
 from __future__ import annotations
 
 import math
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan, check_trigger, make_plan
 from perchd.tau.verify import check_limits

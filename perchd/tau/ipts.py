@@ -10,7 +10,7 @@ The limits 16c-16e plus "tau stays negative and has not yet reached tau_s before
 (perchd.tau.plan.peak_abs) and re-solved with tightened limits if the grid let a peak slip
 between nodes. Variables z = (m_1..m_n, t_s); every constraint gradient is analytic.
 
-Global search: the problem is non-convex (the paper's case 2 is a local minimum, ERRATA 6),
+Global search: the problem is non-convex (the paper's case 2 is a local minimum, docs/errata.md §6),
 so SLSQP runs from seeds fitted to the bang-bang bound profile for several V_c and from
 a spread of random polynomials, and the best verified solution wins.
 """
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.bound import min_time_bound
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan, check_trigger, make_plan

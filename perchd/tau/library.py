@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 
 
 @dataclass(frozen=True)

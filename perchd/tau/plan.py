@@ -13,7 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.limits import Limits
 from perchd.tau.profiles import ConstantTauDot, InversePolynomial
 
@@ -31,7 +31,7 @@ class Peaks:
 
 @dataclass(frozen=True)
 class Plan:
-    """A perching plan (CONTRACTS 1). Build it with perchd.tau.make_plan or a strategy.
+    """A perching plan (docs/contracts.md §1). Build it with perchd.tau.make_plan or a strategy.
 
     x0 [m] < 0 and v0 [m/s] > 0: trigger state.  tau_s [s]: stage switch (None for ctds).
     c: tau-dot of ctds/ctdts.  k: (k_0..k_n) of ipts.  t_switch, duration [s] from trigger.

@@ -1,4 +1,4 @@
-"""Plan files (CONTRACTS 1, schema perchd.plan/1): save, and load with every figure re-derived.
+"""Plan files (docs/contracts.md §1, schema perchd.plan/1): save, and load with every figure re-derived.
 
 A file's stored figures (t_switch, duration, v_contact, peaks) must agree with what its
 parameters imply, so a tampered, stale or hand-edited plan is refused naming the field.
@@ -10,7 +10,7 @@ import json
 import math
 from pathlib import Path
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.limits import Limits
 from perchd.tau.plan import STRATEGIES, Plan, make_plan
 
@@ -36,7 +36,7 @@ def save_plan(plan: Plan, path: str | Path) -> None:
 
 def load_plan(path: str | Path, text: str | None = None) -> Plan:
     """The plan in file `path`; `text`: its contents when the caller has read them already
-    (the service reads plans through perchd.safefile)."""
+    (the service reads plans through perchd.core.safefile)."""
     return load_json(path, plan_from_json, "plan file", text)
 
 

@@ -42,7 +42,7 @@ class ConstantTauDot:
 
 @dataclass(frozen=True)
 class InversePolynomial:
-    """IPTS, paper eqs. 12-15 (ERRATA 3): tau(t) = 1 / p(t), p(t) = sum k_i t^i, k_0 = 1/tau_0.
+    """IPTS, paper eqs. 12-15 (docs/errata.md §3): tau(t) = 1 / p(t), p(t) = sum k_i t^i, k_0 = 1/tau_0.
 
     X = x0 exp(P(t)) with P the antiderivative of p, Xdot = X p, Xddot = X (p' + p^2).
     """

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.plan import Plan, make_plan
 
 if TYPE_CHECKING:

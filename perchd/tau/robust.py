@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.certify import Box, Certificate, certify_box, first_switch
 
 T_SAMPLES = 97          # time samples per trajectory in the search (certifier bounds between)

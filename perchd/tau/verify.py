@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.bound import plan_bound
 from perchd.tau.plan import Plan
 
@@ -30,7 +30,7 @@ def violations(plan: Plan) -> list[str]:
 def _robust_violations(plan: Plan) -> list[str]:
     if plan.robust is None:
         return []
-    from perchd.tau.robust_cli import check_plan
+    from perchd.commands.plan_robust import check_plan
 
     try:
         check_plan(plan)
@@ -49,7 +49,7 @@ def check_limits(plan: Plan) -> Plan:
 
 @dataclass(frozen=True)
 class Report:
-    """What `perchd plan check --json` prints (CONTRACTS 2); times s, speeds m/s, m/s^2."""
+    """What `perchd plan check --json` prints (docs/contracts.md §2); times s, speeds m/s, m/s^2."""
 
     strategy: str
     order: int | None

@@ -15,7 +15,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from perchd.campaign_cli import Progress
+from perchd.commands.campaign import Progress
 
 PLANS = Path(__file__).parents[2] / "plans"
 BOX = str(PLANS / "robust-n3-table2-box.json")

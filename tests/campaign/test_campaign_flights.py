@@ -1,4 +1,4 @@
-"""perchd.campaign: what a campaign flies, how each flight goes, and the table it makes."""
+"""perchd.sim.campaign: what a campaign flies, how each flight goes, and the table it makes."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from perchd.campaign import (COLUMNS, FlightSpec, Spread, campaign_config, default_policy,
+from perchd.sim.campaign import (COLUMNS, FlightSpec, Spread, campaign_config, default_policy,
                              default_ranges, fly_one, grid_specs, random_specs, run_campaign,
                              start_for, summarize, write_table)
-from perchd.errors import ConfigError
-from perchd.flightconfig import FlightConfig, SurfaceConfig, TriggerPolicy
-from perchd.flightlog import read_log
+from perchd.core.errors import ConfigError
+from perchd.flight.config import FlightConfig, SurfaceConfig, TriggerPolicy
+from perchd.logs.flightlog import read_log
 from perchd.tau import load_plan, retarget
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "closedloop"))

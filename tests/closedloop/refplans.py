@@ -1,8 +1,8 @@
 """Closed-form reference plans for the closed-loop tests, independent of perchd.tau.
 
 The paper's case 1 (x0 = -3 m, v0 = 1.5 m/s, tau_s = -0.5 s, V_c in [0.7, 1.0] m/s,
-v_max 2.5 m/s, a_max 1.4 m/s^2) as CTDTS (corrected eq. 7, ERRATA 1-2) and as IPTS n = 3
-with the paper's k (ERRATA 5). They expose the Plan API's attributes and functions, so the
+v_max 2.5 m/s, a_max 1.4 m/s^2) as CTDTS (corrected eq. 7, docs/errata.md §1-2) and as IPTS n = 3
+with the paper's k (docs/errata.md §5). They expose the Plan API's attributes and functions, so the
 flight code cannot tell them from perchd.tau plans; the acceptance tests prefer perchd.tau.
 """
 

@@ -6,12 +6,12 @@ from pathlib import Path
 from typing import Any, Callable
 
 import refplans
-from perchd.clock import ManualClock
+from perchd.core.clock import ManualClock
 from perchd.drivers.base import open_driver
-from perchd.flight import FlightAbort, FlightResult, fly
-from perchd.flightconfig import FlightConfig
+from perchd.flight.run import FlightAbort, FlightResult, fly
+from perchd.flight.config import FlightConfig
 from perchd.mocap.base import open_source
-from perchd.runtime import Runtime
+from perchd.core.runtime import Runtime
 
 PLANS = Path(__file__).resolve().parents[2] / "plans"
 NOISY = "sim://?latency=0.02&noise=0.001"

@@ -9,10 +9,10 @@ import math
 import pytest
 
 from simflight import Sim, case1
-from perchd.flight import FlightAbort
-from perchd.flightconfig import FlightConfig, SafetyConfig, TriggerConfig, TriggerPolicy
-from perchd.flightlog import read_log
-from perchd.types import EndReason, Phase
+from perchd.flight.run import FlightAbort
+from perchd.flight.config import FlightConfig, SafetyConfig, TriggerConfig, TriggerPolicy
+from perchd.logs.flightlog import read_log
+from perchd.core.types import EndReason, Phase
 
 TRIGGER_T = 2.57
 """[s] simulated time of the trigger from the default start (measured in the nominal flight)."""
@@ -170,7 +170,7 @@ def test_an_exception_in_the_loop_still_sends_the_failsafe_and_closes_the_log(tm
 
 
 def test_a_wall_nearer_than_configured_stops_the_vehicle_short_and_the_plan_completes(tmp_path):
-    from perchd.flightconfig import SurfaceConfig
+    from perchd.flight.config import SurfaceConfig
     cfg = dataclasses.replace(safety(tau_error_s=100.0), surface=SurfaceConfig(point=(0.5, 0.0, 0.0)))
 
     def noisy(sim):  # real mocap sees a perched body jitter; bit-still reads as a frozen tracker

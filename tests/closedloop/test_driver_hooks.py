@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from simflight import Sim, case1
-from perchd.types import EndReason
+from perchd.core.types import EndReason
 
 
 def test_a_driver_with_observe_pose_sees_the_poses_the_flight_flew_on(tmp_path):

@@ -7,10 +7,10 @@ import random
 
 import pytest
 
-from perchd.estimator import Estimator
-from perchd.flightconfig import EstimatorConfig
-from perchd.perchframe import PerchFrame
-from perchd.types import Pose
+from perchd.flight.estimator import Estimator
+from perchd.flight.config import EstimatorConfig
+from perchd.flight.frame import PerchFrame
+from perchd.core.types import Pose
 
 WALL_X = PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
 T = 1 / 120

@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from perchd.errors import ConfigError
-from perchd.flightconfig import FlightConfig, SurfaceConfig, VehicleConfig
+from perchd.core.errors import ConfigError
+from perchd.flight.config import FlightConfig, SurfaceConfig, VehicleConfig
 
 
 def test_defaults_are_a_30_g_crazyflie_at_100_hz_with_25_degree_tilt():

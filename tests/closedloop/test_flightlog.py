@@ -6,9 +6,9 @@ import json
 
 import pytest
 
-from perchd.errors import PerchdError
-from perchd.flightconfig import FlightConfig
-from perchd.flightlog import SCHEMA, FlightLogWriter, LogEvent, LogRow, read_log
+from perchd.core.errors import PerchdError
+from perchd.flight.config import FlightConfig
+from perchd.logs.flightlog import SCHEMA, FlightLogWriter, LogEvent, LogRow, read_log
 
 
 def row(k, end=None):

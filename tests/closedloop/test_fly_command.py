@@ -1,4 +1,4 @@
-"""`perchd fly` (CONTRACTS 2): a whole simulated perch from the command line."""
+"""`perchd fly` (docs/contracts.md §2): a whole simulated perch from the command line."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ import pytest
 from simflight import PLANS, Sim, case1
 from perchd.cli import main
 from perchd.commands.fly import StatusLine, make_runtime, summary_text
-from perchd.errors import UriError
-from perchd.flight import TickStatus
-from perchd.flightconfig import FlightConfig
-from perchd.flightlog import read_log
-from perchd.types import Phase
+from perchd.core.errors import UriError
+from perchd.flight.run import TickStatus
+from perchd.flight.config import FlightConfig
+from perchd.logs.flightlog import read_log
+from perchd.core.types import Phase
 
 
 def plan_file(tmp_path, strategy="ipts"):

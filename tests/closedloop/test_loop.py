@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from perchd.clock import ManualClock
-from perchd.loop import FixedRateLoop
+from perchd.core.clock import ManualClock
+from perchd.flight.loop import FixedRateLoop
 
 
 def test_ticks_fall_on_absolute_deadlines_of_the_injected_clock():

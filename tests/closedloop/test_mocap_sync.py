@@ -13,15 +13,15 @@ import pytest
 import zmq
 
 from simflight import Sim, case1
-from perchd.clock import ManualClock, MonotonicClock
-from perchd.config import config_from_dict
-from perchd.errors import ConfigError
-from perchd.flightconfig import FlightConfig, LoopSync
-from perchd.flightlog import read_log
-from perchd.loop import FixedRateLoop, MocapSyncLoop, make_loop
+from perchd.core.clock import ManualClock, MonotonicClock
+from perchd.service.config import config_from_dict
+from perchd.core.errors import ConfigError
+from perchd.flight.config import FlightConfig, LoopSync
+from perchd.logs.flightlog import read_log
+from perchd.flight.loop import FixedRateLoop, MocapSyncLoop, make_loop
 from perchd.mocap.base import open_source
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Phase, Pose, Setpoint
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Pose, Setpoint
 
 MOCAP = FlightConfig(sync=LoopSync.MOCAP, rate_hz=120.0)  # the simulator's mocap runs at 120 Hz
 

@@ -1,14 +1,14 @@
 """Acceptance: the paper's case-1 plans flown closed loop in simulation end in contact at
-the planned speed and time (issue 3), nominal and with 20 ms latency + 1 mm noise."""
+the planned speed and time, nominal and with 20 ms latency + 1 mm noise."""
 
 from __future__ import annotations
 
 import pytest
 
 from simflight import NOISY, PLANS, Sim, case1
-from perchd.flightconfig import FlightConfig, TauGains
-from perchd.flightlog import read_log
-from perchd.types import EndReason
+from perchd.flight.config import FlightConfig, TauGains
+from perchd.logs.flightlog import read_log
+from perchd.core.types import EndReason
 
 LINKS = {"nominal": "sim://", "latency+noise": NOISY, "latency+noise seed 1": NOISY + "&seed=1"}
 
@@ -93,8 +93,8 @@ def test_the_papers_clock_indexed_stage_two_also_perches(tmp_path):
 
 @pytest.mark.parametrize("action,thrust", [("cut", 0.0), ("idle", 0.08)])
 def test_after_contact_the_motors_are_cut_or_idled_as_configured(action, thrust, tmp_path):
-    from perchd.flightconfig import PostContact
-    from perchd.types import Phase
+    from perchd.flight.config import PostContact
+    from perchd.core.types import Phase
     sim = Sim()
     cfg = FlightConfig(post_contact=PostContact(action))
     res = sim.fly(case1("ctdts"), tmp_path / "f.jsonl", cfg)
@@ -124,7 +124,7 @@ def _retarget_or_skip():
 @pytest.mark.parametrize("strategy", ["ctdts", "ipts"])
 def test_the_replan_policy_flies_a_plan_made_for_the_measured_trigger_state(strategy, tmp_path):
     _retarget_or_skip()
-    from perchd.flightconfig import TriggerConfig, TriggerPolicy
+    from perchd.flight.config import TriggerConfig, TriggerPolicy
     plan = case1(strategy)
     cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN))
     res = Sim(NOISY).fly(plan, tmp_path / "f.jsonl", cfg)
@@ -146,7 +146,7 @@ def test_a_vehicle_on_the_ground_takes_off_holds_and_then_perches(tmp_path):
 
 def test_the_robust_policy_flies_a_certified_plan_from_the_measured_state(tmp_path):
     _retarget_or_skip()
-    from perchd.flightconfig import TriggerConfig, TriggerPolicy
+    from perchd.flight.config import TriggerConfig, TriggerPolicy
     from perchd.tau import load_plan
     path = PLANS / "robust-n3-around-case1.json"
     if not path.exists():

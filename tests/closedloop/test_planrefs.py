@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import refplans
-from perchd.planrefs import PlanSampler
+from perchd.flight.planrefs import PlanSampler
 from perchd.tau import load_plan
 
 PLANS = sorted((Path(__file__).resolve().parents[2] / "plans").glob("*.json"))

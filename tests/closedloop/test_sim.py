@@ -8,12 +8,12 @@ import statistics
 
 import pytest
 
-from perchd.clock import ManualClock
+from perchd.core.clock import ManualClock
 from perchd.drivers.base import open_driver
-from perchd.errors import UriError
+from perchd.core.errors import UriError
 from perchd.mocap.base import open_source
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Phase, Setpoint
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Setpoint
 
 G = 9.81
 

@@ -6,10 +6,10 @@ import pytest
 
 from simflight import case1
 from perchd.drivers.base import LinkHealth
-from perchd.flightconfig import FlightConfig
-from perchd.perchframe import PerchFrame
-from perchd.supervisor import Supervisor
-from perchd.types import EndReason, State
+from perchd.flight.config import FlightConfig
+from perchd.flight.frame import PerchFrame
+from perchd.flight.supervisor import Supervisor
+from perchd.core.types import EndReason, State
 
 CFG = FlightConfig()
 FRAME = PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))

@@ -20,8 +20,8 @@ sys.path.insert(0, os.path.dirname(__file__))
 from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig  # noqa: E402
 from perchd.drivers.base import open_driver  # noqa: E402
 from perchd.drivers.thrust import G  # noqa: E402
-from perchd.runtime import Runtime  # noqa: E402
-from perchd.types import Phase, Setpoint  # noqa: E402
+from perchd.core.runtime import Runtime  # noqa: E402
+from perchd.core.types import Phase, Setpoint  # noqa: E402
 
 
 def arrivals(rig) -> list[float]:

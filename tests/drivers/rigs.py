@@ -109,9 +109,9 @@ class LoopbackRig:
     _count = 0
 
     def __init__(self) -> None:
-        from perchd.clock import MonotonicClock
+        from perchd.core.clock import MonotonicClock
         from perchd.drivers.base import open_driver
-        from perchd.runtime import Runtime
+        from perchd.core.runtime import Runtime
         LoopbackRig._count += 1
         self.name = f"conformance{LoopbackRig._count}"
         self.uri = f"sim://{self.name}"

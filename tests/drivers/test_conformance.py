@@ -9,8 +9,8 @@ from ticks import level, ticks_until_lost
 from ticks import wait_for as _wait
 from perchd.drivers.base import DRIVERS, LinkHealth, open_driver
 from perchd.drivers.thrust import G
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Phase, Setpoint
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Setpoint
 
 WEIGHT = MASS * G
 

@@ -15,9 +15,9 @@ from perchd.drivers import crazyflie
 from perchd.drivers.base import open_driver
 from perchd.drivers.crazyflie import PING_S
 from perchd.drivers.thrust import CrazyflieThrust
-from perchd.errors import LinkError, MissingExtraError, UriError
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Phase, Pose, Setpoint
+from perchd.core.errors import LinkError, MissingExtraError, UriError
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Pose, Setpoint
 
 pytest.importorskip("cflib")
 

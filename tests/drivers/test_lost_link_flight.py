@@ -1,6 +1,6 @@
 """A link that dies mid-flight ends the flight as LOST_LINK within 3 ticks, with a failsafe.
 
-The real flight loop (perchd.flight.fly, 100 Hz, real time) flies each real driver against
+The real flight loop (perchd.flight.run.fly, 100 Hz, real time) flies each real driver against
 its test peer (CRTP responder, MAVLink double, ZMQ subscriber). The peer's decoded commands
 drive a simulated world, whose mocap the agent reads, so the flight is physically coherent
 until the peer dies half a second in.
@@ -15,12 +15,12 @@ import pytest
 
 from rigs import CrazyflieRig, MavlinkRig, ZmqRig
 from perchd.drivers.base import open_driver
-from perchd.flightlog import read_log
+from perchd.logs.flightlog import read_log
 from perchd.mocap.base import open_source
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Phase, Setpoint
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Setpoint
 
-flight = pytest.importorskip("perchd.flight", reason="the closed loop is not in this checkout")
+flight = pytest.importorskip("perchd.flight.run", reason="the closed loop is not in this checkout")
 from caseplans import case1_ipts  # noqa: E402
 
 

@@ -20,13 +20,13 @@ from pathlib import Path
 import pytest
 import zmq
 
-from perchd.clock import ManualClock
+from perchd.core.clock import ManualClock
 from perchd.drivers.base import open_driver
 from perchd.mocap.base import open_source
-from perchd.runtime import Runtime
-from perchd.types import EndReason
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason
 
-flight = pytest.importorskip("perchd.flight", reason="the closed loop is not in this checkout")
+flight = pytest.importorskip("perchd.flight.run", reason="the closed loop is not in this checkout")
 
 from caseplans import PLAN_FILE, case1_ipts  # noqa: E402
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from perchd.errors import ConfigError
+from perchd.core.errors import ConfigError
 from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
-from perchd.types import Phase, Setpoint
+from perchd.core.types import Phase, Setpoint
 
 TILTED = Setpoint(0.0, 0.2, -0.3, 0.5, 0.35, 7, Phase.APPROACH)
 

@@ -10,9 +10,9 @@ from ticks import level, ticks_until_lost
 from zmq_subscriber import SetpointSubscriber
 from perchd.drivers.base import open_driver
 from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, setpoint_message
-from perchd.errors import LinkError, UriError
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Phase, Setpoint
+from perchd.core.errors import LinkError, UriError
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Setpoint
 
 
 @pytest.fixture

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from typing import Callable
 
-from perchd.types import EndReason, Phase, Setpoint
+from perchd.core.types import EndReason, Phase, Setpoint
 
 
 def wait_for(predicate: Callable[[], object], timeout: float = 2.0) -> bool:

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import math
 
-from perchd.clock import ManualClock
+from perchd.core.clock import ManualClock
 from perchd.sim.faults import (Corrupt, Freeze, Invalid, Late, Outliers, RateDrop, Reorder,
                                Repeat, Stop, shape)
 from perchd.sim.world import SimWorld, WorldParams
-from perchd.types import Pose
+from perchd.core.types import Pose
 
 P = 0.01
 

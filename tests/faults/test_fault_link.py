@@ -21,11 +21,11 @@ from test_aborts import TRIGGER_T, assert_failsafe_and_closed_log
 from test_lost_link_flight import bridge
 from udp_relay import UdpRelay
 from perchd.drivers.base import open_driver
-from perchd.flight import FlightAbort, fly as fly_real
-from perchd.flightlog import read_log
+from perchd.flight.run import FlightAbort, fly as fly_real
+from perchd.logs.flightlog import read_log
 from perchd.mocap.base import open_source
-from perchd.runtime import Runtime
-from perchd.types import EndReason
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason
 
 PING_S = 0.02
 """[s] the crazyflie driver's echo period: its 'last heard' is at most this old when the

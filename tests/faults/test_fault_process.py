@@ -21,8 +21,8 @@ import pytest
 
 from faultsim import TICK, fly, injected, report
 from svc import PLAN, SimProcess
-from perchd.flightlog import read_log
-from perchd.types import EndReason
+from perchd.logs.flightlog import read_log
+from perchd.core.types import EndReason
 
 ROOT = Path(__file__).resolve().parents[2]
 CUT_S = 2.0

@@ -1,4 +1,4 @@
-"""Control-socket lines (CONTRACTS 4) under fuzzing, against a running `perchd serve` over its
+"""Control-socket lines (docs/contracts.md §4) under fuzzing, against a running `perchd serve` over its
 real Unix socket: every line gets exactly one reply, a bad one {"ok": false, "error": ...};
 the service never stops and answers the next good request."""
 

@@ -13,11 +13,11 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from mutate import mutated_bytes
-from perchd.clock import ManualClock
-from perchd.mocap import natnet_models as natdefs, natnet_protocol as proto
-from perchd.mocap.natnet_client import NatNetConfig, NatNetSource
-from perchd.mocap.natnet_server import NatNetServer
-from perchd.mocap.natnet_wire import MalformedPacket
+from perchd.core.clock import ManualClock
+from perchd.mocap.natnet import models as natdefs, protocol as proto
+from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
+from perchd.mocap.natnet.server import NatNetServer
+from perchd.mocap.natnet.wire import MalformedPacket
 
 V3 = Path(__file__).resolve().parents[1] / "fixtures" / "natnet" / "motive-2.1-natnet-3.0"
 MODELDEFS = [(V3 / f).read_bytes() for f in ("modeldef_packet_v3.bin", "modeldef_packet_v3_2.bin",

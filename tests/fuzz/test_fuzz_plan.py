@@ -1,4 +1,4 @@
-"""Plan files (CONTRACTS 1) under fuzzing: whatever bytes or JSON a file holds, loading it
+"""Plan files (docs/contracts.md §1) under fuzzing: whatever bytes or JSON a file holds, loading it
 either gives a plan whose figures are finite and consistent, or one PlanError; never any
 other exception."""
 
@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from mutate import json_values, mutated_bytes, mutated_document
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.planfile import load_plan, plan_from_json, plan_to_json
 
 PLANS = sorted((Path(__file__).resolve().parents[2] / "plans").glob("*.json"))

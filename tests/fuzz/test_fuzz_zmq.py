@@ -1,4 +1,4 @@
-"""ZMQ pose and setpoint messages (CONTRACTS 3) under fuzzing. tests/mocap already feeds the
+"""ZMQ pose and setpoint messages (docs/contracts.md §3) under fuzzing. tests/mocap already feeds the
 pose source arbitrary frames; here real messages are mutated field by field and byte by byte:
 a message is either taken as sent (quaternion normalised) or counted and dropped, and the simulator's setpoint
 inbox keeps obeying good setpoints over a real socket whatever arrives before them."""
@@ -16,11 +16,11 @@ from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 from mutate import json_values, mutated_bytes, mutated_document
-from perchd.clock import ManualClock
+from perchd.core.clock import ManualClock
 from perchd.commands.sim import Counts, SetpointInbox, make_world
 from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, setpoint_message
 from perchd.mocap.zmq import ZmqPoseSource, pose_message
-from perchd.types import Phase, Pose, Setpoint
+from perchd.core.types import Phase, Pose, Setpoint
 
 POSE = Pose("cf1", 17, 4.9, (-3.0, 0.1, 1.0), (0.0, 0.0, 0.0, 1.0), True, 0.0)
 POSE_DOC = json.loads(pose_message(POSE))

@@ -21,13 +21,13 @@ from pathlib import Path
 
 import pytest
 
-from perchd.config import config_from_dict
-from perchd.control_socket import ControlServer, PeerPolicy
-from perchd.errors import ConfigError, UriError
+from perchd.service.config import config_from_dict
+from perchd.service.control_socket import ControlServer, PeerPolicy
+from perchd.core.errors import ConfigError, UriError
 from perchd.mocap.base import open_source
 from perchd.mocap.zmq import ZmqPosePublisher
-from perchd.netbind import check_bind, is_loopback
-from perchd.runtime import Runtime
+from perchd.core.netbind import check_bind, is_loopback
+from perchd.core.runtime import Runtime
 from served import Service
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -145,7 +145,7 @@ def test_a_configured_user_or_group_is_let_in(served):
 
 
 def test_more_clients_than_the_cap_are_refused_and_the_others_still_served(served):
-    from perchd.control_socket import MAX_CLIENTS
+    from perchd.service.control_socket import MAX_CLIENTS
 
     held = [socket.socket(socket.AF_UNIX) for _ in range(MAX_CLIENTS)]
     try:

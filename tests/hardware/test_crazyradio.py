@@ -12,8 +12,8 @@ import time
 import pytest
 
 from perchd.drivers.base import open_driver
-from perchd.runtime import Runtime
-from perchd.types import EndReason, Phase, Setpoint
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Setpoint
 
 pytestmark = pytest.mark.hardware
 pytest.importorskip("cflib")

@@ -1,4 +1,4 @@
-"""The recorded NatNet packets in shared/fixtures/natnet, and a UDP player that serves them.
+"""The recorded NatNet packets in tests/fixtures/natnet, and a UDP player that serves them.
 
 The player is Motive as recorded: it answers connect and model-definition requests with the
 recorded replies and sends the recorded frames, byte for byte, over a real socket.
@@ -14,7 +14,7 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-# a copy of shared/fixtures/natnet, kept in the repository so a clean clone tests alone
+# a copy of tests/fixtures/natnet, kept in the repository so a clean clone tests alone
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "natnet"
 V3 = FIXTURES / "motive-2.1-natnet-3.0"
 V2X = FIXTURES / "motive-1.x-natnet-2.x"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from perchd.mocap.natnet_clock import ClockSync
+from perchd.mocap.natnet.clock import ClockSync
 
 HZ = 3312787
 OFFSET = 1234.5  # [s] server clock minus agent clock

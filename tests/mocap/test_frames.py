@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from perchd.errors import UriError
+from perchd.core.errors import UriError
 from perchd.mocap.frames import UpAxis, from_world, to_world
 
 Y_UP_TO_Z_UP = Rotation.from_euler("x", 90, degrees=True)

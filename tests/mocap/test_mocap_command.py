@@ -8,10 +8,10 @@ import threading
 import pytest
 
 from perchd.cli import main
-from perchd.clock import MonotonicClock
-from perchd.mocap.natnet import NatNetServer
+from perchd.core.clock import MonotonicClock
+from perchd.mocap.natnet.uris import NatNetServer
 from perchd.mocap.zmq import ZmqPosePublisher
-from perchd.types import Pose
+from perchd.core.types import Pose
 
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 

@@ -7,15 +7,15 @@ import struct
 
 import pytest
 
-from perchd.mocap import natnet_protocol as proto
-from perchd.mocap.natnet import NatNetServer, open_natnet
-from perchd.mocap.natnet_frame import (
+from perchd.mocap.natnet import protocol as proto
+from perchd.mocap.natnet.uris import NatNetServer, open_natnet
+from perchd.mocap.natnet.frame import (
     AnalogDevice, Asset, Frame, LabeledMarker, RigidBodySample, Skeleton, Timing, decode_frame,
     encode_frame)
-from perchd.mocap.natnet_wire import MalformedPacket
-from perchd.runtime import Runtime
-from perchd.types import Pose
-from perchd.uri import parse_uri
+from perchd.mocap.natnet.wire import MalformedPacket
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
+from perchd.core.uri import parse_uri
 
 
 def section(count: int, body: bytes) -> bytes:

@@ -11,14 +11,14 @@ from dataclasses import replace
 
 import pytest
 
-from perchd.clock import ManualClock
-from perchd.errors import LinkError, UriError
-from perchd.mocap import natnet_protocol as proto
-from perchd.mocap.natnet import NatNetServer, NatNetSource, config_from_uri, open_natnet
-from perchd.mocap.natnet_frame import Frame, RigidBodySample, Timing, encode_frame
-from perchd.runtime import Runtime
-from perchd.types import Pose
-from perchd.uri import parse_uri
+from perchd.core.clock import ManualClock
+from perchd.core.errors import LinkError, UriError
+from perchd.mocap.natnet import protocol as proto
+from perchd.mocap.natnet.uris import NatNetServer, NatNetSource, config_from_uri, open_natnet
+from perchd.mocap.natnet.frame import Frame, RigidBodySample, Timing, encode_frame
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
+from perchd.core.uri import parse_uri
 
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 YAW_90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))  # world frame, about Z

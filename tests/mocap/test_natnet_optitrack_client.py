@@ -14,9 +14,9 @@ import time
 
 import pytest
 
-from perchd.clock import MonotonicClock
-from perchd.mocap.natnet import NatNetServer
-from perchd.types import Pose
+from perchd.core.clock import MonotonicClock
+from perchd.mocap.natnet.uris import NatNetServer
+from perchd.core.types import Pose
 
 natnetsdk = pytest.importorskip("natnetsdk.NatNetClient")
 

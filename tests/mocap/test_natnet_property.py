@@ -11,13 +11,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from natnet_recordings import session_frames
-from perchd.clock import ManualClock
-from perchd.mocap.natnet_client import NatNetConfig, NatNetSource
-from perchd.mocap.natnet_clock import ClockSync
-from perchd.mocap.natnet_frame import (
+from perchd.core.clock import ManualClock
+from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
+from perchd.mocap.natnet.clock import ClockSync
+from perchd.mocap.natnet.frame import (
     AnalogDevice, Frame, LabeledMarker, RigidBodySample, Skeleton, Timing, decode_frame,
     encode_frame)
-from perchd.mocap.natnet_wire import MalformedPacket
+from perchd.mocap.natnet.wire import MalformedPacket
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fuzz"))
 from mutate import mutated_bytes  # noqa: E402  (the one byte mutator, shared with tests/fuzz)

@@ -8,11 +8,11 @@ import pytest
 
 from natnet_recordings import (
     V2X, V3, RecordedMotive, expected_rows, packet, payload, session_frames)
-from perchd.mocap import natnet_models as natdefs, natnet_protocol as proto
+from perchd.mocap.natnet import models as natdefs, protocol as proto
 from perchd.mocap.frames import UpAxis
-from perchd.mocap.natnet_client import NatNetConfig, NatNetSource
-from perchd.mocap.natnet_frame import decode_frame, encode_frame
-from perchd.runtime import Runtime
+from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
+from perchd.mocap.natnet.frame import decode_frame, encode_frame
+from perchd.core.runtime import Runtime
 
 
 def test_every_frame_of_the_recorded_session_decodes_to_the_expected_csv():

@@ -8,12 +8,12 @@ import time
 
 import pytest
 
-from perchd.errors import UriError
+from perchd.core.errors import UriError
 from perchd.mocap.base import open_source
 from perchd.mocap.outputs import open_pose_output
 from perchd.mocap.stream import Drop, PoseLimits, PoseStream, RateLimitedWarning
-from perchd.runtime import Runtime
-from perchd.types import Pose
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
 
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 

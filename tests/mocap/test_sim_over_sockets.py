@@ -10,15 +10,15 @@ from pathlib import Path
 
 import pytest
 
-flight = pytest.importorskip("perchd.flight", reason="the closed loop is not in this checkout")
+flight = pytest.importorskip("perchd.flight.run", reason="the closed loop is not in this checkout")
 
-from perchd.clock import ManualClock  # noqa: E402
+from perchd.core.clock import ManualClock  # noqa: E402
 from perchd.drivers.base import open_driver  # noqa: E402
 from perchd.mocap.base import open_source  # noqa: E402
 from perchd.mocap.outputs import open_pose_output  # noqa: E402
 from perchd.mocap.relay import RelayedSource  # noqa: E402
-from perchd.runtime import Runtime  # noqa: E402
-from perchd.types import EndReason  # noqa: E402
+from perchd.core.runtime import Runtime  # noqa: E402
+from perchd.core.types import EndReason  # noqa: E402
 
 REFPLANS = Path(__file__).resolve().parents[1] / "closedloop" / "refplans.py"
 

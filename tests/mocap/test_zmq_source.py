@@ -1,4 +1,4 @@
-"""The ZMQ pose source and publisher (CONTRACTS 3) over real pyzmq sockets on loopback."""
+"""The ZMQ pose source and publisher (docs/contracts.md §3) over real pyzmq sockets on loopback."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from perchd.clock import ManualClock
-from perchd.errors import UriError
+from perchd.core.clock import ManualClock
+from perchd.core.errors import UriError
 from perchd.mocap.base import open_source
 from perchd.mocap.zmq import ZmqPosePublisher, ZmqPoseSource, parse_pose_message, pose_message
-from perchd.runtime import Runtime
-from perchd.types import Pose
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
 
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 

@@ -12,10 +12,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parents[1] / "closedloop"))
 from simflight import Sim  # noqa: E402  (the closed-loop tests' simulated flight)
 
-from perchd.campaign import Spread, default_ranges, random_specs, run_campaign  # noqa: E402
-from perchd.flightconfig import FlightConfig, TriggerConfig, TriggerPolicy  # noqa: E402
+from perchd.sim.campaign import Spread, default_ranges, random_specs, run_campaign  # noqa: E402
+from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy  # noqa: E402
 from perchd.tau import load_plan, retarget  # noqa: E402
-from perchd.types import EndReason  # noqa: E402
+from perchd.core.types import EndReason  # noqa: E402
 
 PLANS = Path(__file__).parents[2] / "plans"
 START = "sim://?start=-7.8,0,1"       # far enough back to reach v0 = 2.5 m/s by |x0| = 3.5 m

@@ -90,7 +90,7 @@ def test_paper_table2_low_orders_never_reach_tau_s_anywhere_in_their_box(order):
     k, x0r, v0r = TABLE2[order]
     cert = certify(k, Box(x0r, v0r))
     assert not cert.certified and cert.violation.limit == "tau_s"
-    for x0 in np.linspace(*x0r, 4):        # ERRATA 7: nowhere in the printed ranges
+    for x0 in np.linspace(*x0r, 4):        # docs/errata.md §7: nowhere in the printed ranges
         for v0 in np.linspace(*v0r, 4):
             assert not fly(k, x0, v0, -0.5).reaches
 

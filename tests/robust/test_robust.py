@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau.certify import Box
 from perchd.tau.robust import (RobustLimits, contact_ratio, fastest_k, retarget_k,
                                shrink_until_certified)
 from perchd.cli import main as perchd
 from perchd.tau import Limits
 from perchd.tau.planfile import load_plan, plan_from_json
-from perchd.tau.robust_cli import check_plan
+from perchd.commands.plan_robust import check_plan
 from robust_brute import fly, worst_over_box
 
 LIM = RobustLimits(-0.5, (0.7, 1.0), 2.5, 1.4)
@@ -27,7 +27,7 @@ ARGS = ["plan", "robust", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0", "--v-m
 
 @pytest.fixture(scope="module")
 def contracts_box():
-    """The CONTRACTS 2 example box, solved once for the module."""
+    """The docs/contracts.md §2 example box, solved once for the module."""
     return fastest_k(3, Box((-3.9, -3.7), (1.8, 2.0)), LIM, maxiter=10)
 
 

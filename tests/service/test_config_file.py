@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from perchd.config import ServiceConfig, config_from_dict, load_config
-from perchd.errors import ConfigError
-from perchd.flightconfig import FlightConfig, TriggerPolicy
+from perchd.service.config import ServiceConfig, config_from_dict, load_config
+from perchd.core.errors import ConfigError
+from perchd.flight.config import FlightConfig, TriggerPolicy
 from svc import perchd
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "systemd" / "perchd.toml"

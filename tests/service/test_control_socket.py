@@ -1,4 +1,4 @@
-"""The control socket server (CONTRACTS 4) on a real Unix socket, driven by select."""
+"""The control socket server (docs/contracts.md §4) on a real Unix socket, driven by select."""
 
 import json
 import os
@@ -9,8 +9,8 @@ import threading
 
 import pytest
 
-from perchd.control_socket import ControlServer, request
-from perchd.errors import ConfigError
+from perchd.service.control_socket import ControlServer, request
+from perchd.core.errors import ConfigError
 
 
 class Served:

@@ -2,7 +2,7 @@
 
 import os
 
-from perchd.sdnotify import Notifier
+from perchd.service.sdnotify import Notifier
 from svc import NotifyListener
 
 

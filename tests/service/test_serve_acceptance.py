@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from perchd.flightlog import read_log
+from perchd.logs.flightlog import read_log
 from svc import PLAN, NotifyListener, Serve, SimProcess, ctl
 
 pytestmark = pytest.mark.slow

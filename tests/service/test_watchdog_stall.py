@@ -12,12 +12,12 @@ import time
 
 import pytest
 
-from perchd.clock import ManualClock, MonotonicClock
-from perchd.errors import UriError
-from perchd.flightlog import read_log
+from perchd.core.clock import ManualClock, MonotonicClock
+from perchd.core.errors import UriError
+from perchd.logs.flightlog import read_log
 from perchd.sim.stall import Stall
 from perchd.sim.world import SimWorld, WorldParams, world_params_from_uri
-from perchd.uri import parse_uri
+from perchd.core.uri import parse_uri
 from svc import PLAN, NotifyListener, Serve, ctl
 
 WATCHDOG_S = 2.0

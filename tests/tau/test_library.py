@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from perchd.errors import ConfigError, PlanError
+from perchd.core.errors import ConfigError, PlanError
 from perchd.tau import load_plan, plan_ipts
 from perchd.tau.library import library_from_json, library_to_json, load_library
 
@@ -103,8 +103,8 @@ def test_perchd_plan_library_with_an_empty_range_is_one_line_and_exit_2(tmp_path
 def test_the_supervisor_replans_from_the_library_at_the_measured_trigger(tmp_path):
     sys.path.insert(0, str(ROOT / "tests" / "closedloop"))
     from simflight import NOISY, Sim
-    from perchd.flightconfig import FlightConfig, TriggerConfig, TriggerPolicy
-    from perchd.types import EndReason
+    from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
+    from perchd.core.types import EndReason
 
     plan = load_plan(ROOT / "plans" / "case1-ipts-n3.json")
     cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN, library=str(LIBRARY)))
@@ -117,9 +117,9 @@ def test_the_supervisor_replans_from_the_library_at_the_measured_trigger(tmp_pat
 
 
 def test_a_library_for_another_plan_or_policy_is_refused_before_flying():
-    from perchd.flightconfig import FlightConfig, TriggerConfig, TriggerPolicy
-    from perchd.perchframe import PerchFrame
-    from perchd.supervisor import Supervisor
+    from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
+    from perchd.flight.frame import PerchFrame
+    from perchd.flight.supervisor import Supervisor
 
     frame = PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
     cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN, library=str(LIBRARY)))

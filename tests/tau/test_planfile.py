@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from perchd.errors import PlanError
+from perchd.core.errors import PlanError
 from perchd.tau import load_plan, plan_ctdts, plan_to_json, save_plan
 from perchd.tau.cases import CASES, FILES, make
 

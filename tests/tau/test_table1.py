@@ -1,4 +1,4 @@
-"""Table 1 of the paper, with ERRATA 1, 2, 4, 5 and 6 applied, re-derived independently."""
+"""Table 1 of the paper, with docs/errata.md §1, §2, §4, §5, §6 applied, re-derived independently."""
 
 import math
 
@@ -102,7 +102,7 @@ def _order1_least_peak_acceleration(v_lo=0.7, v_hi=1.0):
 
 @pytest.mark.parametrize("v_max, a_max", [(2.5, 1.4), (2.0, 1.0)])
 def test_order1_is_refused_because_no_single_coefficient_meets_a_max(v_max, a_max):
-    from perchd.errors import PlanError
+    from perchd.core.errors import PlanError
 
     assert _order1_least_peak_acceleration() > a_max + 0.4   # about 1.87 m/s^2
     with pytest.raises(PlanError, match="order-1"):

@@ -1,0 +1,179 @@
+"""`perchd sim --campaign P.json`: the campaign options of `perchd sim`, its progress bar on
+stderr, the outcome table (CSV) and the printed summary. The flying is perchd.sim.campaign.
+
+    perchd sim --campaign P.json [--flights N | --grid NX NV] [--x0 LO HI] [--v0 LO HI]
+               [--latency S] [--noise M] [--gust DV] [--seed N] [--start X Y Z]
+               [--surface X Y Z] [--normal NX NY NZ] [--config F] [--policy P]
+               [--table out.csv] [--logs DIR] [--jobs J] [--json]
+
+Exit 0 when every flight made contact inside its plan's contact window, 1 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import Counter
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, TextIO
+
+from perchd.core.errors import ConfigError
+
+DEFAULT_FLIGHTS = 20
+LIVE_ONLY = ("pose_out", "setpoint_in", "duration", "exit_on_stop")
+"""Options of a live `perchd sim` (all unset by default) that mean nothing to a campaign."""
+CAMPAIGN_DEFAULTS = {"flights": None, "grid": None, "x0": None, "v0": None, "gust": 0.0,
+                     "seed": 0, "policy": None, "config": None, "table": None, "logs": None,
+                     "jobs": 1}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group(
+        "campaign", "many simulated flights of one plan in this process, on a simulated "
+        "clock; --latency, --noise, --surface, --normal and --json apply too, and --start "
+        "(default: far enough back for each trigger state)")
+    g.add_argument("--campaign", metavar="P.json", help="fly this plan file many times")
+    n = g.add_mutually_exclusive_group()
+    n.add_argument("--flights", type=int, help=f"random trigger states (default {DEFAULT_FLIGHTS})")
+    n.add_argument("--grid", nargs=2, type=int, metavar=("NX", "NV"),
+                   help="a grid of trigger states, corners included")
+    g.add_argument("--x0", nargs=2, type=float, metavar=("LO", "HI"),
+                   help="[m] trigger gap range (default: the plan's robust box less 0.04, "
+                        "else its x0 +- 10 %%)")
+    g.add_argument("--v0", nargs=2, type=float, metavar=("LO", "HI"),
+                   help="[m/s] closing speed range (default as --x0)")
+    g.add_argument("--gust", type=float, default=CAMPAIGN_DEFAULTS["gust"], metavar="DV",
+                   help="[m/s] one velocity kick per flight, uniform in +-DV per axis, at "
+                        "10..60 %% of the plan's duration after the trigger (default 0: none)")
+    g.add_argument("--seed", type=int, default=CAMPAIGN_DEFAULTS["seed"], help="seed of every draw (default 0)")
+    g.add_argument("--policy", choices=("robust", "replan", "refuse"),
+                   help="trigger policy (default robust for a plan with a box, else replan)")
+    g.add_argument("--config", help="flight configuration file (TOML), as for perchd fly")
+    g.add_argument("--table", help="outcome table, CSV (default ./campaigns/<time>-<plan>.csv)")
+    g.add_argument("--logs", help="keep each flight's log in this directory")
+    g.add_argument("--jobs", type=int, default=CAMPAIGN_DEFAULTS["jobs"], help="worker processes (default 1)")
+
+
+def check_mode(args: argparse.Namespace) -> None:
+    """One clear error when a live option meets --campaign, or the other way round."""
+    if args.campaign:
+        given = [o for o in LIVE_ONLY if getattr(args, o) not in (None, False)]
+        if given:
+            opts = ", ".join("--" + o.replace("_", "-") for o in given)
+            raise ConfigError(f"{opts}: for a live simulator, not a --campaign (which flies "
+                              "in this process)")
+        return
+    given = [o for o, v in CAMPAIGN_DEFAULTS.items() if getattr(args, o) != v]
+    if given:
+        opts = ", ".join("--" + o for o in given)
+        raise ConfigError(f"{opts}: only with --campaign P.json")
+    if not args.pose_out or not args.setpoint_in:
+        raise ConfigError("--pose-out and --setpoint-in are required (or --campaign P.json "
+                          "for simulated flights in this process)")
+
+
+class Progress:
+    """Flights done on `stream`: a bar rewritten in place on a terminal, else a line at every
+    tenth of the campaign (and at its end)."""
+
+    WIDTH = 30
+
+    def __init__(self, total: int, stream: TextIO | None = None) -> None:
+        self.stream = sys.stderr if stream is None else stream
+        self.tty = self.stream.isatty()
+        self.total, self.done = total, 0
+        self.outcomes: Counter[str] = Counter()
+        self.t0 = time.monotonic()
+        self._step = max(1, total // 10)
+
+    def __call__(self, row: Any) -> None:
+        self.done += 1
+        self.outcomes[row.outcome] += 1
+        if self.tty:
+            fill = self.WIDTH * self.done // self.total
+            self.stream.write(f"\r[{'#' * fill}{'.' * (self.WIDTH - fill)}] {self.line()}\x1b[K")
+        elif self.done % self._step == 0 or self.done == self.total:
+            self.stream.write(f"perchd sim: {self.line()}\n")
+        self.stream.flush()
+
+    def line(self) -> str:
+        counts = ", ".join(f"{k} {v}" for k, v in self.outcomes.most_common())
+        return (f"{self.done}/{self.total} flights ({counts}) "
+                f"{time.monotonic() - self.t0:.1f} s")
+
+    def close(self) -> None:
+        if self.tty and self.done:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _stat(s: Any, fmt: str, scale: float = 1.0) -> str:
+    if s.median is None:
+        return "--"
+    return " / ".join(format(v * scale, fmt) for v in (s.min, s.median, s.max))
+
+
+def summary_text(summary: Any, table: Path, wall_s: float) -> str:
+    outcomes = ", ".join(f"{k} {v}" for k, v in summary.outcomes.items())
+    contacts = summary.outcomes.get("CONTACT", 0)
+    return "\n".join([
+        f"flights: {summary.flights} in {wall_s:.1f} s; {outcomes}",
+        f"contact inside the plan's window: {summary.in_window} of {summary.flights}",
+        f"contact speed min / median / max: {_stat(summary.contact_speed, '.3f')} m/s "
+        f"({contacts} contacts); - plan: {_stat(summary.speed_error_mps, '+.3f')} m/s",
+        f"perch time - plan: {_stat(summary.perch_error_s, '+.1f', 1e3)} ms "
+        f"({_stat(summary.perch_error_pct, '+.2f')} %)",
+        f"trigger - aim: x {_stat(summary.trigger_dx_m, '+.3f')} m, "
+        f"v {_stat(summary.trigger_dv_mps, '+.3f')} m/s",
+        f"table: {table}"])
+
+
+def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
+    """(plan, flight config, spread, specs) from the options; errors name the option."""
+    from perchd.sim import campaign as cp
+    from perchd.commands.fly import load_config
+    from perchd.flight.config import TriggerPolicy
+    from perchd.tau import load_plan
+
+    plan = load_plan(args.campaign)
+    xr, vr = cp.default_ranges(plan)
+    if not 0.0 <= args.latency <= 1.0:
+        raise ConfigError(f"--latency {args.latency:g} s is outside 0..1 s")
+    if not 0.0 <= args.noise <= 0.1:
+        raise ConfigError(f"--noise {args.noise:g} m is outside 0..0.1 m")
+    spread = cp.Spread(tuple(args.x0 or xr), tuple(args.v0 or vr), args.latency, args.noise,
+                       args.gust, tuple(args.start) if args.start else None, args.seed)
+    policy = TriggerPolicy(args.policy) if args.policy else cp.default_policy(plan)
+    cfg = cp.campaign_config(load_config(args), policy)
+    if args.grid:
+        specs = cp.grid_specs(spread, *args.grid, plan.duration)
+    else:
+        flights = DEFAULT_FLIGHTS if args.flights is None else args.flights
+        specs = cp.random_specs(spread, flights, plan.duration)
+    return plan, cfg, spread, specs
+
+
+def run(args: argparse.Namespace) -> int:
+    from perchd.sim import campaign as cp
+
+    plan, cfg, spread, specs = build(args)
+    table = Path(args.table) if args.table else Path("campaigns") / (
+        f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}.csv")
+    progress = Progress(len(specs))
+    t0 = time.monotonic()
+    try:
+        rows = cp.run_campaign(plan, cfg, spread, specs, args.jobs, args.logs, progress)
+    finally:
+        progress.close()
+    wall = time.monotonic() - t0
+    cp.write_table(rows, table)
+    summary = cp.summarize(rows)
+    if args.json:
+        print(json.dumps({**asdict(summary), "plan": args.campaign, "policy": cfg.trigger.policy.value,
+                          "spread": asdict(spread), "table": str(table), "wall_s": wall}))
+    else:
+        print(summary_text(summary, table, wall))
+    return 0 if summary.in_window == summary.flights else 1

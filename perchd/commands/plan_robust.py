@@ -1,0 +1,180 @@
+"""`perchd plan robust`: find and certify one IPTS k for a box of trigger states (docs/contracts.md §2).
+
+Three modes, by what --x0/--v0 give:
+  --x0 LO HI --v0 LO HI   the box is given: least worst-case duration k certified over it
+  --x0 X --v0 V           a nominal state: the largest certified box holding it
+  (neither)               the largest certified box in --search-x0/--search-v0
+The plan file is an IPTS plan (docs/contracts.md §1) for the nominal state (the box centre unless
+given) with "robust": {"x0": [lo, hi], "v0": [lo, hi]} and a "certificate" record.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+from perchd.core.errors import PlanError
+from perchd.tau.certify import Box
+
+METHOD = ("certify_box: monotone t_s in k0, mean-value enclosures on adaptive k0 x t cells "
+          "(perchd/tau/certify.py)")
+
+
+def register(plan_sub) -> None:
+    """Add `robust` to the `perchd plan` subparsers."""
+    p = plan_sub.add_parser("robust", help="one IPTS k certified over a box of trigger states")
+    p.add_argument("--x0", type=float, nargs="+", metavar="X", help="box LO HI, or nominal [m]")
+    p.add_argument("--v0", type=float, nargs="+", metavar="V", help="box LO HI, or nominal [m/s]")
+    p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
+    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
+    p.add_argument("--v-max", type=float, required=True)
+    p.add_argument("--a-max", type=float, required=True)
+    p.add_argument("--order", type=int, default=3)
+    p.add_argument("--search-x0", type=float, nargs=2, default=(-4.0, -0.5), metavar=("LO", "HI"),
+                   help="where boxes are looked for when none is given [m]")
+    p.add_argument("--search-v0", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="[m/s], default 0.2 .. v_max")
+    p.add_argument("--maxiter", type=int, default=40, help="differential-evolution generations")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--start", metavar="PLAN", help="a lower-order robust plan whose k seeds the search")
+    p.add_argument("--out", required=True, help="plan file to write")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=run)
+
+
+def limits_from(args):
+    from perchd.tau.robust import RobustLimits
+
+    lo, hi = args.v_contact
+    checks = [("--tau-s", args.tau_s < 0, f"must be < 0, got {args.tau_s:g}"),
+              ("--v-contact", 0 < lo <= hi, f"needs 0 < LO <= HI, got {lo:g} {hi:g}"),
+              ("--v-max", args.v_max >= hi, f"{args.v_max:g} is below V_u = {hi:g}"),
+              ("--a-max", args.a_max > 0, f"must be > 0, got {args.a_max:g}"),
+              ("--order", 1 <= args.order <= 7, f"must be 1..7, got {args.order}")]
+    for name, ok, why in checks:
+        if not ok:
+            raise PlanError(f"{name} {why}")
+    return RobustLimits(args.tau_s, (lo, hi), args.v_max, args.a_max)
+
+
+def _pair(name: str, values, sign: int):
+    if values is None:
+        return None
+    if len(values) not in (1, 2):
+        raise PlanError(f"{name} takes LO HI (a box) or one value (a nominal state), got {len(values)}")
+    if any(sign * v <= 0 for v in values):
+        raise PlanError(f"{name} must be {'< 0' if sign < 0 else '> 0'}, got {values}")
+    if len(values) == 2 and not values[0] < values[1]:
+        raise PlanError(f"{name} LO must be below HI, got {values[0]:g} {values[1]:g}")
+    return tuple(values)
+
+
+def run(args) -> int:
+    from perchd.tau.robust import SearchDomain, fastest_k, largest_box
+
+    lim = limits_from(args)
+    x0, v0 = _pair("--x0", args.x0, -1), _pair("--v0", args.v0, +1)
+    if (x0 is None) != (v0 is None) or (x0 and len(x0) != len(v0)):
+        raise PlanError("--x0 and --v0 go together: both boxes (LO HI) or both nominal values")
+    v_search = tuple(args.search_v0) if args.search_v0 else (0.2, args.v_max)
+    s_search = tuple(sorted(-x for x in args.search_x0))
+    if x0 is not None and len(x0) == 2:
+        result, nominal = fastest_k(args.order, Box(x0, v0), lim, seed=args.seed,
+                                    maxiter=args.maxiter), None
+        mode = "box"
+    else:
+        nominal = None if x0 is None else (x0[0], v0[0])
+        dom = SearchDomain(s_search, v_search, contains=nominal)
+        result = largest_box(args.order, lim, dom, seed=args.seed, maxiter=args.maxiter,
+                             start=_start(args.start, lim))
+        mode = "grow" if nominal else "largest"
+    from perchd.tau.planfile import save_plan
+
+    plan = certified_plan(result, lim, nominal)
+    save_plan(plan, args.out)
+    cert = plan.extra["certificate"]
+    summary = {"mode": mode, "order": args.order, "k": list(plan.k[1:]),
+               "robust": {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])},
+               "area": cert["area"], "duration_worst": cert["duration"][1], "out": args.out}
+    print(json.dumps(summary) if args.json else _table(summary))
+    return 0
+
+
+def _start(path, lim):
+    """A RobustResult from a robust plan file, to seed a higher-order search."""
+    from perchd.tau.planfile import load_plan
+    from perchd.tau.robust import RobustResult
+
+    if path is None:
+        return None
+    plan = load_plan(path)
+    if plan.robust is None:
+        raise PlanError(f"--start {path}: not a robust plan (no robust box)")
+    return RobustResult(tuple(plan.k[1:]), Box(*plan.robust), check_plan(plan))
+
+
+def _table(s: dict) -> str:
+    r = s["robust"]
+    return "\n".join([
+        f"robust IPTS order {s['order']} ({s['mode']}): k_1..k_n = "
+        + ", ".join(f"{k:.6g}" for k in s["k"]),
+        f"certified box: x0 {r['x0'][0]:.4f} .. {r['x0'][1]:.4f} m, "
+        f"v0 {r['v0'][0]:.4f} .. {r['v0'][1]:.4f} m/s, area {s['area']:.4f} m*m/s",
+        f"worst-case duration {s['duration_worst']:.4f} s; written to {s['out']}"])
+
+
+def _inward(box: Box, digits: int = 4) -> Box:
+    """The box with edges rounded inward (a sub-box of a certified box is certified)."""
+    f = 10 ** digits
+    up, down = (lambda e: math.ceil(round(e * f, 6)) / f), (lambda e: math.floor(round(e * f, 6)) / f)
+    return Box((up(box.x0[0]), down(box.x0[1])), (up(box.v0[0]), down(box.v0[1])))
+
+
+def robust_plan(k, box: Box, lim, x0: float, v0: float, extra: dict | None = None):
+    """The Plan (perchd.tau.make_plan) of k flown from (x0, v0), carrying its certified box."""
+    from dataclasses import replace
+
+    from perchd.tau import Limits, make_plan
+    from perchd.tau.robust import retarget_k
+
+    plan = make_plan("ipts", x0, v0, lim.tau_s, Limits(lim.v_contact, lim.v_max, lim.a_max),
+                     k=retarget_k(k, box, x0, v0), robust=(box.x0, box.v0))
+    return replace(plan, extra=extra) if extra else plan
+
+
+def certified_plan(result, lim, nominal=None):
+    """The plan file's Plan for a robust result, flown from `nominal` (default: box centre),
+    its box rounded inward to 0.1 mm, re-certified, and the certificate in plan.extra."""
+    box = _inward(result.box)
+    cert = lim.certify(result.k, box)
+    if not cert.certified:
+        raise PlanError(f"rounded box lost its certificate: {cert.reason}")
+    x0, v0 = nominal or (round(sum(box.x0) / 2, 4), round(sum(box.v0) / 2, 4))
+    record = {"method": METHOD, "area": box.area, "v_peak": cert.bounds["v_peak"],
+              "a_peak": cert.bounds["a_peak"],
+              "v_contact": [float(v) for v in cert.bounds["v_contact"]],
+              "duration": [float(d) for d in cert.duration]}
+    return robust_plan(result.k, box, lim, x0, v0, {"certificate": record})
+
+
+def check_plan(plan):
+    """Re-certify a robust Plan over its whole box (`perchd plan check` calls this).
+    Returns the Certificate; PlanError names the broken limit and the state, or the field."""
+    from perchd.tau.robust import RobustLimits
+
+    lim = plan.limits
+    if plan.strategy != "ipts" or plan.tau_s is None:
+        raise PlanError(f"robust: only two-stage ipts plans can be robust, got {plan.strategy}")
+    if lim.v_max is None or lim.a_max is None:
+        raise PlanError("robust: limits.v_max and limits.a_max are needed to certify a box")
+    box = Box(tuple(plan.robust[0]), tuple(plan.robust[1]))
+    if not box.x0[0] < box.x0[1] < 0 < box.v0[0] < box.v0[1]:
+        raise PlanError(f"robust: box must have x0 lo < hi < 0 < v0 lo < hi, got {plan.robust}")
+    if not math.isclose(plan.k[0], plan.v0 / plan.x0, rel_tol=1e-9):
+        raise PlanError(f"stage1.k[0] = {plan.k[0]:g} is not v0/x0 = {plan.v0 / plan.x0:g}")
+    cert = RobustLimits(plan.tau_s, tuple(lim.v_contact), lim.v_max, lim.a_max).certify(
+        plan.k[1:], box)
+    if not cert.certified:
+        raise PlanError(f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} "
+                        f"m/s {cert.reason}")
+    return cert

@@ -1,0 +1,293 @@
+"""Flight configuration: plain nested frozen dataclasses with SI defaults.
+
+A TOML loader (service engineer) fills these; nothing here reads files. Every field carries
+its unit in its name or docstring. Gains are SI (acceleration [m/s^2] per unit of error) and
+their docstrings give the paper's Crazyflie thrust-unit equivalents (docs/errata.md §8: hover is about
+36000 units for a 27-30 g CF2.0 at g = 9.81, so 1 unit of thrust is m*g/36000 N and produces
+g/36000 = 2.725e-4 m/s^2 whatever the mass; SI gain = units gain * 9.81 / 36000).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+from perchd.core.errors import ConfigError
+
+UNIT_ACCEL = 9.81 / 36000.0
+"""[m/s^2] acceleration of one paper thrust unit (docs/errata.md §8)."""
+
+
+def from_paper_units(units: float) -> float:
+    """A paper gain in thrust units -> the SI gain in m/s^2 per unit of error."""
+    return units * UNIT_ACCEL
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """mass_kg [kg]; thrust_min_n/thrust_max_n [N] collective limits while flying (the paper's
+    eq. 26 clamps 10000..65000 units: about 0.07 N and 0.53 N for 30 g); g [m/s^2]."""
+
+    mass_kg: float = 0.030
+    thrust_min_n: float = 0.08
+    thrust_max_n: float = 0.58
+    g: float = 9.81
+
+
+@dataclass(frozen=True)
+class TauGains:
+    """Tau PID on e = 1 - tau_ref/tau (eq. 17) with gain scheduling (eq. 20); output [m/s^2].
+
+    kp_fast: [m/s^2] used when tau_ref/tau > 1 (too fast: must brake).  kp_slow: when
+             tau_ref/tau <= 1.  Defaults are half the paper's k_px1 = 77500 and k_px2 = 31000
+             units (21.1 and 8.45 m/s^2), keeping its ratio 2.5: with the plan's acceleration
+             fed forward the feedback only corrects, and the full gains turn 1 mm mocap noise
+             into +-2 m/s^2 of command (measured: contact speed error 0.10 vs 0.04 m/s).
+    ki: [m/s^2 per s]; paper 2500 units = 0.68.  kd: [m/s^2 s]; paper 2500 units = 0.68,
+        default 0.2 (734 units): the derivative of a tau ratio amplifies mocap noise, and
+        with 1 mm noise 0.2 halves the scatter of the contact speed over seeds.
+    i_limit: [m/s^2] anti-windup clamp of the integral term's contribution.
+    d_filter_s: [s] time constant of the low-pass on the error derivative.
+    error_min, error_max: the error is clamped to this range (it grows without bound as
+        tau -> 0 at contact).
+    feedforward: add the plan's acceleration Xddot_ref(t + ff_lead_s) to the PID output.
+    ff_lead_s: [s] look-ahead of the feed-forward: the vehicle reaches a commanded
+        acceleration only after the command latency, the attitude response and the motor lag
+        (about 0.1 s on a Crazyflie over Crazyradio), so the plan's acceleration is asked for
+        that much early; most visibly, the stage-1 braking is released before the switch.
+    terminal_s: [s] in stage 2, once tau_ref is within this of 0 the tau feedback holds its
+        last output and the speed is left alone: e = 1 - tau_ref/tau divides two vanishing
+        numbers there, so millimetre noise becomes metres per second squared of command,
+        while the stage-2 speed is already what contact will be.
+    stage2_hold_speed: in stage 2 use tau_ref = X / V_c (so e = 1 - Xdot/V_c: the same tau
+        PID now holds the plan's contact speed, docs/errata.md §9 "holds a constant speed"), rather
+        than the paper's clock-indexed tau_s + (t - t_s) (eq. 6), which holds *whatever*
+        speed the vehicle had at the switch: any stage-1 tracking error then reaches the
+        surface unchanged. Both are the same reference when the switch happens on plan.
+    v_contact_margin_mps: [m/s] with stage2_hold_speed, the speed held is the plan's V_c
+        moved at least this far inside the contact window [V_l, V_u]: a minimum-time plan
+        puts V_c on the window's edge (V_u), where any tracking error would leave it.
+    """
+
+    kp_fast: float = from_paper_units(38750.0)
+    kp_slow: float = from_paper_units(15500.0)
+    ki: float = from_paper_units(2500.0)
+    kd: float = from_paper_units(734.0)
+    i_limit: float = 1.0
+    d_filter_s: float = 0.03
+    error_min: float = -1.5
+    error_max: float = 1.0
+    feedforward: bool = True
+    ff_lead_s: float = 0.1
+    terminal_s: float = 0.15
+    stage2_hold_speed: bool = True
+    v_contact_margin_mps: float = 0.015
+
+
+@dataclass(frozen=True)
+class AxisGains:
+    """Position PID of one lateral axis (eq. 18); kp [m/s^2 per m], ki [m/s^2 per m s],
+    kd [m/s^2 per m/s], i_limit [m/s^2] anti-windup clamp, d_filter_s [s] derivative
+    low-pass (the derivative is taken of the estimated velocity, which is already smooth)."""
+
+    kp: float
+    ki: float
+    kd: float
+    i_limit: float = 1.0
+    d_filter_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class LateralGains:
+    """y: paper k_py, k_iy, k_dy = 14500, 2000, 4500 units = 3.95, 0.545, 1.23 SI.
+    z: paper k_pz, k_iz, k_dz = 20000, 1500, 3500 units = 5.45, 0.409, 0.954 SI."""
+
+    y: AxisGains = AxisGains(from_paper_units(14500.0), from_paper_units(2000.0),
+                             from_paper_units(4500.0))
+    z: AxisGains = AxisGains(from_paper_units(20000.0), from_paper_units(1500.0),
+                             from_paper_units(3500.0))
+
+
+@dataclass(frozen=True)
+class ApproachConfig:
+    """Before the trigger: hold, then accelerate along X to reach the plan's (x0, v0).
+
+    takeoff_height_m: [m] world height climbed to when the flight starts lower than this
+        minus 0.1 m (on the ground); takeoff_speed_mps [m/s] climb rate of the reference.
+    hold_s: [s] hover at the start before the approach.
+    accel_max_mps2: [m/s^2] the approach may not need more than this (else it is refused).
+    kv: [1/s] speed-tracking gain along X during the approach.
+    """
+
+    takeoff_height_m: float = 1.0
+    takeoff_speed_mps: float = 0.5
+    hold_s: float = 0.5
+    accel_max_mps2: float = 1.4
+    kv: float = 3.0
+
+
+class TriggerPolicy(enum.Enum):
+    """What to do when the measured trigger state is not exactly the plan's (x0, v0).
+
+    ROBUST: the plan must carry a robust box holding the state; fly it retargeted (k_0 = v/x).
+    REPLAN: retarget (re-plan) the same strategy and limits from the measured state.
+    REFUSE: fly the plan as made when within the tolerance, else end TRIGGER_REFUSED.
+    """
+
+    ROBUST = "robust"
+    REPLAN = "replan"
+    REFUSE = "refuse"
+
+
+@dataclass(frozen=True)
+class TriggerConfig:
+    """policy: see TriggerPolicy.  x_tol_m [m], v_tol_mps [m/s]: largest |measured - plan|
+    of x0 and v0 flown without a new plan under REFUSE.  library: a plan library file
+    (`perchd plan library`) for the plan's order and limits: REPLAN then warm-starts from it
+    (~2 ms) instead of a cold global solve (~60 ms at order 3, ~0.5 s at 7: many ticks)."""
+
+    policy: TriggerPolicy = TriggerPolicy.REFUSE
+    x_tol_m: float = 0.05
+    v_tol_mps: float = 0.10
+    library: str | None = None
+
+
+class LoopSync(enum.Enum):
+    """What releases a control tick.
+
+    FIXED: a clock at rate_hz; a pose waits up to one period for the tick that uses it.
+    MOCAP: the arrival of each new pose (mocap-synchronous): the setpoint follows the pose by
+        the compute time only. rate_hz is then the expected mocap rate: a tick overruns when
+        it ends a period after it started, and runs anyway after 1.5 periods without
+        a pose (so stale mocap is still detected). Set it to the mocap system's rate.
+    """
+
+    FIXED = "fixed"
+    MOCAP = "mocap"
+
+
+class PostContact(enum.Enum):
+    """After contact: CUT the motors, or IDLE at the vehicle's minimum thrust."""
+
+    CUT = "cut"
+    IDLE = "idle"
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Abort thresholds, checked every tick (see perchd.flight.supervisor).
+
+    stale_periods / stale_timeout_s: mocap is stale when no valid pose arrived for more than
+        this many mocap periods, or for stale_timeout_s [s] when that is set.
+    geofence: perching-frame box: x_min_m..x_max_m [m] along the normal (x_max_m > 0 means
+        the vehicle went through the surface), lateral_max_m [m] from the approach line,
+        floor_m [m] lowest world height after take-off.
+    tilt_max_rad: [rad] measured tilt that ends the flight.
+    speed_max_mps: [m/s] measured speed that ends the flight.
+    tau_error_max / tau_error_s: |tau - tau_ref| [s] beyond max(tau_error_max,
+        tau_error_rel * |tau_ref|) for tau_error_s [s], or tau undefined that long, diverges.
+    overrun_streak: consecutive missed loop deadlines that end the flight.
+    link_rtt_max_s: [s] a link round trip (LinkHealth.rtt_s, where the driver measures one)
+        above this ends the flight LOST_LINK: commands that late land the perch too fast
+        (tests/faults: 100 ms one way still perches in the window, 200 ms lands at 1.3 m/s).
+    timeout_s: [s] longest flight; plan_grace_s: [s] after the plan's duration without contact.
+    contact_margin_m: [m] contact is declared within one tick of travel plus this of X = 0.
+    """
+
+    stale_periods: float = 3.0
+    stale_timeout_s: float | None = None
+    x_min_m: float = -8.0
+    x_max_m: float = 0.3
+    lateral_max_m: float = 1.0
+    floor_m: float = 0.1
+    tilt_max_rad: float = math.radians(45.0)
+    speed_max_mps: float = 3.5
+    tau_error_max: float = 0.5
+    tau_error_rel: float = 0.5
+    tau_error_s: float = 0.3
+    overrun_streak: int = 10
+    link_rtt_max_s: float = 0.25
+    timeout_s: float = 30.0
+    plan_grace_s: float = 1.0
+    contact_margin_m: float = 0.005
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Kalman filter (perchd.flight.estimator).
+
+    jerk_psd: [m^2/s^5] white-jerk spectral density of the constant-acceleration model.
+    meas_std_m: [m] mocap position noise.
+    outlier_speed_mps: [m/s] a jump implying more than this speed is rejected.
+    outlier_max_rejects: consecutive rejections after which the filter re-initialises.
+    min_speed_mps: [m/s] tau is undefined (None) when Xdot is at or below this.
+    """
+
+    jerk_psd: float = 2.0
+    meas_std_m: float = 0.001
+    outlier_speed_mps: float = 10.0
+    outlier_max_rejects: int = 5
+    min_speed_mps: float = 0.05
+
+
+@dataclass(frozen=True)
+class SurfaceConfig:
+    """point [m] on the surface and its normal (the approach direction), world frame."""
+
+    point: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    normal: tuple[float, float, float] = (1.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class FlightConfig:
+    """Everything one flight needs besides the plan and the two links.
+
+    rate_hz: [Hz] control loop rate, 20..500 (with sync MOCAP: the mocap rate).
+    sync: what releases a tick (LoopSync: a fixed-rate clock, or each mocap frame).
+    tilt_limit_rad: [rad] setpoint saturation
+    (eq. 25, 25 deg).  post_contact_s: [s] the post-contact action is held this long.
+    idle_thrust_n: [N] thrust of PostContact.IDLE (None: the vehicle's thrust_min_n).
+    """
+
+    vehicle: VehicleConfig = VehicleConfig()
+    tau_gains: TauGains = TauGains()
+    lateral: LateralGains = LateralGains()
+    approach: ApproachConfig = ApproachConfig()
+    trigger: TriggerConfig = TriggerConfig()
+    safety: SafetyConfig = SafetyConfig()
+    estimator: EstimatorConfig = EstimatorConfig()
+    surface: SurfaceConfig = SurfaceConfig()
+    rate_hz: float = 100.0
+    sync: LoopSync = LoopSync.FIXED
+    tilt_limit_rad: float = math.radians(25.0)
+    post_contact: PostContact = PostContact.CUT
+    post_contact_s: float = 0.2
+    idle_thrust_n: float | None = None
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+def validate(cfg: FlightConfig) -> None:
+    """Raise ConfigError naming the first field out of range and by how much."""
+    checks = [
+        ("rate_hz", cfg.rate_hz, 20.0, 500.0),
+        ("tilt_limit_rad", cfg.tilt_limit_rad, 0.01, math.radians(60.0)),
+        ("vehicle.mass_kg", cfg.vehicle.mass_kg, 1e-3, 50.0),
+        ("vehicle.thrust_max_n", cfg.vehicle.thrust_max_n,
+         cfg.vehicle.mass_kg * cfg.vehicle.g, math.inf),
+        ("vehicle.thrust_min_n", cfg.vehicle.thrust_min_n, 0.0, cfg.vehicle.thrust_max_n),
+    ]
+    for name, value, lo, hi in checks:
+        if not lo <= value <= hi:
+            side = f"below {lo:g} by {lo - value:g}" if value < lo else f"above {hi:g} by {value - hi:g}"
+            raise ConfigError(f"{name} = {value:g} is {side}")
+    if cfg.trigger.library is not None and cfg.trigger.policy is not TriggerPolicy.REPLAN:
+        raise ConfigError(f"trigger.library is used by policy 'replan' only, "
+                          f"not {cfg.trigger.policy.value!r}")
+    n = cfg.surface.normal
+    horizontal = math.hypot(n[0], n[1])
+    if horizontal < 1e-6 or abs(n[2]) > horizontal:
+        raise ConfigError(f"surface.normal {n} must point more sideways than up or down "
+                          f"(a wall): |nz| = {abs(n[2]):g} > {horizontal:g}")

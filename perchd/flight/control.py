@@ -1,0 +1,148 @@
+"""The controllers, SI throughout: tau PID (eqs. 17, 20), Y/Z PID (eq. 18), and the mapping
+(eq. 19) of a perching-frame acceleration to roll, pitch, yaw and thrust with the saturations
+of eqs. 25-26. Gains and their paper equivalents: perchd.flight.config (docs/errata.md §8).
+
+Anti-windup: each integral is clamped so its contribution stays within i_limit, and it does
+not integrate on a tick after the mapping saturated (tilt or thrust) in the direction the
+error would push further.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from perchd.flight.config import AxisGains, FlightConfig, TauGains
+from perchd.flight.frame import PerchFrame, body_z
+from perchd.core.types import Phase, Setpoint, State, Vec3
+
+
+@dataclass(frozen=True, slots=True)
+class Attitude:
+    """roll, pitch, yaw [rad] (world, Z-Y-X); thrust [N]; saturated: tilt or thrust clipped."""
+
+    roll: float
+    pitch: float
+    yaw: float
+    thrust: float
+    saturated: bool
+
+
+def tau_error(tau_ref: float, tau: float | None) -> float:
+    """e = 1 - tau_ref/tau (eq. 17). tau None (Xdot ~ 0) is the limit tau -> -inf: e = 1."""
+    if tau is None or tau >= 0.0:
+        return 1.0
+    return 1.0 - tau_ref / tau
+
+
+class Pid:
+    """One PID with clamped integral, filtered derivative and conditional integration."""
+
+    def __init__(self, ki: float, kd: float, i_limit: float, d_filter_s: float) -> None:
+        self.ki, self.kd = ki, kd
+        self.i_limit = i_limit
+        self.d_filter_s = d_filter_s
+        self.integral = 0.0
+        self._prev: float | None = None
+        self._d = 0.0
+
+    def reset(self) -> None:
+        self.integral, self._prev, self._d = 0.0, None, 0.0
+
+    def step(self, kp: float, e: float, dt: float, freeze: bool = False,
+             de: float | None = None) -> float:
+        """Output for error e over dt [s]; `de` is a known error rate (else differenced)."""
+        if de is None:
+            raw = 0.0 if self._prev is None or dt <= 0 else (e - self._prev) / dt
+            alpha = dt / (self.d_filter_s + dt) if dt > 0 else 0.0
+            self._d += alpha * (raw - self._d)
+            de = self._d
+        self._prev = e
+        if not freeze and self.ki > 0.0:
+            bound = self.i_limit / self.ki
+            self.integral = min(max(self.integral + e * dt, -bound), bound)
+        return kp * e + self.ki * self.integral + self.kd * de
+
+
+class TauController:
+    """u_x [m/s^2] along the perching normal from the tau error, plus the plan's acceleration."""
+
+    def __init__(self, gains: TauGains) -> None:
+        self.gains = gains
+        self.pid = Pid(gains.ki, gains.kd, gains.i_limit, gains.d_filter_s)
+        self.last_error = 0.0
+        self.last_kp = gains.kp_slow
+
+    def reset(self) -> None:
+        self.pid.reset()
+
+    def step(self, state: State, tau_ref: float, a_plan: float, dt: float,
+             saturated: bool = False, schedule: bool = True) -> float:
+        """schedule=False uses kp_slow both ways (eq. 20's argument, a shrinking |X| under
+        a tau reference, does not hold when the reference is a speed)."""
+        g = self.gains
+        e = min(max(tau_error(tau_ref, state.tau), g.error_min), g.error_max)
+        kp = g.kp_fast if e < 0.0 and schedule else g.kp_slow  # eq. 20: tau_ref/tau > 1 <=> e < 0
+        self.last_error, self.last_kp = e, kp
+        u = self.pid.step(kp, e, dt, freeze=saturated)
+        return u + (a_plan if g.feedforward else 0.0)
+
+
+class AxisController:
+    """Position PID of one lateral axis (eq. 18), derivative on the estimated velocity."""
+
+    def __init__(self, gains: AxisGains) -> None:
+        self.gains = gains
+        self.pid = Pid(gains.ki, gains.kd, gains.i_limit, gains.d_filter_s)
+
+    def step(self, ref: float, pos: float, vel: float, dt: float, saturated: bool = False,
+             vel_ref: float = 0.0) -> float:
+        return self.pid.step(self.gains.kp, ref - pos, dt, saturated, de=vel_ref - vel)
+
+
+def map_attitude(a: Vec3, yaw: float, mass_kg: float, g: float, tilt_max: float,
+                 thrust_min: float, thrust_max: float) -> Attitude:
+    """Eq. 19: world-frame acceleration command a [m/s^2] -> roll, pitch, thrust at `yaw`,
+    with eq. 25 (|roll|, |pitch| <= tilt_max) and eq. 26 (thrust in thrust_min..thrust_max)."""
+    ux, uy = a[0], a[1]
+    uz = max(a[2], -0.8 * g)  # keep u_z + g > 0: never command upside down
+    s, c = math.sin(yaw), math.cos(yaw)
+    norm = math.sqrt(ux * ux + uy * uy + (uz + g) ** 2)
+    roll = math.asin(max(-1.0, min(1.0, (ux * s - uy * c) / norm)))
+    pitch = math.atan((ux * c + uy * s) / (uz + g))
+    sat_roll = min(max(roll, -tilt_max), tilt_max)
+    sat_pitch = min(max(pitch, -tilt_max), tilt_max)
+    bz = body_z(sat_roll, sat_pitch, yaw)
+    thrust = mass_kg * (ux * bz[0] + uy * bz[1] + (uz + g) * bz[2])
+    sat_thrust = min(max(thrust, thrust_min), thrust_max)
+    saturated = sat_roll != roll or sat_pitch != pitch or sat_thrust != thrust
+    return Attitude(sat_roll, sat_pitch, yaw, sat_thrust, saturated)
+
+
+class Controller:
+    """Perching-frame acceleration commands -> Setpoint; holds the three PIDs' state."""
+
+    def __init__(self, cfg: FlightConfig, frame: PerchFrame) -> None:
+        self.cfg = cfg
+        self.frame = frame
+        self.tau = TauController(cfg.tau_gains)
+        self.y = AxisController(cfg.lateral.y)
+        self.z = AxisController(cfg.lateral.z)
+        self.saturated = False
+        self.last_u: Vec3 = (0.0, 0.0, 0.0)
+        self._yaw = frame.yaw_facing
+
+    def lateral(self, state: State, y_ref: float, z_ref: float, dt: float,
+                vz_ref: float = 0.0) -> tuple[float, float]:
+        uy = self.y.step(y_ref, state.y, state.ydot, dt, self.saturated)
+        uz = self.z.step(z_ref, state.z, state.zdot, dt, self.saturated, vz_ref)
+        return uy, uz
+
+    def setpoint(self, u: Vec3, t: float, pose_seq: int, phase: Phase) -> Setpoint:
+        """Map the perching-frame acceleration u [m/s^2] to an attitude/thrust setpoint."""
+        v = self.cfg.vehicle
+        att = map_attitude(self.frame.rotate_out(u), self._yaw, v.mass_kg, v.g,
+                           self.cfg.tilt_limit_rad, v.thrust_min_n, v.thrust_max_n)
+        self.saturated = att.saturated
+        self.last_u = u
+        return Setpoint(t, att.roll, att.pitch, att.yaw, att.thrust, pose_seq, phase)

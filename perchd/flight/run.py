@@ -1,0 +1,196 @@
+"""One flight: source -> estimator -> supervisor/controller -> driver, on the fixed-rate loop.
+
+`fly` opens nothing: the caller (perchd fly, the daemon, a test) opens and connects the
+driver and starts the pose source, and closes them afterwards. `fly` writes the flight log as
+it goes and returns a FlightResult. Any end other than contact, and any exception, ends in
+driver.failsafe(reason) with the log closed; an exception is re-raised after that.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from perchd.core.clock import Clock
+from perchd.flight.estimator import Estimator
+from perchd.flight.config import FlightConfig
+from perchd.logs.flightlog import FlightLogWriter, LogRow, jsonable
+from perchd.flight.loop import LoopSummary, make_loop
+from perchd.flight.frame import PerchFrame
+from perchd.flight.supervisor import FlightAbort, Supervisor, TickReport, Trigger
+from perchd.core.types import EndReason, Phase, State
+
+__all__ = ["FlightAbort", "FlightResult", "TickStatus", "fly", "plan_summary"]
+
+
+@dataclass(frozen=True, slots=True)
+class TickStatus:
+    """What a live display needs after each tick: t [s] since the flight started, phase,
+    x [m], xdot [m/s], tau and tau_ref [s] (None when undefined)."""
+
+    t: float
+    phase: Phase
+    x: float | None
+    xdot: float | None
+    tau: float | None
+    tau_ref: float | None
+
+
+@dataclass(frozen=True)
+class FlightResult:
+    """outcome: the EndReason; detail: why, in words. contact_speed [m/s] and perch_time
+    [s, trigger to contact] as the agent estimated them (None without contact);
+    plan_duration [s] and v_contact_plan [m/s] of the plan flown (retargeted if it was);
+    trigger: the measured trigger state; true_contact_speed / true_perch_time: the
+    simulator's own figures when flying in simulation (None otherwise); log: the log path;
+    loop: timing statistics; failsafe_sent: driver.failsafe was called."""
+
+    outcome: EndReason
+    detail: str
+    contact_speed: float | None
+    perch_time: float | None
+    plan_duration: float
+    v_contact_plan: float
+    trigger: Trigger | None
+    true_contact_speed: float | None
+    true_perch_time: float | None
+    log: str
+    loop: LoopSummary
+    failsafe_sent: bool
+
+    def to_json(self) -> dict[str, Any]:
+        """The `perchd fly --json` object (docs/contracts.md §2 keys first)."""
+        return {"outcome": self.outcome.name, "message": self.outcome.value,
+                "detail": self.detail, "contact_speed": self.contact_speed,
+                "perch_time": self.perch_time, "plan_duration": self.plan_duration,
+                "v_contact_plan": self.v_contact_plan, "log": self.log,
+                "true_contact_speed": self.true_contact_speed,
+                "true_perch_time": self.true_perch_time,
+                "trigger": jsonable(self.trigger), "loop": jsonable(self.loop),
+                "failsafe_sent": self.failsafe_sent}
+
+
+def plan_summary(plan: Any) -> dict[str, Any]:
+    """The plan's defining figures for the log header (Plan API attributes)."""
+    keys = ("strategy", "x0", "v0", "tau_s", "t_switch", "duration", "v_contact", "robust")
+    out = {k: jsonable(getattr(plan, k, None)) for k in keys}
+    out["limits"] = jsonable(getattr(plan, "limits", None))
+    for extra in ("c", "k"):
+        if hasattr(plan, extra):
+            out[extra] = jsonable(getattr(plan, extra))
+    return out
+
+
+class _Run:
+    """The per-tick wiring, kept apart from `fly` so the tick is one short method."""
+
+    def __init__(self, plan, driver, source, clock, cfg, log, abort, on_tick) -> None:
+        self.frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
+        self.est = Estimator(cfg.estimator, self.frame)
+        self.sup = Supervisor(plan, cfg, self.frame)
+        self.loop = make_loop(cfg.sync.value, clock, cfg.rate_hz, source)
+        self.clock = clock
+        self.driver, self.source, self.log = driver, source, log
+        self.abort, self.on_tick = abort, on_tick
+        self.failsafe_sent = False
+        # Drivers that steer yaw or feed the vehicle's own estimator (Crazyflie extpose)
+        # want every pose the flight uses; the rest do not implement the hook.
+        self.observe = getattr(driver, "observe_pose", None)
+        self.t0: float | None = None
+        self._events = 0
+        self._sent_seq = -1  # newest pose a setpoint has been sent for (latency is per pose)
+
+    def tick(self, k: int, t: float) -> bool:
+        self.t0 = t if self.t0 is None else self.t0
+        health = self.driver.health()
+        pose = self.source.latest()
+        if pose is not None and self.observe is not None:
+            self.observe(pose)  # before send: the Crazyflie's yaw loop uses the newest yaw
+        w0 = time.perf_counter()
+        self.est.offer(pose)
+        state = self.est.state(t)
+        last = self.est.last_pose
+        arrival_age = None if last is None else t - (last.t + last.latency)
+        rep = self.sup.tick(t, state, health, self.loop.stats.streak,
+                            self.abort.reason, self.est.mocap_period, arrival_age)
+        self.loop.stats.agent.append(time.perf_counter() - w0)
+        if rep.end is not None and rep.end is not EndReason.CONTACT:
+            self.failsafe(rep.end)
+        elif rep.setpoint is not None:
+            self.driver.send(rep.setpoint)
+            if last is not None and last.seq != self._sent_seq:
+                self._sent_seq = last.seq
+                self.loop.stats.latency.append(self.clock.now() - (last.t + last.latency))
+        self._log(k, t, state, rep)
+        if self.on_tick is not None:
+            self.on_tick(TickStatus(t - self.t0, rep.phase, state and state.x,
+                                    state and state.xdot, state and state.tau, rep.refs.tau_ref))
+        return not rep.finished
+
+    def failsafe(self, reason: EndReason) -> None:
+        if not self.failsafe_sent:
+            self.failsafe_sent = True
+            self.driver.failsafe(reason)
+
+    def _log(self, k: int, t: float, st: State | None, rep: TickReport) -> None:
+        for ev in self.sup.events[self._events:]:
+            self.log.event(ev)
+        self._events = len(self.sup.events)
+        sp, timing = rep.setpoint, self.loop.last
+        self.log.row(LogRow(
+            t, k, rep.phase.value, st and st.x, st and st.xdot, st and st.tau,
+            rep.refs.tau_ref, rep.refs.x, rep.refs.v, rep.refs.a, st and st.y, st and st.z,
+            sp.roll if sp else 0.0, sp.pitch if sp else 0.0, sp.yaw if sp else 0.0,
+            sp.thrust if sp else 0.0, *rep.u, rep.e, st and st.age,
+            st.pose_seq if st else -1, timing.jitter_s if timing else 0.0,
+            timing.compute_s if timing else 0.0, rep.end.name if rep.finished and rep.end else None))
+
+
+def fly(plan: Any, driver: Any, source: Any, clock: Clock, log_path: str | Path,
+        cfg: FlightConfig = FlightConfig(), abort: FlightAbort | None = None,
+        on_tick: Callable[[TickStatus], None] | None = None, world: Any = None,
+        header: dict[str, Any] | None = None) -> FlightResult:
+    """Fly `plan` (a perchd.tau.Plan) with a connected driver and a started pose source.
+
+    clock: the loop's clock (the Runtime's). abort: the external hook (see FlightAbort).
+    on_tick: called after every tick with a TickStatus (live display). world: the SimWorld
+    when simulated, for the true contact figures. header: extra header fields for the log.
+    """
+    abort = abort or FlightAbort()
+    run = _Run(plan, driver, source, clock, cfg, None, abort, on_tick)  # may refuse: no log yet
+    log = run.log = FlightLogWriter(log_path, {"plan": plan_summary(plan),
+                                               "config": jsonable(cfg),
+                                               "driver": getattr(driver, "uri", ""),
+                                               "mocap_body": getattr(source, "body", ""),
+                                               **(header or {})})
+    try:
+        run.loop.run(run.tick)
+    except BaseException as err:
+        reason = EndReason.SIGNAL if isinstance(err, KeyboardInterrupt) else EndReason.SOFTWARE_ERROR
+        try:
+            run.failsafe(reason)
+        finally:
+            log.close({"outcome": reason.name, "detail": f"{type(err).__name__}: {err}"})
+        raise
+    result = _result(run, world, str(log_path))
+    log.close({"outcome": result.outcome.name, "detail": result.detail,
+               "summary": result.to_json()})
+    return result
+
+
+def _result(run: _Run, world: Any, log_path: str) -> FlightResult:
+    sup = run.sup
+    trig, contact = sup.trigger, sup.contact
+    perch = contact.t - trig.t if contact and trig else None
+    true_speed = true_perch = None
+    if world is not None and world.contact is not None:
+        true_speed = world.contact.speed
+        true_perch = world.contact.t - trig.t if trig else None
+    return FlightResult(
+        sup.end or EndReason.SOFTWARE_ERROR, sup.end_detail,
+        contact.speed if contact else None, perch, float(sup.plan.duration),
+        float(sup.plan.v_contact), trig, true_speed, true_perch, log_path,
+        run.loop.summary(), run.failsafe_sent)
+

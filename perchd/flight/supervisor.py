@@ -1,0 +1,425 @@
+"""Flight phases and every end rule: one `tick` per control period, no I/O of its own.
+
+Phases: TAKEOFF (only when the flight starts below the take-off height) -> HOLD at the start
+point -> APPROACH (accelerate along X so that the plan's trigger state (x0, v0) is reached at
+x0) -> trigger -> STAGE1 (tau_ref indexed by time since the trigger) -> STAGE2 when the
+*measured* tau reaches tau_s (docs/errata.md §9; tau_ref = tau_s + time since that switch) ->
+CONTACT (the post-contact action for post_contact_s) -> DONE.
+
+End rules, checked in this order on every tick: operator abort, signal, stale mocap, lost
+link, geofence, tilt, speed limit, tau divergence, deadline overrun streak, timeout, contact,
+plan complete. The trigger itself may end the flight (TRIGGER_REFUSED): a plan is never
+flown from a state it was not made for, except within the configured tolerance (REFUSE
+policy) or after being retargeted to the measured state (ROBUST, REPLAN).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from typing import Any
+
+from perchd.flight.control import AxisController, Controller
+from perchd.drivers.base import LinkHealth
+from perchd.core.errors import ConfigError, PlanError
+from perchd.flight.config import FlightConfig, PostContact, TriggerPolicy
+from perchd.logs.flightlog import LogEvent
+from perchd.flight.frame import PerchFrame
+from perchd.flight.planrefs import PlanSampler
+from perchd.core.types import EndReason, Phase, Setpoint, State
+
+
+FROZEN_MAX_S = 0.3
+"""[s] once the approach has begun, poses with a bit-identical position for longer than this
+are a stuck tracker re-sending its last position with fresh stamps, not a vehicle (noise
+alone moves a real measurement; a commanded vehicle moves a noiseless simulated one within
+its command latency and attitude response, well under this)."""
+_MOVING = (Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
+
+
+class FlightAbort:
+    """The external abort hook: any thread (a signal handler, the control socket) calls
+    request(); the supervisor ends the flight on its next tick with that reason."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._reason: EndReason | None = None
+
+    def request(self, reason: EndReason = EndReason.OPERATOR_ABORT) -> None:
+        with self._lock:
+            if self._reason is None:
+                self._reason = reason
+
+    @property
+    def reason(self) -> EndReason | None:
+        with self._lock:
+            return self._reason
+
+
+@dataclass(frozen=True, slots=True)
+class Refs:
+    """Plan references at a tick: tau_ref [s], x/v/a [m, m/s, m/s^2]; None outside stages."""
+
+    tau_ref: float | None = None
+    x: float | None = None
+    v: float | None = None
+    a: float | None = None
+
+
+NO_REFS = Refs()
+NO_U = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class TickReport:
+    """What one tick decided: the setpoint to send (None: send nothing), the end reason once
+    the flight has ended, whether the loop should stop, and the figures for the log."""
+
+    phase: Phase
+    setpoint: Setpoint | None
+    end: EndReason | None
+    finished: bool
+    refs: Refs
+    u: tuple[float, float, float]
+    e: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class Trigger:
+    """t [s] on the clock when X crossed the flown plan's x0 (the plan's t = 0; at most a tick
+    before the triggering tick); x [m], v [m/s] measured at the triggering tick;
+    plan_x0/plan_v0 [m, m/s] of the plan finally flown; action: how the plan was chosen."""
+
+    t: float
+    x: float
+    v: float
+    plan_x0: float
+    plan_v0: float
+    action: str
+
+
+@dataclass(frozen=True, slots=True)
+class ContactEstimate:
+    """t [s] estimated time at X = 0; speed [m/s] estimated Xdot then."""
+
+    t: float
+    speed: float
+
+
+class Supervisor:
+    def __init__(self, plan: Any, cfg: FlightConfig, frame: PerchFrame) -> None:
+        self.plan = plan
+        self.cfg = cfg
+        self.frame = frame
+        self.ctl = Controller(cfg, frame)
+        self.phase = Phase.IDLE
+        self.end: EndReason | None = None
+        self.end_detail = ""
+        self.events: list[LogEvent] = []
+        self.trigger: Trigger | None = None
+        self.contact: ContactEstimate | None = None
+        self.t_start: float | None = None
+        self.t_stage2: float | None = None
+        self._t_prev: float | None = None
+        self._t_phase = 0.0
+        self._t_end: float | None = None
+        self._t_bad_tau: float | None = None
+        self._hold: tuple[float, float, float] | None = None
+        self._z_ref = 0.0
+        self._a_app = 0.0
+        self._x: float | None = None  # [m] measured X of the tick in hand
+        self._sampler = PlanSampler(plan)
+        self._refs_memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
+        self._library = _open_library(cfg.trigger.library, plan)
+
+    # --- helpers ----------------------------------------------------------------------------
+    def _enter(self, phase: Phase, t: float, detail: str = "", **values: float) -> None:
+        self.phase, self._t_phase = phase, t
+        self.events.append(LogEvent(t, phase.value, detail, values))
+
+    def _finish(self, reason: EndReason, t: float, detail: str = "") -> None:
+        if self.end is None:
+            self.end, self.end_detail, self._t_end = reason, detail, t
+            self.events.append(LogEvent(t, "end", f"{reason.value}{': ' if detail else ''}{detail}"))
+
+    # --- the tick ---------------------------------------------------------------------------
+    def tick(self, t: float, state: State | None, health: LinkHealth, overrun_streak: int,
+             abort: EndReason | None, mocap_period: float | None,
+             arrival_age: float | None) -> TickReport:
+        dt = 0.0 if self._t_prev is None else t - self._t_prev
+        self._t_prev = t
+        if self.t_start is None:
+            self.t_start = t
+        self._x = None if state is None else state.x
+        if self.end is None:
+            reason, detail = self._check(t, state, health, overrun_streak, abort,
+                                         mocap_period, arrival_age)
+            if reason is not None:
+                self._finish(reason, t, detail)
+        if self.end is not None:
+            return self._ended(t, state)
+        if state is None:  # waiting for the first pose (bounded by the stale-mocap rule)
+            return TickReport(self.phase, None, None, False, NO_REFS, NO_U, None)
+        return self._fly(t, dt, state)
+
+    def _check(self, t, state, health, streak, abort, mocap_period, arrival_age):
+        s = self.cfg.safety
+        if abort is not None:
+            return abort, ""
+        limit = s.stale_timeout_s or s.stale_periods * (mocap_period or 0.01)
+        if state is None:
+            if t - self.t_start > max(limit, 0.5):
+                return EndReason.STALE_MOCAP, f"no pose in {t - self.t_start:.3f} s"
+        elif arrival_age is not None and arrival_age > limit:
+            return EndReason.STALE_MOCAP, f"newest pose arrived {arrival_age * 1000:.0f} ms ago"
+        elif self.phase in _MOVING and min(state.frozen_s, t - self._t_moving) > FROZEN_MAX_S:
+            return EndReason.STALE_MOCAP, (f"mocap frozen: the same position for "
+                                           f"{state.frozen_s * 1000:.0f} ms while flying")
+        if not health.ok:
+            return EndReason.LOST_LINK, health.detail
+        if health.rtt_s is not None and health.rtt_s > s.link_rtt_max_s:
+            return EndReason.LOST_LINK, (f"link too slow: round trip {health.rtt_s * 1000:.0f} ms"
+                                         f" > {s.link_rtt_max_s * 1000:.0f} ms")
+        if state is not None:
+            why = self._limits(state)
+            if why is not None:
+                return why
+            why = self._tau_watch(t, state)
+            if why is not None:
+                return why
+        if streak >= s.overrun_streak:
+            return EndReason.DEADLINE_OVERRUN, f"{streak} deadlines missed in a row"
+        if t - self.t_start > s.timeout_s:
+            return EndReason.TIMEOUT, f"{t - self.t_start:.1f} s > {s.timeout_s:g} s"
+        if state is not None and self._contact(t, state):
+            return EndReason.CONTACT, f"at {self.contact.speed:.3f} m/s"
+        since = None if self.trigger is None else t - self.trigger.t
+        if since is not None and since > self.plan.duration + s.plan_grace_s:
+            return EndReason.PLAN_COMPLETE, f"{since:.2f} s after the trigger, X = {state.x:.3f} m"
+        return None, ""
+
+    def _limits(self, st: State):
+        s = self.cfg.safety
+        airborne = self.phase not in (Phase.IDLE, Phase.TAKEOFF)
+        height = self.frame.point[2] + self.frame.rotate_out((st.x, st.y, st.z))[2]
+        if not s.x_min_m <= st.x <= s.x_max_m:
+            return EndReason.GEOFENCE, f"X = {st.x:.3f} m outside {s.x_min_m:g}..{s.x_max_m:g} m"
+        if self._hold is not None:
+            dy, dz = st.y - self._hold[1], st.z - self._z_ref
+            if airborne and max(abs(dy), abs(dz)) > s.lateral_max_m:
+                return EndReason.GEOFENCE, (f"{math.hypot(dy, dz):.2f} m off the approach line "
+                                            f"(limit {s.lateral_max_m:g} m)")
+        if airborne and height < s.floor_m:
+            return EndReason.GEOFENCE, f"height {height:.3f} m below the floor limit {s.floor_m:g} m"
+        if st.tilt > s.tilt_max_rad:
+            return EndReason.TILT_LIMIT, (f"tilt {math.degrees(st.tilt):.1f} deg > "
+                                          f"{math.degrees(s.tilt_max_rad):.1f} deg")
+        speed = math.sqrt(st.xdot ** 2 + st.ydot ** 2 + st.zdot ** 2)
+        if speed > s.speed_max_mps:
+            return EndReason.SPEED_LIMIT, f"{speed:.2f} m/s > {s.speed_max_mps:g} m/s"
+        return None
+
+    def _tau_watch(self, t: float, st: State):
+        if self.phase not in (Phase.STAGE1, Phase.STAGE2):
+            return None
+        s = self.cfg.safety
+        ref = self._refs(t).tau_ref
+        bad = st.tau is None or abs(st.tau - ref) > max(s.tau_error_max, s.tau_error_rel * abs(ref))
+        if not bad:
+            self._t_bad_tau = None
+            return None
+        self._t_bad_tau = self._t_bad_tau if self._t_bad_tau is not None else t
+        if t - self._t_bad_tau >= s.tau_error_s:
+            got = "undefined" if st.tau is None else f"{st.tau:.3f} s"
+            return EndReason.TAU_DIVERGENCE, f"tau {got} vs tau_ref {ref:.3f} s"
+        return None
+
+    def _contact(self, t: float, st: State) -> bool:
+        if self.phase not in (Phase.APPROACH, Phase.STAGE1, Phase.STAGE2):
+            return False
+        reach = max(st.xdot, 0.0) / self.cfg.rate_hz + self.cfg.safety.contact_margin_m
+        if st.x + reach < 0.0:
+            return False
+        lead = -st.x / st.xdot if st.xdot > 0 and st.x < 0 else 0.0
+        self.contact = ContactEstimate(t + lead, st.xdot)
+        self._enter(Phase.CONTACT, t, "contact", speed=st.xdot, x=st.x)
+        return True
+
+    # --- ends -------------------------------------------------------------------------------
+    def _ended(self, t: float, state: State | None) -> TickReport:
+        seq = state.pose_seq if state else -1
+        if self.end is not EndReason.CONTACT:
+            if self.phase is not Phase.ABORT:
+                self._enter(Phase.ABORT, t, self.end.value)
+            return TickReport(Phase.ABORT, None, self.end, True, NO_REFS, NO_U, None)
+        done = t - self._t_end >= self.cfg.post_contact_s
+        yaw = self.frame.yaw_facing
+        if self.cfg.post_contact is PostContact.IDLE:
+            thrust = self.cfg.idle_thrust_n
+            thrust = self.cfg.vehicle.thrust_min_n if thrust is None else thrust
+            sp = Setpoint(t, 0.0, 0.0, yaw, thrust, seq, Phase.CONTACT)
+        else:
+            sp = Setpoint(t, 0.0, 0.0, yaw, 0.0, seq, Phase.CONTACT)
+        if done and self.phase is not Phase.DONE:
+            self._enter(Phase.DONE, t, self.cfg.post_contact.value)
+        return TickReport(self.phase, sp, self.end, done, NO_REFS, NO_U, None)
+
+    # --- flying -----------------------------------------------------------------------------
+    def _fly(self, t: float, dt: float, st: State) -> TickReport:
+        if self.phase is Phase.IDLE:
+            self._start(t, st)
+        if self.phase is Phase.TAKEOFF and st.z >= self._z_ref - 0.05:
+            self._enter(Phase.HOLD, t)
+        if self.phase is Phase.HOLD and t - self._t_phase >= self.cfg.approach.hold_s:
+            self._begin_approach(t, st)
+        if self.phase is Phase.APPROACH and st.x >= self.plan.x0:
+            self._trigger(t, st)
+            if self.end is not None:
+                return self._ended(t, st)
+        if self.phase is Phase.STAGE1 and self._tau_s is not None and st.tau is not None \
+                and st.tau >= self._tau_s:
+            self.t_stage2 = t
+            self._enter(Phase.STAGE2, t, "measured tau reached tau_s", tau=st.tau,
+                        since_trigger=t - self.trigger.t)
+        refs, ux, e, vz_ref = NO_REFS, 0.0, None, 0.0
+        if self.phase in (Phase.STAGE1, Phase.STAGE2):
+            refs = self._refs(t)
+            g = self.cfg.tau_gains
+            if self.phase is Phase.STAGE2 and not g.stage2_hold_speed \
+                    and refs.tau_ref > -g.terminal_s:
+                ux = 0.0  # terminal: constant speed (see TauGains.terminal_s)
+            else:
+                hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
+                ux = self.ctl.tau.step(st, refs.tau_ref, refs.a, dt, self.ctl.saturated,
+                                       schedule=not hold)
+            e = self.ctl.tau.last_error
+        elif self.phase is Phase.APPROACH:
+            ux = self._approach_accel(st)
+        else:
+            ux = self._hold_x.step(self._hold[0], st.x, st.xdot, dt, self.ctl.saturated)
+            if self.phase is Phase.TAKEOFF:
+                vz_ref = self.cfg.approach.takeoff_speed_mps
+        z_ref = self._z_ref
+        if self.phase is Phase.TAKEOFF:
+            z_ref = min(self._z_ref, self._hold[2] + vz_ref * (t - self._t_phase))
+        uy, uz = self.ctl.lateral(st, self._hold[1], z_ref, dt, vz_ref)
+        u = (ux, uy, uz)
+        sp = self.ctl.setpoint(u, t, st.pose_seq, self.phase)
+        return TickReport(self.phase, sp, None, False, refs, u, e)
+
+    @property
+    def v_hold(self) -> float:
+        """[m/s] the stage-2 speed held: V_c, kept v_contact_margin_mps inside the window."""
+        v, m = float(self.plan.v_contact), self.cfg.tau_gains.v_contact_margin_mps
+        lo, hi = self.plan.limits.v_contact
+        return min(max(v, lo + m), hi - m) if hi - lo > 2 * m else v
+
+    @property
+    def _tau_s(self) -> float | None:
+        return getattr(self.plan, "tau_s", None)
+
+    def _start(self, t: float, st: State) -> None:
+        self._hold = (st.x, st.y, st.z)
+        self._hold_x = AxisController(self.cfg.lateral.z)
+        start_world = self.frame.rotate_out((st.x, st.y, st.z))
+        height = self.frame.point[2] + start_world[2]
+        climb = self.cfg.approach.takeoff_height_m - height
+        self._z_ref = st.z + climb if climb > 0.1 else st.z
+        self._enter(Phase.TAKEOFF if climb > 0.1 else Phase.HOLD, t, "", x=st.x, y=st.y, z=st.z)
+
+    def _begin_approach(self, t: float, st: State) -> None:
+        gap = self.plan.x0 - st.x
+        need = self.plan.v0 ** 2 / (2.0 * gap) if gap > 0 else math.inf
+        if need > self.cfg.approach.accel_max_mps2:
+            self._finish(EndReason.TRIGGER_REFUSED, t,
+                         f"reaching v0 = {self.plan.v0:g} m/s by x0 = {self.plan.x0:g} m from "
+                         f"X = {st.x:.2f} m needs {need:.2f} m/s^2 > approach limit "
+                         f"{self.cfg.approach.accel_max_mps2:g} m/s^2")
+            return
+        self._a_app, self._t_moving = need, t
+        self._enter(Phase.APPROACH, t, "", accel=need)
+
+    def _approach_accel(self, st: State) -> float:
+        v0 = self.plan.v0
+        v_ref = math.sqrt(max(0.0, v0 * v0 - 2.0 * self._a_app * (self.plan.x0 - st.x)))
+        return self._a_app + self.cfg.approach.kv * (v_ref - st.xdot)
+
+    def _trigger(self, t: float, st: State) -> None:
+        plan, action, why = self._choose_plan(st)
+        if plan is None:
+            self._finish(EndReason.TRIGGER_REFUSED, t, why)
+            return
+        # The plan's clock starts when X crossed its x0, a fraction of a tick ago (a plan
+        # retargeted to this very state starts now).
+        late = (st.x - plan.x0) / st.xdot if st.xdot > 0 else 0.0
+        t0 = t - min(max(late, 0.0), 1.0 / self.cfg.rate_hz)
+        self.plan = plan
+        if plan is not self._sampler.plan:
+            self._sampler = PlanSampler(plan)
+        self.trigger = Trigger(t0, st.x, st.xdot, plan.x0, plan.v0, action)
+        self.ctl.tau.reset()
+        self._enter(Phase.STAGE1, t, action, x=st.x, v=st.xdot, plan_x0=plan.x0, plan_v0=plan.v0)
+
+    def _choose_plan(self, st: State) -> tuple[Any, str, str]:
+        """(plan to fly, what was done, why not) for the measured trigger state."""
+        tr, plan = self.cfg.trigger, self.plan
+        dx, dv = st.x - plan.x0, st.xdot - plan.v0
+        if tr.policy is TriggerPolicy.REFUSE:
+            if abs(dx) <= tr.x_tol_m and abs(dv) <= tr.v_tol_mps:
+                return plan, f"flown as made (dx {dx:+.3f} m, dv {dv:+.3f} m/s within tolerance)", ""
+            return None, "", (f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s differ from the "
+                              f"plan's x0 = {plan.x0:g}, v0 = {plan.v0:g} by {dx:+.3f} m, "
+                              f"{dv:+.3f} m/s (tolerance {tr.x_tol_m:g} m, {tr.v_tol_mps:g} m/s)")
+        if tr.policy is TriggerPolicy.ROBUST:
+            box = getattr(plan, "robust", None)
+            if box is None:
+                return None, "", "trigger policy 'robust' but the plan has no robust box"
+            (xl, xh), (vl, vh) = box
+            if not (xl <= st.x <= xh and vl <= st.xdot <= vh):
+                return None, "", (f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s outside the "
+                                  f"plan's robust box x0 {xl:g}..{xh:g}, v0 {vl:g}..{vh:g}")
+        from perchd.tau import retarget
+        try:
+            new = retarget(plan, st.x, st.xdot, library=self._library)
+        except PlanError as err:
+            return None, "", f"no plan from x = {st.x:.3f} m, v = {st.xdot:.3f} m/s: {err}"
+        how = f"{tr.policy.value}{' (library)' if self._library is not None else ''}"
+        return new, f"{how}: retargeted to x0 = {st.x:.3f} m, v0 = {st.xdot:.3f} m/s", ""
+
+    def _refs(self, t: float) -> Refs:
+        """The references at tick time t; computed once per tick (the tau watch and the
+        controller both ask), again only if the stage or the plan changed in between."""
+        key = (t, self.t_stage2, self.trigger, self._x)
+        if self._refs_memo[0] != key:
+            self._refs_memo = (key, self._compute_refs(t))
+        return self._refs_memo[1]
+
+    def _compute_refs(self, t: float) -> Refs:
+        plan = self.plan
+        s = min(max(t - self.trigger.t, 0.0), plan.duration)
+        here = self._sampler.at(s)
+        if self.t_stage2 is None:
+            tau_ref = here.tau_ref
+            ahead = self._sampler.at(min(s + self.cfg.tau_gains.ff_lead_s, plan.duration))
+            a = ahead.a if ahead.stage == 1 else 0.0
+        elif self.cfg.tau_gains.stage2_hold_speed and self._x is not None:
+            tau_ref = min(self._x, 0.0) / self.v_hold
+            a = 0.0
+        else:
+            tau_ref = self._tau_s + (t - self.t_stage2)
+            a = 0.0
+        return Refs(tau_ref, here.x, here.v, a)
+
+
+def _open_library(path: str | None, plan: Any) -> Any:
+    """The trigger's plan library, loaded before the flight and checked against its plan."""
+    if path is None:
+        return None
+    from perchd.tau.library import load_library
+
+    lib = load_library(path)
+    why = lib.matches(plan)
+    if why:
+        raise ConfigError(f"trigger.library {path}: {why}")
+    return lib

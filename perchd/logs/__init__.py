@@ -1,0 +1,1 @@
+"""Flight logs: the JSON-lines writer and reader, summaries and plots."""

@@ -1,0 +1,1 @@
+"""`perchd serve`: the systemd service, its TOML configuration and its control socket."""

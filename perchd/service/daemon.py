@@ -1,0 +1,360 @@
+"""`perchd serve`: the flight agent as a long-running service (under systemd or not).
+
+One thread runs the service loop: select() on the control socket, its clients and a
+self-pipe that signals (signal.set_wakeup_fd) and the flight thread write to. A flight runs
+in its own thread through perchd.flight.run.fly, so abort and status stay answerable while it
+flies. systemd hears READY=1 once mocap and driver are connected, WATCHDOG=1 from the
+flight's own tick callback while flying and from the service loop while idle and the link is
+healthy (a stalled loop stops the pings and gets restarted), STATUS= with the phase, and
+STOPPING=1 on the way out. SIGTERM/SIGINT abort a flight with the driver's failsafe (end
+reason SIGNAL), wait for its log to close, and exit 0; SIGHUP reloads the config between
+flights.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import select
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from perchd.service.config import Config, ServiceConfig, load_config
+from perchd.service.control_socket import ControlServer
+from perchd.core.errors import PerchdError, UriError
+from perchd.service.sdnotify import Notifier
+from perchd.core.types import EndReason
+
+FLIGHT_DONE = b"\xff"
+"""Self-pipe byte the flight thread writes when it ends (signal numbers are < 65)."""
+IDLE_POLL_S = 0.25
+"""[s] the service loop wakes at least this often to ping the watchdog while idle."""
+STOP_JOIN_S = 5.0
+"""[s] longest wait for an aborted flight to close its log before the failsafe is forced."""
+
+
+def say(msg: str) -> None:
+    """One line for the journal."""
+    print(f"perchd serve: {msg}", file=sys.stderr, flush=True)
+
+
+class Links:
+    """The connected driver and started pose source, on the real clock. Simulated links
+    (sim:// on both) get a fresh simulated world per flight, paced in real time."""
+
+    def __init__(self, service: ServiceConfig, surface: Any = None) -> None:
+        from perchd.core.uri import parse_uri
+
+        self.surface = surface  # SurfaceConfig: where a simulated world puts its wall
+        self.driver_uri, self.mocap_uri = service.driver, service.mocap_uri()
+        sims = (parse_uri(self.driver_uri).scheme == "sim", parse_uri(self.mocap_uri).scheme == "sim")
+        if sims[0] != sims[1]:
+            raise UriError("sim:// flies only with sim:// on both driver and mocap "
+                           f"(got {self.driver_uri} and {self.mocap_uri})")
+        self.simulated = sims[0]
+        self.runtime = self.driver = self.source = None
+        self.open()
+
+    def open(self) -> None:
+        from perchd.drivers.base import open_driver
+        from perchd.mocap.base import open_source
+        from perchd.core.runtime import Runtime
+
+        self.runtime = Runtime.real()
+        if self.simulated and self.surface is not None:
+            self.runtime.sim = self._world()
+        self.source = open_source(self.mocap_uri, self.runtime)
+        try:
+            self.source.start()
+            self.driver = open_driver(self.driver_uri, self.runtime)
+            self.driver.connect()
+        except BaseException:
+            self.source.close()
+            raise
+
+    def _world(self) -> Any:
+        from perchd.sim.world import SimWorld, world_params_from_uri
+        from perchd.core.uri import parse_uri
+
+        params = world_params_from_uri(parse_uri(self.driver_uri))
+        return SimWorld(dataclasses.replace(params, surface_point=self.surface.point,
+                                            surface_normal=self.surface.normal), self.runtime.clock)
+
+    def fresh(self) -> None:
+        """Before a flight: a new simulated world (a real link is kept)."""
+        if self.simulated:
+            self.close()
+            self.open()
+
+    def healthy(self) -> bool:
+        try:
+            return bool(self.driver.health().ok)
+        except Exception:  # noqa: BLE001 - a link that cannot say is not healthy
+            return False
+
+    def close(self) -> None:
+        try:
+            if self.driver is not None:
+                self.driver.close()
+        finally:
+            if self.source is not None:
+                self.source.close()
+            self.driver = self.source = None
+
+
+class FlightJob(threading.Thread):
+    """One flight in its own thread; wakes the service loop through the pipe when done."""
+
+    def __init__(self, plan: Any, plan_path: Path, links: Links, cfg: Config, log: Path,
+                 notifier: Notifier, wake_fd: int) -> None:
+        super().__init__(name="perchd-flight", daemon=True)
+        from perchd.flight.run import FlightAbort
+
+        self.plan, self.plan_path, self.links, self.cfg = plan, plan_path, links, cfg
+        self.log, self.notifier, self.wake_fd = log, notifier, wake_fd
+        self.abort = FlightAbort()
+        self.tick: Any = None
+        self.result: dict[str, Any] | None = None
+        self._phase = None
+
+    def run(self) -> None:
+        from perchd.flight.run import fly
+
+        try:
+            res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
+                      self.log, self.cfg.flight, self.abort, self.on_tick, world=self.links.runtime.sim,
+                      header={"plan_file": str(self.plan_path), "vehicle": self.cfg.service.vehicle,
+                              "mocap": self.links.mocap_uri, "service": True})
+            self.result = res.to_json()
+        except BaseException as err:  # fly has already sent the failsafe and closed the log
+            self.result = {"outcome": EndReason.SOFTWARE_ERROR.name, "log": str(self.log),
+                           "detail": f"{type(err).__name__}: {err}"}
+        finally:
+            os.write(self.wake_fd, FLIGHT_DONE)
+
+    def on_tick(self, st: Any) -> None:
+        """Called by the control loop after each tick: proof of life for the watchdog."""
+        self.tick = st
+        self.notifier.watchdog()
+        if st.phase is not self._phase:
+            self._phase = st.phase
+            self.notifier.status(f"{self.cfg.service.vehicle}: flying, {st.phase.value}")
+
+
+class Daemon:
+    def __init__(self, config: Config, notifier: Notifier, config_path: str | None,
+                 overrides: dict[str, str]) -> None:
+        self.config, self.notifier = config, notifier
+        self.config_path, self.overrides = config_path, overrides
+        self.job: FlightJob | None = None
+        self.last: dict[str, Any] | None = None
+        self.flights = 0
+        self.reload_pending = False
+        self.stopping = False
+        self.links: Links | None = None
+        self.server: ControlServer | None = None
+
+    # --- the service loop ---------------------------------------------------------------------
+    def run(self) -> int:
+        rfd, wfd = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        self.wake_fd = wfd
+        previous = {s: signal.signal(s, lambda *_: None)
+                    for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)}
+        old_wakeup = signal.set_wakeup_fd(wfd, warn_on_full_buffer=False)
+        try:
+            self._start()
+            while not self.stopping:
+                self._wait(rfd)
+        finally:
+            self.notifier.stopping()
+            self.notifier.status("stopping")
+            self._shutdown()
+            signal.set_wakeup_fd(old_wakeup)
+            for s, h in previous.items():
+                signal.signal(s, h)
+            os.close(rfd)
+            os.close(wfd)
+        say("stopped")
+        return 0
+
+    def _start(self) -> None:
+        svc = self.config.service
+        self.server = ControlServer(svc.socket, self.dispatch, peers=svc.peer_policy(),
+                                    on_refuse=lambda why: say(f"control socket: refused {why}"))
+        self.notifier.status(f"{svc.vehicle}: connecting {svc.mocap_uri()} and {svc.driver}")
+        self.links = Links(svc, self.config.flight.surface)
+        self.notifier.ready(f"{svc.vehicle}: idle")
+        say(f"ready: vehicle {svc.vehicle}, driver {svc.driver}, mocap {svc.mocap_uri()}, "
+            f"socket {svc.socket}")
+
+    def _wait(self, rfd: int) -> None:
+        readable, _, _ = select.select([rfd, *self.server.fds()], [], [], IDLE_POLL_S)
+        for fd in readable:
+            if fd == rfd:
+                self._wakeups(os.read(rfd, 256))
+            elif fd in self.server.fds():
+                self.server.handle(fd)
+        self._reap()
+        if self.job is None and self.links.healthy():
+            self.notifier.watchdog()
+
+    def _wakeups(self, data: bytes) -> None:
+        for byte in data:
+            if byte in (signal.SIGTERM, signal.SIGINT):
+                say(f"{signal.Signals(byte).name}: stopping")
+                self.stopping = True
+                if self.job is not None:
+                    self.job.abort.request(EndReason.SIGNAL)
+            elif byte == signal.SIGHUP:
+                self.reload_pending = True
+        if self.reload_pending and self.job is None:
+            self.reload()
+
+    def _reap(self) -> None:
+        if self.job is None or self.job.is_alive():
+            return
+        self.job.join()
+        self.last = self.job.result
+        say(f"flight ended: {self.last.get('outcome')}; log {self.last.get('log')}")
+        self.job = None
+        self.notifier.status(f"{self.config.service.vehicle}: idle, last flight "
+                             f"{self.last.get('outcome')}")
+        if self.reload_pending:
+            self.reload()
+
+    def _shutdown(self) -> None:
+        job = self.job
+        if job is not None:
+            job.abort.request(EndReason.SIGNAL)
+            job.join(STOP_JOIN_S)
+            if job.is_alive():  # the loop is stuck: make the vehicle safe from here
+                say("flight did not end in time; sending the failsafe directly")
+                self.links.driver.failsafe(EndReason.SIGNAL)
+            self._reap()
+        if self.links is not None:
+            self.links.close()
+        if self.server is not None:
+            self.server.close()
+
+    # --- configuration ------------------------------------------------------------------------
+    def reload(self) -> None:
+        self.reload_pending = False
+        if not self.config_path:
+            say("SIGHUP: no --config to reload")
+            return
+        try:
+            new = apply_overrides(load_config(self.config_path), self.overrides)
+            peers = new.service.peer_policy()
+            if new.service.socket != self.config.service.socket:
+                say("SIGHUP: [service] socket changes only on restart; keeping "
+                    f"{self.config.service.socket}")
+                new = dataclasses.replace(new, service=dataclasses.replace(
+                    new.service, socket=self.config.service.socket))
+            moved = self.links.simulated and new.flight.surface != self.links.surface
+            if moved or (new.service.driver, new.service.mocap_uri()) != (self.links.driver_uri,
+                                                                          self.links.mocap_uri):
+                links = Links(new.service, new.flight.surface)
+                self.links.close()
+                self.links = links
+        except PerchdError as err:
+            say(f"SIGHUP: config not reloaded, keeping the old one: {err}")
+            self.notifier.status(f"{self.config.service.vehicle}: idle, reload failed: {err}")
+            return
+        self.config = new
+        self.server.peers = peers
+        say(f"SIGHUP: reloaded {self.config_path}")
+        self.notifier.status(f"{new.service.vehicle}: idle, config reloaded")
+
+    # --- the control socket (docs/contracts.md §4) -----------------------------------------------------
+    def dispatch(self, req: dict[str, Any]) -> dict[str, Any]:
+        handler = {"fly": self.cmd_fly, "abort": self.cmd_abort,
+                   "status": self.cmd_status}.get(req["cmd"])
+        if handler is None:
+            return {"ok": False, "error": f"unknown cmd {req['cmd']!r} (fly, abort, status)"}
+        return handler(req)
+
+    def cmd_fly(self, req: dict[str, Any]) -> dict[str, Any]:
+        if self.stopping:
+            return {"ok": False, "error": "the service is stopping"}
+        if self.job is not None:
+            return {"ok": False, "error": "a flight is in progress; abort it or wait"}
+        if not isinstance(req.get("plan"), str) or not req["plan"]:
+            return {"ok": False, "error": 'fly needs "plan": a plan file path'}
+        try:
+            plan, path = self._read_plan(req["plan"])
+        except PerchdError as err:
+            return {"ok": False, "error": str(err)}
+        if not self.links.healthy():
+            return {"ok": False, "error": "the link to the vehicle is down"}
+        self.links.fresh()
+        log = self._log_path(plan)
+        self.job = FlightJob(plan, path, self.links, self.config, log, self.notifier, self.wake_fd)
+        self.flights += 1
+        self.notifier.status(f"{self.config.service.vehicle}: flying {path.name}")
+        self.job.start()
+        say(f"flying {path}; log {log}")
+        return {"ok": True, "flying": True, "plan": str(path), "log": str(log)}
+
+    def _read_plan(self, name: str) -> tuple[Any, Path]:
+        """The plan a request names: inside plan_dir once symlinks are resolved, a regular
+        file of bounded size (perchd.core.safefile); PlanError naming the refusal."""
+        from perchd.core.errors import PlanError
+        from perchd.core.safefile import confine, read_regular
+        from perchd.tau import load_plan
+
+        if "\0" in name:
+            raise PlanError("plan: a path with a NUL byte")
+        path = confine(name, self.config.service.plan_dir, "plan", PlanError)
+        return load_plan(path, read_regular(path, "plan", PlanError)), path
+
+    def cmd_abort(self, req: dict[str, Any]) -> dict[str, Any]:
+        if self.job is not None:
+            self.job.abort.request(EndReason.OPERATOR_ABORT)
+            return {"ok": True, "flying": True, "aborting": True, "log": str(self.job.log)}
+        self.links.driver.failsafe(EndReason.OPERATOR_ABORT)  # idle: make sure it is safe
+        return {"ok": True, "flying": False, "failsafe_sent": True}
+
+    def cmd_status(self, req: dict[str, Any]) -> dict[str, Any]:
+        svc, job = self.config.service, self.job
+        out: dict[str, Any] = {"ok": True, "vehicle": svc.vehicle, "state": "flying" if job else "idle",
+                               "driver": self.links.driver_uri, "mocap": self.links.mocap_uri,
+                               "link_ok": self.links.healthy(), "flights": self.flights,
+                               "config": self.config_path, "last": self.last}
+        if job is not None:
+            st = job.tick
+            out.update(log=str(job.log), plan=str(job.plan_path),
+                       phase=st.phase.value if st else "starting",
+                       t=st and st.t, x=st and st.x, xdot=st and st.xdot,
+                       tau=st and st.tau, tau_ref=st and st.tau_ref)
+        return out
+
+    def _log_path(self, plan: Any) -> Path:
+        stem = f"{time.strftime('%Y%m%d-%H%M%S')}-{self.config.service.vehicle}-{plan.strategy}"
+        base = Path(self.config.service.log_dir)
+        path, n = base / f"{stem}.jsonl", 1
+        while path.exists():
+            n += 1
+            path = base / f"{stem}-{n}.jsonl"
+        return path
+
+
+def apply_overrides(config: Config, overrides: dict[str, str]) -> Config:
+    """Command-line --socket/--driver/--mocap win over the file."""
+    given = {k: v for k, v in overrides.items() if v}
+    return dataclasses.replace(config, service=dataclasses.replace(config.service, **given))
+
+
+def serve(config_path: str | None, overrides: dict[str, str]) -> int:
+    from perchd.service.config import VERSION, config_from_dict
+
+    config = load_config(config_path) if config_path else config_from_dict({"version": VERSION})
+    config = apply_overrides(config, overrides)
+    notifier = Notifier()
+    try:
+        return Daemon(config, notifier, config_path, overrides).run()
+    finally:
+        notifier.close()

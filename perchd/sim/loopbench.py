@@ -1,0 +1,373 @@
+"""The control loop's figures, each as min/median/p99/max; `perchd bench loop`.
+
+1. A 500 Hz FixedRateLoop on the real clock for S seconds whose tick is the agent's own work
+   (estimator + supervisor + controller) on a synthetic perch: start lateness (start -
+   deadline), period deviation (start_k - start_k-1 - period), overruns, missed deadlines,
+   and the agent compute inside that loop.
+2. The agent compute back to back (hot caches), the figure a simulated flight sees.
+3. Over real ZMQ sockets on loopback, per loop mode (mocap-synchronous with 100 Hz mocap;
+   fixed 100 Hz with 120 Hz mocap): this process is the rig, a SimWorld on the real clock
+   publishing its poses (perchd.mocap.zmq) and taking setpoints on a SUB socket; the agent is
+   `perchd fly --driver zmq://... --mocap zmq://...` in its own process. Latency is a
+   setpoint's arrival at the rig minus the publication of the pose its pose_seq names (the
+   first setpoint per pose), so it includes both socket hops; the agent's own view (arrival
+   to driver.send) and its CPU load (process CPU / wall time over the flight loop, all its
+   threads) come from its `--json` loop summary. Perches are flown back to back until S
+   seconds have passed; one still flying then (and at least MIN_FLIGHT_S after its first
+   setpoint) is stopped with SIGINT. The same rig and sockets with the agent replaced by an
+   echo (each pose's seq sent straight back as a setpoint: `python -m perchd.sim.loopbench echo`)
+   give the sockets' own share, so what the agent adds is the difference.
+4. The machine's own wake-up tail: the 500 Hz loop with an empty tick (at most 20 s).
+The load average before and after is printed: figures from a busy machine say so.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from perchd.flight.loop import FixedRateLoop, spread
+
+LOOP_HZ = 500.0
+RIG_HZ = 100.0
+MIN_FLIGHT_S = 1.0
+"""[s] a flight is never interrupted sooner than this after its first setpoint."""
+
+
+def stats_us(values_s: list[float]) -> dict[str, float]:
+    """min/median/p99/max [us] of values [s]."""
+    lo, med, p99, hi = spread(values_s)
+    return {"min_us": 1e6 * lo, "median_us": 1e6 * med, "p99_us": 1e6 * p99, "max_us": 1e6 * hi}
+
+
+# ------------------------------------------------------------------ the agent's own work
+
+class SyntheticAgent:
+    """Estimator + supervisor + controller fed poses of a synthetic perch (accelerate to the
+    plan's trigger state, then coast): one call is one tick; a flight that ends restarts."""
+
+    def __init__(self, plan: Any, rate_hz: float) -> None:
+        from perchd.drivers.base import LinkHealth
+        from perchd.flight.config import FlightConfig
+        from perchd.flight.frame import PerchFrame
+        self.plan, self.cfg = plan, FlightConfig(rate_hz=rate_hz)
+        self.frame = PerchFrame.from_surface(self.cfg.surface.point, self.cfg.surface.normal)
+        self.ok = LinkHealth(True)
+        self.period = 1.0 / rate_hz
+        self.compute: list[float] = []
+        self._restart()
+
+    def _restart(self) -> None:
+        from perchd.flight.estimator import Estimator
+        from perchd.flight.supervisor import Supervisor
+        self.est = Estimator(self.cfg.estimator, self.frame)
+        self.sup = Supervisor(self.plan, self.cfg, self.frame)
+        self.k = 0
+
+    def _x(self, t: float) -> float:
+        """[m] the approach reaches (x0, v0) at t = 2 s with constant acceleration."""
+        x0, v0, t_trig = self.plan.x0, self.plan.v0, 2.0
+        if t < t_trig:
+            return x0 - v0 * t_trig / 2 + v0 / (2 * t_trig) * t * t
+        return x0 + v0 * (t - t_trig)
+
+    def tick(self, k: int = 0, t_now: float = 0.0) -> bool:
+        from perchd.core.types import Pose
+        t = self.k * self.period
+        pose = Pose("cf1", self.k + 1, t - 0.004, (self._x(t), 0.0, 1.0),
+                    (0.0, 0.0, 0.0, 1.0), True, 0.004)
+        w0 = time.perf_counter()
+        self.est.offer(pose)
+        rep = self.sup.tick(t, self.est.state(t), self.ok, 0, None, self.est.mocap_period,
+                            0.004)
+        self.compute.append(time.perf_counter() - w0)
+        self.k += 1
+        if rep.finished or self.k * self.period > 6.0:
+            self._restart()
+        return True
+
+
+def fixed_rate_figures(plan: Any, seconds: float) -> dict[str, Any]:
+    """The 500 Hz loop on the real clock for `seconds`, ticking the synthetic agent."""
+    from perchd.core.clock import MonotonicClock
+    agent = SyntheticAgent(plan, LOOP_HZ)
+    loop = FixedRateLoop(MonotonicClock(), LOOP_HZ)
+    starts: list[float] = []
+    end = time.monotonic() + seconds
+
+    def tick(k: int, t: float) -> bool:
+        starts.append(t)
+        agent.tick()
+        return t < end
+    stats = loop.run(tick)
+    period = 1.0 / LOOP_HZ
+    deviation = [abs(b - a - period) for a, b in zip(starts, starts[1:])]
+    return {"rate_hz": LOOP_HZ, "seconds": stats.wall_s, "ticks": len(stats.jitter),
+            "overruns": stats.overruns, "missed": stats.missed,
+            "lateness": stats_us(stats.jitter), "period_deviation": stats_us(deviation),
+            "agent_compute": stats_us(agent.compute), "tick_compute": stats_us(stats.compute),
+            "cpu_fraction": stats.cpu_s / stats.wall_s}
+
+
+def idle_loop_figures(seconds: float) -> dict[str, Any]:
+    """The 500 Hz loop with nothing to do: what the machine's scheduler alone costs."""
+    from perchd.core.clock import MonotonicClock
+    loop = FixedRateLoop(MonotonicClock(), LOOP_HZ)
+    end = time.monotonic() + seconds
+    stats = loop.run(lambda k, t: t < end)
+    return {"seconds": stats.wall_s, "ticks": len(stats.jitter), "overruns": stats.overruns,
+            "missed": stats.missed, "lateness": stats_us(stats.jitter)}
+
+
+def hot_compute(plan: Any, ticks: int = 5000) -> dict[str, Any]:
+    """The agent's tick back to back (what an in-process simulated flight measures)."""
+    agent = SyntheticAgent(plan, RIG_HZ)
+    for _ in range(ticks):
+        agent.tick()
+    return {"ticks": ticks, **stats_us(agent.compute)}
+
+
+# ------------------------------------------------------------------ ZMQ rig and agent process
+
+@dataclass
+class Flight:
+    """What the rig saw of one agent flight: latencies [s], and the agent's JSON result."""
+
+    latency: list[float] = field(default_factory=list)
+    result: dict[str, Any] = field(default_factory=dict)
+
+
+class Rig:
+    """A simulated vehicle on the real clock behind real ZMQ sockets: poses out on an XPUB
+    (ZmqPosePublisher), setpoints in on a bound SUB; one thread, so nothing waits for a GIL
+    between a setpoint's arrival and its timestamp."""
+
+    def __init__(self, mocap_hz: float) -> None:
+        import zmq
+        from perchd.mocap.zmq import ZmqPosePublisher
+        self.mocap_hz = mocap_hz
+        self.pub = ZmqPosePublisher("tcp://127.0.0.1:0")
+        self.sub = zmq.Context.instance().socket(zmq.SUB)
+        self.sub.setsockopt(zmq.LINGER, 0)
+        for topic in (b"setpoint", b"stop"):
+            self.sub.setsockopt(zmq.SUBSCRIBE, topic)
+        self.sub.bind("tcp://127.0.0.1:*")
+        port = self.sub.getsockopt(zmq.LAST_ENDPOINT).decode().rsplit(":", 1)[1]
+        self.driver_uri = f"zmq://127.0.0.1:{port}?vehicle=cf1&wait=10"
+        self.mocap_uri = self.pub.uri("cf1")
+
+    def close(self) -> None:
+        self.sub.close(0)
+        self.pub.close()
+
+    def _world(self):
+        from perchd.core.clock import MonotonicClock
+        from perchd.sim.world import MocapParams, SimWorld, WorldParams
+        return SimWorld(WorldParams(mocap=MocapParams(rate_hz=self.mocap_hz)), MonotonicClock())
+
+    def fly(self, agent: subprocess.Popen, stop_at: float) -> Flight:
+        """Serve one agent process until it exits (SIGINT at `stop_at` [monotonic s])."""
+        from perchd.drivers.zmq import parse_setpoint_message
+        from perchd.core.types import Setpoint
+        world, flight = self._world(), Flight()
+        sent: dict[int, float] = {}
+        answered: set[int] = set()
+        last_seq, interrupted, first = -1, False, None
+        while agent.poll() is None:
+            pose = world.latest_pose()
+            if pose is not None and pose.seq != last_seq:
+                sent[pose.seq], last_seq = time.monotonic(), pose.seq
+                self.pub.publish(pose)
+            now = time.monotonic()
+            if first is not None and now >= max(stop_at, first + MIN_FLIGHT_S) \
+                    and not interrupted:
+                agent.send_signal(signal.SIGINT)
+                interrupted = True
+            wait_s = max(0.0, min(world.next_arrival() - world.clock.now(), 0.05))
+            if not self.sub.poll(math.ceil(wait_s * 1e3)):  # whole ms: never a busy spin
+                continue
+            while self.sub.poll(0):
+                topic, body = self.sub.recv_multipart()[:2]
+                arrival = time.monotonic()
+                if topic == b"stop":
+                    world.command(Setpoint.stop(world.clock.now()))
+                    continue
+                _, _, sp = parse_setpoint_message(body)
+                first = arrival if first is None else first
+                if sp.pose_seq in sent and sp.pose_seq not in answered:
+                    answered.add(sp.pose_seq)
+                    flight.latency.append(arrival - sent[sp.pose_seq])
+                world.command(sp)
+        out = agent.stdout.read()
+        flight.result = json.loads(out) if out.strip() else {}
+        return flight
+
+
+def _agent(plan_file: Path, rig: Rig, sync: str, rate_hz: float, tmp: Path,
+           n: int) -> subprocess.Popen:
+    if sync == "echo":
+        cmd = [sys.executable, "-m", "perchd.sim.loopbench", "echo", rig.mocap_uri, rig.driver_uri]
+        return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                text=True)
+    config = tmp / f"{sync}.toml"
+    config.write_text(f'version = 1\n[flight]\nsync = "{sync}"\nrate_hz = {rate_hz}\n')
+    cmd = [sys.executable, "-m", "perchd", "fly", str(plan_file), "--driver", rig.driver_uri,
+           "--mocap", rig.mocap_uri, "--config", str(config), "--json",
+           "--log", str(tmp / f"{sync}-{n}.jsonl")]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+
+def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path) -> dict[str, Any]:
+    """Fly perches back to back over ZMQ in one loop mode for `seconds` (at least one)."""
+    mocap_hz = 120.0 if sync == "fixed" else RIG_HZ
+    rig = Rig(mocap_hz)
+    flights: list[Flight] = []
+    end = time.monotonic() + seconds
+    try:
+        while not flights or time.monotonic() < end:
+            agent = _agent(plan_file, rig, sync, RIG_HZ, tmp, len(flights))
+            try:
+                flights.append(rig.fly(agent, end))
+            finally:
+                if agent.poll() is None:
+                    agent.kill()
+                    agent.wait()
+    finally:
+        rig.close()
+    loops = [f.result["loop"] for f in flights if f.result]
+    return {"sync": sync, "rate_hz": RIG_HZ, "mocap_hz": mocap_hz, "flights": len(flights),
+            "outcomes": [f.result.get("outcome") for f in flights],
+            "setpoints_matched": sum(len(f.latency) for f in flights),
+            "latency_sockets": stats_us([x for f in flights for x in f.latency]),
+            "latency_agent": _loop_us(loops, "latency"),
+            "tick_compute": _loop_us(loops, "compute"),
+            "agent_compute": _loop_us(loops, "agent"),
+            "jitter": _loop_us(loops, "jitter"),
+            "overruns": sum(lp["overruns"] for lp in loops),
+            "cpu_fraction": _weighted_cpu(loops)}
+
+
+def echo(mocap_uri: str, driver_uri: str) -> None:
+    """Send each pose's seq straight back as a hover setpoint until SIGINT (no agent work)."""
+    from perchd.drivers.base import open_driver
+    from perchd.flight.config import VehicleConfig
+    from perchd.flight.loop import NO_SEQ
+    from perchd.mocap.base import open_source
+    from perchd.core.runtime import Runtime
+    from perchd.core.types import Phase, Setpoint
+    rt = Runtime.real()
+    source, driver = open_source(mocap_uri, rt), open_driver(driver_uri, rt)
+    hover = VehicleConfig().mass_kg * VehicleConfig().g
+    source.start()
+    driver.connect()
+    seq = NO_SEQ
+    try:
+        while True:
+            pose = source.wait(seq, 0.1)
+            if pose is not None:
+                seq = pose.seq
+                driver.send(Setpoint(pose.t, 0.0, 0.0, 0.0, hover, seq, Phase.HOLD))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        driver.close()
+        source.close()
+
+
+def _loop_us(loops: list[dict], name: str) -> dict[str, float]:
+    """The agent's own min/median/p99/max [us] of `name`: min and max over its flights,
+    median and p99 of the longest flight (most ticks)."""
+    if not loops:
+        return {"min_us": 0.0, "median_us": 0.0, "p99_us": 0.0, "max_us": 0.0}
+    main = max(loops, key=lambda lp: lp["ticks"])
+    return {"min_us": 1e6 * min(lp[f"{name}_min_s"] for lp in loops),
+            "median_us": 1e6 * main[f"{name}_median_s"], "p99_us": 1e6 * main[f"{name}_p99_s"],
+            "max_us": 1e6 * max(lp[f"{name}_max_s"] for lp in loops)}
+
+
+def _weighted_cpu(loops: list[dict]) -> float:
+    wall = sum(lp["wall_s"] for lp in loops)
+    return sum(lp["cpu_fraction"] * lp["wall_s"] for lp in loops) / wall if wall else 0.0
+
+
+def measure(seconds: float) -> dict[str, Any]:
+    from perchd.tau import plan_ipts, save_plan
+    from perchd.tau.cases import CASES
+    case = CASES[0]
+    plan = plan_ipts(case.x0, case.v0, case.tau_s, case.v_contact, case.v_max, case.a_max, 3)
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        plan_file = tmp / "case1-ipts-n3.json"
+        save_plan(plan, plan_file)
+        load = os.getloadavg()[0]
+        return {"seconds": seconds, "load_before": load,
+                "agent_compute_hot": hot_compute(plan),
+                "fixed_500hz": fixed_rate_figures(plan, seconds),
+                "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp),
+                "zmq_fixed": zmq_mode_figures(plan_file, "fixed", seconds, tmp),
+                "zmq_echo": zmq_mode_figures(plan_file, "echo", min(seconds, 20.0), tmp),
+                "idle_500hz": idle_loop_figures(min(seconds, 20.0)),
+                "load_after": os.getloadavg()[0]}
+
+
+# ------------------------------------------------------------------ report
+
+TARGETS = {"lateness": "p99 <= 500", "period_deviation": "p99 <= 500", "agent": "median <= 50",
+           "latency_mocap": "p99 <= 1000", "latency_fixed": "<= 10000 (one period)"}
+
+
+def rows(fig: dict[str, Any]) -> list[tuple[str, dict[str, float], str]]:
+    """(figure, min/median/p99/max [us], target) in the order they are printed."""
+    f5, zm, zf = fig["fixed_500hz"], fig["zmq_mocap"], fig["zmq_fixed"]
+    return [
+        ("500 Hz loop: start lateness", f5["lateness"], TARGETS["lateness"]),
+        ("500 Hz loop: period deviation", f5["period_deviation"], TARGETS["period_deviation"]),
+        ("agent compute, back to back", fig["agent_compute_hot"], TARGETS["agent"]),
+        ("agent compute in the 500 Hz loop", f5["agent_compute"], TARGETS["agent"]),
+        ("agent compute, ZMQ fixed 100 Hz", zf["agent_compute"], TARGETS["agent"]),
+        ("whole tick, ZMQ fixed 100 Hz", zf["tick_compute"], ""),
+        ("latency mocap-sync, sockets", zm["latency_sockets"], TARGETS["latency_mocap"]),
+        ("latency mocap-sync, in agent", zm["latency_agent"], ""),
+        ("latency fixed 100 Hz, sockets", zf["latency_sockets"], TARGETS["latency_fixed"]),
+        ("latency fixed 100 Hz, in agent", zf["latency_agent"], ""),
+        ("latency floor: echo, sockets", fig["zmq_echo"]["latency_sockets"], ""),
+        ("500 Hz loop, empty tick: lateness", fig["idle_500hz"]["lateness"], ""),
+    ]
+
+
+def text(fig: dict[str, Any]) -> str:
+    f5, zm, zf = fig["fixed_500hz"], fig["zmq_mocap"], fig["zmq_fixed"]
+    out = [f"load average {fig['load_before']:.2f} before, {fig['load_after']:.2f} after "
+           f"({os.cpu_count()} cores; targets are for an idle machine)",
+           f"{'figure [us]':36} {'min':>8} {'median':>8} {'p99':>8} {'max':>8}   target"]
+    for name, s, target in rows(fig):
+        out.append(f"{name:36} {s['min_us']:8.1f} {s['median_us']:8.1f} {s['p99_us']:8.1f} "
+                   f"{s['max_us']:8.1f}   {target}")
+    out.append(f"500 Hz loop: {f5['ticks']} ticks in {f5['seconds']:.1f} s, {f5['overruns']} "
+               f"overruns, {f5['missed']} missed deadlines (target 0), "
+               f"CPU {100 * f5['cpu_fraction']:.1f} % of a core")
+    idle = fig["idle_500hz"]
+    out.append(f"500 Hz loop with an empty tick: {idle['ticks']} ticks in {idle['seconds']:.1f} "
+               f"s, {idle['overruns']} overruns (the machine's own wake-up tail)")
+    for z in (zm, zf):
+        out.append(f"ZMQ {z['sync']:5} {z['rate_hz']:g} Hz loop, {z['mocap_hz']:g} Hz mocap: "
+                   f"{z['flights']} flight(s) {', '.join(map(str, z['outcomes']))}; "
+                   f"{z['setpoints_matched']} poses matched; {z['overruns']} overruns; agent "
+                   f"CPU {100 * z['cpu_fraction']:.1f} % of a core (target <= 10 %)")
+    return "\n".join(out)
+
+
+if __name__ == "__main__":  # the echo agent: python -m perchd.sim.loopbench echo MOCAP DRIVER
+    if sys.argv[1:2] != ["echo"] or len(sys.argv) != 4:
+        sys.exit("usage: python -m perchd.sim.loopbench echo MOCAP_URI DRIVER_URI")
+    echo(sys.argv[2], sys.argv[3])
