@@ -2,25 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Protocol
 
 from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Setpoint
+from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Registry
-
-
-@dataclass(frozen=True, slots=True)
-class LinkHealth:
-    """ok: the link is up.  age: [s] since the vehicle was last heard from (0 if it never
-    answers, e.g. a one-way stream).  detail: why the link is down, if it is.
-    rtt_s: [s] the link's round trip, measured by the driver's own echo (median of its
-    recent samples), None where the driver cannot measure one."""
-
-    ok: bool
-    age: float = 0.0
-    detail: str = ""
-    rtt_s: float | None = None
 
 
 class Driver(Protocol):
@@ -36,7 +22,11 @@ class Driver(Protocol):
         """Make the vehicle safe (stop setpoint, land, disarm) and say why; idempotent."""
 
     def health(self) -> LinkHealth:
-        ...
+        """The link's state now; never blocks."""
+
+    def observe_pose(self, pose: Pose) -> None:
+        """Every pose the flight uses, before the setpoint computed from it: drivers that
+        feed the vehicle's own estimator (Crazyflie extpose) or steer yaw use it."""
 
     def close(self) -> None:
         """Release the link; a vehicle left flying gets the failsafe first."""
@@ -51,6 +41,9 @@ class DriverBase:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def observe_pose(self, pose: Pose) -> None:
+        """Most links have no use for the pose."""
 
 
 DRIVERS: Registry[Driver] = Registry("driver", {

@@ -31,15 +31,16 @@ import time
 from collections import deque
 from typing import Any
 
-from perchd.drivers.base import DriverBase, LinkHealth
+from perchd.drivers.base import DriverBase
 from perchd.drivers.thrust import CrazyflieThrust
 from perchd.drivers.ticker import Ticker
-from perchd.core.uriparams import bool_param, float_param, without_query
+
 from perchd.core.errors import LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Pose, Setpoint
+from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Uri
+from perchd.core.uriparams import bool_param, float_param, without_query
 
 KEEPALIVE_S = 0.1
 """[s] silence after which the keep-alive re-sends (the firmware levels at 0.5 s, cuts at 2 s)."""

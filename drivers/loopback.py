@@ -8,11 +8,12 @@ link fault switch, so tests can cut the link.
 
 from __future__ import annotations
 
-from perchd.drivers.base import DriverBase, LinkHealth
+from perchd.drivers.base import DriverBase
+
 from perchd.core.runtime import Runtime
-from perchd.sim.world import SimWorld, world_for
-from perchd.core.types import EndReason, Setpoint
+from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
+from perchd.sim.world import SimWorld, world_for
 
 
 def open_loopback(uri: Uri, runtime: Runtime) -> "LoopbackDriver":

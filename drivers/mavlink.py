@@ -27,15 +27,16 @@ import threading
 import time
 from typing import Any, Callable
 
-from perchd.drivers.base import DriverBase, LinkHealth
+from perchd.drivers.base import DriverBase
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
-from perchd.core.uriparams import bool_param, float_param, split_query
+
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Setpoint
+from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
+from perchd.core.uriparams import bool_param, float_param, split_query
 
 HEARTBEAT_S = 0.5
 """[s] our heartbeat period (MAVLink asks for at least 1 Hz)."""

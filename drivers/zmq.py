@@ -15,13 +15,15 @@ import math
 import time
 from typing import Any
 
-from perchd.drivers.base import DriverBase, LinkHealth
-from perchd.core.uriparams import bool_param, float_param
+import zmq
+from perchd.drivers.base import DriverBase
+
 from perchd.core.errors import LinkError, UriError
 from perchd.core.netbind import check_bind
 from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
 from perchd.core.uri import Uri
+from perchd.core.uriparams import bool_param, float_param
 
 SETPOINT, STOP = b"setpoint", b"stop"
 
@@ -93,7 +95,6 @@ class ZmqSetpointDriver(DriverBase):
         self.failsafe_reasons: list[EndReason] = []
 
     def connect(self) -> None:
-        import zmq
         sock = zmq.Context.instance().socket(zmq.XPUB)
         sock.setsockopt(zmq.LINGER, 500)  # let a final stop reach the subscriber
         sock.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription, for the count
@@ -145,7 +146,6 @@ class ZmqSetpointDriver(DriverBase):
                                  "t": self.clock.now()})
 
     def _publish(self, topic: bytes, body: dict[str, Any]) -> None:
-        import zmq
         try:
             self._sock.send_multipart([topic, json.dumps(body).encode()], zmq.NOBLOCK)
         except zmq.Again:
@@ -153,7 +153,6 @@ class ZmqSetpointDriver(DriverBase):
 
     def _drain(self) -> None:
         """Count subscriptions to 'setpoint' (or to everything) from XPUB's notices."""
-        import zmq
         # Asking EVENTS first: an empty recv would raise zmq.Again on nearly every tick.
         while self._sock.getsockopt(zmq.EVENTS) & zmq.POLLIN:
             note = self._sock.recv(zmq.NOBLOCK)

@@ -6,7 +6,17 @@ The loop figures are measured by perchd.sim.loopbench (also `python benchmarks/l
 from __future__ import annotations
 
 import json
+import random
+import sys
 import time
+from pathlib import Path
+
+from perchd.core.errors import ConfigError
+from perchd.flight.loop import spread
+from perchd.sim import loopbench
+from perchd.tau import plan_bound, plan_ipts
+from perchd.tau.cases import CASES
+from perchd.tau.library import build_library, load_library
 
 
 def register(sub) -> None:
@@ -30,7 +40,6 @@ def register(sub) -> None:
 
 def percentiles_ms(times_s: list[float]) -> dict:
     """min/median/p99 [ms] of solve times [s] (p99 by nearest rank, as the loop's)."""
-    from perchd.flight.loop import spread
 
     lo, median, p99, _ = spread(times_s)
     return {"min_ms": 1e3 * lo, "median_ms": 1e3 * median, "p99_ms": 1e3 * p99}
@@ -38,8 +47,6 @@ def percentiles_ms(times_s: list[float]) -> dict:
 
 def planner_rows(orders: list[int], repeat: int) -> list[dict]:
     """Cold global IPTS solves of both paper cases per order."""
-    from perchd.tau import plan_bound, plan_ipts
-    from perchd.tau.cases import CASES
 
     rows = []
     for case in CASES:
@@ -61,9 +68,7 @@ def planner_rows(orders: list[int], repeat: int) -> list[dict]:
 def replan_rows(states: int, compare: int, seed: int = 1) -> list[dict]:
     """Warm replans from each paper case's order-3 plan library at random trigger states of
     its grid; the first `compare` of them are cold-solved too, for the largest gap [s]."""
-    import random
 
-    from perchd.tau import plan_ipts
 
     rows = []
     for case, lib in _libraries():
@@ -90,11 +95,7 @@ LIBRARY_GRID = ((-3.3, -2.7), (1.3, 1.7), (7, 9))
 def _libraries():
     """(case name, library) for both paper cases: the checkout's plans/libraries files, or,
     where those are not beside the package (an installed copy), the same grid built now."""
-    import sys
-    from pathlib import Path
 
-    from perchd.tau.cases import CASES
-    from perchd.tau.library import build_library, load_library
 
     folder = Path(__file__).resolve().parents[2] / "plans" / "libraries"
     for case in CASES:
@@ -127,8 +128,6 @@ def run_planner(args) -> int:
 
 
 def run_loop(args) -> int:
-    from perchd.core.errors import ConfigError
-    from perchd.sim import loopbench
     if not 0.1 <= args.seconds <= 3600:
         raise ConfigError(f"--seconds {args.seconds:g} is outside 0.1..3600 s")
     figures = loopbench.measure(args.seconds)

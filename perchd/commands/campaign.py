@@ -20,7 +20,11 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any, TextIO
 
+from perchd.commands.fly import load_config
 from perchd.core.errors import ConfigError
+from perchd.flight.config import TriggerPolicy
+from perchd.sim import campaign as cp
+from perchd.tau import load_plan
 
 DEFAULT_FLIGHTS = 20
 LIVE_ONLY = ("pose_out", "setpoint_in", "duration", "exit_on_stop")
@@ -133,10 +137,6 @@ def summary_text(summary: Any, table: Path, wall_s: float) -> str:
 
 def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
     """(plan, flight config, spread, specs) from the options; errors name the option."""
-    from perchd.sim import campaign as cp
-    from perchd.commands.fly import load_config
-    from perchd.flight.config import TriggerPolicy
-    from perchd.tau import load_plan
 
     plan = load_plan(args.campaign)
     xr, vr = cp.default_ranges(plan)
@@ -157,7 +157,6 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd.sim import campaign as cp
 
     plan, cfg, spread, specs = build(args)
     table = Path(args.table) if args.table else Path("campaigns") / (

@@ -9,6 +9,8 @@ import json
 import os
 import time
 
+from perchd.service.control_socket import request
+
 DEFAULT_SOCKET = "/run/perchd/control.sock"
 WAIT_POLL_S = 0.2
 
@@ -29,7 +31,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd.service.control_socket import request
 
     req: dict = {"cmd": args.cmd}
     if args.cmd == "fly":
@@ -46,7 +47,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _wait(socket_path: str, log: str) -> dict:
     """Poll status until the flight writing `log` has ended; its result."""
-    from perchd.service.control_socket import request
 
     while True:
         st = request(socket_path, {"cmd": "status"})

@@ -16,7 +16,18 @@ import sys
 import time
 from pathlib import Path
 
-from perchd.core.errors import ConfigError, UriError
+from perchd.core.clock import ManualClock
+from perchd.core.errors import UriError
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason
+from perchd.core.uri import parse_uri
+from perchd.drivers.base import open_driver
+from perchd.flight.config import FlightConfig, SurfaceConfig
+from perchd.flight.run import FlightAbort, fly
+from perchd.mocap.base import open_source
+from perchd.service.config import load_flight_config
+from perchd.sim.world import SimWorld, world_params_from_uri
+from perchd.tau import load_plan
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -39,15 +50,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def load_config(args: argparse.Namespace):
     """FlightConfig from --config (the TOML loader, perchd.service.config) and --surface/--normal."""
-    from perchd.flight.config import FlightConfig, SurfaceConfig
 
     cfg = FlightConfig()
     if args.config:
-        try:
-            from perchd.service.config import load_flight_config
-        except ImportError:
-            raise ConfigError(f"--config {args.config}: this build has no TOML loader "
-                              "(perchd.service.config)") from None
         cfg = load_flight_config(args.config)
     surface = cfg.surface
     if args.surface:
@@ -59,9 +64,6 @@ def load_config(args: argparse.Namespace):
 
 def make_runtime(args: argparse.Namespace, cfg):
     """A simulated clock and world when both links are sim://, real time otherwise."""
-    from perchd.core.clock import ManualClock
-    from perchd.core.runtime import Runtime
-    from perchd.core.uri import parse_uri
 
     driver_sim = parse_uri(args.driver).scheme == "sim"
     mocap_sim = parse_uri(args.mocap).scheme == "sim"
@@ -70,7 +72,6 @@ def make_runtime(args: argparse.Namespace, cfg):
                        f"(got {args.driver} and {args.mocap})")
     if not driver_sim:
         return Runtime.real()
-    from perchd.sim.world import SimWorld, world_params_from_uri
 
     rt = Runtime(ManualClock())
     params = world_params_from_uri(parse_uri(args.driver))
@@ -127,11 +128,6 @@ def summary_text(res) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd.drivers.base import open_driver
-    from perchd.flight.run import FlightAbort, fly
-    from perchd.mocap.base import open_source
-    from perchd.tau import load_plan
-    from perchd.core.types import EndReason
 
     plan = load_plan(args.plan)
     cfg = load_config(args)

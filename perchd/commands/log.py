@@ -8,6 +8,11 @@ import argparse
 import json
 from pathlib import Path
 
+from perchd.core.errors import PerchdError
+from perchd.logs.flightlog import read_log
+from perchd.logs.plot import plot_flights
+from perchd.logs.summary import summarize, summary_text
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("log", help="summarise or plot a flight log",
@@ -24,8 +29,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _read(path: str):
-    from perchd.core.errors import PerchdError
-    from perchd.logs.flightlog import read_log
 
     try:
         return read_log(path)
@@ -35,12 +38,10 @@ def _read(path: str):
 
 def run(args: argparse.Namespace) -> int:
     if args.action == "summary":
-        from perchd.logs.summary import summarize, summary_text
 
         s = summarize(_read(args.log))
         print(json.dumps(s.to_json()) if args.json else summary_text(s))
         return 0
-    from perchd.logs.plot import plot_flights
 
     out = Path(args.out) if args.out else Path(args.log[0]).with_suffix(".png")
     plot_flights([_read(p) for p in args.log], out, [Path(p).name for p in args.log])

@@ -8,7 +8,9 @@ import json
 import sys
 
 from perchd.core.errors import LinkError
+from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
+from perchd.mocap.base import open_source
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -53,8 +55,6 @@ def pose_line(pose: Pose) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd.mocap.base import open_source
-    from perchd.core.runtime import Runtime
 
     source = open_source(args.uri, Runtime.real())
     source.start()

@@ -5,6 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 
+from perchd.commands.plan_library import register as register_library
+from perchd.commands.plan_robust import register as register_robust
+from perchd.logs.planplot import plot_plan
+from perchd.tau import load_plan, plan_ctds, plan_ctdts, plan_ipts, report, save_plan
+
 
 def register(sub) -> None:
     parser = sub.add_parser("plan", help="make, check and plot tau perching plans")
@@ -12,10 +17,8 @@ def register(sub) -> None:
     _ctds(plan_sub)
     _ctdts(plan_sub)
     _ipts(plan_sub)
-    from perchd.commands.plan_robust import register as register_robust
 
     register_robust(plan_sub)
-    from perchd.commands.plan_library import register as register_library
 
     register_library(plan_sub)
     check = plan_sub.add_parser("check", help="re-derive and verify a plan file")
@@ -63,25 +66,21 @@ def _ipts(plan_sub) -> None:
 
 
 def _plan_ctds(a):
-    from perchd.tau import plan_ctds
 
     return plan_ctds(a.x0, a.v0, a.c)
 
 
 def _plan_ctdts(a):
-    from perchd.tau import plan_ctdts
 
     return plan_ctdts(a.x0, a.v0, a.tau_s, a.v_contact, a.a_max, a.v_max, a.v_window)
 
 
 def _plan_ipts(a):
-    from perchd.tau import plan_ipts
 
     return plan_ipts(a.x0, a.v0, a.tau_s, tuple(a.v_contact), a.v_max, a.a_max, a.order)
 
 
 def _emit(args, plan) -> int:
-    from perchd.tau import report, save_plan
 
     if args.out:
         save_plan(plan, args.out)
@@ -91,11 +90,9 @@ def _emit(args, plan) -> int:
 
 
 def run_check(args) -> int:
-    from perchd.tau import load_plan
 
     plan = load_plan(args.file)
     if args.plot:
-        from perchd.logs.planplot import plot_plan
 
         plot_plan(plan, args.plot)
     return _emit(argparse.Namespace(out=None, json=args.json), plan)

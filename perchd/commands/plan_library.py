@@ -11,6 +11,8 @@ import json
 import sys
 import time
 
+from perchd.tau.library import build_library, save_library
+
 
 def register(plan_sub) -> None:
     """Add `library` to the `perchd plan` subparsers."""
@@ -30,7 +32,6 @@ def register(plan_sub) -> None:
 
 
 def run(a) -> int:
-    from perchd.tau.library import build_library, save_library
 
     start = time.perf_counter()
     lib = build_library(tuple(a.x0), tuple(a.v0), tuple(a.nodes), a.tau_s, tuple(a.v_contact),

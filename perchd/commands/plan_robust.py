@@ -11,13 +11,18 @@ given) with "robust": {"x0": [lo, hi], "v0": [lo, hi]} and a "certificate" recor
 from __future__ import annotations
 
 import json
-import math
 
 from perchd.core.errors import PlanError
 from perchd.tau.certify import Box
-
-METHOD = ("certify_box: monotone t_s in k0, mean-value enclosures on adaptive k0 x t cells "
-          "(perchd/tau/certify.py)")
+from perchd.tau.planfile import load_plan, save_plan
+from perchd.tau.robust import (
+    RobustLimits,
+    RobustResult,
+    SearchDomain,
+    fastest_k,
+    largest_box,
+)
+from perchd.tau.robustplan import certified_plan, check_plan
 
 
 def register(plan_sub) -> None:
@@ -43,7 +48,6 @@ def register(plan_sub) -> None:
 
 
 def limits_from(args):
-    from perchd.tau.robust import RobustLimits
 
     lo, hi = args.v_contact
     checks = [("--tau-s", args.tau_s < 0, f"must be < 0, got {args.tau_s:g}"),
@@ -70,7 +74,6 @@ def _pair(name: str, values, sign: int):
 
 
 def run(args) -> int:
-    from perchd.tau.robust import SearchDomain, fastest_k, largest_box
 
     lim = limits_from(args)
     x0, v0 = _pair("--x0", args.x0, -1), _pair("--v0", args.v0, +1)
@@ -88,7 +91,6 @@ def run(args) -> int:
         result = largest_box(args.order, lim, dom, seed=args.seed, maxiter=args.maxiter,
                              start=_start(args.start, lim))
         mode = "grow" if nominal else "largest"
-    from perchd.tau.planfile import save_plan
 
     plan = certified_plan(result, lim, nominal)
     save_plan(plan, args.out)
@@ -102,8 +104,6 @@ def run(args) -> int:
 
 def _start(path, lim):
     """A RobustResult from a robust plan file, to seed a higher-order search."""
-    from perchd.tau.planfile import load_plan
-    from perchd.tau.robust import RobustResult
 
     if path is None:
         return None
@@ -121,60 +121,3 @@ def _table(s: dict) -> str:
         f"certified box: x0 {r['x0'][0]:.4f} .. {r['x0'][1]:.4f} m, "
         f"v0 {r['v0'][0]:.4f} .. {r['v0'][1]:.4f} m/s, area {s['area']:.4f} m*m/s",
         f"worst-case duration {s['duration_worst']:.4f} s; written to {s['out']}"])
-
-
-def _inward(box: Box, digits: int = 4) -> Box:
-    """The box with edges rounded inward (a sub-box of a certified box is certified)."""
-    f = 10 ** digits
-    up, down = (lambda e: math.ceil(round(e * f, 6)) / f), (lambda e: math.floor(round(e * f, 6)) / f)
-    return Box((up(box.x0[0]), down(box.x0[1])), (up(box.v0[0]), down(box.v0[1])))
-
-
-def robust_plan(k, box: Box, lim, x0: float, v0: float, extra: dict | None = None):
-    """The Plan (perchd.tau.make_plan) of k flown from (x0, v0), carrying its certified box."""
-    from dataclasses import replace
-
-    from perchd.tau import Limits, make_plan
-    from perchd.tau.robust import retarget_k
-
-    plan = make_plan("ipts", x0, v0, lim.tau_s, Limits(lim.v_contact, lim.v_max, lim.a_max),
-                     k=retarget_k(k, box, x0, v0), robust=(box.x0, box.v0))
-    return replace(plan, extra=extra) if extra else plan
-
-
-def certified_plan(result, lim, nominal=None):
-    """The plan file's Plan for a robust result, flown from `nominal` (default: box centre),
-    its box rounded inward to 0.1 mm, re-certified, and the certificate in plan.extra."""
-    box = _inward(result.box)
-    cert = lim.certify(result.k, box)
-    if not cert.certified:
-        raise PlanError(f"rounded box lost its certificate: {cert.reason}")
-    x0, v0 = nominal or (round(sum(box.x0) / 2, 4), round(sum(box.v0) / 2, 4))
-    record = {"method": METHOD, "area": box.area, "v_peak": cert.bounds["v_peak"],
-              "a_peak": cert.bounds["a_peak"],
-              "v_contact": [float(v) for v in cert.bounds["v_contact"]],
-              "duration": [float(d) for d in cert.duration]}
-    return robust_plan(result.k, box, lim, x0, v0, {"certificate": record})
-
-
-def check_plan(plan):
-    """Re-certify a robust Plan over its whole box (`perchd plan check` calls this).
-    Returns the Certificate; PlanError names the broken limit and the state, or the field."""
-    from perchd.tau.robust import RobustLimits
-
-    lim = plan.limits
-    if plan.strategy != "ipts" or plan.tau_s is None:
-        raise PlanError(f"robust: only two-stage ipts plans can be robust, got {plan.strategy}")
-    if lim.v_max is None or lim.a_max is None:
-        raise PlanError("robust: limits.v_max and limits.a_max are needed to certify a box")
-    box = Box(tuple(plan.robust[0]), tuple(plan.robust[1]))
-    if not box.x0[0] < box.x0[1] < 0 < box.v0[0] < box.v0[1]:
-        raise PlanError(f"robust: box must have x0 lo < hi < 0 < v0 lo < hi, got {plan.robust}")
-    if not math.isclose(plan.k[0], plan.v0 / plan.x0, rel_tol=1e-9):
-        raise PlanError(f"stage1.k[0] = {plan.k[0]:g} is not v0/x0 = {plan.v0 / plan.x0:g}")
-    cert = RobustLimits(plan.tau_s, tuple(lim.v_contact), lim.v_max, lim.a_max).certify(
-        plan.k[1:], box)
-    if not cert.certified:
-        raise PlanError(f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} "
-                        f"m/s {cert.reason}")
-    return cert

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from perchd.service.daemon import serve
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("serve", help="run the flight agent as a service (systemd)",
@@ -18,7 +20,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd.service.daemon import serve
 
     return serve(args.config, {"socket": args.socket, "driver": args.driver,
                                "mocap": args.mocap})

@@ -36,7 +36,21 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import zmq
+
+from perchd.commands import campaign as campaign_cli
+from perchd.commands.campaign import add_arguments
+from perchd.core.clock import MonotonicClock
 from perchd.core.errors import LinkError, UriError
+from perchd.core.netbind import check_bind
+from perchd.core.types import Setpoint
+from perchd.core.uri import parse_uri
+from perchd.core.uriparams import bool_param
+from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message
+from perchd.mocap.outputs import open_pose_output
+from perchd.sim.plant import PlantParams
+from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
+from perchd.sim.world import MocapParams, SimWorld, WorldParams
 
 if TYPE_CHECKING:
     from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
@@ -69,7 +83,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--exit-on-stop", action="store_true",
                    help="exit once the agent has sent `stop` (the flight ended)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    from perchd.commands.campaign import add_arguments
     add_arguments(p)
     p.set_defaults(run=run)
 
@@ -89,14 +102,9 @@ class SetpointInbox:
 
     def __init__(self, text: str, world: Any, body: str, counts: Counts,
                  watchdog: WatchdogParams | None = None) -> None:
-        from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
-        from perchd.core.uri import parse_uri
-        import zmq
         uri = parse_uri(text)
         if uri.scheme != "zmq" or not uri.host or uri.port is None:
             raise UriError(f"--setpoint-in {text}: expected zmq://HOST:PORT")
-        from perchd.core.uriparams import bool_param
-        from perchd.core.netbind import check_bind
         check_bind(uri.host, bool_param(uri, "public"), f"--setpoint-in {text}")
         self.world, self.body, self.counts = world, body, counts
         self.watchdog = SetpointWatchdog(watchdog or WatchdogParams(), world.command)
@@ -127,8 +135,6 @@ class SetpointInbox:
                 self.handle(*frames)
 
     def handle(self, topic: bytes, body: bytes) -> None:
-        from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message
-        from perchd.core.types import Setpoint
         if topic == b"stop":
             self.counts.stops += 1
             self.counts.stop_at = self.counts.stop_at or time.monotonic()
@@ -151,9 +157,6 @@ class SetpointInbox:
 
 
 def make_world(args: argparse.Namespace) -> Any:
-    from perchd.core.clock import MonotonicClock
-    from perchd.sim.world import MocapParams, WorldParams, SimWorld
-    from perchd.sim.plant import PlantParams
     if not 0.0 <= args.latency <= 1.0:
         raise UriError(f"--latency {args.latency:g} s is outside 0..1 s")
     if not 0.0 <= args.noise <= 0.1:
@@ -200,13 +203,10 @@ def summary(world: Any, counts: Counts, mocap_uri: str, driver_uri: str,
 
 
 def run(args: argparse.Namespace) -> int:
-    from perchd.commands import campaign as campaign_cli
-    from perchd.mocap.outputs import open_pose_output
 
     campaign_cli.check_mode(args)
     if args.campaign:
         return campaign_cli.run(args)
-    from perchd.sim.watchdog import WatchdogParams
     watchdog = WatchdogParams(*args.watchdog)
     world = make_world(args)
     counts = Counts()

@@ -122,3 +122,16 @@ class Setpoint:
     def stop(t: float, pose_seq: int = -1) -> "Setpoint":
         """Motors off, level: what a failsafe sends when nothing better is possible."""
         return Setpoint(t, 0.0, 0.0, 0.0, 0.0, pose_seq, Phase.ABORT)
+
+
+@dataclass(frozen=True, slots=True)
+class LinkHealth:
+    """ok: the link is up.  age: [s] since the vehicle was last heard from (0 if it never
+    answers, e.g. a one-way stream).  detail: why the link is down, if it is.
+    rtt_s: [s] the link's round trip, measured by the driver's own echo (median of its
+    recent samples), None where the driver cannot measure one."""
+
+    ok: bool
+    age: float = 0.0
+    detail: str = ""
+    rtt_s: float | None = None

@@ -12,9 +12,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from perchd.core.types import Phase, Setpoint, State, Vec3
 from perchd.flight.config import AxisGains, FlightConfig, TauGains
 from perchd.flight.frame import PerchFrame, body_z
-from perchd.core.types import Phase, Setpoint, State, Vec3
 
 
 @dataclass(frozen=True, slots=True)

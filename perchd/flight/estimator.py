@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import math
 
+from perchd.core.types import Pose, State
 from perchd.flight.config import EstimatorConfig
 from perchd.flight.frame import PerchFrame
-from perchd.core.types import Pose, State
 
 Cov = tuple[float, float, float, float, float, float, float, float, float]
 """A 3x3 covariance, row major (p, v, a)."""

@@ -23,6 +23,7 @@ CPU load.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import statistics
 import sys
 import time
@@ -138,7 +139,6 @@ def timer_slack(ns: int) -> Iterator[None]:
     elsewhere, or if prctl refuses, nothing changes)."""
     prctl = None
     if sys.platform.startswith("linux"):
-        import ctypes
         prctl = getattr(ctypes.CDLL(None), "prctl", None)
     if prctl is None:
         yield

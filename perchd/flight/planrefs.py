@@ -12,6 +12,11 @@ from __future__ import annotations
 import math
 from typing import Any, NamedTuple
 
+from numpy.polynomial import polynomial as npp
+
+from perchd.tau.plan import Plan
+from perchd.tau.profiles import ConstantTauDot, InversePolynomial
+
 
 class PlanPoint(NamedTuple):
     """At s [s] since the trigger: stage (1 or 2), tau_ref [s], x [m], v [m/s], a [m/s^2]."""
@@ -39,8 +44,6 @@ class PlanSampler:
     @staticmethod
     def _fast_stage1(plan: Any):
         """The float evaluator of the plan's stage 1, or None to use the plan's methods."""
-        from perchd.tau.plan import Plan
-        from perchd.tau.profiles import ConstantTauDot, InversePolynomial
         if type(plan) is not Plan:
             return None
         profile = plan.stage1
@@ -65,7 +68,6 @@ class _InversePolynomial:
     """tau = 1/p, X = x0 exp(P), Xdot = X p, Xddot = X (p' + p^2) (profiles.InversePolynomial)."""
 
     def __init__(self, profile: Any) -> None:
-        from numpy.polynomial import polynomial as npp
         self.x0 = profile.x0
         self.k = tuple(float(c) for c in profile.k)
         self.dk = tuple(float(c) for c in npp.polyder(self.k))

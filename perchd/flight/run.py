@@ -14,13 +14,19 @@ from pathlib import Path
 from typing import Any, Callable
 
 from perchd.core.clock import Clock
-from perchd.flight.estimator import Estimator
-from perchd.flight.config import FlightConfig
-from perchd.logs.flightlog import FlightLogWriter, LogRow, jsonable
-from perchd.flight.loop import LoopSummary, make_loop
-from perchd.flight.frame import PerchFrame
-from perchd.flight.supervisor import FlightAbort, Supervisor, TickReport, Trigger
 from perchd.core.types import EndReason, Phase, State
+from perchd.flight.config import FlightConfig
+from perchd.flight.estimator import Estimator
+from perchd.flight.frame import PerchFrame
+from perchd.flight.loop import LoopSummary, make_loop
+from perchd.flight.supervisor import (
+    Conditions,
+    FlightAbort,
+    Supervisor,
+    TickReport,
+    Trigger,
+)
+from perchd.logs.flightlog import FlightLogWriter, LogRow, jsonable
 
 __all__ = ["FlightAbort", "FlightResult", "TickStatus", "fly", "plan_summary"]
 
@@ -83,6 +89,22 @@ def plan_summary(plan: Any) -> dict[str, Any]:
     return out
 
 
+@dataclass(frozen=True, slots=True)
+class _NoState:
+    """What a log row records before the estimator has a state: nothing measured."""
+
+    x: None = None
+    xdot: None = None
+    tau: None = None
+    y: None = None
+    z: None = None
+    age: None = None
+    pose_seq: int = -1
+
+
+_NO_STATE = _NoState()
+
+
 class _Run:
     """The per-tick wiring, kept apart from `fly` so the tick is one short method."""
 
@@ -95,9 +117,6 @@ class _Run:
         self.driver, self.source, self.log = driver, source, log
         self.abort, self.on_tick = abort, on_tick
         self.failsafe_sent = False
-        # Drivers that steer yaw or feed the vehicle's own estimator (Crazyflie extpose)
-        # want every pose the flight uses; the rest do not implement the hook.
-        self.observe = getattr(driver, "observe_pose", None)
         self.t0: float | None = None
         self._events = 0
         self._sent_seq = -1  # newest pose a setpoint has been sent for (latency is per pose)
@@ -106,15 +125,16 @@ class _Run:
         self.t0 = t if self.t0 is None else self.t0
         health = self.driver.health()
         pose = self.source.latest()
-        if pose is not None and self.observe is not None:
-            self.observe(pose)  # before send: the Crazyflie's yaw loop uses the newest yaw
+        if pose is not None:
+            self.driver.observe_pose(pose)  # before send: a yaw loop wants the newest yaw
         w0 = time.perf_counter()
         self.est.offer(pose)
         state = self.est.state(t)
         last = self.est.last_pose
         arrival_age = None if last is None else t - (last.t + last.latency)
-        rep = self.sup.tick(t, state, health, self.loop.stats.streak,
-                            self.abort.reason, self.est.mocap_period, arrival_age)
+        rep = self.sup.tick(t, state, Conditions(health, self.loop.stats.streak,
+                                                 self.abort.reason, self.est.mocap_period,
+                                                 arrival_age))
         self.loop.stats.agent.append(time.perf_counter() - w0)
         if rep.end is not None and rep.end is not EndReason.CONTACT:
             self.failsafe(rep.end)
@@ -139,13 +159,16 @@ class _Run:
             self.log.event(ev)
         self._events = len(self.sup.events)
         sp, timing = rep.setpoint, self.loop.last
+        st = st if st is not None else _NO_STATE
         self.log.row(LogRow(
-            t, k, rep.phase.value, st and st.x, st and st.xdot, st and st.tau,
-            rep.refs.tau_ref, rep.refs.x, rep.refs.v, rep.refs.a, st and st.y, st and st.z,
-            sp.roll if sp else 0.0, sp.pitch if sp else 0.0, sp.yaw if sp else 0.0,
-            sp.thrust if sp else 0.0, *rep.u, rep.e, st and st.age,
-            st.pose_seq if st else -1, timing.jitter_s if timing else 0.0,
-            timing.compute_s if timing else 0.0, rep.end.name if rep.finished and rep.end else None))
+            t=t, k=k, phase=rep.phase.value, x=st.x, xdot=st.xdot, tau=st.tau,
+            tau_ref=rep.refs.tau_ref, x_plan=rep.refs.x, v_plan=rep.refs.v, a_plan=rep.refs.a,
+            y=st.y, z=st.z, roll=sp.roll if sp else 0.0, pitch=sp.pitch if sp else 0.0,
+            yaw=sp.yaw if sp else 0.0, thrust=sp.thrust if sp else 0.0,
+            ux=rep.u[0], uy=rep.u[1], uz=rep.u[2], e=rep.e, age=st.age, pose_seq=st.pose_seq,
+            jitter_s=timing.jitter_s if timing else 0.0,
+            compute_s=timing.compute_s if timing else 0.0,
+            end=rep.end.name if rep.finished and rep.end else None))
 
 
 def fly(plan: Any, driver: Any, source: Any, clock: Clock, log_path: str | Path,

@@ -20,15 +20,15 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
-from perchd.flight.control import AxisController, Controller
-from perchd.drivers.base import LinkHealth
 from perchd.core.errors import ConfigError, PlanError
+from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint, State
 from perchd.flight.config import FlightConfig, PostContact, TriggerPolicy
-from perchd.logs.flightlog import LogEvent
+from perchd.flight.control import AxisController, Controller
 from perchd.flight.frame import PerchFrame
 from perchd.flight.planrefs import PlanSampler
-from perchd.core.types import EndReason, Phase, Setpoint, State
-
+from perchd.logs.flightlog import LogEvent
+from perchd.tau import retarget
+from perchd.tau.library import load_library
 
 FROZEN_MAX_S = 0.3
 """[s] once the approach has begun, poses with a bit-identical position for longer than this
@@ -107,6 +107,23 @@ class ContactEstimate:
     speed: float
 
 
+@dataclass(frozen=True, slots=True)
+class Conditions:
+    """What the supervisor checks besides the state, sampled once per tick.
+
+    health: the driver's link.  overrun_streak: deadlines missed in a row by the loop.
+    abort: an external request (operator, signal), None when there is none.
+    mocap_period_s: [s] the measured pose period, None until known.
+    arrival_age_s: [s] since the newest pose used arrived, None before the first.
+    """
+
+    health: LinkHealth
+    overrun_streak: int = 0
+    abort: EndReason | None = None
+    mocap_period_s: float | None = None
+    arrival_age_s: float | None = None
+
+
 class Supervisor:
     def __init__(self, plan: Any, cfg: FlightConfig, frame: PerchFrame) -> None:
         self.plan = plan
@@ -144,17 +161,15 @@ class Supervisor:
             self.events.append(LogEvent(t, "end", f"{reason.value}{': ' if detail else ''}{detail}"))
 
     # --- the tick ---------------------------------------------------------------------------
-    def tick(self, t: float, state: State | None, health: LinkHealth, overrun_streak: int,
-             abort: EndReason | None, mocap_period: float | None,
-             arrival_age: float | None) -> TickReport:
+    def tick(self, t: float, state: State | None, cond: Conditions) -> TickReport:
+        """One control tick at `t` [s]: check every end rule, then fly the phase."""
         dt = 0.0 if self._t_prev is None else t - self._t_prev
         self._t_prev = t
         if self.t_start is None:
             self.t_start = t
         self._x = None if state is None else state.x
         if self.end is None:
-            reason, detail = self._check(t, state, health, overrun_streak, abort,
-                                         mocap_period, arrival_age)
+            reason, detail = self._check(t, state, cond)
             if reason is not None:
                 self._finish(reason, t, detail)
         if self.end is not None:
@@ -163,11 +178,12 @@ class Supervisor:
             return TickReport(self.phase, None, None, False, NO_REFS, NO_U, None)
         return self._fly(t, dt, state)
 
-    def _check(self, t, state, health, streak, abort, mocap_period, arrival_age):
-        s = self.cfg.safety
-        if abort is not None:
-            return abort, ""
-        limit = s.stale_timeout_s or s.stale_periods * (mocap_period or 0.01)
+    def _check(self, t: float, state: State | None, cond: Conditions
+               ) -> tuple[EndReason | None, str]:
+        s, health, arrival_age = self.cfg.safety, cond.health, cond.arrival_age_s
+        if cond.abort is not None:
+            return cond.abort, ""
+        limit = s.stale_timeout_s or s.stale_periods * (cond.mocap_period_s or 0.01)
         if state is None:
             if t - self.t_start > max(limit, 0.5):
                 return EndReason.STALE_MOCAP, f"no pose in {t - self.t_start:.3f} s"
@@ -188,8 +204,8 @@ class Supervisor:
             why = self._tau_watch(t, state)
             if why is not None:
                 return why
-        if streak >= s.overrun_streak:
-            return EndReason.DEADLINE_OVERRUN, f"{streak} deadlines missed in a row"
+        if cond.overrun_streak >= s.overrun_streak:
+            return EndReason.DEADLINE_OVERRUN, f"{cond.overrun_streak} deadlines missed in a row"
         if t - self.t_start > s.timeout_s:
             return EndReason.TIMEOUT, f"{t - self.t_start:.1f} s > {s.timeout_s:g} s"
         if state is not None and self._contact(t, state):
@@ -379,7 +395,6 @@ class Supervisor:
             if not (xl <= st.x <= xh and vl <= st.xdot <= vh):
                 return None, "", (f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s outside the "
                                   f"plan's robust box x0 {xl:g}..{xh:g}, v0 {vl:g}..{vh:g}")
-        from perchd.tau import retarget
         try:
             new = retarget(plan, st.x, st.xdot, library=self._library)
         except PlanError as err:
@@ -416,7 +431,6 @@ def _open_library(path: str | None, plan: Any) -> Any:
     """The trigger's plan library, loaded before the flight and checked against its plan."""
     if path is None:
         return None
-    from perchd.tau.library import load_library
 
     lib = load_library(path)
     why = lib.matches(plan)

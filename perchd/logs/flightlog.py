@@ -17,7 +17,9 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, IO
+from typing import IO, Any
+
+from perchd.core.errors import PerchdError
 
 SCHEMA = "perchd.flightlog/1"
 
@@ -141,7 +143,6 @@ class FlightLogWriter:
 
 def read_log(path: str | os.PathLike) -> FlightLog:
     """Parse a flight log; a torn last line (killed writer) is ignored."""
-    from perchd.core.errors import PerchdError
 
     lines = Path(path).read_text(encoding="utf-8").splitlines()
     objs = []

@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+from perchd.core.extras import require
 from perchd.logs.flightlog import FlightLog
 
 PRE_TRIGGER_S = 0.5
@@ -23,7 +24,6 @@ ROWS = (("x", "x_plan", "distance X [m]"), ("xdot", "v_plan", "velocity Xdot [m/
 
 def plot_flights(logs: Sequence[FlightLog], out: str | Path,
                  titles: Sequence[str] | None = None) -> Path:
-    from perchd.core.extras import require
 
     mpl = require("matplotlib", "plot")
     mpl.use("Agg")

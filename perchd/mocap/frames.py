@@ -11,9 +11,7 @@ from __future__ import annotations
 import enum
 
 from perchd.core.errors import UriError
-
-Vec3 = tuple[float, float, float]
-Quat = tuple[float, float, float, float]
+from perchd.core.types import Quat, Vec3
 
 
 class UpAxis(enum.Enum):

@@ -15,10 +15,12 @@ from __future__ import annotations
 from typing import Protocol
 
 from perchd.core.clock import Clock
-from perchd.core.uriparams import bool_param, float_param
 from perchd.core.errors import UriError
 from perchd.core.types import Pose
 from perchd.core.uri import parse_uri
+from perchd.core.uriparams import bool_param, float_param
+from perchd.mocap.natnet.server import NatNetServer
+from perchd.mocap.zmq import ZmqPosePublisher
 
 _NATNET_PARAMS = ("version", "multicast", "group", "rate", "up")
 
@@ -38,7 +40,6 @@ def open_pose_output(text: str, bodies: list[str], clock: Clock) -> PoseOutput:
     """Open (and start) the output a URI names; UriError for anything malformed."""
     uri = parse_uri(text)
     if uri.scheme == "zmq":
-        from perchd.mocap.zmq import ZmqPosePublisher
         if not uri.host or uri.port is None or set(uri.query) - {"public"}:
             raise UriError(f"{text}: a zmq pose output is zmq://HOST:PORT[?public=1]")
         return ZmqPosePublisher(f"tcp://{uri.host}:{uri.port}", public=bool_param(uri, "public"))
@@ -48,7 +49,6 @@ def open_pose_output(text: str, bodies: list[str], clock: Clock) -> PoseOutput:
 
 
 def _natnet_output(uri, bodies: list[str], clock: Clock):
-    from perchd.mocap.natnet.server import NatNetServer
     unknown = sorted(set(uri.query) - set(_NATNET_PARAMS))
     if unknown:
         raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; "

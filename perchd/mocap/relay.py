@@ -15,10 +15,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from perchd.mocap.base import PoseSource, SourceStats
-from perchd.mocap.outputs import PoseOutput
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
+from perchd.mocap.base import PoseSource, SourceStats, open_source
+from perchd.mocap.outputs import PoseOutput
 
 
 class RelayedSource:
@@ -26,7 +26,6 @@ class RelayedSource:
 
     def __init__(self, upstream: PoseSource, output: PoseOutput, runtime: Runtime,
                  timeout_s: float = 1.0) -> None:
-        from perchd.mocap.base import open_source
         self.upstream, self.output = upstream, output
         self.body = upstream.body
         self.downstream: Any = open_source(output.uri(upstream.body), runtime)

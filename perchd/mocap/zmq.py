@@ -26,15 +26,22 @@ import threading
 import time
 from typing import Any
 
+import zmq
+
 from perchd.core.clock import Clock
-from perchd.core.uriparams import bool_param, float_param
 from perchd.core.errors import LinkError, UriError
 from perchd.core.netbind import check_bind
-from perchd.mocap.stream import (
-    Drop, PoseLimits, PoseStream, RateLimitedWarning, ThreadedSource)
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import Uri
+from perchd.core.uriparams import bool_param, float_param
+from perchd.mocap.stream import (
+    Drop,
+    PoseLimits,
+    PoseStream,
+    RateLimitedWarning,
+    ThreadedSource,
+)
 
 log = logging.getLogger("perchd.mocap.zmq")
 
@@ -129,7 +136,6 @@ class ZmqPoseSource(ThreadedSource):
         self._sock: Any = None
 
     def start(self) -> None:
-        import zmq  # a core dependency, imported late to keep `perchd --help` fast
         sock = zmq.Context.instance().socket(zmq.SUB)
         sock.setsockopt(zmq.SUBSCRIBE, TOPIC)
         sock.setsockopt(zmq.LINGER, 0)
@@ -150,7 +156,6 @@ class ZmqPoseSource(ThreadedSource):
             self._sock = None
 
     def _run(self) -> None:
-        import zmq
         while not self._stop.is_set():
             try:
                 if not self._sock.poll(50):
@@ -206,7 +211,6 @@ class ZmqPosePublisher:
 
     def __init__(self, endpoint: str = "tcp://127.0.0.1:0", *, bind: bool = True,
                  public: bool = False) -> None:
-        import zmq  # a core dependency, imported late to keep `perchd --help` fast
         address = endpoint.replace("zmq://", "tcp://", 1).split("?", 1)[0]
         if bind:
             check_bind(address.split("://", 1)[-1].rsplit(":", 1)[0], public,
@@ -233,7 +237,6 @@ class ZmqPosePublisher:
 
     def send_raw(self, frames: list[bytes]) -> None:
         """Send any multipart message (tests use it for malformed ones); never blocks."""
-        import zmq
         with self._lock:
             try:
                 self._sock.send_multipart(frames, zmq.NOBLOCK)

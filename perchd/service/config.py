@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import grp
 import math
 import os
+import pwd
 import tomllib
 import types
 import typing
@@ -26,7 +28,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from perchd.core.errors import ConfigError
+from perchd.core.safefile import read_regular
 from perchd.flight.config import FlightConfig
+from perchd.service.control_socket import PeerPolicy
 
 if TYPE_CHECKING:
     from perchd.service.control_socket import PeerPolicy
@@ -55,10 +59,7 @@ class ServiceConfig:
 
     def peer_policy(self, name: str = "perchd.toml") -> "PeerPolicy":
         """The control socket's PeerPolicy; ConfigError naming an unknown user or group."""
-        import grp
-        import pwd
 
-        from perchd.service.control_socket import PeerPolicy
 
         uids = _ids(self.allowed_users, lambda n: pwd.getpwnam(n).pw_uid, name, "allowed_users", "user")
         gids = _ids(self.allowed_groups, lambda n: grp.getgrnam(n).gr_gid, name, "allowed_groups", "group")
@@ -90,7 +91,6 @@ def _ids(values: tuple[int | str, ...], lookup: Any, name: str, key: str, kind: 
 def load_config(path: str | os.PathLike) -> Config:
     """Parse and check a perchd.toml; raise ConfigError naming the key on any problem.
     The file must be a regular file of at most 1 MiB of UTF-8 (perchd.core.safefile)."""
-    from perchd.core.safefile import read_regular
 
     name = Path(path).name
     text = read_regular(path, "config", ConfigError)

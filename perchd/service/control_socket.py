@@ -15,12 +15,15 @@ from __future__ import annotations
 
 import json
 import os
+import pwd
 import socket
 import stat
 import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
+
+from perchd.core.errors import ConfigError, LinkError
 
 MAX_LINE = 65536
 """[bytes] a longer request line is refused and the client dropped."""
@@ -66,7 +69,6 @@ class PeerPolicy:
 
 
 def _groups_of(peer: Peer) -> set[int]:
-    import pwd
 
     try:
         name = pwd.getpwuid(peer.uid).pw_name
@@ -91,7 +93,6 @@ class ControlServer:
             self.sock.bind(str(self.path))
         except OSError as err:
             self.sock.close()
-            from perchd.core.errors import ConfigError
             raise ConfigError(f"--socket {self.path}: cannot listen: {err.strerror}") from None
         finally:
             os.umask(old)
@@ -187,7 +188,6 @@ class ControlServer:
 
 def _remove_stale(path: Path) -> None:
     """Remove a socket left by a dead server; refuse to steal a live one or a non-socket."""
-    from perchd.core.errors import ConfigError
 
     try:
         st = path.lstat()
@@ -208,7 +208,6 @@ def _remove_stale(path: Path) -> None:
 
 def request(path: str | os.PathLike, req: dict[str, Any], timeout: float = 5.0) -> dict[str, Any]:
     """Client side: send one request, return the one reply (used by `perchd ctl`)."""
-    from perchd.core.errors import LinkError
 
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         s.settimeout(timeout)

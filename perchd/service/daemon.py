@@ -23,11 +23,25 @@ import time
 from pathlib import Path
 from typing import Any
 
-from perchd.service.config import Config, ServiceConfig, load_config
-from perchd.service.control_socket import ControlServer
-from perchd.core.errors import PerchdError, UriError
-from perchd.service.sdnotify import Notifier
+from perchd.core.errors import PerchdError, PlanError, UriError
+from perchd.core.runtime import Runtime
+from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
+from perchd.core.uri import parse_uri
+from perchd.drivers.base import open_driver
+from perchd.flight.run import FlightAbort, fly
+from perchd.mocap.base import open_source
+from perchd.service.config import (
+    VERSION,
+    Config,
+    ServiceConfig,
+    config_from_dict,
+    load_config,
+)
+from perchd.service.control_socket import ControlServer
+from perchd.service.sdnotify import Notifier
+from perchd.sim.world import SimWorld, world_params_from_uri
+from perchd.tau import load_plan
 
 FLIGHT_DONE = b"\xff"
 """Self-pipe byte the flight thread writes when it ends (signal numbers are < 65)."""
@@ -47,7 +61,6 @@ class Links:
     (sim:// on both) get a fresh simulated world per flight, paced in real time."""
 
     def __init__(self, service: ServiceConfig, surface: Any = None) -> None:
-        from perchd.core.uri import parse_uri
 
         self.surface = surface  # SurfaceConfig: where a simulated world puts its wall
         self.driver_uri, self.mocap_uri = service.driver, service.mocap_uri()
@@ -60,9 +73,6 @@ class Links:
         self.open()
 
     def open(self) -> None:
-        from perchd.drivers.base import open_driver
-        from perchd.mocap.base import open_source
-        from perchd.core.runtime import Runtime
 
         self.runtime = Runtime.real()
         if self.simulated and self.surface is not None:
@@ -77,8 +87,6 @@ class Links:
             raise
 
     def _world(self) -> Any:
-        from perchd.sim.world import SimWorld, world_params_from_uri
-        from perchd.core.uri import parse_uri
 
         params = world_params_from_uri(parse_uri(self.driver_uri))
         return SimWorld(dataclasses.replace(params, surface_point=self.surface.point,
@@ -112,7 +120,6 @@ class FlightJob(threading.Thread):
     def __init__(self, plan: Any, plan_path: Path, links: Links, cfg: Config, log: Path,
                  notifier: Notifier, wake_fd: int) -> None:
         super().__init__(name="perchd-flight", daemon=True)
-        from perchd.flight.run import FlightAbort
 
         self.plan, self.plan_path, self.links, self.cfg = plan, plan_path, links, cfg
         self.log, self.notifier, self.wake_fd = log, notifier, wake_fd
@@ -122,7 +129,6 @@ class FlightJob(threading.Thread):
         self._phase = None
 
     def run(self) -> None:
-        from perchd.flight.run import fly
 
         try:
             res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
@@ -302,9 +308,6 @@ class Daemon:
     def _read_plan(self, name: str) -> tuple[Any, Path]:
         """The plan a request names: inside plan_dir once symlinks are resolved, a regular
         file of bounded size (perchd.core.safefile); PlanError naming the refusal."""
-        from perchd.core.errors import PlanError
-        from perchd.core.safefile import confine, read_regular
-        from perchd.tau import load_plan
 
         if "\0" in name:
             raise PlanError("plan: a path with a NUL byte")
@@ -349,7 +352,6 @@ def apply_overrides(config: Config, overrides: dict[str, str]) -> Config:
 
 
 def serve(config_path: str | None, overrides: dict[str, str]) -> int:
-    from perchd.service.config import VERSION, config_from_dict
 
     config = load_config(config_path) if config_path else config_from_dict({"version": VERSION})
     config = apply_overrides(config, overrides)

@@ -18,13 +18,25 @@ import math
 import statistics
 import tempfile
 from collections import Counter
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
-from perchd.core.errors import ConfigError
-from perchd.flight.config import FlightConfig, TriggerPolicy
+import numpy as np
+
+from perchd.core.clock import ManualClock
+from perchd.core.errors import ConfigError, PlanError
+from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Vec3
+from perchd.drivers.base import open_driver
+from perchd.flight.config import FlightConfig, TriggerPolicy
+from perchd.flight.frame import PerchFrame
+from perchd.flight.run import fly
+from perchd.mocap.base import open_source
+from perchd.sim.plant import PlantParams
+from perchd.sim.world import MocapParams, SimWorld, WorldParams
+from perchd.tau import retarget
 
 Range = tuple[float, float]
 
@@ -139,7 +151,6 @@ def default_policy(plan: Any) -> TriggerPolicy:
 
 
 def _rng(seed: int, *stream: int):
-    import numpy as np
 
     return np.random.default_rng([seed, *stream])
 
@@ -183,7 +194,6 @@ def start_for(x0: float, v0: float, cfg: FlightConfig) -> Vec3:
     """[m] world hover start from which the approach reaches (x0, v0) using APPROACH_SHARE of
     its acceleration limit, kept inside the geofence (perching frame = world rotated about
     the surface point; the start is 1 m above the surface point)."""
-    from perchd.flight.frame import PerchFrame
 
     run_up = v0 * v0 / (2.0 * APPROACH_SHARE * cfg.approach.accel_max_mps2) + START_MARGIN_M
     x = max(x0 - run_up, cfg.safety.x_min_m + 0.2)
@@ -201,8 +211,6 @@ def campaign_config(cfg: FlightConfig, policy: TriggerPolicy) -> FlightConfig:
 def fly_one(plan: Any, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
             log_path: str | Path) -> FlightRow:
     """Fly `plan` aimed at spec's trigger state in a fresh simulated world; one table row."""
-    from perchd.core.errors import PlanError
-    from perchd.tau import retarget
 
     try:
         aimed = retarget(plan, spec.x0, spec.v0)
@@ -213,13 +221,6 @@ def fly_one(plan: Any, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
 
 def _simulate(plan: Any, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
               log_path: str | Path) -> Any:
-    from perchd.core.clock import ManualClock
-    from perchd.drivers.base import open_driver
-    from perchd.flight.run import fly
-    from perchd.mocap.base import open_source
-    from perchd.core.runtime import Runtime
-    from perchd.sim.plant import PlantParams
-    from perchd.sim.world import MocapParams, SimWorld, WorldParams
 
     rt = Runtime(ManualClock(0.0))
     rt.sim = SimWorld(WorldParams(
@@ -303,7 +304,6 @@ def _map(work: list[tuple], jobs: int) -> Iterator[FlightRow]:
     if jobs == 1 or len(work) < 2:
         yield from map(_fly_logged, work)
         return
-    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     with ProcessPoolExecutor(max_workers=min(jobs, len(work))) as pool:
         for fut in as_completed([pool.submit(_fly_logged, w) for w in work]):

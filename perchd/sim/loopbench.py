@@ -35,7 +35,23 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from perchd.flight.loop import FixedRateLoop, spread
+import zmq
+
+from perchd.core.clock import MonotonicClock
+from perchd.core.runtime import Runtime
+from perchd.core.types import LinkHealth, Phase, Pose, Setpoint
+from perchd.drivers.base import open_driver
+from perchd.drivers.zmq import parse_setpoint_message
+from perchd.flight.config import FlightConfig, VehicleConfig
+from perchd.flight.estimator import Estimator
+from perchd.flight.frame import PerchFrame
+from perchd.flight.loop import NO_SEQ, FixedRateLoop, spread
+from perchd.flight.supervisor import Conditions, Supervisor
+from perchd.mocap.base import open_source
+from perchd.mocap.zmq import ZmqPosePublisher
+from perchd.sim.world import MocapParams, SimWorld, WorldParams
+from perchd.tau import plan_ipts, save_plan
+from perchd.tau.cases import CASES
 
 LOOP_HZ = 500.0
 RIG_HZ = 100.0
@@ -56,9 +72,6 @@ class SyntheticAgent:
     plan's trigger state, then coast): one call is one tick; a flight that ends restarts."""
 
     def __init__(self, plan: Any, rate_hz: float) -> None:
-        from perchd.drivers.base import LinkHealth
-        from perchd.flight.config import FlightConfig
-        from perchd.flight.frame import PerchFrame
         self.plan, self.cfg = plan, FlightConfig(rate_hz=rate_hz)
         self.frame = PerchFrame.from_surface(self.cfg.surface.point, self.cfg.surface.normal)
         self.ok = LinkHealth(True)
@@ -67,8 +80,6 @@ class SyntheticAgent:
         self._restart()
 
     def _restart(self) -> None:
-        from perchd.flight.estimator import Estimator
-        from perchd.flight.supervisor import Supervisor
         self.est = Estimator(self.cfg.estimator, self.frame)
         self.sup = Supervisor(self.plan, self.cfg, self.frame)
         self.k = 0
@@ -81,14 +92,13 @@ class SyntheticAgent:
         return x0 + v0 * (t - t_trig)
 
     def tick(self, k: int = 0, t_now: float = 0.0) -> bool:
-        from perchd.core.types import Pose
         t = self.k * self.period
         pose = Pose("cf1", self.k + 1, t - 0.004, (self._x(t), 0.0, 1.0),
                     (0.0, 0.0, 0.0, 1.0), True, 0.004)
         w0 = time.perf_counter()
         self.est.offer(pose)
-        rep = self.sup.tick(t, self.est.state(t), self.ok, 0, None, self.est.mocap_period,
-                            0.004)
+        rep = self.sup.tick(t, self.est.state(t), Conditions(
+            self.ok, mocap_period_s=self.est.mocap_period, arrival_age_s=0.004))
         self.compute.append(time.perf_counter() - w0)
         self.k += 1
         if rep.finished or self.k * self.period > 6.0:
@@ -98,7 +108,6 @@ class SyntheticAgent:
 
 def fixed_rate_figures(plan: Any, seconds: float) -> dict[str, Any]:
     """The 500 Hz loop on the real clock for `seconds`, ticking the synthetic agent."""
-    from perchd.core.clock import MonotonicClock
     agent = SyntheticAgent(plan, LOOP_HZ)
     loop = FixedRateLoop(MonotonicClock(), LOOP_HZ)
     starts: list[float] = []
@@ -120,7 +129,6 @@ def fixed_rate_figures(plan: Any, seconds: float) -> dict[str, Any]:
 
 def idle_loop_figures(seconds: float) -> dict[str, Any]:
     """The 500 Hz loop with nothing to do: what the machine's scheduler alone costs."""
-    from perchd.core.clock import MonotonicClock
     loop = FixedRateLoop(MonotonicClock(), LOOP_HZ)
     end = time.monotonic() + seconds
     stats = loop.run(lambda k, t: t < end)
@@ -152,8 +160,6 @@ class Rig:
     between a setpoint's arrival and its timestamp."""
 
     def __init__(self, mocap_hz: float) -> None:
-        import zmq
-        from perchd.mocap.zmq import ZmqPosePublisher
         self.mocap_hz = mocap_hz
         self.pub = ZmqPosePublisher("tcp://127.0.0.1:0")
         self.sub = zmq.Context.instance().socket(zmq.SUB)
@@ -170,14 +176,10 @@ class Rig:
         self.pub.close()
 
     def _world(self):
-        from perchd.core.clock import MonotonicClock
-        from perchd.sim.world import MocapParams, SimWorld, WorldParams
         return SimWorld(WorldParams(mocap=MocapParams(rate_hz=self.mocap_hz)), MonotonicClock())
 
     def fly(self, agent: subprocess.Popen, stop_at: float) -> Flight:
         """Serve one agent process until it exits (SIGINT at `stop_at` [monotonic s])."""
-        from perchd.drivers.zmq import parse_setpoint_message
-        from perchd.core.types import Setpoint
         world, flight = self._world(), Flight()
         sent: dict[int, float] = {}
         answered: set[int] = set()
@@ -259,12 +261,6 @@ def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path) -> d
 
 def echo(mocap_uri: str, driver_uri: str) -> None:
     """Send each pose's seq straight back as a hover setpoint until SIGINT (no agent work)."""
-    from perchd.drivers.base import open_driver
-    from perchd.flight.config import VehicleConfig
-    from perchd.flight.loop import NO_SEQ
-    from perchd.mocap.base import open_source
-    from perchd.core.runtime import Runtime
-    from perchd.core.types import Phase, Setpoint
     rt = Runtime.real()
     source, driver = open_source(mocap_uri, rt), open_driver(driver_uri, rt)
     hover = VehicleConfig().mass_kg * VehicleConfig().g
@@ -301,8 +297,6 @@ def _weighted_cpu(loops: list[dict]) -> float:
 
 
 def measure(seconds: float) -> dict[str, Any]:
-    from perchd.tau import plan_ipts, save_plan
-    from perchd.tau.cases import CASES
     case = CASES[0]
     plan = plan_ipts(case.x0, case.v0, case.tau_s, case.v_contact, case.v_max, case.a_max, 3)
     with tempfile.TemporaryDirectory() as tmp_name:

@@ -14,8 +14,8 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-from perchd.flight.frame import body_z
 from perchd.core.types import Setpoint, Vec3
+from perchd.flight.frame import body_z
 
 
 @dataclass(frozen=True)

@@ -21,13 +21,14 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from perchd.core.errors import UriError
-from perchd.mocap.base import SourceStats
 from perchd.core.runtime import Runtime
+from perchd.core.types import Pose, Setpoint, Vec3
+from perchd.core.uri import Uri
+from perchd.core.uriparams import float_param
+from perchd.mocap.base import SourceStats
 from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
 from perchd.sim.stall import Stall, stall_from_uri
-from perchd.core.types import Pose, Setpoint, Vec3
-from perchd.core.uri import Uri
 
 _NAMED: dict[str, "SimWorld"] = {}
 _NAMED_LOCK = threading.Lock()
@@ -199,7 +200,6 @@ class SimWorld:
 
 def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldParams:
     """Apply a sim:// URI's options to `base` (defaults); bad values are one UriError."""
-    from perchd.core.uriparams import float_param
 
     wp = base or WorldParams()
     plant = replace(

@@ -9,7 +9,12 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from perchd.tau.ctds import plan_ctds
+from perchd.tau.ctdts import plan_ctdts
+from perchd.tau.ipts import plan_ipts
+from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan
+from perchd.tau.planfile import save_plan
 
 
 @dataclass(frozen=True)
@@ -33,7 +38,6 @@ FILES = ("ctds", "ctdts", "ipts-n3", "ipts-n5", "ipts-n8")
 
 
 def make(case: Case, kind: str) -> Plan:
-    from perchd.tau import Limits, plan_ctds, plan_ctdts, plan_ipts
 
     if kind == "ctds":
         return plan_ctds(case.x0, case.v0, 0.5, Limits((0.0, 0.0), case.v_max, case.a_max))
@@ -45,7 +49,6 @@ def make(case: Case, kind: str) -> Plan:
 
 
 def write_all(folder: Path) -> list[Path]:
-    from perchd.tau import save_plan
 
     written = []
     for case in CASES:

@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import minimize
 
 from perchd.core.errors import PlanError
 from perchd.tau.bound import min_time_bound
@@ -165,7 +166,6 @@ def _random_seeds(prob: Problem, ts0: float, count: int, rng) -> list[np.ndarray
 
 
 def _solve_from(model: _Model, z0: np.ndarray, prob: Problem):
-    from scipy.optimize import minimize
 
     n = prob.order
     eq = {"type": "eq", "fun": lambda z: np.array([z[:-1].sum() - prob.m_sum]),

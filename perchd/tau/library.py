@@ -18,8 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from perchd.core.errors import PlanError
+from perchd.tau.ipts import MAX_ORDER, plan_ipts, plan_ipts_from
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan
+from perchd.tau.planfile import load_json
 
 SCHEMA = "perchd.planlib/1"
 SWITCH_TOL = 1e-6  # |q(t_s) - 1/tau_s| * |tau_s| a stored node may be off by (round-off)
@@ -51,7 +53,6 @@ class PlanLibrary:
 
     def replan(self, x0: float, v0: float) -> Plan:
         """The minimum-time plan from the measured trigger state (x0 [m], v0 [m/s])."""
-        from perchd.tau.ipts import plan_ipts_from
 
         i, fx = _cell(self.x0s, x0, "x0", "m")
         j, fv = _cell(self.v0s, v0, "v0", "m/s")
@@ -104,7 +105,6 @@ def build_library(x0: tuple[float, float], v0: tuple[float, float], counts: tupl
                   a_max: float | None, order: int, progress=None) -> PlanLibrary:
     """Cold-solve the global minimum-time plan at every node of the grid (x0 [m], v0 [m/s]
     ranges with counts[0] x counts[1] nodes). progress(done, total) is called per node."""
-    from perchd.tau.ipts import MAX_ORDER, plan_ipts
 
     if not 1 <= order <= MAX_ORDER:
         raise PlanError(f"order must be 1..{MAX_ORDER}, got {order}")
@@ -150,7 +150,6 @@ def save_library(lib: PlanLibrary, path: str | Path) -> None:
 
 def load_library(path: str | Path) -> PlanLibrary:
     """The library in `path`, every node checked; errors name the field."""
-    from perchd.tau.planfile import load_json
 
     return load_json(path, library_from_json, "plan library")
 
@@ -161,7 +160,6 @@ def library_from_json(doc: object) -> PlanLibrary:
     if doc.get("strategy") != "ipts":
         raise PlanError("strategy must be 'ipts'")
     order, tau_s = doc.get("order"), _finite(doc.get("tau_s"), "tau_s")
-    from perchd.tau.ipts import MAX_ORDER
 
     if not (isinstance(order, int) and 1 <= order <= MAX_ORDER):
         raise PlanError(f"order must be an integer 1..{MAX_ORDER}, got {order!r}")

@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 from perchd.core.errors import PlanError
+from perchd.tau.ipts import MAX_ORDER
 from perchd.tau.limits import Limits
 from perchd.tau.plan import STRATEGIES, Plan, make_plan
 
@@ -115,7 +116,6 @@ def _number(doc: dict, key: str, name: str | None = None) -> float:
 
 
 def _numbers(doc: dict, key: str, name: str) -> list[float]:
-    from perchd.tau.ipts import MAX_ORDER
 
     values = _field(doc, key, list, name)
     if not 2 <= len(values) <= MAX_ORDER + 1:

@@ -5,7 +5,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from perchd.core.errors import PlanError
+from perchd.tau.certify import Box
+from perchd.tau.ctds import plan_ctds
+from perchd.tau.ctdts import plan_ctdts
+from perchd.tau.ipts import plan_ipts
 from perchd.tau.plan import Plan, make_plan
+from perchd.tau.robust import retarget_k
 
 if TYPE_CHECKING:
     from perchd.tau.library import PlanLibrary
@@ -21,14 +26,9 @@ def retarget(plan: Plan, x0: float, v0: float, library: PlanLibrary | None = Non
     one warm local solve from the library's grid (milliseconds); a state outside its grid is
     refused, not cold-solved, so the caller never blocks a tick on a global solve.
     """
-    from perchd.tau.ctds import plan_ctds
-    from perchd.tau.ctdts import plan_ctdts
-    from perchd.tau.ipts import plan_ipts
 
     lim = plan.limits
     if plan.robust is not None:
-        from perchd.tau.certify import Box
-        from perchd.tau.robust import retarget_k
 
         k = retarget_k(plan.k[1:], Box(*plan.robust), x0, v0)
         return make_plan("ipts", x0, v0, plan.tau_s, lim, k=k, robust=plan.robust)

@@ -18,9 +18,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import differential_evolution, minimize
 
 from perchd.core.errors import PlanError
 from perchd.tau.certify import Box, Certificate, certify_box, first_switch
+from perchd.tau.profiles import InversePolynomial
 
 T_SAMPLES = 97          # time samples per trajectory in the search (certifier bounds between)
 SEARCH_MARGIN = 2e-3    # relative slack the search keeps from every limit
@@ -50,7 +52,6 @@ class RobustResult:
 
 def admissible(k, k0s: np.ndarray, lim: RobustLimits, margin: float = SEARCH_MARGIN):
     """Sampled (L, U) [m] of admissible |x0| for each k_0 (nan where tau misses tau_s)."""
-    from perchd.tau.profiles import InversePolynomial
 
     lo, hi = np.full(len(k0s), np.nan), np.full(len(k0s), np.nan)
     u = np.linspace(0.0, 1.0, T_SAMPLES)
@@ -167,7 +168,6 @@ def _score(k, lim, dom) -> float:
 def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain,
            evals: int | None = None) -> tuple[np.ndarray, Box]:
     """Grow the box and adjust k together (Nelder-Mead; sampled boundary must keep a margin)."""
-    from scipy.optimize import minimize
 
     n = len(k)
     z0 = np.concatenate([k, [box.x0[0], box.x0[1], box.v0[0], box.v0[1]]])
@@ -217,7 +217,6 @@ def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(
     """k_1..k_n (n = order) and the largest certified box for them (see module docstring).
     `start` (e.g. the order n-1 result, padded with zeros) seeds the search, so a higher
     order never does worse than the lower one it contains."""
-    from scipy.optimize import differential_evolution
 
     if order < 1:
         raise PlanError(f"order must be >= 1, got {order}")
@@ -246,7 +245,6 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
     """k_1..k_n certified over `box` with the least worst-case duration: first the k with the
     widest sampled margin over the box (differential evolution), then the worst duration
     t_s(k_max) + |tau_s| minimised under a sampled margin (COBYLA), then certified."""
-    from scipy.optimize import differential_evolution, minimize
 
     if order < 1:
         raise PlanError(f"order must be >= 1, got {order}")

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 from perchd.core.errors import PlanError
 from perchd.tau.bound import plan_bound
 from perchd.tau.plan import Plan
+from perchd.tau.robustplan import check_plan
 
 TOL = 1e-6  # relative slack for a limit met with equality by an optimiser
 
@@ -30,7 +31,6 @@ def violations(plan: Plan) -> list[str]:
 def _robust_violations(plan: Plan) -> list[str]:
     if plan.robust is None:
         return []
-    from perchd.commands.plan_robust import check_plan
 
     try:
         check_plan(plan)

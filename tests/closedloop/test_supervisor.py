@@ -5,10 +5,10 @@ from __future__ import annotations
 import pytest
 
 from simflight import case1
-from perchd.drivers.base import LinkHealth
+from perchd.core.types import LinkHealth
 from perchd.flight.config import FlightConfig
 from perchd.flight.frame import PerchFrame
-from perchd.flight.supervisor import Supervisor
+from perchd.flight.supervisor import Conditions, Supervisor
 from perchd.core.types import EndReason, State
 
 CFG = FlightConfig()
@@ -22,8 +22,8 @@ def state(x=-4.5, tilt=0.0, xdot=0.0):
 
 def first_end(*, abort=None, age=0.004, health=OK, st=None, streak=0):
     sup = Supervisor(case1("ipts"), CFG, FRAME)
-    sup.tick(0.0, state(), OK, 0, None, 1 / 120, 0.004)  # starts: HOLD at the start point
-    rep = sup.tick(0.01, st or state(), health, streak, abort, 1 / 120, age)
+    sup.tick(0.0, state(), Conditions(OK, 0, None, 1 / 120, 0.004))  # starts: HOLD at the start point
+    rep = sup.tick(0.01, st or state(), Conditions(health, streak, abort, 1 / 120, age))
     return rep.end
 
 

@@ -7,7 +7,8 @@ import pytest
 from rigs import MASS, NOT_HERE, RIGS, loopback_available
 from ticks import level, ticks_until_lost
 from ticks import wait_for as _wait
-from perchd.drivers.base import DRIVERS, LinkHealth, open_driver
+from perchd.core.types import LinkHealth
+from perchd.drivers.base import DRIVERS, open_driver
 from perchd.drivers.thrust import G
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Setpoint

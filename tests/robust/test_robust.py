@@ -16,7 +16,7 @@ from perchd.tau.robust import (RobustLimits, contact_ratio, fastest_k, retarget_
 from perchd.cli import main as perchd
 from perchd.tau import Limits
 from perchd.tau.planfile import load_plan, plan_from_json
-from perchd.commands.plan_robust import check_plan
+from perchd.tau.robustplan import check_plan
 from robust_brute import fly, worst_over_box
 
 LIM = RobustLimits(-0.5, (0.7, 1.0), 2.5, 1.4)

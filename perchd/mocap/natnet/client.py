@@ -22,14 +22,20 @@ from dataclasses import dataclass, field
 
 from perchd.core.clock import Clock
 from perchd.core.errors import LinkError, UriError
-from perchd.mocap.natnet import models as natdefs, protocol as proto
+from perchd.core.types import Pose
 from perchd.mocap.frames import UpAxis, to_world
+from perchd.mocap.natnet import models as natdefs
+from perchd.mocap.natnet import protocol as proto
 from perchd.mocap.natnet.clock import ClockSync
 from perchd.mocap.natnet.frame import Frame, Timing, decode_frame
 from perchd.mocap.natnet.wire import MalformedPacket, Truncated
 from perchd.mocap.stream import (
-    Drop, PoseLimits, PoseStream, RateLimitedWarning, ThreadedSource)
-from perchd.core.types import Pose
+    Drop,
+    PoseLimits,
+    PoseStream,
+    RateLimitedWarning,
+    ThreadedSource,
+)
 
 log = logging.getLogger("perchd.mocap.natnet")
 

@@ -14,11 +14,15 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
+from perchd.core.types import Quat, Vec3
 from perchd.mocap.natnet.wire import (
-    MalformedPacket, Reader, Version, Writer, at_least, has_section_sizes)
-
-Vec3 = tuple[float, float, float]
-Quat = tuple[float, float, float, float]
+    MalformedPacket,
+    Reader,
+    Version,
+    Writer,
+    at_least,
+    has_section_sizes,
+)
 
 
 @dataclass(frozen=True, slots=True)

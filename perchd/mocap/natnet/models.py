@@ -9,7 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from perchd.mocap.natnet.wire import MalformedPacket, Reader, Version, Writer, has_section_sizes
+from perchd.mocap.natnet.wire import (
+    MalformedPacket,
+    Reader,
+    Version,
+    Writer,
+    has_section_sizes,
+)
+
 
 @dataclass(frozen=True, slots=True)
 class RigidBodyDef:

@@ -30,11 +30,12 @@ import time
 from dataclasses import replace
 
 from perchd.core.clock import Clock, MonotonicClock
-from perchd.mocap.natnet import models as natdefs, protocol as proto
+from perchd.core.types import Pose
 from perchd.mocap.frames import UpAxis, from_world
+from perchd.mocap.natnet import models as natdefs
+from perchd.mocap.natnet import protocol as proto
 from perchd.mocap.natnet.frame import Frame, RigidBodySample, Timing, encode_frame
 from perchd.mocap.natnet.wire import MalformedPacket, Version
-from perchd.core.types import Pose
 
 log = logging.getLogger("perchd.mocap.natnet.server")
 

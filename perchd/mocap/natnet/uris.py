@@ -14,15 +14,15 @@ from __future__ import annotations
 
 import ipaddress
 
-from perchd.core.uriparams import float_param
 from perchd.core.errors import UriError
+from perchd.core.runtime import Runtime
+from perchd.core.uri import Uri
+from perchd.core.uriparams import float_param
 from perchd.mocap.frames import UpAxis
 from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
 from perchd.mocap.natnet.protocol import DEFAULT_COMMAND_PORT
 from perchd.mocap.natnet.server import NatNetServer
 from perchd.mocap.stream import PoseLimits
-from perchd.core.runtime import Runtime
-from perchd.core.uri import Uri
 
 __all__ = ["NatNetConfig", "NatNetServer", "NatNetSource", "config_from_uri", "open_natnet"]
 
