@@ -25,23 +25,21 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
+    """The parser, with only the named command's module imported when argv names one: a
+    flight command pulls in numpy and scipy, `perchd ctl status` should not wait for them."""
     parser = _Parser(prog="perchd", description="Tau-based perching flight agent.")
     parser.add_argument("--version", action="version", version=f"perchd {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    for name in COMMANDS:
-        try:
-            module = importlib.import_module(f"perchd.commands.{name}")
-        except ModuleNotFoundError as err:
-            if err.name != f"perchd.commands.{name}":
-                raise
-            continue  # command not built yet in this checkout
-        module.register(sub)
+    named = next((a for a in argv if not a.startswith("-")), None)
+    for name in (named,) if named in COMMANDS else COMMANDS:
+        importlib.import_module(f"perchd.commands.{name}").register(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(argv).parse_args(argv)
     try:
         return int(args.run(args) or 0)
     except PerchdError as err:

@@ -16,17 +16,11 @@ import sys
 import time
 from pathlib import Path
 
-from perchd.core.clock import ManualClock
-from perchd.core.errors import UriError
-from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
-from perchd.core.uri import parse_uri
-from perchd.drivers.base import open_driver
 from perchd.flight.config import FlightConfig, SurfaceConfig
-from perchd.flight.run import FlightAbort, fly
-from perchd.mocap.base import open_source
+from perchd.flight.run import FlightAbort
 from perchd.service.config import load_flight_config
-from perchd.sim.world import SimWorld, world_params_from_uri
+from perchd.sim.session import open_links
 from perchd.tau import load_plan
 
 
@@ -60,24 +54,6 @@ def load_config(args: argparse.Namespace):
     if args.normal:
         surface = dataclasses.replace(surface, normal=tuple(args.normal))
     return dataclasses.replace(cfg, surface=SurfaceConfig(surface.point, surface.normal))
-
-
-def make_runtime(args: argparse.Namespace, cfg):
-    """A simulated clock and world when both links are sim://, real time otherwise."""
-
-    driver_sim = parse_uri(args.driver).scheme == "sim"
-    mocap_sim = parse_uri(args.mocap).scheme == "sim"
-    if driver_sim != mocap_sim:
-        raise UriError("sim:// flies only with sim:// on both --driver and --mocap "
-                       f"(got {args.driver} and {args.mocap})")
-    if not driver_sim:
-        return Runtime.real()
-
-    rt = Runtime(ManualClock())
-    params = world_params_from_uri(parse_uri(args.driver))
-    rt.sim = SimWorld(dataclasses.replace(params, surface_point=cfg.surface.point,
-                                          surface_normal=cfg.surface.normal), rt.clock)
-    return rt
 
 
 class StatusLine:
@@ -128,26 +104,20 @@ def summary_text(res) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-
     plan = load_plan(args.plan)
     cfg = load_config(args)
-    runtime = make_runtime(args, cfg)
     log = Path(args.log) if args.log else Path("flightlogs") / (
         f"{time.strftime('%Y%m%d-%H%M%S')}-{plan.strategy}.jsonl")
     abort = FlightAbort()
     handlers = {s: signal.signal(s, lambda *_: abort.request(EndReason.SIGNAL))
                 for s in (signal.SIGINT, signal.SIGTERM)}
     status = StatusLine()
-    source = open_source(args.mocap, runtime)
     try:
-        source.start()
-        with open_driver(args.driver, runtime) as driver:
-            res = fly(plan, driver, source, runtime.clock, log, cfg, abort, status,
-                      world=runtime.sim, header={"plan_file": str(args.plan),
-                                                 "mocap": args.mocap})
+        links = open_links(args.driver, args.mocap, cfg.surface)
+        res = links.fly(plan, log, cfg, abort, status,
+                        header={"plan_file": str(args.plan), "mocap": args.mocap})
     finally:
         status.close()
-        source.close()
         for s, h in handlers.items():
             signal.signal(s, h)
     print(json.dumps(res.to_json()) if args.json else summary_text(res))

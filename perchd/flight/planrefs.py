@@ -37,12 +37,12 @@ def _horner(coeffs: tuple[float, ...], t: float) -> float:
 
 
 class PlanSampler:
-    def __init__(self, plan: Any) -> None:
+    def __init__(self, plan: Plan) -> None:
         self.plan = plan
         self._stage1 = self._fast_stage1(plan)
 
     @staticmethod
-    def _fast_stage1(plan: Any):
+    def _fast_stage1(plan: Plan):
         """The float evaluator of the plan's stage 1, or None to use the plan's methods."""
         if type(plan) is not Plan:
             return None

@@ -11,10 +11,11 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 from perchd.core.clock import Clock
 from perchd.core.types import EndReason, Phase, State
+from perchd.drivers.base import Driver
 from perchd.flight.config import FlightConfig
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
@@ -27,6 +28,8 @@ from perchd.flight.supervisor import (
     Trigger,
 )
 from perchd.logs.flightlog import FlightLogWriter, LogRow, jsonable
+from perchd.mocap.base import PoseSource
+from perchd.tau.plan import Plan
 
 __all__ = ["FlightAbort", "FlightResult", "TickStatus", "fly", "plan_summary"]
 
@@ -78,7 +81,7 @@ class FlightResult:
                 "failsafe_sent": self.failsafe_sent}
 
 
-def plan_summary(plan: Any) -> dict[str, Any]:
+def plan_summary(plan: Plan) -> dict[str, Any]:
     """The plan's defining figures for the log header (Plan API attributes)."""
     keys = ("strategy", "x0", "v0", "tau_s", "t_switch", "duration", "v_contact", "robust")
     out = {k: jsonable(getattr(plan, k, None)) for k in keys}
@@ -108,13 +111,16 @@ _NO_STATE = _NoState()
 class _Run:
     """The per-tick wiring, kept apart from `fly` so the tick is one short method."""
 
-    def __init__(self, plan, driver, source, clock, cfg, log, abort, on_tick) -> None:
+    def __init__(self, plan: Plan, driver: Driver, source: PoseSource, clock: Clock,
+                 cfg: FlightConfig, abort: FlightAbort,
+                 on_tick: Callable[[TickStatus], None] | None) -> None:
         self.frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
         self.est = Estimator(cfg.estimator, self.frame)
         self.sup = Supervisor(plan, cfg, self.frame)
         self.loop = make_loop(cfg.sync.value, clock, cfg.rate_hz, source)
         self.clock = clock
-        self.driver, self.source, self.log = driver, source, log
+        self.driver, self.source = driver, source
+        self.log: FlightLogWriter | None = None  # opened once the supervisor accepts the plan
         self.abort, self.on_tick = abort, on_tick
         self.failsafe_sent = False
         self.t0: float | None = None
@@ -171,9 +177,23 @@ class _Run:
             end=rep.end.name if rep.finished and rep.end else None))
 
 
-def fly(plan: Any, driver: Any, source: Any, clock: Clock, log_path: str | Path,
+class TrueContact(Protocol):
+    """A simulator's own record of the contact: t [s] on the flight's clock, speed [m/s]."""
+
+    t: float
+    speed: float
+
+
+class GroundTruth(Protocol):
+    """What a simulated vehicle knows that the agent can only estimate (sim.world.SimWorld)."""
+
+    contact: TrueContact | None
+
+
+def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: str | Path,
         cfg: FlightConfig = FlightConfig(), abort: FlightAbort | None = None,
-        on_tick: Callable[[TickStatus], None] | None = None, world: Any = None,
+        on_tick: Callable[[TickStatus], None] | None = None,
+        world: GroundTruth | None = None,
         header: dict[str, Any] | None = None) -> FlightResult:
     """Fly `plan` (a perchd.tau.Plan) with a connected driver and a started pose source.
 
@@ -182,7 +202,7 @@ def fly(plan: Any, driver: Any, source: Any, clock: Clock, log_path: str | Path,
     when simulated, for the true contact figures. header: extra header fields for the log.
     """
     abort = abort or FlightAbort()
-    run = _Run(plan, driver, source, clock, cfg, None, abort, on_tick)  # may refuse: no log yet
+    run = _Run(plan, driver, source, clock, cfg, abort, on_tick)  # may refuse: no log yet
     log = run.log = FlightLogWriter(log_path, {"plan": plan_summary(plan),
                                                "config": jsonable(cfg),
                                                "driver": getattr(driver, "uri", ""),
@@ -203,7 +223,7 @@ def fly(plan: Any, driver: Any, source: Any, clock: Clock, log_path: str | Path,
     return result
 
 
-def _result(run: _Run, world: Any, log_path: str) -> FlightResult:
+def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult:
     sup = run.sup
     trig, contact = sup.trigger, sup.contact
     perch = contact.t - trig.t if contact and trig else None

@@ -29,6 +29,7 @@ from perchd.flight.planrefs import PlanSampler
 from perchd.logs.flightlog import LogEvent
 from perchd.tau import retarget
 from perchd.tau.library import load_library
+from perchd.tau.plan import Plan
 
 FROZEN_MAX_S = 0.3
 """[s] once the approach has begun, poses with a bit-identical position for longer than this
@@ -125,7 +126,7 @@ class Conditions:
 
 
 class Supervisor:
-    def __init__(self, plan: Any, cfg: FlightConfig, frame: PerchFrame) -> None:
+    def __init__(self, plan: Plan, cfg: FlightConfig, frame: PerchFrame) -> None:
         self.plan = plan
         self.cfg = cfg
         self.frame = frame
@@ -427,7 +428,7 @@ class Supervisor:
         return Refs(tau_ref, here.x, here.v, a)
 
 
-def _open_library(path: str | None, plan: Any) -> Any:
+def _open_library(path: str | None, plan: Plan) -> Any:
     """The trigger's plan library, loaded before the flight and checked against its plan."""
     if path is None:
         return None

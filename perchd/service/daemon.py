@@ -23,14 +23,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from perchd.core.errors import PerchdError, PlanError, UriError
+from perchd.core.clock import MonotonicClock
+from perchd.core.errors import PerchdError, PlanError
 from perchd.core.runtime import Runtime
 from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
-from perchd.core.uri import parse_uri
-from perchd.drivers.base import open_driver
+from perchd.drivers.base import Driver
+from perchd.flight.config import SurfaceConfig
 from perchd.flight.run import FlightAbort, fly
-from perchd.mocap.base import open_source
+from perchd.mocap.base import PoseSource
 from perchd.service.config import (
     VERSION,
     Config,
@@ -40,8 +41,9 @@ from perchd.service.config import (
 )
 from perchd.service.control_socket import ControlServer
 from perchd.service.sdnotify import Notifier
-from perchd.sim.world import SimWorld, world_params_from_uri
+from perchd.sim.session import Session, open_links
 from perchd.tau import load_plan
+from perchd.tau.plan import Plan
 
 FLIGHT_DONE = b"\xff"
 """Self-pipe byte the flight thread writes when it ends (signal numbers are < 65)."""
@@ -57,46 +59,35 @@ def say(msg: str) -> None:
 
 
 class Links:
-    """The connected driver and started pose source, on the real clock. Simulated links
-    (sim:// on both) get a fresh simulated world per flight, paced in real time."""
+    """The service's connected driver and pose source. Simulated links (sim:// on both) fly
+    a fresh simulated world per flight, paced in real time."""
 
-    def __init__(self, service: ServiceConfig, surface: Any = None) -> None:
-
-        self.surface = surface  # SurfaceConfig: where a simulated world puts its wall
+    def __init__(self, service: ServiceConfig, surface: SurfaceConfig | None = None) -> None:
+        self.surface = surface  # where a simulated world puts its wall
         self.driver_uri, self.mocap_uri = service.driver, service.mocap_uri()
-        sims = (parse_uri(self.driver_uri).scheme == "sim", parse_uri(self.mocap_uri).scheme == "sim")
-        if sims[0] != sims[1]:
-            raise UriError("sim:// flies only with sim:// on both driver and mocap "
-                           f"(got {self.driver_uri} and {self.mocap_uri})")
-        self.simulated = sims[0]
-        self.runtime = self.driver = self.source = None
-        self.open()
+        self.session: Session | None = self._open()
+        self.simulated = self.session.world is not None
 
-    def open(self) -> None:
+    def _open(self) -> Session:
+        return open_links(self.driver_uri, self.mocap_uri, self.surface, MonotonicClock())
 
-        self.runtime = Runtime.real()
-        if self.simulated and self.surface is not None:
-            self.runtime.sim = self._world()
-        self.source = open_source(self.mocap_uri, self.runtime)
-        try:
-            self.source.start()
-            self.driver = open_driver(self.driver_uri, self.runtime)
-            self.driver.connect()
-        except BaseException:
-            self.source.close()
-            raise
+    @property
+    def driver(self) -> Driver:
+        return self.session.driver
 
-    def _world(self) -> Any:
+    @property
+    def source(self) -> PoseSource:
+        return self.session.source
 
-        params = world_params_from_uri(parse_uri(self.driver_uri))
-        return SimWorld(dataclasses.replace(params, surface_point=self.surface.point,
-                                            surface_normal=self.surface.normal), self.runtime.clock)
+    @property
+    def runtime(self) -> Runtime:
+        return self.session.runtime
 
     def fresh(self) -> None:
         """Before a flight: a new simulated world (a real link is kept)."""
         if self.simulated:
             self.close()
-            self.open()
+            self.session = self._open()
 
     def healthy(self) -> bool:
         try:
@@ -105,19 +96,15 @@ class Links:
             return False
 
     def close(self) -> None:
-        try:
-            if self.driver is not None:
-                self.driver.close()
-        finally:
-            if self.source is not None:
-                self.source.close()
-            self.driver = self.source = None
+        session, self.session = self.session, None
+        if session is not None:
+            session.close()
 
 
 class FlightJob(threading.Thread):
     """One flight in its own thread; wakes the service loop through the pipe when done."""
 
-    def __init__(self, plan: Any, plan_path: Path, links: Links, cfg: Config, log: Path,
+    def __init__(self, plan: Plan, plan_path: Path, links: Links, cfg: Config, log: Path,
                  notifier: Notifier, wake_fd: int) -> None:
         super().__init__(name="perchd-flight", daemon=True)
 
@@ -132,7 +119,7 @@ class FlightJob(threading.Thread):
 
         try:
             res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
-                      self.log, self.cfg.flight, self.abort, self.on_tick, world=self.links.runtime.sim,
+                      self.log, self.cfg.flight, self.abort, self.on_tick, world=self.links.session.world,
                       header={"plan_file": str(self.plan_path), "vehicle": self.cfg.service.vehicle,
                               "mocap": self.links.mocap_uri, "service": True})
             self.result = res.to_json()
@@ -335,7 +322,7 @@ class Daemon:
                        tau=st and st.tau, tau_ref=st and st.tau_ref)
         return out
 
-    def _log_path(self, plan: Any) -> Path:
+    def _log_path(self, plan: Plan) -> Path:
         stem = f"{time.strftime('%Y%m%d-%H%M%S')}-{self.config.service.vehicle}-{plan.strategy}"
         base = Path(self.config.service.log_dir)
         path, n = base / f"{stem}.jsonl", 1

@@ -25,18 +25,16 @@ from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
-from perchd.core.clock import ManualClock
 from perchd.core.errors import ConfigError, PlanError
-from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Vec3
-from perchd.drivers.base import open_driver
 from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.frame import PerchFrame
-from perchd.flight.run import fly
-from perchd.mocap.base import open_source
+from perchd.flight.run import FlightResult, TickStatus
 from perchd.sim.plant import PlantParams
+from perchd.sim.session import open_session
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 from perchd.tau import retarget
+from perchd.tau.plan import Plan
 
 Range = tuple[float, float]
 
@@ -136,7 +134,7 @@ COLUMNS = tuple(f.name for f in dataclasses.fields(FlightRow))
 
 
 # --- what to fly ---------------------------------------------------------------------------
-def default_ranges(plan: Any) -> tuple[Range, Range]:
+def default_ranges(plan: Plan) -> tuple[Range, Range]:
     """The plan's robust box inset by ROBUST_INSET, else its (x0, v0) +- DEFAULT_SPREAD."""
     if plan.robust is not None:
         (xl, xh), (vl, vh) = plan.robust
@@ -145,7 +143,7 @@ def default_ranges(plan: Any) -> tuple[Range, Range]:
     return (plan.x0 - dx, plan.x0 + dx), (plan.v0 - dv, plan.v0 + dv)
 
 
-def default_policy(plan: Any) -> TriggerPolicy:
+def default_policy(plan: Plan) -> TriggerPolicy:
     """Robust plans fly their box; any other is replanned from the measured state."""
     return TriggerPolicy.ROBUST if plan.robust is not None else TriggerPolicy.REPLAN
 
@@ -208,7 +206,7 @@ def campaign_config(cfg: FlightConfig, policy: TriggerPolicy) -> FlightConfig:
     return dataclasses.replace(cfg, trigger=dataclasses.replace(cfg.trigger, policy=policy))
 
 
-def fly_one(plan: Any, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
+def fly_one(plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
             log_path: str | Path) -> FlightRow:
     """Fly `plan` aimed at spec's trigger state in a fresh simulated world; one table row."""
 
@@ -219,38 +217,27 @@ def fly_one(plan: Any, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
     return _row(spec, spread, aimed, _simulate(aimed, cfg, spread, spec, log_path), "")
 
 
-def _simulate(plan: Any, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
-              log_path: str | Path) -> Any:
-
-    rt = Runtime(ManualClock(0.0))
-    rt.sim = SimWorld(WorldParams(
+def _simulate(plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
+              log_path: str | Path) -> FlightResult:
+    session = open_session(params=WorldParams(
         plant=PlantParams(latency_s=spread.latency_s), mocap=MocapParams(noise_m=spread.noise_m),
-        start=spread.start or start_for(spec.x0, spec.v0, cfg), surface_point=cfg.surface.point,
-        surface_normal=cfg.surface.normal, seed=spec.seed), rt.clock)
-    source = open_source("sim://", rt)
-    driver = open_driver("sim://", rt)
-    try:
-        source.start()
-        driver.connect()
-        return fly(plan, driver, source, rt.clock, log_path, cfg,
-                   on_tick=_gust_hook(rt.sim, spec), world=rt.sim,
-                   header={"campaign_flight": dataclasses.asdict(spec)})
-    finally:
-        source.close()
-        driver.close()
+        start=spread.start or start_for(spec.x0, spec.v0, cfg), seed=spec.seed),
+        surface=cfg.surface)
+    return session.fly(plan, log_path, cfg, on_tick=_gust_hook(session.world, spec),
+                       header={"campaign_flight": dataclasses.asdict(spec)})
 
 
-def _gust_hook(world: Any, spec: FlightSpec) -> Callable[[Any], None] | None:
+def _gust_hook(world: SimWorld, spec: FlightSpec) -> Callable[[TickStatus], None] | None:
     """An on_tick that schedules the kick spec.gust_s after the trigger, once."""
     if not any(spec.gust_dv):
         return None
     armed = [True]
 
-    def kick(w: Any) -> None:
+    def kick(w: SimWorld) -> None:
         for i in range(3):
             w.plant.v[i] += spec.gust_dv[i]
 
-    def on_tick(status: Any) -> None:
+    def on_tick(status: TickStatus) -> None:
         if armed[0] and status.phase is Phase.STAGE1:
             armed[0] = False
             world.faults.at.append((world.clock.now() + spec.gust_s, kick))
@@ -258,7 +245,7 @@ def _gust_hook(world: Any, spec: FlightSpec) -> Callable[[Any], None] | None:
     return on_tick
 
 
-def _row(spec: FlightSpec, spread: Spread, plan: Any, res: Any, why: str) -> FlightRow:
+def _row(spec: FlightSpec, spread: Spread, plan: Plan, res: FlightResult | None, why: str) -> FlightRow:
     """The table row of a flight result, or (res None) of an aim no plan could be made for."""
     lo, hi = plan.limits.v_contact
     trig = res.trigger if res else None
@@ -280,7 +267,7 @@ def _fly_logged(args: tuple) -> FlightRow:
     return fly_one(plan, cfg, spread, spec, Path(log_dir) / f"flight-{spec.index:04d}.jsonl")
 
 
-def run_campaign(plan: Any, cfg: FlightConfig, spread: Spread, specs: Iterable[FlightSpec],
+def run_campaign(plan: Plan, cfg: FlightConfig, spread: Spread, specs: Iterable[FlightSpec],
                  jobs: int = 1, log_dir: str | Path | None = None,
                  on_row: Callable[[FlightRow], None] | None = None) -> list[FlightRow]:
     """Fly every spec (in `jobs` processes); rows in spec order. on_row(row) as each ends.

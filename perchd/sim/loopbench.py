@@ -52,6 +52,7 @@ from perchd.mocap.zmq import ZmqPosePublisher
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 from perchd.tau import plan_ipts, save_plan
 from perchd.tau.cases import CASES
+from perchd.tau.plan import Plan
 
 LOOP_HZ = 500.0
 RIG_HZ = 100.0
@@ -71,7 +72,7 @@ class SyntheticAgent:
     """Estimator + supervisor + controller fed poses of a synthetic perch (accelerate to the
     plan's trigger state, then coast): one call is one tick; a flight that ends restarts."""
 
-    def __init__(self, plan: Any, rate_hz: float) -> None:
+    def __init__(self, plan: Plan, rate_hz: float) -> None:
         self.plan, self.cfg = plan, FlightConfig(rate_hz=rate_hz)
         self.frame = PerchFrame.from_surface(self.cfg.surface.point, self.cfg.surface.normal)
         self.ok = LinkHealth(True)
@@ -106,7 +107,7 @@ class SyntheticAgent:
         return True
 
 
-def fixed_rate_figures(plan: Any, seconds: float) -> dict[str, Any]:
+def fixed_rate_figures(plan: Plan, seconds: float) -> dict[str, Any]:
     """The 500 Hz loop on the real clock for `seconds`, ticking the synthetic agent."""
     agent = SyntheticAgent(plan, LOOP_HZ)
     loop = FixedRateLoop(MonotonicClock(), LOOP_HZ)
@@ -136,7 +137,7 @@ def idle_loop_figures(seconds: float) -> dict[str, Any]:
             "missed": stats.missed, "lateness": stats_us(stats.jitter)}
 
 
-def hot_compute(plan: Any, ticks: int = 5000) -> dict[str, Any]:
+def hot_compute(plan: Plan, ticks: int = 5000) -> dict[str, Any]:
     """The agent's tick back to back (what an in-process simulated flight measures)."""
     agent = SyntheticAgent(plan, RIG_HZ)
     for _ in range(ticks):

@@ -2,20 +2,21 @@
 
 from __future__ import annotations
 
-import argparse
+import dataclasses
 import io
 import json
 
 import pytest
-
 from simflight import PLANS, Sim, case1
+
 from perchd.cli import main
-from perchd.commands.fly import StatusLine, make_runtime, summary_text
+from perchd.commands.fly import StatusLine, summary_text
 from perchd.core.errors import UriError
-from perchd.flight.run import TickStatus
-from perchd.flight.config import FlightConfig
-from perchd.logs.flightlog import read_log
 from perchd.core.types import Phase
+from perchd.flight.config import FlightConfig
+from perchd.flight.run import TickStatus
+from perchd.logs.flightlog import read_log
+from perchd.sim.session import open_links
 
 
 def plan_file(tmp_path, strategy="ipts"):
@@ -57,19 +58,18 @@ def test_perchd_fly_without_log_writes_into_flightlogs_and_prints_a_summary(tmp_
 
 
 def test_a_surface_given_on_the_command_line_moves_the_simulated_wall_too():
-    args = argparse.Namespace(driver="sim://", mocap="sim://")
     cfg = FlightConfig()
-    import dataclasses
     cfg = dataclasses.replace(cfg, surface=dataclasses.replace(cfg.surface, point=(2.0, 1.0, 0.0),
                                                                normal=(0.0, 1.0, 0.0)))
-    rt = make_runtime(args, cfg)
-    assert rt.sim.params.surface_point == (2.0, 1.0, 0.0)
-    assert rt.sim.start == pytest.approx((2.0, -3.5, 1.0))
+    links = open_links("sim://", "sim://", cfg.surface)
+    links.close()
+    assert links.world.params.surface_point == (2.0, 1.0, 0.0)
+    assert links.world.start == pytest.approx((2.0, -3.5, 1.0))
 
 
 def test_sim_on_one_side_only_is_refused_with_one_line():
     with pytest.raises(UriError, match="sim:// flies only with sim:// on both"):
-        make_runtime(argparse.Namespace(driver="sim://", mocap="natnet://10.0.0.5"), FlightConfig())
+        open_links("sim://", "natnet://10.0.0.5")
 
 
 def test_the_status_line_shows_phase_x_xdot_and_tau_against_its_reference():
