@@ -34,6 +34,7 @@ CANDIDATES = 4     # best grid solutions tried through dense verification
 VERIFY_TOL = 1e-9  # relative overshoot of a limit accepted by the dense check
 TIGHTEN_MARGIN = 1e-8  # extra relative tightening when a peak slipped between grid nodes
 UNBOUNDED = 1e3    # stands in for an unset v_max [m/s] or a_max [m/s^2]
+SWITCH_MARGIN = 1e-3  # how far (relative to 1/|tau_s|) q keeps from 1/tau_s before the switch
 
 
 @dataclass(frozen=True)
@@ -60,10 +61,16 @@ def _grid(n: int = GRID) -> np.ndarray:
 
 
 class _Model:
-    """Vectorised profiles on the u-grid and their Jacobians w.r.t. z = (m_1..m_n, t_s)."""
+    """Vectorised profiles on the u-grid and their Jacobians w.r.t. z = (m_1..m_n, t_s).
 
-    def __init__(self, prob: Problem, u: np.ndarray, a_max: float, v_max: float) -> None:
+    Every constraint row is divided by its own scale (v_max, a_max, V_u, |1/tau_s|), so all
+    rows are O(1) whatever the limits: SLSQP's merit function weighs them alike, and a loose
+    limit neither swamps nor vanishes beside the others."""
+
+    def __init__(self, prob: Problem, u: np.ndarray, a_max: float, v_max: float,
+                 switch_margin: float = SWITCH_MARGIN) -> None:
         self.p, self.u, self.a_max, self.v_max = prob, u, a_max, v_max
+        self.switch_margin = switch_margin
         i = np.arange(1, prob.order + 1)
         self.U = u[:, None] ** i                                  # d q / d m_i
         self.dU = i * u[:, None] ** (i - 1)                        # d q' / d m_i
@@ -87,7 +94,7 @@ class _Model:
         dg[:, -1] -= dq / ts ** 2
         A = -S * g
         dA = -(dS * g[:, None] + S[:, None] * dg)
-        return q, dq_z, V, dV, A, dA
+        return q, dq_z, V, dV, A, dA, dq, ddq_z
 
     def constraints(self, z: np.ndarray) -> np.ndarray:
         return self._both(z)[0]
@@ -102,17 +109,22 @@ class _Model:
         return self._val
 
     def _assemble(self, z):
-        q, dq, V, dV, A, dA = self.eval(z)
+        q, dq, V, dV, A, dA, slope, dslope = self.eval(z)
         lo, hi = self.p.limits.v_contact
-        inner = slice(0, -1)
+        q_s = -1.0 / self.p.tau_s            # |q| at the switch: the scale of q
+        margin = self.switch_margin * (1.0 - self.u[:-1])
+        v_c = max(hi, self.p.v0)             # a speed scale that is never 0
         rows = [
-            (self.v_max - V, -dV),
-            (self.a_max - A, -dA),
-            (self.a_max + A, dA),
-            (-q, -dq),                                    # closing, tau negative
-            (q[inner] - 1.0 / self.p.tau_s, dq[inner]),   # tau_s not reached before t_s
-            (V[-1:] - lo, dV[-1:]),                       # V(t_s) = V_c within limits
-            (hi - V[-1:], -dV[-1:]),
+            ((self.v_max - V) / self.v_max, -dV / self.v_max),
+            ((self.a_max - A) / self.a_max, -dA / self.a_max),
+            ((self.a_max + A) / self.a_max, dA / self.a_max),
+            (-q / q_s, -dq / q_s),                        # closing, tau negative
+            # tau_s is not reached before t_s, by a margin shrinking to 0 at the switch ...
+            ((q[:-1] - 1.0 / self.p.tau_s) / q_s - margin, dq[:-1] / q_s),
+            # ... where tau crosses tau_s with a slope, not tangentially (a simple root).
+            (-slope[-1:] / q_s - self.switch_margin, -dslope[-1:] / q_s),
+            ((V[-1:] - lo) / v_c, dV[-1:] / v_c),         # V(t_s) = V_c within limits
+            ((hi - V[-1:]) / v_c, -dV[-1:] / v_c),
         ]
         return np.concatenate([r[0] for r in rows]), np.vstack([r[1] for r in rows])
 
