@@ -47,7 +47,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from perchd.errors import PlanError
-from perchd.tau.bound import min_time_bound
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan, check_trigger, make_plan
 

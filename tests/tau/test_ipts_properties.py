@@ -4,8 +4,6 @@ verification; infeasibility comes with a certificate that checks out."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
