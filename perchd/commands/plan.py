@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
+
+from perchd.tau.ipts import MAX_ORDER, UNBOUNDED
 
 from perchd.commands.plan_library import register as register_library
 from perchd.commands.plan_robust import register as register_robust
@@ -31,14 +34,22 @@ def register(sub) -> None:
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--x0", type=float, required=True, help="gap at trigger [m], < 0")
     p.add_argument("--v0", type=float, required=True, help="closing speed at trigger [m/s] > 0")
-    p.add_argument("--out", help="plan file to write")
+    p.add_argument("--out", help="plan file to write (default: none)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _limit_args(p: argparse.ArgumentParser, searched: bool) -> None:
+    """--v-max and --a-max; unset means unconstrained, which the help and the run both say."""
+    for flag, what, unit in (("--v-max", "peak closing speed", "m/s"),
+                             ("--a-max", "peak |acceleration|", "m/s^2")):
+        as_ = f", searched as {UNBOUNDED:g} {unit}" if searched else ""
+        p.add_argument(flag, type=float, help=f"{what} limit [{unit}] (default: none{as_})")
 
 
 def _ctds(plan_sub) -> None:
     p = plan_sub.add_parser("ctds", help="constant tau-dot: zero contact speed")
     _common(p)
-    p.add_argument("--c", type=float, default=0.5, help="tau-dot in (0, 0.5]")
+    p.add_argument("--c", type=float, default=0.5, help="tau-dot in (0, 0.5] (default: 0.5)")
     p.set_defaults(run=lambda a: _emit(a, _plan_ctds(a)))
 
 
@@ -49,8 +60,7 @@ def _ctdts(plan_sub) -> None:
     p.add_argument("--v-contact", type=float, required=True, help="contact speed [m/s]")
     p.add_argument("--v-window", type=float, nargs=2, metavar=("LO", "HI"),
                    help="contact speeds the vehicle tolerates [m/s] (default: V_c only)")
-    p.add_argument("--a-max", type=float, help="[m/s^2]")
-    p.add_argument("--v-max", type=float, help="[m/s]")
+    _limit_args(p, searched=False)
     p.set_defaults(run=lambda a: _emit(a, _plan_ctdts(a)))
 
 
@@ -58,11 +68,21 @@ def _ipts(plan_sub) -> None:
     p = plan_sub.add_parser("ipts", help="inverse polynomial, minimum time, then constant speed")
     _common(p)
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
-    p.add_argument("--v-max", type=float, help="[m/s]")
-    p.add_argument("--a-max", type=float, help="[m/s^2]")
-    p.add_argument("--order", type=int, default=3, help="polynomial order 1..9")
+    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="contact speeds allowed [m/s], V_l <= V_u")
+    _limit_args(p, searched=True)
+    p.add_argument("--order", type=int, default=3,
+                   help=f"polynomial order 1..{MAX_ORDER} (default: 3)")
     p.set_defaults(run=lambda a: _emit(a, _plan_ipts(a)))
+
+
+def _note_unset_limits(a, searched: bool) -> None:
+    """Say on stderr (stdout stays the plan or its JSON) which limits were left unset."""
+    for name, unit in (("v_max", "m/s"), ("a_max", "m/s^2")):
+        if getattr(a, name) is None:
+            as_ = f" (searched as {UNBOUNDED:g} {unit})" if searched else ""
+            print(f"perchd plan: note: no --{name.replace('_', '-')} given: {name} is "
+                  f"unconstrained{as_}", file=sys.stderr)
 
 
 def _plan_ctds(a):
@@ -72,12 +92,16 @@ def _plan_ctds(a):
 
 def _plan_ctdts(a):
 
-    return plan_ctdts(a.x0, a.v0, a.tau_s, a.v_contact, a.a_max, a.v_max, a.v_window)
+    plan = plan_ctdts(a.x0, a.v0, a.tau_s, a.v_contact, a.a_max, a.v_max, a.v_window)
+    _note_unset_limits(a, searched=False)  # after planning: an error stays one line
+    return plan
 
 
 def _plan_ipts(a):
 
-    return plan_ipts(a.x0, a.v0, a.tau_s, tuple(a.v_contact), a.v_max, a.a_max, a.order)
+    plan = plan_ipts(a.x0, a.v0, a.tau_s, tuple(a.v_contact), a.v_max, a.a_max, a.order)
+    _note_unset_limits(a, searched=True)  # after planning: an error stays one line
+    return plan
 
 
 def _emit(args, plan) -> int:

@@ -23,9 +23,11 @@ def register(plan_sub) -> None:
                    help="grid nodes along x0 and v0 (default 11 13)")
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
     p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
-    p.add_argument("--v-max", type=float, help="[m/s]")
-    p.add_argument("--a-max", type=float, help="[m/s^2]")
-    p.add_argument("--order", type=int, default=3, help="polynomial order 1..9")
+    p.add_argument("--v-max", type=float,
+                   help="peak closing speed limit [m/s] (default: none, searched as 1000 m/s)")
+    p.add_argument("--a-max", type=float,
+                   help="peak |acceleration| limit [m/s^2] (default: none, searched as 1000 m/s^2)")
+    p.add_argument("--order", type=int, default=3, help="polynomial order 1..9 (default: 3)")
     p.add_argument("--out", required=True, help="library file to write")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)

@@ -1,18 +1,42 @@
-"""IPTS minimum-time planning (paper eq. 16) with a global multistart and analytic gradients.
+"""IPTS minimum-time planning (paper eq. 16): a multistart of SLSQP with analytic gradients.
 
 Formulation. In scaled time u = t / t_s in [0, 1] the stage-1 polynomial is
 q(u) = p(t_s u) = sum m_i u^i with m_i = k_i t_s^i. Then m_0 = 1/tau_0 is fixed, reaching
 tau_s at the switch is the *linear* equality sum m_i = 1/tau_s, the objective t_s is linear,
 and with S = |X| = |x0| exp(t_s Q(u)) (Q the antiderivative of q):
     V = -S q,    A = -S (q'/t_s + q^2),    V_c = S(1) / |tau_s|.
-The limits 16c-16e plus "tau stays negative and has not yet reached tau_s before the switch"
-(0 >= q > 1/tau_s) are imposed on a grid of u; the result is then verified densely in t
-(perchd.tau.plan.peak_abs) and re-solved with tightened limits if the grid let a peak slip
-between nodes. Variables z = (m_1..m_n, t_s); every constraint gradient is analytic.
+Variables z = (m_1..m_n, t_s); every constraint gradient is analytic. On a grid of u:
+  * the limits, each row divided by its own scale: V/v_max <= 1, |A|/a_max <= 1,
+    V_l <= V(1) <= V_u (rows O(1) whatever the limits);
+  * tau negative (q <= 0) and tau_s not reached before the switch, with a margin:
+    q(u) - 1/tau_s >= SWITCH_MARGIN |1/tau_s| (1 - u), and -q'(1) >= SWITCH_MARGIN |1/tau_s|.
+    The margin is what keeps loose limits solvable: there the optimum presses against this
+    constraint, and without it SLSQP returned polynomials that reach tau_s *between* grid
+    nodes (mid-flight, or tangentially just before u = 1); the real first switch was then
+    earlier, at another contact speed, and every candidate was rejected. With it, tau
+    crosses tau_s once, with a slope (a simple root that the dense check finds at u = 1).
+The result is verified densely in t (perchd.tau.plan.make_plan: first switch by polynomial
+roots, peaks by peak_abs) and re-solved with tightened limits or a wider margin if the grid
+let a peak or the crossing slip between nodes.
 
-Global search: the problem is non-convex (the paper's case 2 is a local minimum, docs/errata.md §6),
-so SLSQP runs from seeds fitted to the bang-bang bound profile for several V_c and from
-a spread of random polynomials, and the best verified solution wins.
+Why the search is global, in terms a reviewer can check:
+  1. Nested feasible sets. Limits enter only as right-hand sides (V/v_max <= 1,
+     |A|/a_max <= 1, V_l <= V(1) <= V_u); the grid, the margin and the dense check do not
+     depend on them. So any z feasible for tighter limits is feasible for looser ones, and
+     the optimum of the looser problem is no slower.
+  2. Limit-free starts. The RANDOM_SEEDS random polynomials and their t_s spread depend on
+     the trigger state, tau_s and the contact window only (_random_seeds), so every limit
+     set is searched from the same starts; the bang-bang-bound fits are added per limits.
+  3. Every start is solved to a KKT point of the grid problem and the fastest CANDIDATES
+     are verified densely; the reported plan is the fastest verified one.
+  4. Independent checks: `perchd plan check` prints duration / bang-bang lower bound
+     (perchd.tau.bound); tests/tau/test_ipts_properties.py checks monotonicity in every
+     limit and re-derives each plan's X, V, A without this module.
+It is a multistart, not a proof: a basin no start reaches can be missed. When nothing is
+found, InfeasiblePlan carries a certificate: either a limit no trajectory of any order can
+meet (v_max below v0 or V_l; a_max below the braking the gap needs), or the closest plan
+of this order (least common factor on v_max, a_max) whose dense peaks say which limit is
+short and by how much; a higher order is suggested only once one is shown to plan.
 """
 
 from __future__ import annotations
@@ -24,7 +48,6 @@ import numpy as np
 from scipy.optimize import minimize
 
 from perchd.core.errors import PlanError
-from perchd.tau.bound import min_time_bound
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan, check_trigger, make_plan
 
@@ -35,6 +58,7 @@ CANDIDATES = 4     # best grid solutions tried through dense verification
 VERIFY_TOL = 1e-9  # relative overshoot of a limit accepted by the dense check
 TIGHTEN_MARGIN = 1e-8  # extra relative tightening when a peak slipped between grid nodes
 UNBOUNDED = 1e3    # stands in for an unset v_max [m/s] or a_max [m/s^2]
+SWITCH_MARGIN = 1e-3  # how far (relative to 1/|tau_s|) q keeps from 1/tau_s before the switch
 
 
 @dataclass(frozen=True)
@@ -61,10 +85,16 @@ def _grid(n: int = GRID) -> np.ndarray:
 
 
 class _Model:
-    """Vectorised profiles on the u-grid and their Jacobians w.r.t. z = (m_1..m_n, t_s)."""
+    """Vectorised profiles on the u-grid and their Jacobians w.r.t. z = (m_1..m_n, t_s).
 
-    def __init__(self, prob: Problem, u: np.ndarray, a_max: float, v_max: float) -> None:
+    Every constraint row is divided by its own scale (v_max, a_max, V_u, |1/tau_s|), so all
+    rows are O(1) whatever the limits: SLSQP's merit function weighs them alike, and a loose
+    limit neither swamps nor vanishes beside the others."""
+
+    def __init__(self, prob: Problem, u: np.ndarray, a_max: float, v_max: float,
+                 switch_margin: float = SWITCH_MARGIN) -> None:
         self.p, self.u, self.a_max, self.v_max = prob, u, a_max, v_max
+        self.switch_margin = switch_margin
         i = np.arange(1, prob.order + 1)
         self.U = u[:, None] ** i                                  # d q / d m_i
         self.dU = i * u[:, None] ** (i - 1)                        # d q' / d m_i
@@ -88,7 +118,7 @@ class _Model:
         dg[:, -1] -= dq / ts ** 2
         A = -S * g
         dA = -(dS * g[:, None] + S[:, None] * dg)
-        return q, dq_z, V, dV, A, dA
+        return q, dq_z, V, dV, A, dA, dq, ddq_z
 
     def constraints(self, z: np.ndarray) -> np.ndarray:
         return self._both(z)[0]
@@ -103,17 +133,22 @@ class _Model:
         return self._val
 
     def _assemble(self, z):
-        q, dq, V, dV, A, dA = self.eval(z)
+        q, dq, V, dV, A, dA, slope, dslope = self.eval(z)
         lo, hi = self.p.limits.v_contact
-        inner = slice(0, -1)
+        q_s = -1.0 / self.p.tau_s            # |q| at the switch: the scale of q
+        margin = self.switch_margin * (1.0 - self.u[:-1])
+        v_c = max(hi, self.p.v0)             # a speed scale that is never 0
         rows = [
-            (self.v_max - V, -dV),
-            (self.a_max - A, -dA),
-            (self.a_max + A, dA),
-            (-q, -dq),                                    # closing, tau negative
-            (q[inner] - 1.0 / self.p.tau_s, dq[inner]),   # tau_s not reached before t_s
-            (V[-1:] - lo, dV[-1:]),                       # V(t_s) = V_c within limits
-            (hi - V[-1:], -dV[-1:]),
+            ((self.v_max - V) / self.v_max, -dV / self.v_max),
+            ((self.a_max - A) / self.a_max, -dA / self.a_max),
+            ((self.a_max + A) / self.a_max, dA / self.a_max),
+            (-q / q_s, -dq / q_s),                        # closing, tau negative
+            # tau_s is not reached before t_s, by a margin shrinking to 0 at the switch ...
+            ((q[:-1] - 1.0 / self.p.tau_s) / q_s - margin, dq[:-1] / q_s),
+            # ... where tau crosses tau_s with a slope, not tangentially (a simple root).
+            (-slope[-1:] / q_s - self.switch_margin, -dslope[-1:] / q_s),
+            ((V[-1:] - lo) / v_c, dV[-1:] / v_c),         # V(t_s) = V_c within limits
+            ((hi - V[-1:]) / v_c, -dV[-1:] / v_c),
         ]
         return np.concatenate([r[0] for r in rows]), np.vstack([r[1] for r in rows])
 
@@ -156,12 +191,17 @@ def _fit(prob: Problem, u, target, ts) -> np.ndarray:
     return np.append(m, ts)
 
 
-def _random_seeds(prob: Problem, ts0: float, count: int, rng) -> list[np.ndarray]:
+def _random_seeds(prob: Problem, count: int, rng) -> list[np.ndarray]:
+    """Random polynomials on the switch equality, t_s spread about a time scale of the state
+    alone: the same starts for any limits, so loosening a limit never loses a start."""
+    lo, hi = prob.limits.v_contact
+    gap = -prob.x0 + prob.tau_s * (lo + hi) / 2
+    ts_free = gap / max(prob.v0, (lo + hi) / 2)
     seeds = []
     for _ in range(count):
         m = rng.normal(0.0, 2.0 * abs(prob.m_sum), prob.order)
         m[-1] = prob.m_sum - m[:-1].sum()
-        seeds.append(np.append(m, ts0 * rng.uniform(0.8, 1.6)))
+        seeds.append(np.append(m, ts_free * rng.uniform(0.5, 1.5)))
     return seeds
 
 
@@ -193,20 +233,49 @@ def _to_plan(prob: Problem, z: np.ndarray) -> Plan | None:
 
 def plan_ipts(x0: float, v0: float, tau_s: float, v_contact: tuple[float, float],
               v_max: float | None, a_max: float | None, order: int = 3, *,
-              seed: int = 0, starts: int = RANDOM_SEEDS) -> Plan:
-    """The minimum-time IPTS plan of `order` (1..MAX_ORDER) meeting every limit, verified densely."""
+              seed: int = 0, starts: int = RANDOM_SEEDS, probe_orders: bool = True) -> Plan:
+    """The minimum-time IPTS plan of `order` (1..MAX_ORDER) meeting every limit, verified
+    densely. Otherwise InfeasiblePlan, naming the limit that is short and by how much, and
+    (probe_orders) the lowest higher order that does plan, if one up to MAX_ORDER does."""
     prob = _problem(x0, v0, tau_s, v_contact, v_max, a_max, order)
     a_lim = a_max if a_max is not None else UNBOUNDED
     v_lim = v_max if v_max is not None else UNBOUNDED
-    seeds, _ = _seeds(prob, a_lim, v_lim, starts, seed)
+    short = _any_plan_shortfalls(prob, a_lim, v_lim)
+    if short:
+        why = "; ".join(map(str, short))
+        raise InfeasiblePlan(f"no plan of any order can meet the limits: {why}", short, True)
+    seeds = _seeds(prob, a_lim, v_lim, starts, seed)
     model = _Model(prob, _grid(), a_lim, v_lim)
+    plan = _search(prob, model, seeds)
+    if plan is not None:
+        return plan
+    near = _least_relaxed(prob, a_lim, v_lim, seeds)
+    if near is not None and _meets(near, a_lim, v_lim):
+        # The starts missed, but the least-relaxed plan fits: descend in time from it.
+        z = _solve_from(model, _z_of(near), prob)
+        return (None if z is None else _verified(prob, z, a_lim, v_lim)) or near
+    higher = _lowest_order_that_plans(prob, a_lim, v_lim, seed, starts) if probe_orders else None
+    raise _infeasible(prob, a_lim, v_lim, near, higher, probe_orders)
+
+
+def _search(prob: Problem, model: _Model, seeds) -> Plan | None:
+    """SLSQP from every start; the fastest grid optima are verified densely, best first."""
     found = sorted((z for z0 in seeds if (z := _solve_from(model, z0, prob)) is not None),
                    key=lambda z: z[-1])
     for z in found[:CANDIDATES]:
-        plan = _verified(prob, z, a_lim, v_lim)
+        plan = _verified(prob, z, model.a_max, model.v_max)
         if plan is not None:
             return plan
-    raise PlanError(_infeasible_reason(prob, a_lim, v_lim))
+    return None
+
+
+def _meets(plan: Plan, a_lim: float, v_lim: float) -> bool:
+    return plan.peaks.a <= a_lim * (1 + VERIFY_TOL) and plan.peaks.v <= v_lim * (1 + VERIFY_TOL)
+
+
+def _z_of(plan: Plan) -> np.ndarray:
+    ts = plan.t_switch
+    return np.array([k * ts ** i for i, k in enumerate(plan.k)][1:] + [ts])
 
 
 def plan_ipts_from(x0: float, v0: float, tau_s: float, v_contact: tuple[float, float],
@@ -226,20 +295,22 @@ def plan_ipts_from(x0: float, v0: float, tau_s: float, v_contact: tuple[float, f
 
 def _verified(prob: Problem, z: np.ndarray, a_lim: float, v_lim: float) -> Plan | None:
     """Check the grid solution densely; where a peak slipped between nodes, tighten that
-    limit by the overshoot and re-solve from here, a few times at most."""
-    a_eff, v_eff = a_lim, v_lim
+    limit by the overshoot, and where tau reached tau_s between nodes before the switch,
+    widen the switch margin; then re-solve from here, a few times at most."""
+    a_eff, v_eff, margin = a_lim, v_lim, SWITCH_MARGIN
     for _ in range(6):
         plan = _to_plan(prob, z)
         if plan is None:
-            return None
-        over_a, over_v = plan.peaks.a / a_lim, plan.peaks.v / v_lim
-        if over_a <= 1 + VERIFY_TOL and over_v <= 1 + VERIFY_TOL:
-            return plan
-        # A margin of 1e-8 past the overshoot: the next solve lands inside, rather than
-        # creeping up on the limit in steps SLSQP can no longer resolve (it fails near 1e-9).
-        a_eff /= max(over_a, 1.0) * (1 + TIGHTEN_MARGIN)
-        v_eff /= max(over_v, 1.0) * (1 + TIGHTEN_MARGIN)
-        z = _solve_from(_Model(prob, _grid(), a_eff, v_eff), z, prob)
+            margin *= 4
+        else:
+            over_a, over_v = plan.peaks.a / a_lim, plan.peaks.v / v_lim
+            if over_a <= 1 + VERIFY_TOL and over_v <= 1 + VERIFY_TOL:
+                return plan
+            # A margin of 1e-8 past the overshoot: the next solve lands inside, rather than
+            # creeping up on the limit in steps SLSQP can no longer resolve (fails near 1e-9).
+            a_eff /= max(over_a, 1.0) * (1 + TIGHTEN_MARGIN)
+            v_eff /= max(over_v, 1.0) * (1 + TIGHTEN_MARGIN)
+        z = _solve_from(_Model(prob, _grid(), a_eff, v_eff, margin), z, prob)
         if z is None:
             return None
     return None
@@ -259,22 +330,116 @@ def _problem(x0, v0, tau_s, v_contact, v_max, a_max, order) -> Problem:
     return Problem(x0, v0, tau_s, Limits(tuple(v_contact), v_max, a_max), order)
 
 
-def _seeds(prob, a_lim, v_lim, starts, seed):
+def _seeds(prob: Problem, a_lim: float, v_lim: float, starts: int, seed: int):
     lo, hi = prob.limits.v_contact
     seeds = [s for v_c in np.linspace(lo, hi, 4)
              if (s := _seed_from_bound(prob, float(v_c), a_lim, v_lim)) is not None]
-    ts0 = float(np.median([s[-1] for s in seeds])) if seeds else -prob.x0 / prob.v0
-    return seeds + _random_seeds(prob, ts0, starts, np.random.default_rng(seed)), ts0
+    return seeds + _random_seeds(prob, starts, np.random.default_rng(seed))
 
 
-def _infeasible_reason(prob: Problem, a_lim: float, v_lim: float) -> str:
-    bound, _ = min_time_bound(prob.x0, prob.v0, prob.tau_s, prob.limits.v_contact, a_lim, v_lim)
+@dataclass(frozen=True)
+class Shortfall:
+    """A limit that no plan (or no plan of this order) can meet: `limit` is 'v_max' [m/s]
+    or 'a_max' [m/s^2]; `given` is the value asked for, `needed` the least that works
+    (for an order-specific shortfall: the peak of a verified plan that meets the rest)."""
+
+    limit: str
+    given: float
+    needed: float
+
+    @property
+    def unit(self) -> str:
+        return "m/s" if self.limit == "v_max" else "m/s^2"
+
+    def __str__(self) -> str:
+        return (f"{self.limit} = {self.given:g} {self.unit}: short by "
+                f"{self.needed - self.given:.4g} {self.unit} (needs {self.needed:.4f})")
+
+
+class InfeasiblePlan(PlanError):
+    """No plan found, with its certificate: the shortfalls, whether they bind every plan
+    (`any_order`) or this order only, and the lowest higher order that does plan, if any."""
+
+    def __init__(self, message: str, shortfalls: tuple[Shortfall, ...], any_order: bool,
+                 higher_order: int | None = None) -> None:
+        super().__init__(message)
+        self.shortfalls, self.any_order, self.higher_order = shortfalls, any_order, higher_order
+
+
+def _infeasible(prob: Problem, a_lim: float, v_lim: float, near: Plan | None,
+                higher: tuple[int, float] | None, probed: bool) -> InfeasiblePlan:
+    """Why no order-n plan was found: the closest plan's shortfalls, and what order helps."""
     lo, hi = prob.limits.v_contact
-    if not math.isfinite(bound):
-        need = (prob.v0 ** 2 - hi ** 2) / (2 * (-prob.x0 - hi * -prob.tau_s))
-        return (f"a_max = {a_lim:g} m/s^2 cannot brake from v0 = {prob.v0:g} to V_u = {hi:g} "
-                f"m/s in time: it needs at least {need:.4f} m/s^2 "
-                f"(short by {need - a_lim:.4f} m/s^2)")
-    return (f"no order-{prob.order} IPTS plan meets v_contact [{lo:g}, {hi:g}] m/s, "
-            f"v_max {v_lim:g} m/s and a_max {a_lim:g} m/s^2 from x0 = {prob.x0:g} m, "
-            f"v0 = {prob.v0:g} m/s; try a higher --order")
+    unset = " (unset)"
+    head = (f"no order-{prob.order} IPTS plan meets v_contact [{lo:g}, {hi:g}] m/s, v_max "
+            f"{v_lim:g} m/s{unset * (prob.limits.v_max is None)} and a_max {a_lim:g} m/s^2"
+            f"{unset * (prob.limits.a_max is None)} from x0 = {prob.x0:g} m, v0 = "
+            f"{prob.v0:g} m/s")
+    if near is None:
+        short: tuple[Shortfall, ...] = ()
+        why = "no polynomial of this order reaches the contact window at all"
+    else:
+        short = tuple(Shortfall(name, given, peak) for name, given, peak in
+                      (("v_max", v_lim, near.peaks.v), ("a_max", a_lim, near.peaks.a))
+                      if peak > given)
+        why = (f"the closest order-{prob.order} plan found ({near.duration:.4f} s, peak "
+               f"speed {near.peaks.v:.4f} m/s, peak |accel| {near.peaks.a:.4f} m/s^2) "
+               f"breaks " + " and ".join(map(str, short)))
+    if higher is not None:
+        why += f"; order {higher[0]} meets every limit ({higher[1]:.4f} s): use --order {higher[0]}"
+    elif probed and prob.order < MAX_ORDER:
+        why += f"; no order up to {MAX_ORDER} meets them either"
+    return InfeasiblePlan(f"{head}: {why}", short, False, higher and higher[0])
+
+
+def _any_plan_shortfalls(prob: Problem, a_lim: float, v_lim: float) -> tuple[Shortfall, ...]:
+    """Limits no trajectory at all can meet: speed limits below the trigger or contact speed,
+    or too little deceleration to brake to V_u over the gap (the bang-bang bound is inf)."""
+    lo, hi = prob.limits.v_contact
+    if v_lim < max(prob.v0, lo):
+        return (Shortfall("v_max", v_lim, max(prob.v0, lo)),)
+    v_c = np.linspace(lo, hi, 201)
+    gap = -prob.x0 + prob.tau_s * v_c
+    need = float(np.min(np.maximum(prob.v0 ** 2 - v_c ** 2, 0.0) / (2 * gap)))
+    return (Shortfall("a_max", a_lim, need),) if need > a_lim else ()
+
+
+def _least_relaxed(prob: Problem, a_lim: float, v_lim: float, seeds) -> Plan | None:
+    """The plan of this order needing the least common factor on v_max and a_max, every
+    other constraint met: minimise lam with V <= lam v_max, |A| <= lam a_max. Its dense
+    peaks are what the limits would have to be; the plan itself is the witness."""
+    model = _Model(prob, _grid(), a_lim, v_lim)
+    found = sorted((w for z0 in seeds if (w := _relax_from(model, z0, prob)) is not None),
+                   key=lambda w: w[-1])
+    return next((plan for w in found[:CANDIDATES] if (plan := _to_plan(prob, w[:-1]))), None)
+
+
+def _relax_from(model: _Model, z0: np.ndarray, prob: Problem) -> np.ndarray | None:
+    from scipy.optimize import minimize
+
+    n, g = prob.order, len(model.u)
+    on_limits = np.zeros(len(model.constraints(z0)))
+    on_limits[:3 * g] = 1.0                      # the v_max and both a_max rows come first
+    lam0 = 1.0 + max(0.0, -float(model.constraints(z0)[:3 * g].min()))
+    eq = {"type": "eq", "fun": lambda w: np.array([w[:n].sum() - prob.m_sum]),
+          "jac": lambda w: np.append(np.ones(n), [0.0, 0.0])[None, :]}
+    ineq = {"type": "ineq",
+            "fun": lambda w: model.constraints(w[:-1]) + (w[-1] - 1.0) * on_limits,
+            "jac": lambda w: np.hstack([model.jacobian(w[:-1]), on_limits[:, None]])}
+    res = minimize(lambda w: w[-1], np.append(z0, lam0),
+                   jac=lambda w: np.append(np.zeros(n + 1), 1.0), method="SLSQP",
+                   bounds=[(None, None)] * n + [(1e-3, 60.0), (1.0, None)],
+                   constraints=[eq, ineq], options={"maxiter": 300, "ftol": 1e-12})
+    return res.x if res.success else None
+
+
+def _lowest_order_that_plans(prob: Problem, a_lim: float, v_lim: float, seed: int,
+                             starts: int) -> tuple[int, float] | None:
+    """(order, duration [s]) of the lowest order above prob's that meets every limit."""
+    for order in range(prob.order + 1, MAX_ORDER + 1):
+        higher = Problem(prob.x0, prob.v0, prob.tau_s, prob.limits, order)
+        plan = _search(higher, _Model(higher, _grid(), a_lim, v_lim),
+                       _seeds(higher, a_lim, v_lim, starts, seed))
+        if plan is not None:
+            return order, plan.duration
+    return None

@@ -115,7 +115,8 @@ def build_library(x0: tuple[float, float], v0: tuple[float, float], counts: tupl
         row = []
         for j, v in enumerate(v0s):
             try:
-                plan = plan_ipts(x, v, tau_s, v_contact, v_max, a_max, order)
+                plan = plan_ipts(x, v, tau_s, v_contact, v_max, a_max, order,
+                                 probe_orders=False)  # a hole needs no order advice
                 row.append(Node(tuple(plan.k), plan.t_switch))
             except PlanError as err:  # infeasible here; the file records the hole
                 row.append(None)

@@ -103,8 +103,9 @@ def test_perchd_plan_library_with_an_empty_range_is_one_line_and_exit_2(tmp_path
 def test_the_supervisor_replans_from_the_library_at_the_measured_trigger(tmp_path):
     sys.path.insert(0, str(ROOT / "tests" / "closedloop"))
     from simflight import NOISY, Sim
-    from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
+
     from perchd.core.types import EndReason
+    from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
 
     plan = load_plan(ROOT / "plans" / "case1-ipts-n3.json")
     cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN, library=str(LIBRARY)))

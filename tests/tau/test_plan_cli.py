@@ -51,7 +51,7 @@ BAD = [
     (["ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0",
       "--v-max", "2.5", "--a-max", "0.2"], "a_max = 0.2"),
     (["ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0",
-      "--order", "9"], "order"),
+      "--order", "10"], "order must be 1..9"),
     (["check", "/nonexistent/plan.json"], "cannot read"),
     (["ipts", "--x0", "-3"], "required"),
 ]

@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 import pytest
-
 from integrate import fly_tau, ipts_tau
+
 from perchd.tau import plan_bound, plan_ctds, plan_ctdts, plan_ipts
 
 X0, V0, TAU_S = -3.0, 1.5, -0.5
