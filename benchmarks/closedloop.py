@@ -80,9 +80,10 @@ def measure(seeds: int, logdir: Path) -> dict:
 def realtime_jitter(logdir: Path) -> dict:
     """One noisy IPTS perch on the real clock: the loop's jitter and compute time [us]."""
     from perchd.drivers.base import open_driver
+
+    from perchd.core.runtime import Runtime
     from perchd.flight.run import fly
     from perchd.mocap.base import open_source
-    from perchd.core.runtime import Runtime
     rt = Runtime.real()
     driver = open_driver("sim://?latency=0.02&noise=0.001", rt)
     source = open_source("sim://", rt)

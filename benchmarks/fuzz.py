@@ -31,8 +31,8 @@ import os
 import random
 import shutil
 import signal
-import statistics
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -41,15 +41,16 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from perchd.core.clock import ManualClock, MonotonicClock
-from perchd.mocap.natnet import models as natdefs, protocol as proto
-from perchd.mocap.natnet.uris import NatNetServer, open_natnet
-from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
-from perchd.mocap.natnet.clock import ClockSync
-from perchd.mocap.natnet.frame import decode_frame
-from perchd.mocap.natnet.wire import MalformedPacket
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import parse_uri
+from perchd.mocap.natnet import models as natdefs
+from perchd.mocap.natnet import protocol as proto
+from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
+from perchd.mocap.natnet.clock import ClockSync
+from perchd.mocap.natnet.frame import decode_frame
+from perchd.mocap.natnet.uris import NatNetServer, open_natnet
+from perchd.mocap.natnet.wire import MalformedPacket
 
 FIXTURES = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet"
 OLD_MOTIVE = {"1.5.0": (2, 5), "1.7.2": (2, 7), "1.9.0": (2, 9)}  # NatNet of each Motive 1.x

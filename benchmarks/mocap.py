@@ -22,17 +22,23 @@ import time
 from pathlib import Path
 
 from perchd.core.clock import MonotonicClock
-from perchd.mocap.natnet import protocol as proto
-from perchd.mocap.frames import UpAxis
-from perchd.mocap.natnet.uris import NatNetServer, open_natnet
-from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
-from perchd.mocap.natnet.clock import ClockSync
-from perchd.mocap.natnet.frame import Frame, RigidBodySample, Timing, decode_frame, encode_frame
-from perchd.mocap.zmq import ZmqPosePublisher
-from perchd.mocap.base import open_source
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import parse_uri
+from perchd.mocap.base import open_source
+from perchd.mocap.frames import UpAxis
+from perchd.mocap.natnet import protocol as proto
+from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
+from perchd.mocap.natnet.clock import ClockSync
+from perchd.mocap.natnet.frame import (
+    Frame,
+    RigidBodySample,
+    Timing,
+    decode_frame,
+    encode_frame,
+)
+from perchd.mocap.natnet.uris import NatNetServer, open_natnet
+from perchd.mocap.zmq import ZmqPosePublisher
 
 SESSION = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet" / \
     "motive-2.1-session" / "packets"

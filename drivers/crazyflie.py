@@ -41,6 +41,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, without_query
+from perchd.core.vehicle import CRAZYFLIE_HOVER_UNITS, CRAZYFLIE_MASS_KG
 
 KEEPALIVE_S = 0.1
 """[s] silence after which the keep-alive re-sends (the firmware levels at 0.5 s, cuts at 2 s)."""
@@ -68,8 +69,8 @@ def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
     require("cflib", "crazyflie")
     if uri.scheme == "radio":
         _check_radio(uri)
-    hover = float_param(uri, "hover", 36000.0, 1000, 60000, " units")
-    mass = float_param(uri, "mass", 0.030, 0.010, 0.100, " kg")
+    hover = float_param(uri, "hover", CRAZYFLIE_HOVER_UNITS, 1000, 60000, " units")
+    mass = float_param(uri, "mass", CRAZYFLIE_MASS_KG, 0.010, 0.100, " kg")
     timeout = float_param(uri, "timeout", 0.5, 0.01, 10.0, " s")
     model = CrazyflieThrust(hover_units=hover, mass_kg=mass)
     return CrazyflieDriver(uri.raw, without_query(uri), runtime, model, timeout,

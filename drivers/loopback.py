@@ -1,4 +1,4 @@
-"""`sim://[NAME][?latency=S&noise=M&...]`: the in-process simulated vehicle (perchd.sim).
+"""`sim://[?latency=S&noise=M&...]`: the in-process simulated vehicle (perchd.sim).
 
 The reference driver: it keeps the Driver protocol's promises with no radio in between.
 Setpoints go to the shared SimWorld's plant (after the configured command latency); the
@@ -32,23 +32,22 @@ class LoopbackDriver(DriverBase):
         self._connected, self._stopped = True, False
 
     def send(self, setpoint: Setpoint) -> None:
-        if self._connected and not self._stopped and self.world.faults.link_ok:
+        if self._connected and not self._stopped and self.world.link_ok:
             self.world.command(setpoint)
 
     def failsafe(self, reason: EndReason) -> None:
         self.failsafe_reasons.append(reason)
         if not self._stopped:
-            self.world.failsafes.append(reason)
-            self.world.command(Setpoint.stop(self.world.clock.now()))
+            self.world.failsafe(reason)
         self._stopped = True
 
     def health(self) -> LinkHealth:
         if not self._connected:
             return LinkHealth(False, 0.0, "not connected")
-        if not self.world.faults.link_ok:
+        if not self.world.link_ok:
             return LinkHealth(False, 0.0, "simulated link cut")
         # The simulated link's echo would cross its command latency both ways.
-        return LinkHealth(True, 0.0, rtt_s=2.0 * self.world.params.plant.latency_s)
+        return LinkHealth(True, 0.0, rtt_s=2.0 * self.world.command_latency_s)
 
     def close(self) -> None:
         if self._connected and not self._stopped:  # motors off, like every driver's close

@@ -9,8 +9,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-G = 9.81
-"""[m/s^2] gravity used for hover calibrations (the paper's docs/errata.md §8 value)."""
+from perchd.core.vehicle import CRAZYFLIE_HOVER_UNITS, CRAZYFLIE_MASS_KG, G_M_S2
+
+G = G_M_S2
+"""[m/s^2] gravity used for hover calibrations (docs/errata.md §8)."""
 
 CF_UNITS_MAX = 0xFFFF
 """Largest thrust cflib's send_setpoint accepts (the firmware clamps to 60000 itself)."""
@@ -32,8 +34,8 @@ class CrazyflieThrust:
     Set mass/hover per vehicle (driver URI ?mass=KG&hover=UNITS) after a hover test.
     """
 
-    hover_units: float = 36000.0
-    mass_kg: float = 0.030
+    hover_units: float = CRAZYFLIE_HOVER_UNITS
+    mass_kg: float = CRAZYFLIE_MASS_KG
 
     A = 2.130295e-11
     """[N / unit^2] per motor."""

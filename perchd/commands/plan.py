@@ -6,12 +6,11 @@ import argparse
 import json
 import sys
 
-from perchd.tau.ipts import MAX_ORDER, UNBOUNDED
-
 from perchd.commands.plan_library import register as register_library
 from perchd.commands.plan_robust import register as register_robust
 from perchd.logs.planplot import plot_plan
 from perchd.tau import load_plan, plan_ctds, plan_ctdts, plan_ipts, report, save_plan
+from perchd.tau.ipts import MAX_ORDER, UNBOUNDED
 
 
 def register(sub) -> None:

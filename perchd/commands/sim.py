@@ -28,27 +28,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
-
-import zmq
 
 from perchd.commands import campaign as campaign_cli
 from perchd.commands.campaign import add_arguments
 from perchd.core.clock import MonotonicClock
-from perchd.core.errors import LinkError, UriError
-from perchd.core.netbind import check_bind
-from perchd.core.types import Setpoint
-from perchd.core.uri import parse_uri
-from perchd.core.uriparams import bool_param
-from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message
+from perchd.core.errors import UriError
 from perchd.mocap.outputs import open_pose_output
 from perchd.sim.plant import PlantParams
+from perchd.sim.receiver import Counts, SetpointInbox
 from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 
@@ -85,75 +77,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_arguments(p)
     p.set_defaults(run=run)
-
-
-@dataclass
-class Counts:
-    setpoints: int = 0
-    stops: int = 0
-    rejected: int = 0
-    poses: int = 0
-    stop_at: float | None = None  # time.monotonic() of the first stop
-
-
-class SetpointInbox:
-    """SUB bound at --setpoint-in: setpoints and stops for `body` go to the world, through
-    the vehicle's setpoint watchdog (checked on this thread, between messages)."""
-
-    def __init__(self, text: str, world: Any, body: str, counts: Counts,
-                 watchdog: WatchdogParams | None = None) -> None:
-        uri = parse_uri(text)
-        if uri.scheme != "zmq" or not uri.host or uri.port is None:
-            raise UriError(f"--setpoint-in {text}: expected zmq://HOST:PORT")
-        check_bind(uri.host, bool_param(uri, "public"), f"--setpoint-in {text}")
-        self.world, self.body, self.counts = world, body, counts
-        self.watchdog = SetpointWatchdog(watchdog or WatchdogParams(), world.command)
-        self.sock = zmq.Context.instance().socket(zmq.SUB)
-        self.sock.setsockopt(zmq.LINGER, 0)
-        try:
-            self.sock.bind(f"tcp://{uri.host}:{uri.port}")
-        except zmq.ZMQError as err:
-            self.sock.close()
-            raise LinkError(f"--setpoint-in {text}: cannot bind: {err}") from None
-        for topic in (b"setpoint", b"stop"):
-            self.sock.setsockopt(zmq.SUBSCRIBE, topic)
-        port = self.sock.getsockopt(zmq.LAST_ENDPOINT).decode().rsplit(":", 1)[1]
-        self.uri = f"zmq://{uri.host}:{port}?vehicle={body}"
-        self._alive = True
-        self._thread = threading.Thread(target=self._serve, name="sim-setpoints", daemon=True)
-        self._thread.start()
-
-    def _serve(self) -> None:
-        while self._alive:
-            due = self.watchdog.check(self.world.clock.now())
-            wait_ms = 50 if due is None else max(1, min(50, math.ceil(1000 * due)))
-            if self.sock.poll(wait_ms):
-                frames = self.sock.recv_multipart()
-                if len(frames) != 2:  # not [topic, JSON]: counted, never fatal
-                    self.counts.rejected += 1
-                    continue
-                self.handle(*frames)
-
-    def handle(self, topic: bytes, body: bytes) -> None:
-        if topic == b"stop":
-            self.counts.stops += 1
-            self.counts.stop_at = self.counts.stop_at or time.monotonic()
-            self.world.command(Setpoint.stop(self.world.clock.now()))
-            self.watchdog.stopped()
-            return
-        try:
-            vehicle, _, sp = parse_setpoint_message(body)
-        except BadSetpoint:
-            self.counts.rejected += 1  # counted, never fatal: the sim outlives a bad sender
-            return
-        if vehicle in ("", self.body):
-            self.counts.setpoints += 1  # received; the thrust lock may refuse it
-            self.watchdog.feed(sp, self.world.clock.now())
-
-    def close(self) -> None:
-        self._alive = False
-        self._thread.join(timeout=1.0)
-        self.sock.close()
 
 
 def make_world(args: argparse.Namespace) -> Any:

@@ -14,8 +14,15 @@ import math
 from dataclasses import dataclass
 
 from perchd.core.errors import ConfigError
+from perchd.core.vehicle import (
+    CRAZYFLIE_HOVER_UNITS,
+    CRAZYFLIE_MASS_KG,
+    CRAZYFLIE_THRUST_MAX_N,
+    CRAZYFLIE_THRUST_MIN_N,
+    G_M_S2,
+)
 
-UNIT_ACCEL = 9.81 / 36000.0
+UNIT_ACCEL = G_M_S2 / CRAZYFLIE_HOVER_UNITS
 """[m/s^2] acceleration of one paper thrust unit (docs/errata.md §8)."""
 
 
@@ -29,10 +36,10 @@ class VehicleConfig:
     """mass_kg [kg]; thrust_min_n/thrust_max_n [N] collective limits while flying (the paper's
     eq. 26 clamps 10000..65000 units: about 0.07 N and 0.53 N for 30 g); g [m/s^2]."""
 
-    mass_kg: float = 0.030
-    thrust_min_n: float = 0.08
-    thrust_max_n: float = 0.58
-    g: float = 9.81
+    mass_kg: float = CRAZYFLIE_MASS_KG
+    thrust_min_n: float = CRAZYFLIE_THRUST_MIN_N
+    thrust_max_n: float = CRAZYFLIE_THRUST_MAX_N
+    g: float = G_M_S2
 
 
 @dataclass(frozen=True)

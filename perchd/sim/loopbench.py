@@ -35,8 +35,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import zmq
-
 from perchd.core.clock import MonotonicClock
 from perchd.core.runtime import Runtime
 from perchd.core.types import LinkHealth, Phase, Pose, Setpoint
@@ -49,6 +47,7 @@ from perchd.flight.loop import NO_SEQ, FixedRateLoop, spread
 from perchd.flight.supervisor import Conditions, Supervisor
 from perchd.mocap.base import open_source
 from perchd.mocap.zmq import ZmqPosePublisher
+from perchd.sim.receiver import bind_setpoint_socket
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 from perchd.tau import plan_ipts, save_plan
 from perchd.tau.cases import CASES
@@ -163,12 +162,7 @@ class Rig:
     def __init__(self, mocap_hz: float) -> None:
         self.mocap_hz = mocap_hz
         self.pub = ZmqPosePublisher("tcp://127.0.0.1:0")
-        self.sub = zmq.Context.instance().socket(zmq.SUB)
-        self.sub.setsockopt(zmq.LINGER, 0)
-        for topic in (b"setpoint", b"stop"):
-            self.sub.setsockopt(zmq.SUBSCRIBE, topic)
-        self.sub.bind("tcp://127.0.0.1:*")
-        port = self.sub.getsockopt(zmq.LAST_ENDPOINT).decode().rsplit(":", 1)[1]
+        self.sub, port = bind_setpoint_socket("127.0.0.1", 0, "loop benchmark rig")
         self.driver_uri = f"zmq://127.0.0.1:{port}?vehicle=cf1&wait=10"
         self.mocap_uri = self.pub.uri("cf1")
 

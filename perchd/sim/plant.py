@@ -15,6 +15,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from perchd.core.types import Setpoint, Vec3
+from perchd.core.vehicle import CRAZYFLIE_MASS_KG, G_M_S2
 from perchd.flight.frame import body_z
 
 
@@ -25,13 +26,13 @@ class PlantParams:
     latency_s [s] command delay; drag_per_s [1/s] linear drag coefficient; g [m/s^2];
     step_s [s] integration step."""
 
-    mass_kg: float = 0.030
+    mass_kg: float = CRAZYFLIE_MASS_KG
     thrust_max_n: float = 0.60
     attitude_tau_s: float = 0.07
     motor_tau_s: float = 0.03
     latency_s: float = 0.0
     drag_per_s: float = 0.0
-    g: float = 9.81
+    g: float = G_M_S2
     step_s: float = 0.001
 
 

@@ -1,7 +1,7 @@
 """The simulated world: one plant, a surface that registers contact, and a mocap model.
 
-The `sim://` driver and the `sim://` mocap source share one world through Runtime.sim (or,
-for tests that hold two runtimes, a world named by the URI host: `sim://rig1`). The world is
+The `sim://` driver and the `sim://` mocap source share one world through Runtime.sim
+(perchd.sim.session puts it there). The world is
 lazy: it integrates the plant up to runtime.clock.now() whenever it is asked for a pose or
 given a setpoint, so with a ManualClock the control loop's sleep_until drives simulated time
 and a 3 s flight runs in a few hundred milliseconds of wall time.
@@ -18,20 +18,18 @@ import math
 import random
 import threading
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Callable
 
+from perchd.core.clock import Clock
 from perchd.core.errors import UriError
 from perchd.core.runtime import Runtime
-from perchd.core.types import Pose, Setpoint, Vec3
+from perchd.core.types import EndReason, Pose, Setpoint, Vec3
 from perchd.core.uri import Uri
 from perchd.core.uriparams import float_param
 from perchd.mocap.base import SourceStats
 from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
 from perchd.sim.stall import Stall, stall_from_uri
-
-_NAMED: dict[str, "SimWorld"] = {}
-_NAMED_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -84,7 +82,7 @@ class Faults:
 
 
 class SimWorld:
-    def __init__(self, params: WorldParams, clock: Any) -> None:
+    def __init__(self, params: WorldParams, clock: Clock) -> None:
         self.params = params
         self.clock = clock
         sp, n = params.surface_point, params.surface_normal
@@ -98,7 +96,7 @@ class SimWorld:
             self.faults.at.append((self.t0 + params.stall.at_s, params.stall))
         self.contact: Contact | None = None
         self.sent: list[Setpoint] = []
-        self.failsafes: list[Any] = []
+        self.failsafes: list[EndReason] = []
         n = params.surface_normal
         norm = math.sqrt(sum(c * c for c in n))
         self._n = tuple(c / norm for c in n)
@@ -157,6 +155,21 @@ class SimWorld:
         self.plant.freeze()
 
     # --- the driver side --------------------------------------------------------------------
+    @property
+    def link_ok(self) -> bool:
+        """The simulated radio link is up (tests cut it through faults.link_ok)."""
+        return self.faults.link_ok
+
+    @property
+    def command_latency_s(self) -> float:
+        """[s] from a setpoint's sending to its reaching the vehicle."""
+        return self.params.plant.latency_s
+
+    def failsafe(self, reason: EndReason) -> None:
+        """The driver's failsafe: recorded, and the motors stopped."""
+        self.failsafes.append(reason)
+        self.command(Setpoint.stop(self.clock.now()))
+
     def command(self, sp: Setpoint) -> None:
         with self._lock:
             self.advance()
@@ -229,24 +242,13 @@ def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldPar
 
 
 def world_for(uri: Uri, runtime: Runtime) -> SimWorld:
-    """The runtime's world, created from this URI's options if it has none yet.
-
-    `sim://NAME` joins a process-wide world of that name instead (tests that open the
-    driver in one runtime and look at the vehicle from another)."""
+    """The runtime's world, created from this URI's options if it has none yet."""
     if uri.host:
-        with _NAMED_LOCK:
-            world = _NAMED.get(uri.host)
-            if world is None:
-                world = _NAMED[uri.host] = SimWorld(world_params_from_uri(uri), runtime.clock)
-            return world
+        raise UriError(f"{uri.raw}: sim:// takes no host; its options go in the query "
+                       "(sim://?latency=0.02&noise=0.001)")
     if runtime.sim is None:
         runtime.sim = SimWorld(world_params_from_uri(uri), runtime.clock)
     return runtime.sim
-
-
-def forget_named(name: str) -> None:
-    with _NAMED_LOCK:
-        _NAMED.pop(name, None)
 
 
 class SimMocap:

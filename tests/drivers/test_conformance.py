@@ -3,22 +3,18 @@
 from __future__ import annotations
 
 import pytest
-
-from rigs import MASS, NOT_HERE, RIGS, loopback_available
-from ticks import level, ticks_until_lost
-from ticks import wait_for as _wait
-from perchd.core.types import LinkHealth
 from perchd.drivers.base import DRIVERS, open_driver
 from perchd.drivers.thrust import G
-from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Phase, Setpoint
+from rigs import MASS, NOT_HERE, RIGS
+from ticks import level, ticks_until_lost
+from ticks import wait_for as _wait
+
+from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
 
 WEIGHT = MASS * G
 
 
 def rig_factory(scheme: str):
-    if scheme == "sim" and not loopback_available():
-        pytest.skip("drivers/loopback.py has not landed yet")
     if scheme in NOT_HERE:
         pytest.skip(NOT_HERE[scheme])
     return RIGS[scheme]
@@ -33,7 +29,7 @@ def rig(request):
 
 @pytest.fixture
 def driver(rig):
-    d = open_driver(rig.uri, Runtime.real())
+    d = open_driver(rig.uri, rig.runtime())
     d.connect()
     yield d
     d.close()
@@ -44,7 +40,7 @@ def test_every_registered_scheme_has_a_rig_or_a_reason():
 
 
 def test_opening_a_driver_does_not_connect_it(rig):
-    d = open_driver(rig.uri, Runtime.real())
+    d = open_driver(rig.uri, rig.runtime())
     assert d.uri == rig.uri
     health = d.health()
     assert isinstance(health, LinkHealth) and not health.ok
@@ -75,7 +71,7 @@ def test_failsafe_reaches_the_vehicle_is_idempotent_and_silences_later_setpoints
 
 
 def test_leaving_the_context_stops_a_flying_vehicle_and_closing_twice_is_harmless(rig):
-    with open_driver(rig.uri, Runtime.real()) as d:
+    with open_driver(rig.uri, rig.runtime()) as d:
         d.send(level(WEIGHT))
     assert _wait(rig.stopped)
     d.close()

@@ -8,13 +8,13 @@ import sys
 import time
 
 import pytest
-
 from crtp_responder import STOP, CrtpResponder
-from ticks import level, ticks_until_lost
 from perchd.drivers import crazyflie
 from perchd.drivers.base import open_driver
 from perchd.drivers.crazyflie import PING_S
 from perchd.drivers.thrust import CrazyflieThrust
+from ticks import level, ticks_until_lost
+
 from perchd.core.errors import LinkError, MissingExtraError, UriError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Pose, Setpoint

@@ -9,36 +9,17 @@ until the peer dies half a second in.
 from __future__ import annotations
 
 import threading
-import time
 
 import pytest
-
-from rigs import CrazyflieRig, MavlinkRig, ZmqRig
+from caseplans import case1_ipts
 from perchd.drivers.base import open_driver
+from rigs import CrazyflieRig, MavlinkRig, ZmqRig, bridge, kill_after
+
+import perchd.flight.run as flight
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason
 from perchd.logs.flightlog import read_log
 from perchd.mocap.base import open_source
-from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Phase, Setpoint
-
-flight = pytest.importorskip("perchd.flight.run", reason="the closed loop is not in this checkout")
-from caseplans import case1_ipts  # noqa: E402
-
-
-def bridge(rig, world, stop: threading.Event) -> None:
-    """What the peer understood is what the simulated vehicle does."""
-    last = None
-    while not stop.wait(0.002):
-        cmd = rig.commanded()
-        if cmd is not None and cmd != last:
-            last = cmd
-            world.command(Setpoint(world.clock.now(), cmd[0], cmd[1], 0.0, cmd[2], -1, Phase.HOLD))
-
-
-def kill_after(rig, world, n_setpoints: int, killed: list[float]) -> None:
-    while len(world.sent) < n_setpoints:
-        time.sleep(0.001)
-    rig.kill()
-    killed.append(time.monotonic())  # the peer's socket is closed: the link is dead now
 
 
 @pytest.mark.parametrize("rig_cls", [CrazyflieRig, MavlinkRig, ZmqRig],

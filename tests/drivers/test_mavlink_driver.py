@@ -9,15 +9,15 @@ import pytest
 
 pytest.importorskip("pymavlink")
 
-from pymavlink import mavutil  # noqa: E402
-from pymavlink.quaternion import Quaternion  # noqa: E402
+from mavlink_double import ARDUPILOT, PX4, VehicleDouble
+from perchd.drivers.base import open_driver
+from pymavlink import mavutil
+from pymavlink.quaternion import Quaternion
+from ticks import level, ticks_until_lost
 
-from mavlink_double import ARDUPILOT, PX4, VehicleDouble  # noqa: E402
-from ticks import level, ticks_until_lost  # noqa: E402
-from perchd.drivers.base import open_driver  # noqa: E402
-from perchd.core.errors import ConfigError, LinkError, MissingExtraError, UriError  # noqa: E402
-from perchd.core.runtime import Runtime  # noqa: E402
-from perchd.core.types import EndReason, Phase, Setpoint  # noqa: E402
+from perchd.core.errors import ConfigError, LinkError, MissingExtraError, UriError
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason, Phase, Setpoint
 
 MASS = 0.5
 WEIGHT = MASS * 9.81

@@ -5,11 +5,11 @@ from __future__ import annotations
 import json
 
 import pytest
-
-from ticks import level, ticks_until_lost
-from zmq_subscriber import SetpointSubscriber
 from perchd.drivers.base import open_driver
 from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, setpoint_message
+from ticks import level, ticks_until_lost
+from zmq_subscriber import SetpointSubscriber
+
 from perchd.core.errors import LinkError, UriError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Setpoint

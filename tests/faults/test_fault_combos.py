@@ -7,14 +7,14 @@ from __future__ import annotations
 import math
 
 import pytest
-
+from aborts import assert_failsafe_and_closed_log
 from faultsim import PERIOD, TICK, fly, report
 from simflight import NOISY, Sim, case1
-from test_aborts import assert_failsafe_and_closed_log
+
+from perchd.core.types import EndReason, Phase
 from perchd.flight.run import FlightAbort
 from perchd.logs.flightlog import read_log
 from perchd.sim.faults import Corrupt, Late, Outliers, RateDrop, Reorder, Repeat, Stop
-from perchd.core.types import EndReason, Phase
 
 TOLERABLE = (Repeat(times=2), Outliers(every=10), Corrupt(3.52, 3.53))
 """Each alone is flown through (test_fault_mocap); together, with 1 mm noise and 20 ms of

@@ -7,10 +7,20 @@ from __future__ import annotations
 import math
 
 from perchd.core.clock import ManualClock
-from perchd.sim.faults import (Corrupt, Freeze, Invalid, Late, Outliers, RateDrop, Reorder,
-                               Repeat, Stop, shape)
-from perchd.sim.world import SimWorld, WorldParams
 from perchd.core.types import Pose
+from perchd.sim.faults import (
+    Corrupt,
+    Freeze,
+    Invalid,
+    Late,
+    Outliers,
+    RateDrop,
+    Reorder,
+    Repeat,
+    Stop,
+    shape,
+)
+from perchd.sim.world import SimWorld, WorldParams
 
 P = 0.01
 

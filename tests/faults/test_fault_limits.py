@@ -8,11 +8,11 @@ import dataclasses
 import math
 
 import pytest
-
+from aborts import TRIGGER_T, assert_failsafe_and_closed_log, safety
 from faultsim import PERIOD, TICK, fly, injected, report
-from test_aborts import TRIGGER_T, assert_failsafe_and_closed_log, safety
-from perchd.flight.config import FlightConfig
+
 from perchd.core.types import EndReason, Phase
+from perchd.flight.config import FlightConfig
 
 LATENCY = 0.004
 """[s] the simulated mocap's latency."""

@@ -13,19 +13,19 @@ import time
 
 import pytest
 import zmq
-
+from aborts import TRIGGER_T, assert_failsafe_and_closed_log
 from caseplans import case1_ipts
 from faultsim import TICK, fly, injected, report
-from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig
-from test_aborts import TRIGGER_T, assert_failsafe_and_closed_log
-from test_lost_link_flight import bridge
-from udp_relay import UdpRelay
 from perchd.drivers.base import open_driver
-from perchd.flight.run import FlightAbort, fly as fly_real
-from perchd.logs.flightlog import read_log
-from perchd.mocap.base import open_source
+from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig, bridge
+from udp_relay import UdpRelay
+
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
+from perchd.flight.run import FlightAbort
+from perchd.flight.run import fly as fly_real
+from perchd.logs.flightlog import read_log
+from perchd.mocap.base import open_source
 
 PING_S = 0.02
 """[s] the crazyflie driver's echo period: its 'last heard' is at most this old when the

@@ -9,13 +9,22 @@ from __future__ import annotations
 import math
 
 import pytest
-
+from aborts import assert_failsafe_and_closed_log
 from faultsim import PERIOD, TICK, fly, report
-from test_aborts import assert_failsafe_and_closed_log
-from perchd.sim.faults import (Corrupt, Freeze, Invalid, Late, Outliers, RateDrop, Reorder,
-                               Repeat, Stop)
-from perchd.flight.config import FlightConfig, LoopSync
+
 from perchd.core.types import EndReason
+from perchd.flight.config import FlightConfig, LoopSync
+from perchd.sim.faults import (
+    Corrupt,
+    Freeze,
+    Invalid,
+    Late,
+    Outliers,
+    RateDrop,
+    Reorder,
+    Repeat,
+    Stop,
+)
 
 ONSETS = {"hold": 0.3, "approach": 1.5, "stage1": 3.0, "stage1+": 3.003, "stage2": 4.2}
 """[s] simulated fault onsets: the flight triggers at 2.57 s, switches stage at 4.07 s and
@@ -137,10 +146,10 @@ def test_a_tracker_frozen_while_hovering_is_stale_once_the_approach_should_move_
 def test_the_stale_limit_counts_mocap_frames_not_the_loop_s_polls():
     """At 120 Hz mocap a 100 Hz loop sees 5 frames in 6; the frame period the stale rule
     multiplies by 3 is still 1/120 s (from the frames' seq numbers), not ~1/100 s."""
-    from perchd.flight.estimator import Estimator
-    from perchd.flight.config import EstimatorConfig
-    from perchd.flight.frame import PerchFrame
     from perchd.core.types import Pose
+    from perchd.flight.config import EstimatorConfig
+    from perchd.flight.estimator import Estimator
+    from perchd.flight.frame import PerchFrame
     est = Estimator(EstimatorConfig(), PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)))
     seen = [k for k in range(120) if k % 6 != 5]
     for k in seen:

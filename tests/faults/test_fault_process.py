@@ -18,11 +18,11 @@ import time
 from pathlib import Path
 
 import pytest
-
 from faultsim import TICK, fly, injected, report
 from svc import PLAN, SimProcess
-from perchd.logs.flightlog import read_log
+
 from perchd.core.types import EndReason
+from perchd.logs.flightlog import read_log
 
 ROOT = Path(__file__).resolve().parents[2]
 CUT_S = 2.0

@@ -9,10 +9,10 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-
 from mutate import mutated_bytes, mutated_document
-from perchd.service.config import Config, config_from_dict, load_config
+
 from perchd.core.errors import ConfigError
+from perchd.service.config import Config, config_from_dict, load_config
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "systemd" / "perchd.toml"
 SMALL = b'version = 1\n[service]\nvehicle = "cf2"\n[flight]\nrate_hz = 200\n[safety]\ntilt_max_deg = 30\n'

@@ -9,7 +9,6 @@ import json
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-
 from mutate import json_values
 from served import Service
 

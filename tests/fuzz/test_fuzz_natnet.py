@@ -11,10 +11,11 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-
 from mutate import mutated_bytes
+
 from perchd.core.clock import ManualClock
-from perchd.mocap.natnet import models as natdefs, protocol as proto
+from perchd.mocap.natnet import models as natdefs
+from perchd.mocap.natnet import protocol as proto
 from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
 from perchd.mocap.natnet.server import NatNetServer
 from perchd.mocap.natnet.wire import MalformedPacket

@@ -10,8 +10,8 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-
 from mutate import json_values, mutated_bytes, mutated_document
+
 from perchd.core.errors import PlanError
 from perchd.tau.planfile import load_plan, plan_from_json, plan_to_json
 

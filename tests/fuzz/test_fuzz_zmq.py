@@ -14,13 +14,13 @@ import pytest
 import zmq
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
-
 from mutate import json_values, mutated_bytes, mutated_document
-from perchd.core.clock import ManualClock
-from perchd.commands.sim import Counts, SetpointInbox, make_world
 from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, setpoint_message
-from perchd.mocap.zmq import ZmqPoseSource, pose_message
+
+from perchd.commands.sim import Counts, SetpointInbox, make_world
+from perchd.core.clock import ManualClock
 from perchd.core.types import Phase, Pose, Setpoint
+from perchd.mocap.zmq import ZmqPoseSource, pose_message
 
 POSE = Pose("cf1", 17, 4.9, (-3.0, 0.1, 1.0), (0.0, 0.0, 0.0, 1.0), True, 0.0)
 POSE_DOC = json.loads(pose_message(POSE))

@@ -20,15 +20,15 @@ import time
 from pathlib import Path
 
 import pytest
+from served import Service
 
-from perchd.service.config import config_from_dict
-from perchd.service.control_socket import ControlServer, PeerPolicy
 from perchd.core.errors import ConfigError, UriError
-from perchd.mocap.base import open_source
-from perchd.mocap.zmq import ZmqPosePublisher
 from perchd.core.netbind import check_bind, is_loopback
 from perchd.core.runtime import Runtime
-from served import Service
+from perchd.mocap.base import open_source
+from perchd.mocap.zmq import ZmqPosePublisher
+from perchd.service.config import config_from_dict
+from perchd.service.control_socket import ControlServer, PeerPolicy
 
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"

@@ -10,8 +10,8 @@ import os
 import time
 
 import pytest
-
 from perchd.drivers.base import open_driver
+
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Setpoint
 

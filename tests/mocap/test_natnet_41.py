@@ -7,15 +7,23 @@ import struct
 
 import pytest
 
-from perchd.mocap.natnet import protocol as proto
-from perchd.mocap.natnet.uris import NatNetServer, open_natnet
-from perchd.mocap.natnet.frame import (
-    AnalogDevice, Asset, Frame, LabeledMarker, RigidBodySample, Skeleton, Timing, decode_frame,
-    encode_frame)
-from perchd.mocap.natnet.wire import MalformedPacket
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import parse_uri
+from perchd.mocap.natnet import protocol as proto
+from perchd.mocap.natnet.frame import (
+    AnalogDevice,
+    Asset,
+    Frame,
+    LabeledMarker,
+    RigidBodySample,
+    Skeleton,
+    Timing,
+    decode_frame,
+    encode_frame,
+)
+from perchd.mocap.natnet.uris import NatNetServer, open_natnet
+from perchd.mocap.natnet.wire import MalformedPacket
 
 
 def section(count: int, body: bytes) -> bytes:

@@ -13,12 +13,17 @@ import pytest
 
 from perchd.core.clock import ManualClock
 from perchd.core.errors import LinkError, UriError
-from perchd.mocap.natnet import protocol as proto
-from perchd.mocap.natnet.uris import NatNetServer, NatNetSource, config_from_uri, open_natnet
-from perchd.mocap.natnet.frame import Frame, RigidBodySample, Timing, encode_frame
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import parse_uri
+from perchd.mocap.natnet import protocol as proto
+from perchd.mocap.natnet.frame import Frame, RigidBodySample, Timing, encode_frame
+from perchd.mocap.natnet.uris import (
+    NatNetServer,
+    NatNetSource,
+    config_from_uri,
+    open_natnet,
+)
 
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 YAW_90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))  # world frame, about Z

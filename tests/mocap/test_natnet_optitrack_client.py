@@ -15,8 +15,8 @@ import time
 import pytest
 
 from perchd.core.clock import MonotonicClock
-from perchd.mocap.natnet.uris import NatNetServer
 from perchd.core.types import Pose
+from perchd.mocap.natnet.uris import NatNetServer
 
 natnetsdk = pytest.importorskip("natnetsdk.NatNetClient")
 

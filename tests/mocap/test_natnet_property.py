@@ -4,23 +4,26 @@ perchd can express survives encode/decode in every supported version."""
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
+from mutate import mutated_bytes  # the one byte mutator, shared with tests/fuzz
 from natnet_recordings import session_frames
+
 from perchd.core.clock import ManualClock
 from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
 from perchd.mocap.natnet.clock import ClockSync
 from perchd.mocap.natnet.frame import (
-    AnalogDevice, Frame, LabeledMarker, RigidBodySample, Skeleton, Timing, decode_frame,
-    encode_frame)
+    AnalogDevice,
+    Frame,
+    LabeledMarker,
+    RigidBodySample,
+    Skeleton,
+    Timing,
+    decode_frame,
+    encode_frame,
+)
 from perchd.mocap.natnet.wire import MalformedPacket
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fuzz"))
-from mutate import mutated_bytes  # noqa: E402  (the one byte mutator, shared with tests/fuzz)
 
 REAL = [r.data for r in session_frames()[:20]]
 VERSIONS = [(2, 5), (2, 6), (2, 7), (2, 9), (2, 10), (2, 11), (3, 0), (3, 1), (4, 0), (4, 1)]

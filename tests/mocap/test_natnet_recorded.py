@@ -5,14 +5,22 @@ from __future__ import annotations
 import struct
 
 import pytest
-
 from natnet_recordings import (
-    V2X, V3, RecordedMotive, expected_rows, packet, payload, session_frames)
-from perchd.mocap.natnet import models as natdefs, protocol as proto
+    V2X,
+    V3,
+    RecordedMotive,
+    expected_rows,
+    packet,
+    payload,
+    session_frames,
+)
+
+from perchd.core.runtime import Runtime
 from perchd.mocap.frames import UpAxis
+from perchd.mocap.natnet import models as natdefs
+from perchd.mocap.natnet import protocol as proto
 from perchd.mocap.natnet.client import NatNetConfig, NatNetSource
 from perchd.mocap.natnet.frame import decode_frame, encode_frame
-from perchd.core.runtime import Runtime
 
 
 def test_every_frame_of_the_recorded_session_decodes_to_the_expected_csv():

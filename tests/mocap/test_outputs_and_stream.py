@@ -9,11 +9,11 @@ import time
 import pytest
 
 from perchd.core.errors import UriError
+from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
 from perchd.mocap.base import open_source
 from perchd.mocap.outputs import open_pose_output
 from perchd.mocap.stream import Drop, PoseLimits, PoseStream, RateLimitedWarning
-from perchd.core.runtime import Runtime
-from perchd.core.types import Pose
 
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 

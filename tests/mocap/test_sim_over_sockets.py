@@ -4,34 +4,19 @@ flight with the in-process source does."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
+from caseplans import case1_ipts
+from perchd.drivers.base import open_driver
 
-flight = pytest.importorskip("perchd.flight.run", reason="the closed loop is not in this checkout")
-
-from perchd.core.clock import ManualClock  # noqa: E402
-from perchd.drivers.base import open_driver  # noqa: E402
-from perchd.mocap.base import open_source  # noqa: E402
-from perchd.mocap.outputs import open_pose_output  # noqa: E402
-from perchd.mocap.relay import RelayedSource  # noqa: E402
-from perchd.core.runtime import Runtime  # noqa: E402
-from perchd.core.types import EndReason  # noqa: E402
-
-REFPLANS = Path(__file__).resolve().parents[1] / "closedloop" / "refplans.py"
-
-
-def case1_ipts():
-    """The paper's case-1 IPTS plan in closed form (the closed-loop tests' reference)."""
-    if not REFPLANS.exists():
-        pytest.skip("tests/closedloop/refplans.py is not in this checkout")
-    spec = importlib.util.spec_from_file_location("refplans_for_mocap", REFPLANS)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module.ipts()
+import perchd.flight.run as flight
+from perchd.core.clock import ManualClock
+from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason
+from perchd.mocap.base import open_source
+from perchd.mocap.outputs import open_pose_output
+from perchd.mocap.relay import RelayedSource
 
 
 def perch(tmp_path: Path, output: str | None):

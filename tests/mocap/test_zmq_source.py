@@ -11,10 +11,15 @@ from hypothesis import strategies as st
 
 from perchd.core.clock import ManualClock
 from perchd.core.errors import UriError
-from perchd.mocap.base import open_source
-from perchd.mocap.zmq import ZmqPosePublisher, ZmqPoseSource, parse_pose_message, pose_message
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
+from perchd.mocap.base import open_source
+from perchd.mocap.zmq import (
+    ZmqPosePublisher,
+    ZmqPoseSource,
+    parse_pose_message,
+    pose_message,
+)
 
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 

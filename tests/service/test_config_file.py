@@ -6,11 +6,11 @@ import re
 from pathlib import Path
 
 import pytest
+from svc import perchd
 
-from perchd.service.config import ServiceConfig, config_from_dict, load_config
 from perchd.core.errors import ConfigError
 from perchd.flight.config import FlightConfig, TriggerPolicy
-from svc import perchd
+from perchd.service.config import ServiceConfig, config_from_dict, load_config
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "systemd" / "perchd.toml"
 

@@ -9,8 +9,8 @@ import threading
 
 import pytest
 
-from perchd.service.control_socket import ControlServer, request
 from perchd.core.errors import ConfigError
+from perchd.service.control_socket import ControlServer, request
 
 
 class Served:

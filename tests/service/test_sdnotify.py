@@ -2,8 +2,9 @@
 
 import os
 
-from perchd.service.sdnotify import Notifier
 from svc import NotifyListener
+
+from perchd.service.sdnotify import Notifier
 
 
 def test_messages_reach_a_path_socket(tmp_path):

@@ -13,9 +13,9 @@ import sys
 import time
 
 import pytest
+from svc import PLAN, NotifyListener, Serve, SimProcess, ctl
 
 from perchd.logs.flightlog import read_log
-from svc import PLAN, NotifyListener, Serve, SimProcess, ctl
 
 pytestmark = pytest.mark.slow
 

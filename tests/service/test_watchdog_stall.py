@@ -11,14 +11,14 @@ import socket
 import time
 
 import pytest
+from svc import PLAN, NotifyListener, Serve, ctl
 
 from perchd.core.clock import ManualClock, MonotonicClock
 from perchd.core.errors import UriError
+from perchd.core.uri import parse_uri
 from perchd.logs.flightlog import read_log
 from perchd.sim.stall import Stall
 from perchd.sim.world import SimWorld, WorldParams, world_params_from_uri
-from perchd.core.uri import parse_uri
-from svc import PLAN, NotifyListener, Serve, ctl
 
 WATCHDOG_S = 2.0
 """WatchdogSec of the test service (svc.Serve sets WATCHDOG_USEC=2000000)."""

@@ -101,7 +101,6 @@ def test_perchd_plan_library_with_an_empty_range_is_one_line_and_exit_2(tmp_path
 
 
 def test_the_supervisor_replans_from_the_library_at_the_measured_trigger(tmp_path):
-    sys.path.insert(0, str(ROOT / "tests" / "closedloop"))
     from simflight import NOISY, Sim
 
     from perchd.core.types import EndReason

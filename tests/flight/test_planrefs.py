@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import refplans
+
 from perchd.flight.planrefs import PlanSampler
 from perchd.tau import load_plan
 

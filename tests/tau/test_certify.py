@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from robust_brute import fly, worst_over_box
 
 from perchd.tau.certify import Box, certify_box, first_switch, scale_functions
-from robust_brute import fly, worst_over_box
 
 LIMITS = dict(v_contact=(0.7, 1.0), v_max=2.5, a_max=1.4, tau_s=-0.5)
 K3 = (-0.3111, -0.3082, 0.02853)                  # an order-3 k found by perchd's search

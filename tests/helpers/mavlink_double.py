@@ -20,7 +20,6 @@ import time
 from dataclasses import dataclass
 
 from pymavlink import mavutil
-
 from ticks import wait_for
 
 ARDUPILOT, PX4 = 3, 12

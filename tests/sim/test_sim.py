@@ -7,13 +7,13 @@ import math
 import statistics
 
 import pytest
+from perchd.drivers.base import open_driver
 
 from perchd.core.clock import ManualClock
-from perchd.drivers.base import open_driver
 from perchd.core.errors import UriError
-from perchd.mocap.base import open_source
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.mocap.base import open_source
 
 G = 9.81
 

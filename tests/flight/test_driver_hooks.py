@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from simflight import Sim, case1
+
 from perchd.core.types import EndReason
 
 

@@ -8,7 +8,6 @@ import threading
 import time
 
 import zmq
-
 from ticks import wait_for
 
 

@@ -17,10 +17,10 @@ import time
 
 sys.path.insert(0, os.path.dirname(__file__))
 
-from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig  # noqa: E402
 from perchd.drivers.base import open_driver  # noqa: E402
 from perchd.drivers.thrust import G  # noqa: E402
-from perchd.core.runtime import Runtime  # noqa: E402
+from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig  # noqa: E402
+
 from perchd.core.types import Phase, Setpoint  # noqa: E402
 
 
@@ -36,7 +36,7 @@ def arrivals(rig) -> list[float]:
 
 def bench(rig_cls, n: int) -> dict[str, float]:
     rig = rig_cls()
-    driver = open_driver(rig.uri, Runtime.real())
+    driver = open_driver(rig.uri, rig.runtime())
     driver.connect()
     send_us, latency_us = [], []
     try:

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import pytest
-
 from simflight import case1
-from perchd.core.types import LinkHealth
+
+from perchd.core.types import EndReason, LinkHealth, State
 from perchd.flight.config import FlightConfig
 from perchd.flight.frame import PerchFrame
 from perchd.flight.supervisor import Conditions, Supervisor
-from perchd.core.types import EndReason, State
 
 CFG = FlightConfig()
 FRAME = PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))

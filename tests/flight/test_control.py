@@ -6,10 +6,10 @@ import math
 
 import pytest
 
-from perchd.flight.control import Pid, TauController, map_attitude, tau_error
-from perchd.flight.config import UNIT_ACCEL, FlightConfig, TauGains, from_paper_units
-from perchd.flight.frame import body_z
 from perchd.core.types import State
+from perchd.flight.config import UNIT_ACCEL, FlightConfig, TauGains, from_paper_units
+from perchd.flight.control import Pid, TauController, map_attitude, tau_error
+from perchd.flight.frame import body_z
 
 M, G = 0.030, 9.81
 TILT = math.radians(25.0)

@@ -9,9 +9,9 @@ import pytest
 
 from perchd.cli import main
 from perchd.core.clock import MonotonicClock
+from perchd.core.types import Pose
 from perchd.mocap.natnet.uris import NatNetServer
 from perchd.mocap.zmq import ZmqPosePublisher
-from perchd.core.types import Pose
 
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 

@@ -6,15 +6,29 @@ its own decoding, so the conformance suite holds every driver to the same number
 
 from __future__ import annotations
 
-import importlib.util
 import math
+import threading
+import time
 from typing import Protocol
 
-from perchd.drivers.thrust import G, CrazyflieThrust
+from perchd.drivers.thrust import CrazyflieThrust, G
 
-MASS = 0.030
+from perchd.core.clock import MonotonicClock
+from perchd.core.runtime import Runtime
+from perchd.core.types import Phase, Setpoint
+from perchd.core.vehicle import CRAZYFLIE_MASS_KG
+from perchd.sim.world import SimWorld, WorldParams
+
+MASS = CRAZYFLIE_MASS_KG
 """[kg] the vehicle every rig pretends to be (a Crazyflie 2.0 with markers, as
 VehicleConfig and the default thrust model have it)."""
+
+
+class RealLink:
+    """Rigs whose peer is a real socket: drivers run on the real clock."""
+
+    def runtime(self) -> Runtime:
+        return Runtime.real()
 
 
 class Rig(Protocol):
@@ -29,10 +43,13 @@ class Rig(Protocol):
     def kill(self) -> None:
         """The vehicle end of the link dies."""
 
+    def runtime(self) -> Runtime:
+        """The runtime a driver for this rig is opened in."""
+
     def close(self) -> None: ...
 
 
-class CrazyflieRig:
+class CrazyflieRig(RealLink):
     def __init__(self) -> None:
         from crtp_responder import CrtpResponder
         self.peer = CrtpResponder()
@@ -57,7 +74,7 @@ class CrazyflieRig:
         self.peer.close()
 
 
-class MavlinkRig:
+class MavlinkRig(RealLink):
     HOVER = 0.35
 
     def __init__(self) -> None:
@@ -83,7 +100,7 @@ class MavlinkRig:
         self.peer.close()
 
 
-class ZmqRig:
+class ZmqRig(RealLink):
     def __init__(self) -> None:
         from zmq_subscriber import SetpointSubscriber
         self.peer = SetpointSubscriber()
@@ -104,19 +121,16 @@ class ZmqRig:
 
 
 class LoopbackRig:
-    """The in-process simulator, in a named world so the rig sees what the driver does."""
-
-    _count = 0
+    """The in-process simulator on a real clock; the rig reads the world the driver steers,
+    so tests open the driver on this rig's runtime."""
 
     def __init__(self) -> None:
-        from perchd.core.clock import MonotonicClock
-        from perchd.drivers.base import open_driver
-        from perchd.core.runtime import Runtime
-        LoopbackRig._count += 1
-        self.name = f"conformance{LoopbackRig._count}"
-        self.uri = f"sim://{self.name}"
-        # opening once creates the named world on a real clock (the drivers run in real time)
-        self.world = open_driver(self.uri, Runtime(MonotonicClock())).world
+        self.uri = "sim://"
+        self._runtime = Runtime(MonotonicClock())
+        self.world = self._runtime.sim = SimWorld(WorldParams(), self._runtime.clock)
+
+    def runtime(self) -> Runtime:
+        return self._runtime
 
     def commanded(self):
         sent = [sp for sp in self.world.sent if sp.thrust > 0]
@@ -129,13 +143,25 @@ class LoopbackRig:
         self.world.faults.link_ok = False
 
     def close(self) -> None:
-        from perchd.sim.world import forget_named
-        forget_named(self.name)
-
-
-def loopback_available() -> bool:
-    return importlib.util.find_spec("perchd.drivers.loopback") is not None
+        pass
 
 
 RIGS = {"udp": CrazyflieRig, "mavlink": MavlinkRig, "zmq": ZmqRig, "sim": LoopbackRig}
 NOT_HERE = {"radio": "needs a Crazyradio; the same driver as udp://, see tests/hardware"}
+
+
+def bridge(rig, world, stop: threading.Event) -> None:
+    """What the peer understood is what the simulated vehicle does."""
+    last = None
+    while not stop.wait(0.002):
+        cmd = rig.commanded()
+        if cmd is not None and cmd != last:
+            last = cmd
+            world.command(Setpoint(world.clock.now(), cmd[0], cmd[1], 0.0, cmd[2], -1, Phase.HOLD))
+
+
+def kill_after(rig, world, n_setpoints: int, killed: list[float]) -> None:
+    while len(world.sent) < n_setpoints:
+        time.sleep(0.001)
+    rig.kill()
+    killed.append(time.monotonic())  # the peer's socket is closed: the link is dead now

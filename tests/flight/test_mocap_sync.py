@@ -11,17 +11,17 @@ import time
 
 import pytest
 import zmq
-
 from simflight import Sim, case1
+
 from perchd.core.clock import ManualClock, MonotonicClock
-from perchd.service.config import config_from_dict
 from perchd.core.errors import ConfigError
-from perchd.flight.config import FlightConfig, LoopSync
-from perchd.logs.flightlog import read_log
-from perchd.flight.loop import FixedRateLoop, MocapSyncLoop, make_loop
-from perchd.mocap.base import open_source
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Pose, Setpoint
+from perchd.flight.config import FlightConfig, LoopSync
+from perchd.flight.loop import FixedRateLoop, MocapSyncLoop, make_loop
+from perchd.logs.flightlog import read_log
+from perchd.mocap.base import open_source
+from perchd.service.config import config_from_dict
 
 MOCAP = FlightConfig(sync=LoopSync.MOCAP, rate_hz=120.0)  # the simulator's mocap runs at 120 Hz
 
@@ -123,6 +123,7 @@ def test_over_real_zmq_sockets_each_published_pose_releases_one_setpoint():
     """Publisher -> zmq:// source -> MocapSyncLoop -> zmq driver -> subscriber: the setpoints'
     pose_seq are exactly the poses published, each once."""
     from perchd.drivers.zmq import ZmqSetpointDriver
+
     from perchd.mocap.zmq import ZmqPosePublisher
 
     rt = Runtime(MonotonicClock())

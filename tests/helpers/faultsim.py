@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import Any
 
 from simflight import Sim, case1
+
+from perchd.core.types import Pose
 from perchd.flight.config import FlightConfig
 from perchd.logs.flightlog import FlightLog, read_log
-from perchd.core.types import Pose
 
 PERIOD = 1.0 / 120.0
 """[s] the simulated mocap's frame period (120 Hz)."""

@@ -8,7 +8,6 @@ another process, and must perch within the tolerances the in-process simulator m
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import re
 import signal
@@ -19,16 +18,14 @@ from pathlib import Path
 
 import pytest
 import zmq
-
-from perchd.core.clock import ManualClock
+from caseplans import PLANS, case1_ipts
 from perchd.drivers.base import open_driver
-from perchd.mocap.base import open_source
+
+import perchd.flight.run as flight
+from perchd.core.clock import ManualClock
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
-
-flight = pytest.importorskip("perchd.flight.run", reason="the closed loop is not in this checkout")
-
-from caseplans import PLAN_FILE, case1_ipts  # noqa: E402
+from perchd.mocap.base import open_source
 
 
 class SimProcess:
@@ -62,26 +59,15 @@ class SimProcess:
             self.proc.communicate()
 
 
-def fly_agent(plan, sim: SimProcess, log: Path):
-    """The agent against the sim process: `perchd fly` when plan files exist, else the
-    same flight.fly call `perchd fly` makes, in this process, on the real clock."""
-    if PLAN_FILE.exists() and importlib.util.find_spec("perchd.commands.fly"):
-        done = subprocess.run(
-            [sys.executable, "-m", "perchd", "fly", str(PLAN_FILE), "--driver", sim.driver,
-             "--mocap", sim.mocap, "--log", str(log), "--json"],
-            capture_output=True, text=True, timeout=60)
-        assert done.stdout, done.stderr
-        out = json.loads(done.stdout)
-        return EndReason[out["outcome"]], out["contact_speed"], out["perch_time"]
-    runtime = Runtime.real()
-    source = open_source(sim.mocap, runtime)
-    source.start()
-    try:
-        with open_driver(sim.driver, runtime) as driver:
-            res = flight.fly(plan, driver, source, runtime.clock, log)
-    finally:
-        source.close()
-    return res.outcome, res.contact_speed, res.perch_time
+def fly_agent(sim: SimProcess, log: Path):
+    """`perchd fly` against the sim process, as a user runs it."""
+    done = subprocess.run(
+        [sys.executable, "-m", "perchd", "fly", str(PLANS / "case1-ipts-n3.json"), "--driver",
+         sim.driver, "--mocap", sim.mocap, "--log", str(log), "--json"],
+        capture_output=True, text=True, timeout=60)
+    assert done.stdout, done.stderr
+    out = json.loads(done.stdout)
+    return EndReason[out["outcome"]], out["contact_speed"], out["perch_time"]
 
 
 def fly_in_process(plan, log: Path):
@@ -104,7 +90,7 @@ def test_the_agent_perches_on_perchd_sim_in_another_process_as_in_process(pose_o
     reference = fly_in_process(plan, tmp_path / "in_process.jsonl")
     sim = SimProcess("--exit-on-stop", pose_out=pose_out)
     try:
-        outcome, speed, perch_time = fly_agent(plan, sim, tmp_path / "hil.jsonl")
+        outcome, speed, perch_time = fly_agent(sim, tmp_path / "hil.jsonl")
         report = sim.finish()
     finally:
         sim.kill()

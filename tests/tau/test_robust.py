@@ -8,16 +8,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from perchd.core.errors import PlanError
-from perchd.tau.certify import Box
-from perchd.tau.robust import (RobustLimits, contact_ratio, fastest_k, retarget_k,
-                               shrink_until_certified)
-from perchd.cli import main as perchd
-from perchd.tau import Limits
-from perchd.tau.planfile import load_plan, plan_from_json
-from perchd.tau.robustplan import check_plan
 from robust_brute import fly, worst_over_box
+
+from perchd.cli import main as perchd
+from perchd.core.errors import PlanError
+from perchd.tau import Limits
+from perchd.tau.certify import Box
+from perchd.tau.planfile import load_plan, plan_from_json
+from perchd.tau.robust import (
+    RobustLimits,
+    contact_ratio,
+    fastest_k,
+    retarget_k,
+    shrink_until_certified,
+)
+from perchd.tau.robustplan import check_plan
 
 LIM = RobustLimits(-0.5, (0.7, 1.0), 2.5, 1.4)
 PLANS = sorted((Path(__file__).parents[2] / "plans").glob("robust-*.json"))

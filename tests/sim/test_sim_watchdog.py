@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 from perchd.core.errors import ConfigError
-from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
 from perchd.core.types import Phase, Setpoint
+from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
 
 TILTED = Setpoint(0.0, 0.2, -0.3, 0.5, 0.35, 7, Phase.APPROACH)
 

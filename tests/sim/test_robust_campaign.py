@@ -4,18 +4,15 @@ through the supervisor's 'robust' trigger policy (retarget at the measured state
 from __future__ import annotations
 
 import dataclasses
-import sys
 from pathlib import Path
 
 import pytest
+from simflight import Sim  # the closed-loop tests' simulated flight
 
-sys.path.insert(0, str(Path(__file__).parents[1] / "closedloop"))
-from simflight import Sim  # noqa: E402  (the closed-loop tests' simulated flight)
-
-from perchd.sim.campaign import Spread, default_ranges, random_specs, run_campaign  # noqa: E402
-from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy  # noqa: E402
-from perchd.tau import load_plan, retarget  # noqa: E402
-from perchd.core.types import EndReason  # noqa: E402
+from perchd.core.types import EndReason
+from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
+from perchd.sim.campaign import Spread, default_ranges, random_specs, run_campaign
+from perchd.tau import load_plan, retarget
 
 PLANS = Path(__file__).parents[2] / "plans"
 START = "sim://?start=-7.8,0,1"       # far enough back to reach v0 = 2.5 m/s by |x0| = 3.5 m

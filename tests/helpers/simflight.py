@@ -5,30 +5,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable
 
-import refplans
-from perchd.core.clock import ManualClock
+from caseplans import case1  # noqa: F401  (re-exported: the flight tests' plan)
 from perchd.drivers.base import open_driver
-from perchd.flight.run import FlightAbort, FlightResult, fly
-from perchd.flight.config import FlightConfig
-from perchd.mocap.base import open_source
+
+from perchd.core.clock import ManualClock
 from perchd.core.runtime import Runtime
+from perchd.flight.config import FlightConfig
+from perchd.flight.run import FlightAbort, FlightResult, fly
+from perchd.mocap.base import open_source
 
 PLANS = Path(__file__).resolve().parents[2] / "plans"
 NOISY = "sim://?latency=0.02&noise=0.001"
 """20 ms command latency and 1 mm mocap noise (the issue's second acceptance case)."""
-
-
-def case1(strategy: str) -> Any:
-    """The paper's case-1 plan: from perchd.tau (plans/case1-*.json) once it has landed,
-    else the closed-form reference in refplans.py."""
-    path = PLANS / {"ctdts": "case1-ctdts.json", "ipts": "case1-ipts-n3.json"}[strategy]
-    try:
-        from perchd.tau import load_plan
-    except ImportError:
-        load_plan = None
-    if load_plan is not None and path.exists():
-        return load_plan(path)
-    return refplans.ctdts() if strategy == "ctdts" else refplans.ipts()
 
 
 class Sim:

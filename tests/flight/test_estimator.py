@@ -7,10 +7,10 @@ import random
 
 import pytest
 
-from perchd.flight.estimator import Estimator
-from perchd.flight.config import EstimatorConfig
-from perchd.flight.frame import PerchFrame
 from perchd.core.types import Pose
+from perchd.flight.config import EstimatorConfig
+from perchd.flight.estimator import Estimator
+from perchd.flight.frame import PerchFrame
 
 WALL_X = PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
 T = 1 / 120

@@ -4,22 +4,31 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from simflight import Sim  # the closed-loop tests' own simulated flight
 
-from perchd.sim.campaign import (COLUMNS, FlightSpec, Spread, campaign_config, default_policy,
-                             default_ranges, fly_one, grid_specs, random_specs, run_campaign,
-                             start_for, summarize, write_table)
 from perchd.core.errors import ConfigError
 from perchd.flight.config import FlightConfig, SurfaceConfig, TriggerPolicy
 from perchd.logs.flightlog import read_log
+from perchd.sim.campaign import (
+    COLUMNS,
+    FlightSpec,
+    Spread,
+    campaign_config,
+    default_policy,
+    default_ranges,
+    fly_one,
+    grid_specs,
+    random_specs,
+    run_campaign,
+    start_for,
+    summarize,
+    write_table,
+)
 from perchd.tau import load_plan, retarget
-
-sys.path.insert(0, str(Path(__file__).parents[1] / "closedloop"))
-from simflight import Sim  # noqa: E402  (the closed-loop tests' own simulated flight)
 
 PLANS = Path(__file__).parents[2] / "plans"
 ROBUST = load_plan(PLANS / "robust-n3-largest.json")
