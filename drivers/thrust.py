@@ -12,8 +12,9 @@ from dataclasses import dataclass
 G = 9.81
 """[m/s^2] gravity used for hover calibrations (the paper's docs/errata.md §8 value)."""
 
-CF_UNITS_MAX = 0xFFFF
-"""Largest thrust cflib's send_setpoint accepts (the firmware clamps to 60000 itself)."""
+CF_UNITS_MAX = 60000
+"""Largest thrust command: the firmware clamps RPYT thrust at 60000 (MAX_THRUST in
+crtp_commander_rpyt.c), so anything above would be asked for and not flown (docs/firmware.md)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,7 +64,7 @@ class CrazyflieThrust:
         return 4.0 * self.scale * self._motor(units)
 
     def units(self, newtons: float) -> int:
-        """Command for a collective thrust [N], rounded and clamped to 0..65535.
+        """Command for a collective thrust [N], rounded and clamped to 0..CF_UNITS_MAX.
 
         Zero or negative thrust is 0 (motors off; also the value that unlocks thrust)."""
         if newtons <= 0 or math.isnan(newtons):
