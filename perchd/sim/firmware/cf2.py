@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from perchd.core.clock import Clock, MonotonicClock
-from perchd.core.errors import LinkError
+from perchd.core.errors import LinkError, UriError
 from perchd.core.types import Vec3
 from perchd.sim.firmware import cf2wire as wire
 from perchd.sim.firmware.harness import (FirmwareVehicle, Interrupted, ProcessGroup, Truth,
@@ -146,6 +146,9 @@ class Cf2Vehicle(FirmwareVehicle):
     name = "cf2"
 
     def __init__(self, params: Cf2Params, clock: Clock | None = None) -> None:
+        if params.surface is not None and params.surface.gap(params.start) >= 0.0:
+            raise UriError(f"start {params.start} is on or past the surface (point "
+                           f"{params.surface.point}, normal {params.surface.normal})")
         self.params = params
         self.clock = clock or MonotonicClock()
         self.log = params.log or default_log("cf2")

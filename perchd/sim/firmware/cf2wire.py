@@ -56,17 +56,22 @@ class Kind(enum.Enum):
     CLIENT = "client"  # CRTP for cflib: forwarded
 
 
-def _lsb(value: float) -> int:
-    """Round and clip to int16: the plugin's cast wraps around, a clip saturates like a sensor."""
-    return max(-32768, min(32767, int(round(value))))
+_ACC_SCALE = 1.0 / (G_IMU * ACC_LSB_G)  # LSB per m/s^2
+_GYRO_SCALE = 180.0 / math.pi / GYRO_LSB_DPS  # LSB per rad/s
 
 
 def imu_packet(acc_mps2: tuple[float, float, float],
                gyro_rads: tuple[float, float, float]) -> bytes:
-    """Specific force [m/s^2] and body rates [rad/s], body FLU."""
-    a = [_lsb(c / G_IMU / ACC_LSB_G) for c in acc_mps2]
-    g = [_lsb(math.degrees(c) / GYRO_LSB_DPS) for c in gyro_rads]
-    return _IMU.pack(SIM_HEADER, IMU_TYPE, *a, *g)
+    """Specific force [m/s^2] and body rates [rad/s], body FLU; rounded and clipped to
+    int16 (the plugin's cast wraps around; a clip saturates, as a sensor does). Sent 1000
+    times a second, so written out rather than looped."""
+    ax, ay, az = acc_mps2
+    gx, gy, gz = gyro_rads
+    a, g = _ACC_SCALE, _GYRO_SCALE
+    return _IMU.pack(SIM_HEADER, IMU_TYPE,
+                     max(-32768, min(32767, round(ax * a))), max(-32768, min(32767, round(ay * a))),
+                     max(-32768, min(32767, round(az * a))), max(-32768, min(32767, round(gx * g))),
+                     max(-32768, min(32767, round(gy * g))), max(-32768, min(32767, round(gz * g))))
 
 
 def decode_imu(data: bytes) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
