@@ -83,8 +83,14 @@ def params_from(args: argparse.Namespace) -> tuple[Cf2Params, MocapParams]:
     return cf2, MocapParams(rate_hz=args.mocap_rate, noise_m=args.noise, body=args.body)
 
 
+GIL_SWITCH_S = 0.0005
+"""[s] Python's GIL hand-over interval (5 ms by default): the 1 kHz sim thread must not
+wait a whole default interval behind another thread's Python code."""
+
+
 def run(args: argparse.Namespace) -> int:
     cf2, mocap = params_from(args)
+    sys.setswitchinterval(GIL_SWITCH_S)
     clock = MonotonicClock()
     done = threading.Event()
     previous = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -121,7 +127,8 @@ def serve(vehicle: Cf2Vehicle, procs: ProcessGroup, output: Any, mocap: MocapPar
     until = None if duration is None else time.monotonic() + duration
     publisher.run(done, until)
     out = vehicle.summary()
-    out.update({"mocap": mocap_uri, "driver": driver_uri, "poses": publisher.poses})
+    out.update({"mocap": mocap_uri, "driver": driver_uri, "poses": publisher.poses,
+                "yaw_range_rad": publisher.yaw_range})
     return out
 
 

@@ -15,6 +15,7 @@ The harness publishes the truth at the mocap rate through perchd's pose outputs
 from __future__ import annotations
 
 import atexit
+import math
 import os
 import random
 import shutil
@@ -169,6 +170,7 @@ class TruthPublisher:
         self.vehicle, self.output, self.params = vehicle, output, params
         self.clock = clock or MonotonicClock()
         self.poses = 0
+        self.yaw_range: tuple[float, float] | None = None  # [rad] of the true poses published
         self._rng = random.Random(params.seed)
 
     def pose(self, truth: Truth) -> Pose:
@@ -185,6 +187,9 @@ class TruthPublisher:
             if truth is not None:
                 self.output.publish(self.pose(truth))
                 self.poses += 1
+                yaw = yaw_of(truth.q)
+                lo, hi = self.yaw_range or (yaw, yaw)
+                self.yaw_range = (min(lo, yaw), max(hi, yaw))
             due += period
             now = self.clock.now()
             if until is not None and now >= until:
@@ -192,6 +197,12 @@ class TruthPublisher:
             if due < now - period:  # fell behind (a stalled process): no burst of stale poses
                 due = now
             done.wait(max(0.0, due - now))
+
+
+def yaw_of(q: Quat) -> float:
+    """[rad] Z-Y-X yaw of an (x, y, z, w) quaternion."""
+    x, y, z, w = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def contact_json(c: Contact | None, t0: float) -> dict[str, Any] | None:
