@@ -13,8 +13,12 @@ Conversions (perchd SI -> cflib send_setpoint):
   bitcraze/crazyflie-firmware#884 and crazyflie-lib-rs#7 on that legacy sign).
 - yaw [rad] -> a yaw *rate* [deg/s]: the RPYT packet commands yaw rate. With a measured
   yaw (observe_pose) it is K_YAW * wrap(yaw_sp - yaw), clamped to YAW_RATE_MAX;
-  without one it is 0 (hold the heading the vehicle has).
-- thrust [N] -> 0..65535 through drivers.thrust.CrazyflieThrust.
+  without one it is 0 (hold the heading the vehicle has). It goes on the wire negated:
+  the firmware's legacy RPYT takes the yaw rate positive clockwise
+  (crtp_commander_rpyt.c sets attitudeRate.yaw = -yaw), so a counter-clockwise
+  correction is sent negative; sent as is, the yaw loop runs away (docs/firmware.md).
+- thrust [N] -> 0..60000 through drivers.thrust.CrazyflieThrust (the firmware clamps
+  RPYT thrust at 60000).
 
 URI options (removed before cflib sees the URI): mass=KG, hover=UNITS (thrust model
 calibration), timeout=S (link silent this long = lost, default 0.5), wait=S (connect
@@ -216,7 +220,7 @@ class CrazyflieDriver(DriverBase):
         if self._yaw is not None:
             err = math.degrees(wrap_angle(sp.yaw - self._yaw))
             yawrate = max(-YAW_RATE_MAX, min(YAW_RATE_MAX, K_YAW * err))
-        return (math.degrees(sp.roll), math.degrees(sp.pitch), yawrate,
+        return (math.degrees(sp.roll), math.degrees(sp.pitch), -yawrate,  # clockwise-positive
                 self.model.units(sp.thrust))
 
     def observe_pose(self, pose: Pose) -> None:

@@ -14,8 +14,9 @@ from perchd.core.vehicle import CRAZYFLIE_HOVER_UNITS, CRAZYFLIE_MASS_KG, G_M_S2
 G = G_M_S2
 """[m/s^2] gravity used for hover calibrations (docs/errata.md §8)."""
 
-CF_UNITS_MAX = 0xFFFF
-"""Largest thrust cflib's send_setpoint accepts (the firmware clamps to 60000 itself)."""
+CF_UNITS_MAX = 60000
+"""Largest thrust command: the firmware clamps RPYT thrust at 60000 (MAX_THRUST in
+crtp_commander_rpyt.c), so anything above would be asked for and not flown (docs/firmware.md)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,7 +66,7 @@ class CrazyflieThrust:
         return 4.0 * self.scale * self._motor(units)
 
     def units(self, newtons: float) -> int:
-        """Command for a collective thrust [N], rounded and clamped to 0..65535.
+        """Command for a collective thrust [N], rounded and clamped to 0..CF_UNITS_MAX.
 
         Zero or negative thrust is 0 (motors off; also the value that unlocks thrust)."""
         if newtons <= 0 or math.isnan(newtons):

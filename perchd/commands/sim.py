@@ -35,6 +35,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from perchd.commands import campaign as campaign_cli
+from perchd.commands import sim_firmware
 from perchd.commands.campaign import add_arguments
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import UriError
@@ -77,6 +78,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_arguments(p)
     p.set_defaults(run=run)
+    sim_firmware.register_under(p)  # `perchd sim firmware ...` (docs/firmware.md)
 
 
 def make_world(args: argparse.Namespace) -> Any:

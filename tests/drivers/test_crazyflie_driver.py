@@ -79,7 +79,9 @@ def test_hover_thrust_is_36000_units_and_twice_the_weight_follows_the_motor_curv
 def test_the_thrust_model_clamps_and_round_trips():
     model = CrazyflieThrust()
     assert model.units(0.0) == 0 and model.units(-1.0) == 0 and model.units(math.nan) == 0
-    assert model.units(10.0) == 65535
+    assert model.units(10.0) == 60000  # the firmware's RPYT clamp (crtp_commander_rpyt.c)
+    # the controller's thrust_max_n on the SITL vehicle's calibration: 63599 before the clamp
+    assert CrazyflieThrust(hover_units=38800, mass_kg=0.0282).units(0.58) == 60000
     assert model.newtons(model.units(0.2)) == pytest.approx(0.2, abs=2e-5)
     light = CrazyflieThrust(hover_units=34000, mass_kg=0.027)
     assert light.units(0.027 * 9.81) == 34000
@@ -114,8 +116,11 @@ def test_yaw_becomes_a_rate_once_the_measured_yaw_is_known(responder, cf):
     assert responder.wait_for(lambda: len([s for s in responder.setpoints() if s.thrust]) >= 3)
     rates = [s.yawrate_dps for s in responder.setpoints() if s.thrust][:3]
     assert rates[0] == 0.0  # no measured yaw yet: hold heading
-    assert rates[1] == pytest.approx(2.0 * math.degrees(0.2), abs=1e-3)  # counter-clockwise
-    assert rates[2] == pytest.approx(-2.0 * math.degrees(0.2), abs=1e-3)
+    # the firmware negates the RPYT yaw rate (crtp_commander_rpyt.c: attitudeRate.yaw =
+    # -yaw), so the wire carries it clockwise-positive: a counter-clockwise correction
+    # (setpoint 0.3 rad, measured 0.1 rad) goes out negative
+    assert rates[1] == pytest.approx(-2.0 * math.degrees(0.2), abs=1e-3)
+    assert rates[2] == pytest.approx(2.0 * math.degrees(0.2), abs=1e-3)  # clockwise
 
 
 def test_observed_poses_reach_the_estimator_as_extpose_when_asked():

@@ -7,7 +7,8 @@ answer, and what it records:
   firmware's link service does. This is the driver's connect handshake and its proof of
   life on a link without radio acks.
 - commander RPYT (port 3, channel 0, header 0x3C, payload `<fffH>`: roll deg, pitch deg as
-  on the wire (cflib negates it), yaw rate deg/s, thrust 0..65535): recorded, not answered.
+  on the wire (cflib negates it), yaw rate deg/s clockwise-positive as on the wire (the
+  firmware negates it), thrust 0..65535): recorded, not answered.
 - generic commander stop (port 7, channel 0, header 0x7C, payload `<B>` = 0): recorded.
 - localization ext-pose (port 6, channel 1, header 0x6D, `<Bfffffff>` type 8): recorded.
 Nothing else is needed: the driver never downloads TOCs.
@@ -36,7 +37,7 @@ class Rpyt:
     t: float  # [s] time.monotonic() at arrival
     roll_deg: float
     wire_pitch_deg: float  # firmware (legacy) convention: positive nose-up
-    yawrate_dps: float
+    yawrate_dps: float  # as on the wire: positive clockwise (the firmware negates it)
     thrust: int
 
 

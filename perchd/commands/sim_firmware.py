@@ -1,0 +1,144 @@
+"""`perchd sim firmware`: a vehicle's real flight firmware in the loop (docs/firmware.md).
+
+    perchd sim firmware --cf2 PATH [--pose-out zmq://127.0.0.1:0 | natnet://127.0.0.1[:PORT]]
+                        [--link udp://127.0.0.1:19850] [--fw-port PORT] [--body cf1]
+                        [--start X Y Z] [--surface X Y Z] [--normal NX NY NZ]
+                        [--noise M] [--imu-noise GYRO ACC] [--mocap-rate HZ]
+                        [--fw-log PATH] [--duration S] [--json]
+
+Starts the Crazyflie SITL firmware (cf2) against perchd's physics (perchd.sim.firmware.cf2),
+waits until it has calibrated, then prints one line on stderr, as `perchd sim` does:
+    perchd sim: ready: mocap <URI for perchd fly --mocap> driver <URI for --driver>
+and publishes the vehicle's true pose as mocap until SIGINT/SIGTERM or --duration. Then it
+stops every process it started and prints a summary (text, or with --json one JSON object
+on stdout: contact time [s] and speed [m/s], the IMU rate achieved, the launches).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from perchd.core.errors import UriError
+from perchd.mocap.outputs import open_pose_output
+from perchd.sim.firmware.cf2 import Cf2Params, Cf2Vehicle, SensorNoise, Surface
+from perchd.sim.firmware.harness import (Interrupted, MocapParams, ProcessGroup,
+                                         TruthPublisher, ready_line)
+from perchd.core.clock import MonotonicClock
+
+
+def register_under(sim_parser: argparse.ArgumentParser) -> None:
+    """`firmware` as a subcommand of `perchd sim` (plain `perchd sim` is unchanged)."""
+    sub = sim_parser.add_subparsers(dest="sim_mode", metavar="{firmware}",
+                                    parser_class=type(sim_parser))
+    p = sub.add_parser("firmware", help="fly a vehicle's own firmware in the loop",
+                       description=__doc__.splitlines()[0])
+    p.add_argument("--cf2", required=True, metavar="PATH",
+                   help="the Crazyflie SITL firmware binary (docs/firmware.md)")
+    p.add_argument("--pose-out", default="zmq://127.0.0.1:0",
+                   help="natnet://HOST[:PORT] or zmq://HOST:PORT (default zmq://127.0.0.1:0)")
+    p.add_argument("--link", default="udp://127.0.0.1:19850",
+                   help="where cflib's udp:// link connects (default udp://127.0.0.1:19850; "
+                        "port 0: a free one)")
+    p.add_argument("--fw-port", type=int, default=0,
+                   help="UDP port the firmware sends to (default 0: a free one)")
+    p.add_argument("--body", default="cf1", help="rigid body name (default cf1)")
+    p.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   default=(-4.5, 0.0, 0.0), help="[m] start, on the floor at Z = 0 "
+                   "(default -4.5 0 0: 4.5 m before the surface)")
+    p.add_argument("--surface", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   default=(0.0, 0.0, 0.0), help="[m] a point on the surface (default 0 0 0)")
+    p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
+                   default=(1.0, 0.0, 0.0), help="approach direction (default 1 0 0)")
+    p.add_argument("--noise", type=float, default=0.0, help="[m] mocap noise std per axis")
+    p.add_argument("--imu-noise", nargs=2, type=float, default=(0.0, 0.0),
+                   metavar=("GYRO", "ACC"), help="[rad/s] [m/s^2] IMU noise std per axis")
+    p.add_argument("--mocap-rate", type=float, default=100.0, help="[Hz] (default 100)")
+    p.add_argument("--fw-log", help="the firmware's stdout (default /tmp/perchd-cf2-PID.log)")
+    p.add_argument("--duration", type=float, help="[s] stop after this long once ready")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(run=run)
+
+
+def params_from(args: argparse.Namespace) -> tuple[Cf2Params, MocapParams]:
+    if not 0.0 <= args.noise <= 0.1:
+        raise UriError(f"--noise {args.noise:g} m is outside 0..0.1 m")
+    gyro, acc = args.imu_noise
+    if not (0.0 <= gyro <= 1.0 and 0.0 <= acc <= 10.0):
+        raise UriError(f"--imu-noise {gyro:g} {acc:g} is outside 0..1 rad/s, 0..10 m/s^2")
+    if not 1.0 <= args.mocap_rate <= 1000.0:
+        raise UriError(f"--mocap-rate {args.mocap_rate:g} Hz is outside 1..1000 Hz")
+    if not 0 <= args.fw_port <= 65535:
+        raise UriError(f"--fw-port {args.fw_port} is not a UDP port")
+    cf2 = Cf2Params(binary=args.cf2, fw_port=args.fw_port, link=args.link,
+                    start=tuple(args.start), noise=SensorNoise(gyro, acc),
+                    surface=Surface(tuple(args.surface), tuple(args.normal)),
+                    log=Path(args.fw_log) if args.fw_log else None)
+    return cf2, MocapParams(rate_hz=args.mocap_rate, noise_m=args.noise, body=args.body)
+
+
+GIL_SWITCH_S = 0.0005
+"""[s] Python's GIL hand-over interval (5 ms by default): the 1 kHz sim thread must not
+wait a whole default interval behind another thread's Python code."""
+
+
+def run(args: argparse.Namespace) -> int:
+    cf2, mocap = params_from(args)
+    sys.setswitchinterval(GIL_SWITCH_S)
+    clock = MonotonicClock()
+    done = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with ProcessGroup() as procs:
+            vehicle = Cf2Vehicle(cf2, clock)
+            try:
+                output = open_pose_output(args.pose_out, [mocap.body], clock)
+                try:
+                    result = serve(vehicle, procs, output, mocap, done, args.duration)
+                finally:
+                    output.close()
+            finally:
+                vehicle.close()
+    except Interrupted:
+        print("perchd sim: interrupted before the firmware was ready", file=sys.stderr)
+        return 130
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(summary_text(result))
+    return 0
+
+
+def serve(vehicle: Cf2Vehicle, procs: ProcessGroup, output: Any, mocap: MocapParams,
+          done: threading.Event, duration: float | None) -> dict[str, Any]:
+    vehicle.start(procs, done)
+    mocap_uri, driver_uri = output.uri(mocap.body), vehicle.driver_uri()
+    print(ready_line(mocap_uri, driver_uri), file=sys.stderr, flush=True)
+    publisher = TruthPublisher(vehicle, output, mocap, vehicle.clock)
+    until = None if duration is None else time.monotonic() + duration
+    publisher.run(done, until)
+    out = vehicle.summary()
+    out.update({"mocap": mocap_uri, "driver": driver_uri, "poses": publisher.poses,
+                "yaw_range_rad": publisher.yaw_range})
+    return out
+
+
+def summary_text(r: dict[str, Any]) -> str:
+    c = r["contact"]
+    contact = (f"contact at {c['speed']:.3f} m/s, {c['t']:.3f} s after start" if c
+               else "no contact")
+    imu = r["imu"]
+    rate = "n/a" if imu["rate_hz"] is None else f"{imu['rate_hz']:.1f} Hz"
+    return (f"{contact}; IMU {imu['sent']} samples at {rate} (late max "
+            f"{imu['late_max_ms']:.1f} ms, {imu['skipped_late']} skipped); "
+            f"{r['motor_packets']} motor packets; {len(r['launches'])} launch(es); "
+            f"{r['poses']} poses; firmware log {r['log']}")

@@ -1,0 +1,225 @@
+"""Firmware in the loop: a vehicle's own flight firmware in its own process, our physics
+(or the firmware's), and the true state published as mocap for `perchd fly`.
+
+One harness for every firmware: a vehicle is anything that satisfies FirmwareVehicle
+(start its processes through a ProcessGroup, say when it is ready to fly, give its true
+state and the driver URI that reaches it). The Crazyflie's cf2 is the first
+(perchd.sim.firmware.cf2); ArduPilot SITL and PX4 SIH bring their own physics and would
+give their truth from it.
+
+The harness publishes the truth at the mocap rate through perchd's pose outputs
+(perchd.mocap.outputs: zmq:// or natnet://) and announces itself with the line
+`perchd sim` uses (docs/contracts.md §2), so `perchd fly` and the tests treat both alike.
+"""
+
+from __future__ import annotations
+
+import atexit
+import math
+import os
+import random
+import shutil
+import subprocess
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol, Sequence
+
+from perchd.core.clock import Clock, MonotonicClock
+from perchd.core.errors import LinkError
+from perchd.core.types import Pose, Quat, Vec3
+from perchd.mocap.outputs import PoseOutput
+from perchd.sim.world import Contact
+
+STOP_GRACE_S = 2.0
+"""[s] a process asked to stop (SIGTERM) gets this long before SIGKILL."""
+
+
+@dataclass(frozen=True, slots=True)
+class Truth:
+    """The simulated vehicle's true state. t [s] on the harness clock (monotonic);
+    p [m], v [m/s] world frame, Z up; q (x, y, z, w) body -> world; w [rad/s] body rates."""
+
+    t: float
+    p: Vec3
+    v: Vec3
+    q: Quat
+    w: Vec3
+
+
+class Interrupted(Exception):
+    """The harness was told to stop (a signal) before the vehicle was ready."""
+
+
+class FirmwareVehicle(Protocol):
+    """A vehicle process whose true state the harness publishes as mocap."""
+
+    name: str
+
+    def start(self, procs: "ProcessGroup", cancel: threading.Event) -> None:
+        """Launch the firmware through `procs` and return once it is ready to fly.
+        LinkError if it never gets there; Interrupted when `cancel` is set meanwhile."""
+
+    def truth(self) -> Truth | None:
+        """The newest true state (None before the physics has run)."""
+
+    def driver_uri(self) -> str:
+        """The URI `perchd fly --driver` reaches this vehicle's firmware with."""
+
+    def contact(self) -> Contact | None:
+        """Where and how fast it reached the perching surface, if it has."""
+
+    def summary(self) -> dict[str, Any]:
+        """Figures for the harness's summary (JSON-able)."""
+
+    def close(self) -> None:
+        """Stop its threads and sockets (its processes belong to the ProcessGroup)."""
+
+
+class ProcessGroup:
+    """Every process the harness starts, stopped by close() (and at interpreter exit).
+
+    Each child gets its own session, so a Ctrl-C at the terminal reaches only the harness,
+    which then stops its children in order rather than leaving a firmware half-killed."""
+
+    def __init__(self) -> None:
+        self._procs: list[subprocess.Popen] = []
+        self._logs: list[Any] = []
+        self._lock = threading.Lock()
+        atexit.register(self.close)
+
+    def launch(self, argv: Sequence[str], log: Path) -> subprocess.Popen:
+        """Start argv with stdout and stderr appended to `log`; LinkError if it cannot run."""
+        out = open(log, "ab")
+        try:
+            proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, stdout=out,
+                                    stderr=subprocess.STDOUT, start_new_session=True)
+        except OSError as err:
+            out.close()
+            raise LinkError(f"cannot start {argv[0]}: {err.strerror or err}") from None
+        with self._lock:
+            self._procs.append(proc)
+            self._logs.append(out)
+        return proc
+
+    @property
+    def running(self) -> list[subprocess.Popen]:
+        with self._lock:
+            return [p for p in self._procs if p.poll() is None]
+
+    def stop(self, proc: subprocess.Popen, grace_s: float = STOP_GRACE_S) -> int | None:
+        """SIGTERM to its pid, SIGKILL after grace_s; its exit code."""
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(grace_s)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        return proc.returncode
+
+    def close(self) -> None:
+        with self._lock:
+            procs, self._procs = self._procs, []
+            logs, self._logs = self._logs, []
+        for proc in reversed(procs):
+            self.stop(proc)
+        for out in logs:
+            out.close()
+
+    def __enter__(self) -> "ProcessGroup":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def line_buffered(argv: Sequence[str]) -> list[str]:
+    """argv run with a line-buffered stdout when coreutils' stdbuf is there (a firmware's
+    printf log is block-buffered into a file otherwise); stdbuf execs, so the pid is kept."""
+    stdbuf = shutil.which("stdbuf")
+    return [stdbuf, "-oL", *argv] if stdbuf else list(argv)
+
+
+def default_log(name: str) -> Path:
+    return Path(os.environ.get("TMPDIR", "/tmp")) / f"perchd-{name}-{os.getpid()}.log"
+
+
+@dataclass(frozen=True, slots=True)
+class MocapParams:
+    """rate_hz [Hz] poses published; noise_m [m] Gaussian std per axis on the position;
+    body: the rigid body name; seed of the noise."""
+
+    rate_hz: float = 100.0
+    noise_m: float = 0.0
+    body: str = "cf1"
+    seed: int = 0
+
+
+def ready_line(mocap_uri: str, driver_uri: str) -> str:
+    """The one line on stderr that says where to connect (as `perchd sim` prints it)."""
+    return f"perchd sim: ready: mocap {mocap_uri} driver {driver_uri}"
+
+
+class TruthPublisher:
+    """Publishes a vehicle's truth as mocap poses at a fixed rate, on the caller's thread."""
+
+    def __init__(self, vehicle: FirmwareVehicle, output: PoseOutput, params: MocapParams,
+                 clock: Clock | None = None) -> None:
+        self.vehicle, self.output, self.params = vehicle, output, params
+        self.clock = clock or MonotonicClock()
+        self.poses = 0
+        self.yaw_range: tuple[float, float] | None = None  # [rad] of the true poses published
+        self._rng = random.Random(params.seed)
+
+    def pose(self, truth: Truth) -> Pose:
+        n = self.params.noise_m
+        p = truth.p if n <= 0 else tuple(c + self._rng.gauss(0.0, n) for c in truth.p)
+        return Pose(self.params.body, self.poses + 1, truth.t, p, truth.q)  # type: ignore[arg-type]
+
+    def run(self, done: threading.Event, until: float | None = None) -> None:
+        """Until `done` is set or the clock reaches `until` [s]."""
+        period = 1.0 / self.params.rate_hz
+        due = self.clock.now()
+        while not done.is_set():
+            truth = self.vehicle.truth()
+            if truth is not None:
+                self.output.publish(self.pose(truth))
+                self.poses += 1
+                yaw = yaw_of(truth.q)
+                lo, hi = self.yaw_range or (yaw, yaw)
+                self.yaw_range = (min(lo, yaw), max(hi, yaw))
+            due += period
+            now = self.clock.now()
+            if until is not None and now >= until:
+                return
+            if due < now - period:  # fell behind (a stalled process): no burst of stale poses
+                due = now
+            done.wait(max(0.0, due - now))
+
+
+def yaw_of(q: Quat) -> float:
+    """[rad] Z-Y-X yaw of an (x, y, z, w) quaternion."""
+    x, y, z, w = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def contact_json(c: Contact | None, t0: float) -> dict[str, Any] | None:
+    """[s] after t0, [m/s] along the normal, [m] world position."""
+    if c is None:
+        return None
+    return {"t": c.t - t0, "speed": c.speed, "p": list(c.p)}
+
+
+def wait_or_cancel(event: threading.Event, timeout_s: float, cancel: threading.Event) -> bool:
+    """event.wait(timeout_s), but Interrupted as soon as `cancel` is set."""
+    deadline = time.monotonic() + timeout_s
+    while not event.is_set():
+        if cancel.is_set():
+            raise Interrupted()
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return False
+        event.wait(min(left, 0.05))
+    return True

@@ -1,0 +1,79 @@
+"""Opt-in (PERCHD_CF2): a whole perch against the Crazyflie firmware in the loop, as a
+user runs it: `perchd sim firmware --cf2 ...` in one process, `perchd fly
+plans/case1-ipts-n3.json --driver udp://... --mocap zmq://...` in another.
+
+Figures (contact speed, perch time against the plan's, trigger speed, yaw range, the
+harness's IMU rate) are printed (pytest -s) and, with PERCHD_FW_REPORT=PATH, appended
+there as JSON lines."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cf2rig import CF2, needs_cf2
+
+pytestmark = [pytest.mark.firmware, needs_cf2]
+pytest.importorskip("cflib")
+
+ROOT = Path(__file__).parents[2]
+PLAN = ROOT / "plans" / "case1-ipts-n3.json"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "perchd", "sim", "firmware", "--cf2", CF2, "--link",
+         "udp://127.0.0.1:0", "--fw-log", str(tmp / "cf2.log"), "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    line = proc.stderr.readline()
+    found = re.search(r"ready: mocap (\S+) driver (\S+)", line)
+    if found is None:
+        proc.kill()
+        raise AssertionError(f"perchd sim firmware did not start: {line}{proc.stderr.read()}")
+    return proc, found.group(1), found.group(2)
+
+
+@pytest.mark.parametrize("flight", [1, 2, 3])
+def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
+    plan = json.loads(PLAN.read_text())
+    proc, mocap, driver = harness(tmp_path)
+    try:
+        done = subprocess.run(
+            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
+             mocap, "--log", str(tmp_path / "flight.jsonl"), "--json"],
+            capture_output=True, text=True, timeout=90, env=ENV)
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert done.stdout, done.stderr
+    fly = json.loads(done.stdout)
+    sim = json.loads(out)
+    lo, hi = plan["limits"]["v_contact"]
+    yaws = sim["yaw_range_rad"]  # the true heading over the whole run
+    figures = {
+        "flight": flight, "outcome": fly["outcome"], "contact_speed": fly["contact_speed"],
+        "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
+        "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
+        "trigger_speed": fly["trigger"] and fly["trigger"]["v"],
+        "yaw_range_rad": yaws, "imu_rate_hz": sim["imu"]["rate_hz"],
+        "imu_late_max_ms": sim["imu"]["late_max_ms"], "imu_skipped": sim["imu"]["skipped_late"],
+        "launches": [r["outcome"] for r in sim["launches"]]}
+    print("\n" + json.dumps(figures))
+    if os.environ.get("PERCHD_FW_REPORT"):
+        with open(os.environ["PERCHD_FW_REPORT"], "a") as f:
+            f.write(json.dumps(figures) + "\n")
+    assert fly["outcome"] == "CONTACT", fly.get("detail")
+    assert sim["contact"] is not None
+    assert lo - 0.1 <= sim["contact"]["speed"] <= hi + 0.1
+    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.10)
+    assert max(abs(y) for y in yaws) < 0.1  # the heading held (a yaw run-away fails here)
