@@ -77,6 +77,9 @@ class SyntheticAgent:
         self.ok = LinkHealth(True)
         self.period = 1.0 / rate_hz
         self.compute: list[float] = []
+        self.est: Estimator
+        self.sup: Supervisor
+        self.k = 0
         self._restart()
 
     def _restart(self) -> None:

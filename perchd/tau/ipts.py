@@ -100,6 +100,8 @@ class _Model:
         self.dU = i * u[:, None] ** (i - 1)                        # d q' / d m_i
         self.IU = u[:, None] ** (i + 1) / (i + 1)                  # d Q / d m_i
         self.ln_s0 = math.log(-prob.x0)
+        self._key: bytes | None = None  # the z last assembled, and what it gave (SLSQP asks
+        self._val = None                # for value and gradient at the same z in turn)
 
     def eval(self, z: np.ndarray):
         m, ts = z[:-1], z[-1]
@@ -128,7 +130,7 @@ class _Model:
 
     def _both(self, z):
         key = z.tobytes()
-        if getattr(self, "_key", None) != key:
+        if self._key != key:
             self._key, self._val = key, self._assemble(z)
         return self._val
 
