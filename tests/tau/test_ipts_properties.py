@@ -16,7 +16,7 @@ X0, V0, TAU_S, WINDOW = -3.0, 1.5, -0.5, (0.7, 1.0)
 REL = 1e-6   # relative slack on a limit met with equality
 SLOWER = 1e-6  # [s] a looser plan may be slower by no more than solver tolerance
 
-SETTINGS = settings(max_examples=12, deadline=None, derandomize=True,
+SETTINGS = settings(max_examples=5, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.filter_too_much, HealthCheck.too_slow])
 
 
