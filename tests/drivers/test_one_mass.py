@@ -65,3 +65,10 @@ def test_the_crazyflie_ceiling_caps_the_flights_thrust():
     cfg = bind_vehicle(drv, FlightConfig())
     ceiling = CrazyflieThrust(hover_units=50000, mass_kg=0.030).newtons(CF_UNITS_MAX)
     assert cfg.vehicle.thrust_max_n == pytest.approx(ceiling) and ceiling < 0.5
+
+
+def test_a_mavlink_driver_never_given_a_mass_refuses_to_connect():
+    pytest.importorskip("pymavlink")
+    drv = open_driver("mavlink:udpout:127.0.0.1:9?wait=0.3", Runtime.real())
+    with pytest.raises(ConfigError, match="vehicle mass is unknown"):
+        drv.connect()
