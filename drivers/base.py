@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
+from perchd.core.errors import ConfigError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Registry
@@ -31,6 +32,16 @@ class Driver(Protocol):
     def close(self) -> None:
         """Release the link; a vehicle left flying gets the failsafe first."""
 
+    def bind_mass(self, mass_kg: float) -> None:
+        """The flight's vehicle mass [kg], FlightConfig.vehicle.mass_kg: the one mass (issue
+        13). A thrust model calibrated by weight scales to it. Called before connect() by
+        the session and again by flight.run.fly(); raises ConfigError, one line naming both
+        values, when the URI's own mass= disagrees (nothing has been armed or flown yet)."""
+
+    def thrust_ceiling_n(self) -> float | None:
+        """[N] the most collective thrust the vehicle flies, in this driver's newtons (None:
+        no ceiling known); the flight's saturation uses min(config, this)."""
+
 
 class DriverBase:
     """Context-manager plumbing shared by the drivers: `with open_driver(...) as d:`."""
@@ -44,6 +55,28 @@ class DriverBase:
 
     def observe_pose(self, pose: Pose) -> None:
         """Most links have no use for the pose."""
+
+    def bind_mass(self, mass_kg: float) -> None:
+        """Links that pass newtons through have no use for the mass."""
+
+    def thrust_ceiling_n(self) -> float | None:
+        return None
+
+
+MASS_REL_TOL = 0.005
+"""A URI mass= within 0.5 % of the flight config's is the same mass written twice."""
+
+
+def agreed_mass(uri: str, uri_mass: float | None, flight_mass_kg: float) -> float:
+    """The flight's mass [kg], or ConfigError when the driver URI's mass= says another: the
+    controller's newtons and the driver's thrust units would then be scaled by two masses,
+    which mis-scales every thrust (ArduPilot SITL fell with ?mass=3.0 and a 30 g config)."""
+    if uri_mass is not None and abs(uri_mass - flight_mass_kg) > MASS_REL_TOL * flight_mass_kg:
+        raise ConfigError(
+            f"{uri}: mass={uri_mass:g} kg in the driver URI disagrees with the flight config's "
+            f"vehicle.mass_kg = {flight_mass_kg:g} kg; give the mass once, as [vehicle] mass_kg "
+            f"in --config, and drop mass= from the URI")
+    return flight_mass_kg
 
 
 DRIVERS: Registry[Driver] = Registry("driver", {

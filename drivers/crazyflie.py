@@ -20,8 +20,9 @@ Conversions (perchd SI -> cflib send_setpoint):
 - thrust [N] -> 0..60000 through drivers.thrust.CrazyflieThrust (the firmware clamps
   RPYT thrust at 60000).
 
-URI options (removed before cflib sees the URI): mass=KG, hover=UNITS (thrust model
-calibration), timeout=S (link silent this long = lost, default 0.5), wait=S (connect
+URI options (removed before cflib sees the URI): hover=UNITS (thrust model calibration:
+the command that holds the flight's vehicle.mass_kg; the mass itself comes from the flight,
+bind_mass; a mass=KG here must agree with it, else the flight is refused before it starts), timeout=S (link silent this long = lost, default 0.5), wait=S (connect
 waits this long for the echo, default 2), extpose=1 (forward observed poses to the
 on-board estimator).
 """
@@ -35,11 +36,11 @@ import time
 from collections import deque
 from typing import Any
 
-from perchd.drivers.base import DriverBase
-from perchd.drivers.thrust import CrazyflieThrust
+from perchd.drivers.base import DriverBase, agreed_mass
+from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.drivers.ticker import Ticker
 
-from perchd.core.errors import LinkError, UriError
+from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
@@ -74,12 +75,14 @@ def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
     if uri.scheme == "radio":
         _check_radio(uri)
     hover = float_param(uri, "hover", CRAZYFLIE_HOVER_UNITS, 1000, 60000, " units")
-    mass = float_param(uri, "mass", CRAZYFLIE_MASS_KG, 0.010, 0.100, " kg")
+    mass = float_param(uri, "mass", None, 0.010, 0.100, " kg")
     timeout = float_param(uri, "timeout", 0.5, 0.01, 10.0, " s")
-    model = CrazyflieThrust(hover_units=hover, mass_kg=mass)
-    return CrazyflieDriver(uri.raw, without_query(uri), runtime, model, timeout,
-                           extpose=bool_param(uri, "extpose"),
-                           wait=float_param(uri, "wait", 2.0, 0.05, 60.0, " s"))
+    model = CrazyflieThrust(hover_units=hover, mass_kg=mass or CRAZYFLIE_MASS_KG)
+    driver = CrazyflieDriver(uri.raw, without_query(uri), runtime, model, timeout,
+                             extpose=bool_param(uri, "extpose"),
+                             wait=float_param(uri, "wait", 2.0, 0.05, 60.0, " s"))
+    driver.uri_mass = mass
+    return driver
 
 
 def _check_radio(uri: Uri) -> None:
@@ -159,6 +162,7 @@ class CrazyflieDriver(DriverBase):
         self._stop_until = 0.0  # time.monotonic() until which the stop is repeated
         self._wire = threading.Lock()  # "stopped?" and the send that follows, as one step
         self.failsafe_reasons: list[EndReason] = []
+        self.uri_mass: float | None = None  # [kg] the URI's mass=, checked by bind_mass
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -211,6 +215,18 @@ class CrazyflieDriver(DriverBase):
         if not self._stopped:
             self._stop()
         self._close_link()
+
+    def bind_mass(self, mass_kg: float) -> None:
+        """Recalibrate the thrust model to the flight's mass: hover= units hold mass_kg."""
+        mass = agreed_mass(self.uri, self.uri_mass, mass_kg)
+        try:
+            self.model = CrazyflieThrust(hover_units=self.model.hover_units, mass_kg=mass)
+        except ValueError as err:
+            raise ConfigError(f"{self.uri}: vehicle.mass_kg: {err}") from None
+
+    def thrust_ceiling_n(self) -> float:
+        """[N] what CF_UNITS_MAX (the firmware's RPYT clamp) gives in this model."""
+        return self.model.newtons(CF_UNITS_MAX)
 
     # -- conversions -----------------------------------------------------------------
     def command(self, sp: Setpoint) -> tuple[float, float, float, int]:

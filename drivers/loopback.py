@@ -49,6 +49,12 @@ class LoopbackDriver(DriverBase):
         # The simulated link's echo would cross its command latency both ways.
         return LinkHealth(True, 0.0, rtt_s=2.0 * self.world.command_latency_s)
 
+    def thrust_ceiling_n(self) -> float:
+        """[N] the simulated plant's most thrust. Its mass (sim://?mass=) is the simulated
+        truth, not a calibration: the flight's config may disagree, as a real vehicle's
+        weight may (the hover learner finds out, flight/hover.py)."""
+        return self.world.plant.params.thrust_max_n
+
     def close(self) -> None:
         if self._connected and not self._stopped:  # motors off, like every driver's close
             self.world.command(Setpoint.stop(self.world.clock.now()))

@@ -1,8 +1,10 @@
 """MAVLink autopilots over pymavlink: ArduPilot in GUIDED_NOGPS, PX4 in OFFBOARD, both flown
 with SET_ATTITUDE_TARGET (attitude quaternion + normalised thrust).
 
-`mavlink:udpout:HOST:PORT?mass=KG[&arm=1&hover=F&timeout=S&stream=HZ&wait=S]`
-- mass (required): the vehicle's mass, for the thrust model (drivers.thrust.NormalisedThrust).
+`mavlink:udpout:HOST:PORT[?arm=1&hover=F&timeout=S&stream=HZ&wait=S&mass=KG]`
+- mass: the thrust model's mass (drivers.thrust.NormalisedThrust) comes from the flight
+  config (`[vehicle] mass_kg`, bind_mass); a mass= here must agree with it, else the flight
+  is refused before the mode switch or arming. Only a driver never bound uses it alone.
 - hover: normalised hover thrust; default: read MOT_THST_HOVER (ArduPilot) or
   MPC_THR_HOVER (PX4) from the vehicle.
 - arm=1: arm after the mode switch (default: never arm; the pilot does).
@@ -27,7 +29,7 @@ import threading
 import time
 from typing import Any, Callable
 
-from perchd.drivers.base import DriverBase
+from perchd.drivers.base import DriverBase, agreed_mass
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
 
@@ -82,8 +84,6 @@ def open_mavlink(uri: Uri, runtime: Runtime) -> "MavlinkDriver":
     _check_network_port(uri.raw, device)
     opts = Uri(uri.raw, uri.scheme, "", None, device, query)
     mass = float_param(opts, "mass", None, 0.01, 50.0, " kg")
-    if mass is None:
-        raise UriError(f"{uri.raw}: the mavlink driver needs the vehicle mass: add ?mass=KG")
     return MavlinkDriver(
         uri.raw, device, runtime, mass_kg=mass,
         hover=float_param(opts, "hover", None, 0.05, 0.95),
@@ -144,13 +144,14 @@ def px4_custom_mode(main: int, sub: int) -> int:
 
 
 class MavlinkDriver(DriverBase):
-    def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float,
+    def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float | None,
                  hover: float | None, arm: bool, timeout: float, stream_hz: float,
                  wait: float) -> None:
         self.uri = uri
         self.device = device
         self.clock = runtime.clock
         self.mass_kg = mass_kg
+        self.uri_mass = mass_kg  # [kg] the URI's mass=, checked by bind_mass
         self.hover = hover
         self.arm = arm
         self.timeout = timeout
@@ -222,8 +223,21 @@ class MavlinkDriver(DriverBase):
             self._land()
         self._release()
 
+    def bind_mass(self, mass_kg: float) -> None:
+        """The flight's mass for the thrust model (rebuilt if connect() already made it)."""
+        self.mass_kg = agreed_mass(self.uri, self.uri_mass, mass_kg)
+        if self.model is not None:
+            self.model = NormalisedThrust(self.mass_kg, self.model.hover_fraction)
+
+    def thrust_ceiling_n(self) -> float | None:
+        """[N] full normalised thrust (1.0) in this model; known once connected."""
+        return None if self.model is None else self.model.newtons(1.0)
+
     # -- connection setup --------------------------------------------------------------
     def _setup(self) -> None:
+        if self.mass_kg is None:
+            raise ConfigError(f"{self.uri}: the vehicle mass is unknown: fly with a flight "
+                              f"config ([vehicle] mass_kg) or add ?mass=KG")
         self._await(lambda: self._heard is not None, "a heartbeat from the vehicle")
         if self.autopilot not in (ARDUPILOT, PX4):
             raise LinkError(f"{self.uri}: autopilot type {self.autopilot} is neither ArduPilot nor PX4")

@@ -1,5 +1,9 @@
 """`perchd fly P.json --driver URI --mocap URI [--config F] [--surface X Y Z]
-[--normal NX NY NZ] [--log F] [--json]`: fly one perch and report it (docs/contracts.md §2).
+[--normal NX NY NZ] [--log F] [--state F] [--json]`: fly one perch and report it
+(docs/contracts.md §2).
+
+The hover thrust the hold learns is kept per vehicle (the driver URI) in --state (default
+$XDG_STATE_HOME/perchd/vehicles.json, flight/vehiclestate.py) and is the next flight's guess.
 
 While flying, a one-line status on stderr (phase, X, Xdot, tau vs tau_ref); afterwards a
 summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise.
@@ -19,6 +23,7 @@ from pathlib import Path
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
+from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.service.config import load_flight_config
 from perchd.sim.session import open_links
 from perchd.tau import load_plan
@@ -38,6 +43,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
                    help="surface normal along the approach, world frame (default 1 0 0)")
     p.add_argument("--log", help="flight log path (default ./flightlogs/<time>-<strategy>.jsonl)")
+    p.add_argument("--state", help="per-vehicle memory of learned hover thrusts (JSON; default "
+                                   "$XDG_STATE_HOME/perchd/vehicles.json, i.e. "
+                                   "~/.local/state/perchd/vehicles.json)")
     p.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
     p.set_defaults(run=run)
 
@@ -93,6 +101,8 @@ def summary_text(res) -> str:
         lines.append(f"simulator: contact at {res.true_contact_speed:.3f} m/s"
                      + (f", {res.true_perch_time:.3f} s after the trigger"
                         if res.true_perch_time is not None else ""))
+    if res.hover_n is not None:
+        lines.append(f"hover thrust learned: {res.hover_n:.4f} N (guess {res.hover_guess_n:.4f} N)")
     if res.trigger is not None:
         lines.append(f"trigger: x {res.trigger.x:.3f} m, v {res.trigger.v:.3f} m/s; "
                      f"{res.trigger.action}")
@@ -105,7 +115,8 @@ def summary_text(res) -> str:
 
 def run(args: argparse.Namespace) -> int:
     plan = load_plan(args.plan)
-    cfg = load_config(args)
+    store = VehicleStore(Path(args.state) if args.state else default_path(), _warn)
+    cfg = store.with_learned_guess(args.driver, load_config(args))
     log = Path(args.log) if args.log else Path("flightlogs") / (
         f"{time.strftime('%Y%m%d-%H%M%S')}-{plan.strategy}.jsonl")
     abort = FlightAbort()
@@ -113,12 +124,18 @@ def run(args: argparse.Namespace) -> int:
                 for s in (signal.SIGINT, signal.SIGTERM)}
     status = StatusLine()
     try:
-        links = open_links(args.driver, args.mocap, cfg.surface)
+        links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
         res = links.fly(plan, log, cfg, abort, status,
                         header={"plan_file": str(args.plan), "mocap": args.mocap})
     finally:
         status.close()
         for s, h in handlers.items():
             signal.signal(s, h)
+    if res.hover_n is not None:
+        store.remember(args.driver, res.hover_n, cfg)
     print(json.dumps(res.to_json()) if args.json else summary_text(res))
     return 0 if res.outcome is EndReason.CONTACT else 1
+
+
+def _warn(line: str) -> None:
+    print(f"perchd fly: {line}", file=sys.stderr)

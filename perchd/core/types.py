@@ -63,6 +63,7 @@ class EndReason(enum.Enum):
     DEADLINE_OVERRUN = "control loop missed its deadlines"
     SIGNAL = "stopped by a signal"
     TRIGGER_REFUSED = "trigger state outside what the plan allows"
+    HOVER_UNLEARNED = "hover thrust not learned"
     TIMEOUT = "flight took too long"
     SOFTWARE_ERROR = "flight software error"
 
@@ -83,6 +84,8 @@ class State:
     pose_seq: sequence number of the newest pose used.
     frozen_s: [s] how long the newest poses used have had a bit-identical position (0 when
         the last one moved): a flying body never stays bit-still, a stuck tracker does.
+    zddot: [m/s^2] acceleration along the perching frame's z (the hover-thrust learner
+        reads it: flight/hover.py).
     """
 
     t: float
@@ -99,6 +102,7 @@ class State:
     age: float
     pose_seq: int
     frozen_s: float = 0.0
+    zddot: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -18,5 +18,8 @@ CRAZYFLIE_HOVER_UNITS = 36000.0
 CRAZYFLIE_THRUST_MIN_N = 0.08
 """[N] least collective thrust while flying (the paper clamps at 10000 units, ~0.07 N)."""
 
-CRAZYFLIE_THRUST_MAX_N = 0.58
-"""[N] most collective thrust perchd asks of a Crazyflie 2.0."""
+CRAZYFLIE_THRUST_MAX_N = 0.627
+"""[N] most collective thrust perchd asks of a Crazyflie 2.0: what the firmware's RPYT clamp
+(60000 units, drivers/thrust.py CF_UNITS_MAX) gives in the default thrust model (30 g hover at
+36000 units); a test re-derives it. A flight takes the smaller of this and its driver's own
+ceiling (Driver.thrust_ceiling_n, for the calibration flown)."""

@@ -33,13 +33,55 @@ def from_paper_units(units: float) -> float:
 
 @dataclass(frozen=True)
 class VehicleConfig:
-    """mass_kg [kg]; thrust_min_n/thrust_max_n [N] collective limits while flying (the paper's
-    eq. 26 clamps 10000..65000 units: about 0.07 N and 0.53 N for 30 g); g [m/s^2]."""
+    """The one vehicle of a flight (issue 13: drivers take its mass, Driver.bind_mass).
+
+    mass_kg [kg]; g [m/s^2].
+    thrust_min_n/thrust_max_n [N] collective limits while flying (the paper's eq. 26 clamps
+        10000..65000 units). thrust_max_n is a cap: the flight saturates, and stops its
+        integrators, at min(thrust_max_n, the driver's ceiling) (flight.run.fly asks
+        Driver.thrust_ceiling_n: a Crazyflie's thrust model at the firmware's 60000-unit
+        clamp, a MAVLink vehicle's full thrust, the simulated plant's maximum), so the
+        controller never counts on thrust the vehicle will not give.
+    hover_thrust_n [N]: the thrust that holds the vehicle level, in the driver's newtons;
+        None: mass_kg * g, or what an earlier flight of this vehicle learned. It is the
+        initial guess the hold phase refines (HoverConfig, flight/hover.py).
+    """
 
     mass_kg: float = CRAZYFLIE_MASS_KG
     thrust_min_n: float = CRAZYFLIE_THRUST_MIN_N
     thrust_max_n: float = CRAZYFLIE_THRUST_MAX_N
     g: float = G_M_S2
+    hover_thrust_n: float | None = None
+
+    @property
+    def hover_guess_n(self) -> float:
+        """[N] the configured hover thrust, or the weight."""
+        return self.mass_kg * self.g if self.hover_thrust_n is None else self.hover_thrust_n
+
+
+@dataclass(frozen=True)
+class HoverConfig:
+    """Learning the hover thrust during the hold (flight/hover.py, issue 13 B).
+
+    learn: refine the hover thrust in HOLD and start the approach only once it settled.
+    tau_s: [s] time constant of the low-pass on the measured hover thrust.
+    settle_s: [s] the estimate must stay within rel_tol of itself this long, with the
+        height within z_tol_m [m] of its reference and |zdot| below vz_tol_mps [m/s].
+    rel_tol: relative spread of the estimate over settle_s that counts as converged.
+    timeout_s: [s] in HOLD without convergence ends the flight HOVER_UNLEARNED.
+    ratio_min, ratio_max: a learned hover outside this multiple of mass_kg * g is refused
+        (a wrong mass or calibration by that much is not flown on).
+    """
+
+    learn: bool = True
+    tau_s: float = 0.25
+    settle_s: float = 0.4
+    rel_tol: float = 0.01
+    z_tol_m: float = 0.15
+    vz_tol_mps: float = 0.15
+    timeout_s: float = 6.0
+    ratio_min: float = 0.6
+    ratio_max: float = 1.6
 
 
 @dataclass(frozen=True)
@@ -125,6 +167,10 @@ class ApproachConfig:
     hold_s: [s] hover at the start before the approach.
     accel_max_mps2: [m/s^2] the approach may not need more than this (else it is refused).
     kv: [1/s] speed-tracking gain along X during the approach.
+    ki_v: [1/s^2] integral gain on the approach's speed error: drag and the attitude lag
+        otherwise leave the speed at the trigger ~0.09 m/s short of v0 on the Crazyflie
+        firmware (issue 13 C). i_limit_mps2: [m/s^2] clamp of its contribution; it does not
+        integrate while the mapping saturates, and is reset when the approach begins.
     """
 
     takeoff_height_m: float = 1.0
@@ -132,6 +178,8 @@ class ApproachConfig:
     hold_s: float = 0.5
     accel_max_mps2: float = 1.4
     kv: float = 3.0
+    ki_v: float = 8.0
+    i_limit_mps2: float = 1.0
 
 
 class TriggerPolicy(enum.Enum):
@@ -258,6 +306,7 @@ class FlightConfig:
     """
 
     vehicle: VehicleConfig = VehicleConfig()
+    hover: HoverConfig = HoverConfig()
     tau_gains: TauGains = TauGains()
     lateral: LateralGains = LateralGains()
     approach: ApproachConfig = ApproachConfig()
@@ -285,6 +334,9 @@ def validate(cfg: FlightConfig) -> None:
         ("vehicle.thrust_max_n", cfg.vehicle.thrust_max_n,
          cfg.vehicle.mass_kg * cfg.vehicle.g, math.inf),
         ("vehicle.thrust_min_n", cfg.vehicle.thrust_min_n, 0.0, cfg.vehicle.thrust_max_n),
+        ("vehicle.hover_thrust_n", cfg.vehicle.hover_guess_n, 1e-6, cfg.vehicle.thrust_max_n),
+        ("hover.tau_s", cfg.hover.tau_s, 0.01, 5.0),
+        ("hover.timeout_s", cfg.hover.timeout_s, 0.5, 60.0),
     ]
     for name, value, lo, hi in checks:
         if not lo <= value <= hi:

@@ -120,7 +120,14 @@ def map_attitude(a: Vec3, yaw: float, mass_kg: float, g: float, tilt_max: float,
 
 
 class Controller:
-    """Perching-frame acceleration commands -> Setpoint; holds the three PIDs' state."""
+    """Perching-frame acceleration commands -> Setpoint; holds the three PIDs' state.
+
+    hover_n [N]: the thrust that holds the vehicle level, in the driver's newtons (the hold
+    phase learns it: flight/hover.py). The mapping scales accelerations by hover_n / g, the
+    vehicle's mass as the thrust path sees it, so a wrong mass or thrust calibration is
+    corrected for feed-forward and gains alike. last_thrust_z [N]: the vertical component
+    of the last setpoint's thrust.
+    """
 
     def __init__(self, cfg: FlightConfig, frame: PerchFrame) -> None:
         self.cfg = cfg
@@ -130,6 +137,8 @@ class Controller:
         self.z = AxisController(cfg.lateral.z)
         self.saturated = False
         self.last_u: Vec3 = (0.0, 0.0, 0.0)
+        self.hover_n = cfg.vehicle.hover_guess_n
+        self.last_thrust_z: float | None = None
         self._yaw = frame.yaw_facing
 
     def lateral(self, state: State, y_ref: float, z_ref: float, dt: float,
@@ -141,8 +150,9 @@ class Controller:
     def setpoint(self, u: Vec3, t: float, pose_seq: int, phase: Phase) -> Setpoint:
         """Map the perching-frame acceleration u [m/s^2] to an attitude/thrust setpoint."""
         v = self.cfg.vehicle
-        att = map_attitude(self.frame.rotate_out(u), self._yaw, v.mass_kg, v.g,
+        att = map_attitude(self.frame.rotate_out(u), self._yaw, self.hover_n / v.g, v.g,
                            self.cfg.tilt_limit_rad, v.thrust_min_n, v.thrust_max_n)
         self.saturated = att.saturated
         self.last_u = u
+        self.last_thrust_z = att.thrust * body_z(att.roll, att.pitch, att.yaw)[2]
         return Setpoint(t, att.roll, att.pitch, att.yaw, att.thrust, pose_seq, phase)

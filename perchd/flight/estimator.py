@@ -159,4 +159,4 @@ class Estimator:
         tau = X / Xd if Xd > self.cfg.min_speed_mps else None
         return State(t, X, Xd, ax, py + dt * vy + h * ay, pz + dt * vz + h * az, vy + dt * ay,
                      vz + dt * az, tau, self._yaw, self._tilt, t - self._last.t, self._last.seq,
-                     self._last.t - self._moved_t)
+                     self._last.t - self._moved_t, az)

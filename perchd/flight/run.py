@@ -8,12 +8,14 @@ driver.failsafe(reason) with the log closed; an exception is re-raised after tha
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Protocol
 
 from perchd.core.clock import Clock
+from perchd.core.errors import ConfigError
 from perchd.core.types import EndReason, Phase, State
 from perchd.drivers.base import Driver
 from perchd.flight.config import FlightConfig
@@ -31,7 +33,7 @@ from perchd.logs.flightlog import FlightLogWriter, LogRow, jsonable
 from perchd.mocap.base import PoseSource
 from perchd.tau.plan import Plan
 
-__all__ = ["FlightAbort", "FlightResult", "TickStatus", "fly", "plan_summary"]
+__all__ = ["FlightAbort", "FlightResult", "TickStatus", "bind_vehicle", "fly", "plan_summary"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +56,9 @@ class FlightResult:
     plan_duration [s] and v_contact_plan [m/s] of the plan flown (retargeted if it was);
     trigger: the measured trigger state; true_contact_speed / true_perch_time: the
     simulator's own figures when flying in simulation (None otherwise); log: the log path;
-    loop: timing statistics; failsafe_sent: driver.failsafe was called."""
+    loop: timing statistics; failsafe_sent: driver.failsafe was called; hover_n [N]: the
+    hover thrust the hold learned (None if it did not settle or learning is off),
+    hover_guess_n [N] the guess it started from."""
 
     outcome: EndReason
     detail: str
@@ -68,6 +72,8 @@ class FlightResult:
     log: str
     loop: LoopSummary
     failsafe_sent: bool
+    hover_n: float | None = None
+    hover_guess_n: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The `perchd fly --json` object (docs/contracts.md §2 keys first)."""
@@ -78,7 +84,8 @@ class FlightResult:
                 "true_contact_speed": self.true_contact_speed,
                 "true_perch_time": self.true_perch_time,
                 "trigger": jsonable(self.trigger), "loop": jsonable(self.loop),
-                "failsafe_sent": self.failsafe_sent}
+                "failsafe_sent": self.failsafe_sent, "hover_n": self.hover_n,
+                "hover_guess_n": self.hover_guess_n}
 
 
 def plan_summary(plan: Plan) -> dict[str, Any]:
@@ -190,6 +197,25 @@ class GroundTruth(Protocol):
     contact: TrueContact | None
 
 
+def bind_vehicle(driver: Driver, cfg: FlightConfig) -> FlightConfig:
+    """Give the driver the flight's vehicle (its mass: Driver.bind_mass, which refuses a URI
+    mass= that disagrees) and cap the thrust at the driver's ceiling, so saturation and
+    anti-windup act where the vehicle really stops (VehicleConfig.thrust_max_n). Drivers
+    written before these hooks have neither; getattr keeps them flying as before."""
+    v = cfg.vehicle
+    bind = getattr(driver, "bind_mass", None)
+    if bind is not None:
+        bind(v.mass_kg)
+    ceiling = getattr(driver, "thrust_ceiling_n", lambda: None)()
+    if ceiling is None or ceiling >= v.thrust_max_n:
+        return cfg
+    if ceiling < v.hover_guess_n:
+        raise ConfigError(f"{getattr(driver, 'uri', 'driver')}: its thrust ceiling "
+                          f"{ceiling:.4f} N is below the hover thrust {v.hover_guess_n:.4f} N "
+                          f"of vehicle.mass_kg = {v.mass_kg:g} kg")
+    return dataclasses.replace(cfg, vehicle=dataclasses.replace(v, thrust_max_n=ceiling))
+
+
 def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: str | Path,
         cfg: FlightConfig = FlightConfig(), abort: FlightAbort | None = None,
         on_tick: Callable[[TickStatus], None] | None = None,
@@ -202,6 +228,7 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
     when simulated, for the true contact figures. header: extra header fields for the log.
     """
     abort = abort or FlightAbort()
+    cfg = bind_vehicle(driver, cfg)  # before the log: a refused vehicle never flies
     run = _Run(plan, driver, source, clock, cfg, abort, on_tick)  # may refuse: no log yet
     log = run.log = FlightLogWriter(log_path, {"plan": plan_summary(plan),
                                                "config": jsonable(cfg),
@@ -235,5 +262,5 @@ def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult
         sup.end or EndReason.SOFTWARE_ERROR, sup.end_detail,
         contact.speed if contact else None, perch, float(sup.plan.duration),
         float(sup.plan.v_contact), trig, true_speed, true_perch, log_path,
-        run.loop.summary(), run.failsafe_sent)
+        run.loop.summary(), run.failsafe_sent, sup.hover_learned_n, sup.hover.guess_n)
 

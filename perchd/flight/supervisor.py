@@ -1,7 +1,8 @@
 """Flight phases and every end rule: one `tick` per control period, no I/O of its own.
 
 Phases: TAKEOFF (only when the flight starts below the take-off height) -> HOLD at the start
-point -> APPROACH (accelerate along X so that the plan's trigger state (x0, v0) is reached at
+point, at least hold_s and until the hover thrust has been learned (flight/hover.py;
+HOVER_UNLEARNED after hover.timeout_s) -> APPROACH (accelerate along X so that the plan's trigger state (x0, v0) is reached at
 x0) -> trigger -> STAGE1 (tau_ref indexed by time since the trigger) -> STAGE2 when the
 *measured* tau reaches tau_s (docs/errata.md §9; tau_ref = tau_s + time since that switch) ->
 CONTACT (the post-contact action for post_contact_s) -> DONE.
@@ -25,6 +26,7 @@ from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint, State
 from perchd.flight.config import FlightConfig, PostContact, TriggerPolicy
 from perchd.flight.control import AxisController, Controller
 from perchd.flight.frame import PerchFrame
+from perchd.flight.hover import HoverLearner
 from perchd.flight.planrefs import PlanSampler
 from perchd.logs.flightlog import LogEvent
 from perchd.tau import retarget
@@ -150,6 +152,10 @@ class Supervisor:
         self._sampler = PlanSampler(plan)
         self._refs_memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
         self._library = _open_library(cfg.trigger.library, plan)
+        self.hover = HoverLearner(cfg.hover, cfg.vehicle.hover_guess_n, cfg.vehicle.g)
+        self.hover_learned_n: float | None = None  # [N] once the hold's estimate settled
+        self._hover_waiting = False
+        self._v_int = 0.0  # [m/s] integral of the approach's speed error
 
     # --- helpers ----------------------------------------------------------------------------
     def _enter(self, phase: Phase, t: float, detail: str = "", **values: float) -> None:
@@ -288,8 +294,12 @@ class Supervisor:
             self._start(t, st)
         if self.phase is Phase.TAKEOFF and st.z >= self._z_ref - 0.05:
             self._enter(Phase.HOLD, t)
-        if self.phase is Phase.HOLD and t - self._t_phase >= self.cfg.approach.hold_s:
+        self._learn_hover(t, dt, st)
+        if self.phase is Phase.HOLD and t - self._t_phase >= self.cfg.approach.hold_s \
+                and self._hover_ready(t, st):
             self._begin_approach(t, st)
+        if self.end is not None:
+            return self._ended(t, st)
         if self.phase is Phase.APPROACH and st.x >= self.plan.x0:
             self._trigger(t, st)
             if self.end is not None:
@@ -312,7 +322,7 @@ class Supervisor:
                                        schedule=not hold)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
-            ux = self._approach_accel(st)
+            ux = self._approach_accel(st, dt)
         else:
             ux = self._hold_x.step(self._hold[0], st.x, st.xdot, dt, self.ctl.saturated)
             if self.phase is Phase.TAKEOFF:
@@ -354,13 +364,73 @@ class Supervisor:
                          f"X = {st.x:.2f} m needs {need:.2f} m/s^2 > approach limit "
                          f"{self.cfg.approach.accel_max_mps2:g} m/s^2")
             return
-        self._a_app, self._t_moving = need, t
+        self._a_app, self._t_moving, self._v_int = need, t, 0.0
         self._enter(Phase.APPROACH, t, "", accel=need)
 
-    def _approach_accel(self, st: State) -> float:
-        v0 = self.plan.v0
+    def _approach_accel(self, st: State, dt: float) -> float:
+        """Feed-forward + PI on the speed profile to (x0, v0); the integral takes up drag
+        and attitude lag (ApproachConfig.ki_v), frozen while the mapping saturates."""
+        a, v0 = self.cfg.approach, self.plan.v0
         v_ref = math.sqrt(max(0.0, v0 * v0 - 2.0 * self._a_app * (self.plan.x0 - st.x)))
-        return self._a_app + self.cfg.approach.kv * (v_ref - st.xdot)
+        err = v_ref - st.xdot
+        if not self.ctl.saturated and a.ki_v > 0.0:
+            bound = a.i_limit_mps2 / a.ki_v
+            self._v_int = min(max(self._v_int + err * dt, -bound), bound)
+        return self._a_app + a.kv * err + a.ki_v * self._v_int
+
+    # --- the hover thrust (flight/hover.py) -------------------------------------------------
+    def _learn_hover(self, t: float, dt: float, st: State) -> None:
+        """Fold this tick into the hover estimate while taking off (once clear of the floor,
+        which would carry part of the weight) and holding, until it has settled."""
+        if not self.cfg.hover.learn or self.hover_learned_n is not None:
+            return
+        if self.phase not in (Phase.TAKEOFF, Phase.HOLD) or self.ctl.last_thrust_z is None:
+            return
+        if self.phase is Phase.TAKEOFF and st.z < self._hold[2] + 0.1:
+            return
+        self.hover.update(t, self.ctl.last_thrust_z, st.zddot, dt)
+        self.ctl.hover_n = self.hover.estimate_n
+        # The estimate does the z integral's job here; both at once would wind the integral
+        # up against a deficit the estimate then removes, and the height would overshoot.
+        self.ctl.z.pid.integral = 0.0
+
+    def _hover_ready(self, t: float, st: State) -> bool:
+        """True once the hover thrust is known; says in the log what the hold waits for, and
+        ends the flight HOVER_UNLEARNED after hover.timeout_s in HOLD."""
+        h, v = self.cfg.hover, self.cfg.vehicle
+        if not h.learn or self.hover_learned_n is not None:
+            return True
+        status = self.hover.status(t, st.z - self._z_ref, st.zdot)
+        ratio = status.estimate_n / (v.mass_kg * v.g)
+        if self.hover.settled(status):
+            return self._hover_settled(t, status.estimate_n, ratio)
+        if not self._hover_waiting:
+            self._hover_waiting = True
+            self.events.append(LogEvent(t, "hover-wait", "waiting for the hover thrust to "
+                                        "settle before the approach", {
+                                            "estimate_n": status.estimate_n,
+                                            "spread": status.spread}))
+        if t - self._t_phase > h.timeout_s:
+            self._finish(EndReason.HOVER_UNLEARNED, t, (
+                f"hover thrust unsettled after {t - self._t_phase:.1f} s in hold: estimate "
+                f"{status.estimate_n:.4f} N ({ratio:.3f} x the weight of "
+                f"{v.mass_kg:g} kg), spread {status.spread:.1%} over "
+                f"{status.steady_s:.2f} s steady (need {h.rel_tol:.1%} over {h.settle_s:g} s)"))
+        return False
+
+    def _hover_settled(self, t: float, hover_n: float, ratio: float) -> bool:
+        h, v = self.cfg.hover, self.cfg.vehicle
+        if not h.ratio_min <= ratio <= h.ratio_max:
+            self._finish(EndReason.HOVER_UNLEARNED, t, (
+                f"learned hover thrust {hover_n:.4f} N is {ratio:.3f} x the weight of "
+                f"vehicle.mass_kg = {v.mass_kg:g} kg, outside {h.ratio_min:g}..{h.ratio_max:g}:"
+                f" check the mass and the driver's thrust calibration"))
+            return False
+        self.hover_learned_n = self.ctl.hover_n = hover_n
+        self.events.append(LogEvent(t, "hover-learned", f"{hover_n:.4f} N", {
+            "hover_n": hover_n, "ratio": ratio, "guess_n": self.hover.guess_n,
+            "since_hold_s": t - self._t_phase}))
+        return True
 
     def _trigger(self, t: float, st: State) -> None:
         plan, action, why = self._choose_plan(st)

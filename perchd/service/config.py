@@ -44,7 +44,8 @@ class ServiceConfig:
     """vehicle: a name for logs and STATUS; driver, mocap: link URIs; body: mocap rigid body
     (added to the mocap URI as ?body= when it names none); socket: control socket path;
     plan_dir: plans in `fly` requests must lie here (relative names resolve here); log_dir:
-    flight logs. allowed_users, allowed_groups: names or numeric ids let onto the control
+    flight logs. state_dir: where vehicles.json keeps each vehicle's learned hover thrust
+    (flight/vehiclestate.py; empty: log_dir). allowed_users, allowed_groups: names or numeric ids let onto the control
     socket besides the service's own user and root (checked by SO_PEERCRED)."""
 
     vehicle: str = "cf1"
@@ -54,6 +55,7 @@ class ServiceConfig:
     socket: str = "/run/perchd/control.sock"
     plan_dir: str = "/var/lib/perchd/plans"
     log_dir: str = "/var/log/perchd"
+    state_dir: str = ""
     allowed_users: tuple[int | str, ...] = ()
     allowed_groups: tuple[int | str, ...] = ()
 

@@ -30,6 +30,7 @@ from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
 from perchd.drivers.base import Driver
 from perchd.flight.config import SurfaceConfig
+from perchd.flight.vehiclestate import VehicleStore
 from perchd.flight.run import FlightAbort, fly
 from perchd.mocap.base import PoseSource
 from perchd.service.config import (
@@ -62,14 +63,17 @@ class Links:
     """The service's connected driver and pose source. Simulated links (sim:// on both) fly
     a fresh simulated world per flight, paced in real time."""
 
-    def __init__(self, service: ServiceConfig, surface: SurfaceConfig | None = None) -> None:
+    def __init__(self, service: ServiceConfig, surface: SurfaceConfig | None = None,
+                 mass_kg: float | None = None) -> None:
         self.surface = surface  # where a simulated world puts its wall
+        self.mass_kg = mass_kg  # the flight config's, bound before the driver connects
         self.driver_uri, self.mocap_uri = service.driver, service.mocap_uri()
         self.session: Session | None = self._open()
         self.simulated = self.session.world is not None
 
     def _open(self) -> Session:
-        return open_links(self.driver_uri, self.mocap_uri, self.surface, MonotonicClock())
+        return open_links(self.driver_uri, self.mocap_uri, self.surface, MonotonicClock(),
+                          self.mass_kg)
 
     @property
     def driver(self) -> Driver:
@@ -116,13 +120,18 @@ class FlightJob(threading.Thread):
         self._phase = None
 
     def run(self) -> None:
-
+        svc = self.cfg.service
+        store = VehicleStore(Path(svc.state_dir or svc.log_dir) / "vehicles.json", say)
+        key = f"{svc.vehicle} {svc.driver}"  # the vehicle and the calibration it flies with
         try:
+            flight = store.with_learned_guess(key, self.cfg.flight)
             res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
-                      self.log, self.cfg.flight, self.abort, self.on_tick, world=self.links.session.world,
+                      self.log, flight, self.abort, self.on_tick, world=self.links.session.world,
                       header={"plan_file": str(self.plan_path), "vehicle": self.cfg.service.vehicle,
                               "mocap": self.links.mocap_uri, "service": True})
             self.result = res.to_json()
+            if res.hover_n is not None:
+                store.remember(key, res.hover_n, flight)
         except BaseException as err:  # fly has already sent the failsafe and closed the log
             self.result = {"outcome": EndReason.SOFTWARE_ERROR.name, "log": str(self.log),
                            "detail": f"{type(err).__name__}: {err}"}
@@ -179,7 +188,7 @@ class Daemon:
         self.server = ControlServer(svc.socket, self.dispatch, peers=svc.peer_policy(),
                                     on_refuse=lambda why: say(f"control socket: refused {why}"))
         self.notifier.status(f"{svc.vehicle}: connecting {svc.mocap_uri()} and {svc.driver}")
-        self.links = Links(svc, self.config.flight.surface)
+        self.links = Links(svc, self.config.flight.surface, self.config.flight.vehicle.mass_kg)
         self.notifier.ready(f"{svc.vehicle}: idle")
         say(f"ready: vehicle {svc.vehicle}, driver {svc.driver}, mocap {svc.mocap_uri()}, "
             f"socket {svc.socket}")
@@ -250,7 +259,7 @@ class Daemon:
             moved = self.links.simulated and new.flight.surface != self.links.surface
             if moved or (new.service.driver, new.service.mocap_uri()) != (self.links.driver_uri,
                                                                           self.links.mocap_uri):
-                links = Links(new.service, new.flight.surface)
+                links = Links(new.service, new.flight.surface, new.flight.vehicle.mass_kg)
                 self.links.close()
                 self.links = links
         except PerchdError as err:

@@ -58,8 +58,10 @@ class Session:
 
 
 def open_links(driver_uri: str, mocap_uri: str, surface: SurfaceConfig | None = None,
-               simulated_clock: Clock | None = None) -> Session:
-    """The flight's links from the user's URIs. sim:// on both flies a fresh simulated world
+               simulated_clock: Clock | None = None, mass_kg: float | None = None) -> Session:
+    """The flight's links from the user's URIs. mass_kg: the flight config's vehicle mass,
+    given to the driver before it connects (Driver.bind_mass refuses a URI mass= that
+    disagrees before anything is armed). sim:// on both flies a fresh simulated world
     on `simulated_clock` (default a ManualClock: faster than real time); sim:// on only one
     side is refused, since the simulated vehicle would be steered on real poses or the
     reverse."""
@@ -69,15 +71,17 @@ def open_links(driver_uri: str, mocap_uri: str, surface: SurfaceConfig | None = 
                        f"(got {driver_uri} and {mocap_uri})")
     if sims[0]:
         return open_session(driver_uri, surface=surface, clock=simulated_clock)
-    return _connect(Runtime.real(), None, driver_uri, mocap_uri)
+    return _connect(Runtime.real(), None, driver_uri, mocap_uri, mass_kg)
 
 
 def _connect(runtime: Runtime, world: SimWorld | None, driver_uri: str,
-             mocap_uri: str) -> Session:
+             mocap_uri: str, mass_kg: float | None = None) -> Session:
+    driver = open_driver(driver_uri, runtime)
+    if mass_kg is not None:
+        driver.bind_mass(mass_kg)
     source = open_source(mocap_uri, runtime)
     source.start()
     try:
-        driver = open_driver(driver_uri, runtime)
         driver.connect()
     except BaseException:
         source.close()

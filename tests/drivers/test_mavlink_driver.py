@@ -200,7 +200,6 @@ def test_no_vehicle_fails_the_connect_by_name():
 
 
 @pytest.mark.parametrize("uri, message", [
-    ("mavlink:udpout:127.0.0.1:14550", "needs the vehicle mass"),
     ("mavlink:udpout:127.0.0.1:14550?mass=90", "mass=90 kg is outside"),
     ("mavlink:nonsense", "expected mavlink:udpout"),
 ])

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from cf2rig import CF2, needs_cf2
+from perchd.drivers.thrust import CrazyflieThrust
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
 pytest.importorskip("cflib")
@@ -26,6 +27,9 @@ pytest.importorskip("cflib")
 ROOT = Path(__file__).parents[2]
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+HOVER_TRUE_N = CrazyflieThrust().newtons(38780)
+"""[N] the SITL vehicle's weight (it hovers at 38780 units) in the newtons of the driver's
+default thrust model, which the flight flies in when no hover= calibrates it."""
 
 
 def harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
@@ -45,10 +49,12 @@ def harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
 def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
     plan = json.loads(PLAN.read_text())
     proc, mocap, driver = harness(tmp_path)
+    driver = driver.split("?")[0]  # no mass, no hover: the hold learns it (issue 13 B)
     try:
         done = subprocess.run(
             [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
-             mocap, "--log", str(tmp_path / "flight.jsonl"), "--json"],
+             mocap, "--log", str(tmp_path / "flight.jsonl"), "--state",
+             str(tmp_path / "vehicles.json"), "--json"],
             capture_output=True, text=True, timeout=90, env=ENV)
         proc.send_signal(signal.SIGTERM)
         out, _ = proc.communicate(timeout=15)
@@ -65,6 +71,7 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
         "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
         "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
         "trigger_speed": fly["trigger"] and fly["trigger"]["v"],
+        "hover_n": fly["hover_n"], "hover_true_n": HOVER_TRUE_N,
         "yaw_range_rad": yaws, "imu_rate_hz": sim["imu"]["rate_hz"],
         "imu_late_max_ms": sim["imu"]["late_max_ms"], "imu_skipped": sim["imu"]["skipped_late"],
         "launches": [r["outcome"] for r in sim["launches"]]}
@@ -76,4 +83,6 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
     assert sim["contact"] is not None
     assert lo - 0.1 <= sim["contact"]["speed"] <= hi + 0.1
     assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.10)
+    assert fly["hover_n"] == pytest.approx(HOVER_TRUE_N, rel=0.03)
+    assert abs(fly["trigger"]["v"] - plan["v0"]) < 0.03
     assert max(abs(y) for y in yaws) < 0.1  # the heading held (a yaw run-away fails here)
