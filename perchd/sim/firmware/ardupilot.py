@@ -310,6 +310,7 @@ class ArduPilotVehicle(FirmwareVehicle):
                    "the EKF to use GPS and the pre-arm checks to pass", deadline, cancel)
         self._set_param("SIM_SPEEDUP", 1.0, deadline, cancel)
         self._ask_truth()  # the rate is per wall second: ask again at speed-up 1
+        self.state.sim_states, self.state.first_sim_t = 0, None  # the summary's rate: at 1x
 
     def truth(self) -> Truth | None:
         return self._truth
