@@ -1,5 +1,6 @@
 """`perchd sim firmware`: a vehicle's real flight firmware in the loop (docs/firmware.md).
 
+    perchd sim firmware --arducopter PATH [--defaults FILE] [--frame nwu|enu] [--pose-out ...]
     perchd sim firmware --cf2 PATH [--pose-out zmq://127.0.0.1:0 | natnet://127.0.0.1[:PORT]]
                         [--link udp://127.0.0.1:19850] [--fw-port PORT] [--body cf1]
                         [--start X Y Z] [--surface X Y Z] [--normal NX NY NZ]
@@ -27,6 +28,7 @@ from typing import Any
 
 from perchd.core.errors import UriError
 from perchd.mocap.outputs import open_pose_output
+from perchd.sim.firmware.ardupilot import ArduPilotParams, ArduPilotVehicle
 from perchd.sim.firmware.cf2 import Cf2Params, Cf2Vehicle, SensorNoise, Surface
 from perchd.sim.firmware.harness import (Interrupted, MocapParams, ProcessGroup,
                                          TruthPublisher, ready_line)
@@ -39,8 +41,16 @@ def register_under(sim_parser: argparse.ArgumentParser) -> None:
                                     parser_class=type(sim_parser))
     p = sub.add_parser("firmware", help="fly a vehicle's own firmware in the loop",
                        description=__doc__.splitlines()[0])
-    p.add_argument("--cf2", required=True, metavar="PATH",
-                   help="the Crazyflie SITL firmware binary (docs/firmware.md)")
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument("--cf2", metavar="PATH",
+                       help="the Crazyflie SITL firmware binary (docs/firmware.md)")
+    which.add_argument("--arducopter", metavar="PATH",
+                       help="ArduCopter's SITL binary (docs/firmware.md, ArduPilot)")
+    p.add_argument("--defaults", metavar="FILE", help="ArduCopter: the defaults .parm (default: "
+                   "Tools/autotest/default_params/copter.parm of the binary's source tree)")
+    p.add_argument("--frame", choices=("nwu", "enu"), default="nwu",
+                   help="ArduCopter: world frame of the truth (default nwu: X north, "
+                        "perchd's MAVLink driver's frame)")
     p.add_argument("--pose-out", default="zmq://127.0.0.1:0",
                    help="natnet://HOST[:PORT] or zmq://HOST:PORT (default zmq://127.0.0.1:0)")
     p.add_argument("--link", default="udp://127.0.0.1:19850",
@@ -88,15 +98,33 @@ GIL_SWITCH_S = 0.0005
 wait a whole default interval behind another thread's Python code."""
 
 
+def arducopter_params(args: argparse.Namespace) -> ArduPilotParams:
+    return ArduPilotParams(binary=args.arducopter, defaults=args.defaults, start=tuple(args.start),
+                           frame=args.frame,
+                           surface=(tuple(args.surface), tuple(args.normal)),
+                           truth_hz=max(args.mocap_rate, 50.0),
+                           log=Path(args.fw_log) if args.fw_log else None)
+
+
+def open_vehicle(args: argparse.Namespace, clock: MonotonicClock) -> Any:
+    """The FirmwareVehicle the command line names."""
+    if args.arducopter:
+        return ArduPilotVehicle(arducopter_params(args), clock)
+    return Cf2Vehicle(params_from(args)[0], clock)
+
+
 def run(args: argparse.Namespace) -> int:
-    cf2, mocap = params_from(args)
+    if args.arducopter:
+        mocap = MocapParams(rate_hz=args.mocap_rate, noise_m=args.noise, body=args.body)
+    else:
+        _, mocap = params_from(args)
     sys.setswitchinterval(GIL_SWITCH_S)
     clock = MonotonicClock()
     done = threading.Event()
     previous = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         with ProcessGroup() as procs:
-            vehicle = Cf2Vehicle(cf2, clock)
+            vehicle = open_vehicle(args, clock)
             try:
                 output = open_pose_output(args.pose_out, [mocap.body], clock)
                 try:
@@ -114,11 +142,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
     else:
-        print(summary_text(result))
+        print(summary_text(result) if "imu" in result else arducopter_text(result))
     return 0
 
 
-def serve(vehicle: Cf2Vehicle, procs: ProcessGroup, output: Any, mocap: MocapParams,
+def serve(vehicle: Any, procs: ProcessGroup, output: Any, mocap: MocapParams,
           done: threading.Event, duration: float | None) -> dict[str, Any]:
     vehicle.start(procs, done)
     mocap_uri, driver_uri = output.uri(mocap.body), vehicle.driver_uri()
@@ -142,3 +170,13 @@ def summary_text(r: dict[str, Any]) -> str:
             f"{imu['late_max_ms']:.1f} ms, {imu['skipped_late']} skipped); "
             f"{r['motor_packets']} motor packets; {len(r['launches'])} launch(es); "
             f"{r['poses']} poses; firmware log {r['log']}")
+
+
+def arducopter_text(r: dict[str, Any]) -> str:
+    c = r["contact"]
+    contact = (f"contact at {c['speed']:.3f} m/s, {c['t']:.3f} s after start" if c
+               else "no contact")
+    rate = r["truth"]["rate_hz"]
+    return (f"{contact}; SIM_STATE {r['truth']['sim_states']} at "
+            f"{'n/a' if rate is None else f'{rate:.1f} Hz'}; mode {r['mode']}, "
+            f"{'armed' if r['armed'] else 'disarmed'}; {r['poses']} poses; log {r['log']}")
