@@ -11,8 +11,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
-import signal
 import subprocess
 import sys
 import threading
@@ -20,6 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fwharness import start_harness, stop_harness
 
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
 pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
@@ -40,27 +39,8 @@ def with_param(uri: str, param: str) -> str:
     return uri + ("&" if "?" in uri else "?") + param
 
 
-def start_harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "sim", "firmware", "--arducopter", ARDUCOPTER,
-         "--fw-log", str(tmp / "sitl.log"), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    line = proc.stderr.readline()
-    found = re.search(r"ready: mocap (\S+) driver (\S+)", line)
-    if found is None:
-        proc.kill()
-        raise AssertionError(f"perchd sim firmware did not start: {line}{proc.stderr.read()}")
-    return proc, found.group(1), found.group(2)
-
-
-def stop_harness(proc: subprocess.Popen) -> dict:
-    proc.send_signal(signal.SIGTERM)
-    try:
-        out, _ = proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    return json.loads(out)
+def start(tmp: Path) -> tuple[subprocess.Popen, str, str]:
+    return start_harness("--arducopter", ARDUCOPTER, "--fw-log", str(tmp / "sitl.log"), env=ENV)
 
 
 def fly_argv(tmp: Path, mocap: str, driver: str) -> list[str]:
@@ -129,11 +109,12 @@ def pitch_lag(log: Path, truth: list[tuple[float, float, float, float, float]]) 
 
 
 def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_path):
+    from perchd.drivers.base import open_driver
     from pymavlink import mavutil  # noqa: F401 (the driver's dependency)
+
     from perchd.core.runtime import Runtime
     from perchd.core.types import Phase, Setpoint
-    from perchd.drivers.base import open_driver
-    proc, mocap, driver = start_harness(tmp_path)
+    proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
         runtime = Runtime.real()
@@ -158,7 +139,7 @@ def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_pat
 
 def test_the_agent_perches_on_arducopter_sitl(tmp_path):
     plan = json.loads(PLAN.read_text())
-    proc, mocap, driver = start_harness(tmp_path)
+    proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
         done = subprocess.run(fly_argv(tmp_path, mocap, driver), capture_output=True,
@@ -184,7 +165,7 @@ def test_the_agent_perches_on_arducopter_sitl(tmp_path):
 
 def test_sigkill_of_perchd_fly_mid_approach_leaves_the_vehicle_level(tmp_path):
     """No failsafe can be sent: ArduPilot's GUID_TIMEOUT (3 s) levels it; docs/safety.md."""
-    proc, mocap, driver = start_harness(tmp_path)
+    proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
         fly = subprocess.Popen(fly_argv(tmp_path, mocap, driver), stdout=subprocess.PIPE,

@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import json
 import os
-import re
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-
 from cf2rig import CF2, needs_cf2
+from fwharness import start_harness, stop_harness
 from perchd.drivers.thrust import CrazyflieThrust
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
@@ -33,16 +31,8 @@ default thrust model, which the flight flies in when no hover= calibrates it."""
 
 
 def harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "sim", "firmware", "--cf2", CF2, "--link",
-         "udp://127.0.0.1:0", "--fw-log", str(tmp / "cf2.log"), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    line = proc.stderr.readline()
-    found = re.search(r"ready: mocap (\S+) driver (\S+)", line)
-    if found is None:
-        proc.kill()
-        raise AssertionError(f"perchd sim firmware did not start: {line}{proc.stderr.read()}")
-    return proc, found.group(1), found.group(2)
+    return start_harness("--cf2", CF2, "--link", "udp://127.0.0.1:0", "--fw-log",
+                         str(tmp / "cf2.log"), env=ENV)
 
 
 @pytest.mark.parametrize("flight", [1, 2, 3])
@@ -56,14 +46,10 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
              mocap, "--log", str(tmp_path / "flight.jsonl"), "--state",
              str(tmp_path / "vehicles.json"), "--json"],
             capture_output=True, text=True, timeout=90, env=ENV)
-        proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=15)
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        sim = stop_harness(proc, 15.0)
     assert done.stdout, done.stderr
     fly = json.loads(done.stdout)
-    sim = json.loads(out)
     lo, hi = plan["limits"]["v_contact"]
     yaws = sim["yaw_range_rad"]  # the true heading over the whole run
     figures = {

@@ -6,11 +6,10 @@ thrust (docs/firmware.md)."""
 from __future__ import annotations
 
 import math
-import time
 
 import pytest
-
 from cf2rig import CALIBRATION, MASS, Pilot, cf2_vehicle, needs_cf2, rpy
+
 from perchd.core.runtime import Runtime
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
