@@ -33,8 +33,8 @@ class Driver(Protocol):
         """Release the link; a vehicle left flying gets the failsafe first."""
 
     def bind_mass(self, mass_kg: float) -> None:
-        """The flight's vehicle mass [kg], FlightConfig.vehicle.mass_kg: the one mass (issue
-        13). A thrust model calibrated by weight scales to it. Called before connect() by
+        """The flight's vehicle mass [kg], FlightConfig.vehicle.mass_kg: the one mass.
+        A thrust model calibrated by weight scales to it. Called before connect() by
         the session and again by flight.run.fly(); raises ConfigError, one line naming both
         values, when the URI's own mass= disagrees (nothing has been armed or flown yet)."""
 

@@ -33,7 +33,7 @@ def from_paper_units(units: float) -> float:
 
 @dataclass(frozen=True)
 class VehicleConfig:
-    """The one vehicle of a flight (issue 13: drivers take its mass, Driver.bind_mass).
+    """The one vehicle of a flight (drivers take its mass, Driver.bind_mass).
 
     mass_kg [kg]; g [m/s^2].
     thrust_min_n/thrust_max_n [N] collective limits while flying (the paper's eq. 26 clamps
@@ -61,7 +61,7 @@ class VehicleConfig:
 
 @dataclass(frozen=True)
 class HoverConfig:
-    """Learning the hover thrust during the hold (flight/hover.py, issue 13 B).
+    """Learning the hover thrust during the hold (flight/hover.py).
 
     learn: refine the hover thrust in HOLD and start the approach only once it settled.
     tau_s: [s] time constant of the low-pass on the measured hover thrust.
@@ -169,7 +169,7 @@ class ApproachConfig:
     kv: [1/s] speed-tracking gain along X during the approach.
     ki_v: [1/s^2] integral gain on the approach's speed error: drag and the attitude lag
         otherwise leave the speed at the trigger ~0.09 m/s short of v0 on the Crazyflie
-        firmware (issue 13 C). i_limit_mps2: [m/s^2] clamp of its contribution; it does not
+        firmware. i_limit_mps2: [m/s^2] clamp of its contribution; it does not
         integrate while the mapping saturates, and is reset when the approach begins.
     """
 

@@ -1,4 +1,4 @@
-"""The hover thrust, learned while the vehicle holds before the approach (issue 13 B).
+"""The hover thrust, learned while the vehicle holds before the approach.
 
 A vehicle's true weight in the driver's newtons is rarely mass_kg * g: the mass is
 weighed with another battery, a thrust calibration was made on another airframe (the

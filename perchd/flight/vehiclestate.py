@@ -1,4 +1,4 @@
-"""What one flight learns about its vehicle, kept for the next (issue 13 B): a small JSON file,
+"""What one flight learns about its vehicle, kept for the next: a small JSON file,
 `{"schema": "perchd.vehicles/1", "vehicles": {KEY: {"hover_ratio": R, "hover_n": N,
 "mass_kg": M}}}`, keyed by the vehicle (`perchd fly`: the driver URI; the service: its
 vehicle name and driver URI).

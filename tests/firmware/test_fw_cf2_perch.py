@@ -39,7 +39,7 @@ def harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
 def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
     plan = json.loads(PLAN.read_text())
     proc, mocap, driver = harness(tmp_path)
-    driver = driver.split("?")[0]  # no mass, no hover: the hold learns it (issue 13 B)
+    driver = driver.split("?")[0]  # no mass, no hover: the hold learns it
     try:
         done = subprocess.run(
             [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
