@@ -146,6 +146,8 @@ class Supervisor:
         self._t_end: float | None = None
         self._t_bad_tau: float | None = None
         self._hold: tuple[float, float, float] | None = None
+        self._hold_x: AxisController | None = None  # the X position loop of the hold
+        self._t_moving = 0.0  # [s] when the approach began moving the vehicle
         self._z_ref = 0.0
         self._a_app = 0.0
         self._x: float | None = None  # [m] measured X of the tick in hand
