@@ -32,28 +32,30 @@ def confine(name: str | os.PathLike, root: str | os.PathLike, what: str,
 
 def read_regular(path: str | os.PathLike, what: str, error: type[PerchdError],
                  max_bytes: int = MAX_FILE_BYTES) -> str:
-    """The UTF-8 text of a regular file of at most `max_bytes`; `error` naming why not."""
+    """The UTF-8 text of a regular file of at most `max_bytes`; `error` naming why not,
+    as "WHAT PATH: why" (or "PATH: why" when `what` is empty)."""
+    what = f"{what} {path}" if what else str(path)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOCTTY)
     except OSError as err:
-        raise error(f"{what} {path}: cannot read ({err.strerror})") from None
+        raise error(f"{what}: cannot read ({err.strerror})") from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise error(f"{what} {path}: not a regular file ({_kind(st.st_mode)})")
+            raise error(f"{what}: not a regular file ({_kind(st.st_mode)})")
         if st.st_size > max_bytes:
-            raise error(f"{what} {path}: {st.st_size} bytes, over the {max_bytes} byte limit "
+            raise error(f"{what}: {st.st_size} bytes, over the {max_bytes} byte limit "
                         f"by {st.st_size - max_bytes}")
         with os.fdopen(os.dup(fd), "rb") as f:
             data = f.read(max_bytes + 1)
     finally:
         os.close(fd)
     if len(data) > max_bytes:  # grew after the check
-        raise error(f"{what} {path}: over the {max_bytes} byte limit")
+        raise error(f"{what}: over the {max_bytes} byte limit")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as err:
-        raise error(f"{what} {path}: not UTF-8 text (byte {err.start})") from None
+        raise error(f"{what}: not UTF-8 text (byte {err.start})") from None
 
 
 def _kind(mode: int) -> str:
