@@ -22,6 +22,7 @@ from typing import Any, TextIO
 
 from perchd.commands.fly import load_config
 from perchd.core.errors import ConfigError
+from perchd.core.safefile import OutputError, check_output
 from perchd.flight.config import TriggerPolicy
 from perchd.sim import campaign as cp
 from perchd.tau import load_plan
@@ -31,7 +32,7 @@ LIVE_ONLY = ("pose_out", "setpoint_in", "duration", "exit_on_stop")
 """Options of a live `perchd sim` (all unset by default) that mean nothing to a campaign."""
 CAMPAIGN_DEFAULTS = {"flights": None, "grid": None, "x0": None, "v0": None, "gust": 0.0,
                      "seed": 0, "policy": None, "config": None, "table": None, "logs": None,
-                     "jobs": 1}
+                     "jobs": 1, "force": False}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -56,8 +57,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--policy", choices=("robust", "replan", "refuse"),
                    help="trigger policy (default robust for a plan with a box, else replan)")
     g.add_argument("--config", help="flight configuration file (TOML), as for perchd fly")
-    g.add_argument("--table", help="outcome table, CSV (default ./campaigns/<time>-<plan>.csv)")
-    g.add_argument("--logs", help="keep each flight's log in this directory")
+    g.add_argument("--table", help="outcome table, CSV; its directory must exist "
+                                   "(default ./campaigns/<time>-<plan>.csv, directory made)")
+    g.add_argument("--logs", help="keep each flight's log (flight-NNNN.jsonl) in this existing "
+                                  "directory (default: none kept)")
+    g.add_argument("--force", action="store_true",
+                   help="overwrite an existing --table file or flight logs in --logs")
     g.add_argument("--jobs", type=int, default=CAMPAIGN_DEFAULTS["jobs"], help="worker processes (default 1)")
 
 
@@ -156,11 +161,30 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
     return plan, cfg, spread, specs
 
 
+def table_path(args: argparse.Namespace) -> Path:
+    """--table checked (nothing overwritten without --force, no directory made), or the
+    default in ./campaigns, the one directory a campaign creates."""
+    if args.table:
+        return check_output(args.table, "--table", args.force, inputs=(args.campaign,))
+    table = Path("campaigns") / f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}.csv"
+    return check_output(table, "--table", args.force) if table.parent.is_dir() else table
+
+
+def check_log_dir(logs: str | None, indices: list[int], force: bool) -> None:
+    """--logs must be an existing directory whose flight logs are not overwritten unless --force."""
+    if logs is None:
+        return
+    if not Path(logs).is_dir():
+        raise OutputError(f"--logs {logs}: not an existing directory (perchd creates none)")
+    for i in indices:
+        check_output(Path(logs) / f"flight-{i:04d}.jsonl", "--logs", force)
+
+
 def run(args: argparse.Namespace) -> int:
 
     plan, cfg, spread, specs = build(args)
-    table = Path(args.table) if args.table else Path("campaigns") / (
-        f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}.csv")
+    table = table_path(args)
+    check_log_dir(args.logs, [s.index for s in specs], args.force)
     progress = Progress(len(specs))
     t0 = time.monotonic()
     try:

@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+from perchd.commands.argcheck import numbers_as_values
+from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
@@ -29,6 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               description="Fly a perch along a plan file, e.g. "
                                           "perchd fly plans/case1-ipts-n3.json "
                                           "--driver sim:// --mocap sim://")
+    numbers_as_values(p)
     p.add_argument("plan", help="plan file (perchd.plan/1 JSON)")
     p.add_argument("--driver", required=True, help="vehicle URI (sim://, radio://..., ...)")
     p.add_argument("--mocap", required=True, help="mocap URI (sim://, natnet://..., ...)")
@@ -37,7 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="[m] a point on the surface, world frame (default 0 0 0)")
     p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
                    help="surface normal along the approach, world frame (default 1 0 0)")
-    p.add_argument("--log", help="flight log path (default ./flightlogs/<time>-<strategy>.jsonl)")
+    p.add_argument("--log", help="flight log path; its directory must exist "
+                                 "(default ./flightlogs/<time>-<strategy>.jsonl, directory made)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --log file")
     p.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
     p.set_defaults(run=run)
 
@@ -103,11 +108,19 @@ def summary_text(res) -> str:
     return "\n".join(lines)
 
 
+def log_path(args: argparse.Namespace, strategy: str) -> Path:
+    """--log checked (nothing overwritten without --force, no directory made), or the default
+    in ./flightlogs, the one directory a flight creates."""
+    if args.log:
+        return check_output(args.log, "--log", args.force, inputs=(args.plan,))
+    log = Path("flightlogs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{strategy}.jsonl"
+    return check_output(log, "--log", args.force) if log.parent.is_dir() else log
+
+
 def run(args: argparse.Namespace) -> int:
     plan = load_plan(args.plan)
     cfg = load_config(args)
-    log = Path(args.log) if args.log else Path("flightlogs") / (
-        f"{time.strftime('%Y%m%d-%H%M%S')}-{plan.strategy}.jsonl")
+    log = log_path(args, plan.strategy)
     abort = FlightAbort()
     handlers = {s: signal.signal(s, lambda *_: abort.request(EndReason.SIGNAL))
                 for s in (signal.SIGINT, signal.SIGTERM)}

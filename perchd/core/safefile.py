@@ -65,3 +65,39 @@ def _kind(mode: int) -> str:
         if test(mode):
             return name
     return "not a file"
+
+
+class OutputError(PerchdError, OSError):
+    """An output path that would destroy data or needs directories made (exit 2)."""
+
+
+def check_output(path: str | os.PathLike, flag: str, force: bool = False,
+                 inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
+    """`path` if writing it destroys nothing: its directory exists (none is created), it is
+    not a directory, not one of `inputs`, and absent unless `force`; else OutputError
+    naming `flag`."""
+    out = Path(path)
+    if out.is_dir():
+        raise OutputError(f"{flag} {out}: is a directory (give a file path inside it)")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(f"{flag} {out}: directory {parent} does not exist "
+                          "(perchd creates none; make it first)")
+    for given in inputs:
+        if os.path.exists(given) and out.exists() and os.path.samefile(out, given):
+            raise OutputError(f"{flag} {out}: is the input {given}; give another path")
+    if out.exists() and not force:
+        raise OutputError(f"{flag} {out}: exists (pass --force to overwrite)")
+    return out
+
+
+def write_text(path: Path, text: str, flag: str, force: bool) -> None:
+    """Write `text` to `path` (checked by check_output); created exclusively unless `force`,
+    so a file appearing meanwhile is not overwritten either. OSError as one OutputError."""
+    try:
+        with open(path, "w" if force else "x", encoding="utf-8") as f:
+            f.write(text)
+    except FileExistsError:
+        raise OutputError(f"{flag} {path}: exists (pass --force to overwrite)") from None
+    except OSError as err:
+        raise OutputError(f"{flag} {path}: cannot write ({err.strerror})") from None

@@ -145,8 +145,12 @@ def library_to_json(lib: PlanLibrary) -> dict:
                        for n in row] for row in lib.nodes]}
 
 
+def library_text(lib: PlanLibrary) -> str:
+    return json.dumps(library_to_json(lib)) + "\n"
+
+
 def save_library(lib: PlanLibrary, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(library_to_json(lib)) + "\n")
+    Path(path).write_text(library_text(lib))
 
 
 def load_library(path: str | Path) -> PlanLibrary:

@@ -32,8 +32,12 @@ def plan_to_json(plan: Plan) -> dict:
     return doc
 
 
+def plan_text(plan: Plan) -> str:
+    return json.dumps(plan_to_json(plan), indent=2) + "\n"
+
+
 def save_plan(plan: Plan, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(plan_to_json(plan), indent=2) + "\n")
+    Path(path).write_text(plan_text(plan))
 
 
 def load_plan(path: str | Path, text: str | None = None) -> Plan:
