@@ -11,12 +11,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import signal
 import sys
 import time
 from pathlib import Path
 
-from perchd.commands.argcheck import numbers_as_values
+from perchd.commands.argcheck import numbers_as_values, within
+from perchd.core.errors import ConfigError
 from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, SurfaceConfig
@@ -58,7 +60,25 @@ def load_config(args: argparse.Namespace):
         surface = dataclasses.replace(surface, point=tuple(args.surface))
     if args.normal:
         surface = dataclasses.replace(surface, normal=tuple(args.normal))
+    where = f"in --config {args.config}" if args.config else "default"
+    check_geometry(surface.point, surface.normal,
+                   "--surface" if args.surface else f"[surface] point ({where})",
+                   "--normal" if args.normal else f"[surface] normal ({where})")
     return dataclasses.replace(cfg, surface=SurfaceConfig(surface.point, surface.normal))
+
+
+MAX_COORD_M = 1000.0
+"""[m] largest |coordinate| of a surface point: no flying room is bigger; 1e300 is a typo."""
+
+
+def check_geometry(point, normal, point_flag: str, normal_flag: str) -> None:
+    """Refuse non-finite or absurd geometry before any link opens (a NaN surface used to start
+    a flight that ended STALE_MOCAP)."""
+    within(point_flag, point, -MAX_COORD_M, MAX_COORD_M, "m")
+    within(normal_flag, normal, -1e6, 1e6, "")
+    if math.sqrt(sum(c * c for c in normal)) < 1e-9:
+        raise ConfigError(f"{normal_flag} {' '.join(f'{c:g}' for c in normal)}: "
+                          "must be a non-zero direction")
 
 
 class StatusLine:

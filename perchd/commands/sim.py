@@ -36,7 +36,8 @@ from typing import TYPE_CHECKING, Any
 
 from perchd.commands import campaign as campaign_cli
 from perchd.commands import sim_firmware
-from perchd.commands.argcheck import numbers_as_values
+from perchd.commands.argcheck import numbers_as_values, within
+from perchd.commands.fly import MAX_COORD_M, check_geometry
 from perchd.commands.campaign import add_arguments
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import UriError
@@ -89,6 +90,8 @@ def make_world(args: argparse.Namespace) -> Any:
         raise UriError(f"--latency {args.latency:g} s is outside 0..1 s")
     if not 0.0 <= args.noise <= 0.1:
         raise UriError(f"--noise {args.noise:g} m is outside 0..0.1 m")
+    check_geometry(args.surface, args.normal, "--surface", "--normal")
+    within("--start", args.start, -MAX_COORD_M, MAX_COORD_M, "m")
     params = WorldParams(plant=PlantParams(latency_s=args.latency),
                          mocap=MocapParams(noise_m=args.noise),
                          start=tuple(args.start) if args.start else None,
