@@ -21,6 +21,7 @@ from perchd.commands.argcheck import numbers_as_values, within
 from perchd.core.errors import ConfigError
 from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
+from perchd.core.uriparams import params_help
 from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
 from perchd.service.config import load_flight_config
@@ -28,11 +29,21 @@ from perchd.sim.session import open_links
 from perchd.tau import load_plan
 
 
+EPILOG = f"""URI query parameters, KEY [unit] (default); any other key is refused
+(docs/contracts.md §7), e.g. sim://?latency=0.02&noise=0.001:
+{params_help()}
+
+sim:// flies on a simulated clock, faster than real time. In real time: run
+`perchd sim --pose-out natnet://127.0.0.1:0 --setpoint-in zmq://127.0.0.1:0` and fly
+against the URIs it prints, or use sim:// links under `perchd serve`."""
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("fly", help="fly a perch along a plan",
                               description="Fly a perch along a plan file, e.g. "
                                           "perchd fly plans/case1-ipts-n3.json "
-                                          "--driver sim:// --mocap sim://")
+                                          "--driver sim:// --mocap sim://",
+                              epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     numbers_as_values(p)
     p.add_argument("plan", help="plan file (perchd.plan/1 JSON)")
     p.add_argument("--driver", required=True, help="vehicle URI (sim://, radio://..., ...)")
