@@ -12,7 +12,9 @@ Exit 0 when every flight made contact inside its plan's contact window, 1 otherw
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import signal
 import sys
 import time
 from collections import Counter
@@ -144,6 +146,8 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
     """(plan, flight config, spread, specs) from the options; errors name the option."""
 
     plan = load_plan(args.campaign)
+    if args.jobs < 1:  # before the table is made
+        raise ConfigError(f"--jobs {args.jobs}: at least 1")
     xr, vr = cp.default_ranges(plan)
     if not 0.0 <= args.latency <= 1.0:
         raise ConfigError(f"--latency {args.latency:g} s is outside 0..1 s")
@@ -186,17 +190,72 @@ def run(args: argparse.Namespace) -> int:
     table = table_path(args)
     check_log_dir(args.logs, [s.index for s in specs], args.force)
     progress = Progress(len(specs))
+    rows: list[Any] = []
     t0 = time.monotonic()
-    try:
-        rows = cp.run_campaign(plan, cfg, spread, specs, args.jobs, args.logs, progress)
-    finally:
-        progress.close()
-    wall = time.monotonic() - t0
-    cp.write_table(rows, table)
+    stopped = None
+    with open_table(table, args.force) as writer, on_signals() as signals:
+        def finished(row: Any) -> None:
+            rows.append(row)
+            writer.write(row)  # as it finishes: an interrupted campaign keeps it
+            progress(row)
+        try:
+            cp.run_campaign(plan, cfg, spread, specs, args.jobs, args.logs, finished)
+        except Stopped as stop:
+            stopped = stop
+        finally:
+            progress.close()
+    rows.sort(key=lambda r: r.index)
+    report(args, cfg, spread, rows, table, time.monotonic() - t0, stopped, len(specs))
+    if stopped is not None:
+        return stopped.exit_code
+    return 0 if cp.summarize(rows).in_window == len(rows) else 1
+
+
+def report(args, cfg, spread, rows: list[Any], table: Path, wall: float,
+           stopped: "Stopped | None", planned: int) -> None:
+    """The summary of the flights that finished (all of them unless `stopped`)."""
     summary = cp.summarize(rows)
     if args.json:
         print(json.dumps({**asdict(summary), "plan": args.campaign, "policy": cfg.trigger.policy.value,
-                          "spread": asdict(spread), "table": str(table), "wall_s": wall}))
+                          "spread": asdict(spread), "table": str(table), "wall_s": wall,
+                          "interrupted": None if stopped is None else stopped.name,
+                          "planned": planned}))
     else:
         print(summary_text(summary, table, wall))
-    return 0 if summary.in_window == summary.flights else 1
+    if stopped is not None:
+        print(f"perchd sim: interrupted by {stopped.name} after {len(rows)} of {planned} "
+              f"flights; the table holds those", file=sys.stderr)
+
+
+class Stopped(BaseException):
+    """SIGINT/SIGTERM during a campaign: stop flying, keep what finished (docs/contracts.md §6)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.name = signal.Signals(signum).name
+        self.exit_code = 128 + signum
+
+
+@contextlib.contextmanager
+def on_signals():
+    """SIGINT and SIGTERM raise Stopped in the main thread while the campaign runs."""
+    def stop(signum, _frame):
+        raise Stopped(signum)
+    previous = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def open_table(table: Path, force: bool):
+    """The table's writer; the default ./campaigns is the one directory a campaign makes."""
+    if table.parent == Path("campaigns"):
+        table.parent.mkdir(exist_ok=True)
+    try:
+        return cp.TableWriter(table, overwrite=force)
+    except FileExistsError:
+        raise OutputError(f"--table {table}: exists (pass --force to overwrite)") from None
+    except OSError as err:
+        raise OutputError(f"--table {table}: cannot write ({err.strerror})") from None
