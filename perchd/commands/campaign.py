@@ -46,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     n = g.add_mutually_exclusive_group()
     n.add_argument("--flights", type=int, help=f"random trigger states (default {DEFAULT_FLIGHTS})")
     n.add_argument("--grid", nargs=2, type=int, metavar=("NX", "NV"),
-                   help="a grid of trigger states, corners included")
+                   help="a grid of NX x NV trigger states, corners included (default: random draws)")
     g.add_argument("--x0", nargs=2, type=float, metavar=("LO", "HI"),
                    help="[m] trigger gap range (default: the plan's robust box less 0.04, "
                         "else its x0 +- 10 %%)")

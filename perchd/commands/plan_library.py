@@ -21,12 +21,15 @@ def register(plan_sub) -> None:
     """Add `library` to the `perchd plan` subparsers."""
     p = numbers_as_values(plan_sub.add_parser(
         "library", help="IPTS plans over a grid of trigger states, one file"))
-    p.add_argument("--x0", type=float, nargs=2, required=True, metavar=("LO", "HI"), help="[m]")
-    p.add_argument("--v0", type=float, nargs=2, required=True, metavar=("LO", "HI"), help="[m/s]")
+    p.add_argument("--x0", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="trigger gaps the grid spans [m], < 0")
+    p.add_argument("--v0", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="trigger closing speeds the grid spans [m/s], > 0")
     p.add_argument("--nodes", type=int, nargs=2, default=(11, 13), metavar=("NX", "NV"),
                    help="grid nodes along x0 and v0 (default 11 13)")
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
+    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="contact speeds allowed [m/s], 0 < LO <= HI")
     p.add_argument("--v-max", type=float,
                    help="peak closing speed limit [m/s] (default: none, searched as 1000 m/s)")
     p.add_argument("--a-max", type=float,

@@ -35,7 +35,8 @@ def register(plan_sub) -> None:
     p.add_argument("--x0", type=float, nargs="+", metavar="X", help="box LO HI, or nominal [m]")
     p.add_argument("--v0", type=float, nargs="+", metavar="V", help="box LO HI, or nominal [m/s]")
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
+    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="contact speeds allowed [m/s], 0 < LO <= HI")
     p.add_argument("--v-max", type=float, required=True, help="peak closing speed limit [m/s]")
     p.add_argument("--a-max", type=float, required=True, help="peak |acceleration| limit [m/s^2]")
     p.add_argument("--order", type=int, default=3, help="polynomial order (default: 3)")
