@@ -24,3 +24,10 @@ def test_a_reply_reads_as_key_value_lines():
              "last": {"outcome": "CONTACT", "contact_speed": 0.98765, "detail": None}}
     assert lines(reply) == ["state: idle", "vehicle: cf1", "last.outcome: CONTACT",
                             "last.contact_speed: 0.9877", "last.detail: -"]
+
+
+def test_mocap_timeout_reaches_the_natnet_connect():
+    from perchd.commands.mocap import with_timeout
+    assert with_timeout("natnet://h?body=cf1", 1.0) == "natnet://h?body=cf1&timeout=1"
+    assert with_timeout("natnet://h?body=cf1&timeout=3", 1.0).endswith("timeout=3")
+    assert with_timeout("zmq://h:1?body=cf1", 1.0) == "zmq://h:1?body=cf1"
