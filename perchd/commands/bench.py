@@ -23,10 +23,12 @@ def register(sub) -> None:
     parser = sub.add_parser("bench", help="measure planner (and loop) speed")
     bench_sub = parser.add_subparsers(dest="bench", required=True)
     p = bench_sub.add_parser("planner", help="IPTS cold solve time per order, both paper cases")
-    p.add_argument("--orders", type=int, nargs="+", default=[3, 5, 7])
-    p.add_argument("--repeat", type=int, default=5, help="solves per (case, order)")
+    p.add_argument("--orders", type=int, nargs="+", default=[3, 5, 7],
+                   help="IPTS polynomial orders to time (default: 3 5 7)")
+    p.add_argument("--repeat", type=int, default=5, help="solves per (case, order) (default: 5)")
     p.add_argument("--replans", type=int, default=200,
-                   help="warm replans from each plan library (the first 10 also cold-solved)")
+                   help="warm replans from each plan library (the first 10 also cold-solved) "
+                        "(default: 200)")
     p.add_argument("--json", action="store_true", help="print one JSON list")
     p.set_defaults(run=run_planner)
     lp = bench_sub.add_parser("loop", help="control loop: 500 Hz jitter, agent compute, "

@@ -12,7 +12,9 @@ Exit 0 when every flight made contact inside its plan's contact window, 1 otherw
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import signal
 import sys
 import time
 from collections import Counter
@@ -22,6 +24,7 @@ from typing import Any, TextIO
 
 from perchd.commands.fly import load_config
 from perchd.core.errors import ConfigError
+from perchd.core.safefile import OutputError, check_output
 from perchd.flight.config import TriggerPolicy
 from perchd.sim import campaign as cp
 from perchd.tau import load_plan
@@ -31,7 +34,7 @@ LIVE_ONLY = ("pose_out", "setpoint_in", "duration", "exit_on_stop")
 """Options of a live `perchd sim` (all unset by default) that mean nothing to a campaign."""
 CAMPAIGN_DEFAULTS = {"flights": None, "grid": None, "x0": None, "v0": None, "gust": 0.0,
                      "seed": 0, "policy": None, "config": None, "table": None, "logs": None,
-                     "jobs": 1}
+                     "jobs": 1, "force": False}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -43,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     n = g.add_mutually_exclusive_group()
     n.add_argument("--flights", type=int, help=f"random trigger states (default {DEFAULT_FLIGHTS})")
     n.add_argument("--grid", nargs=2, type=int, metavar=("NX", "NV"),
-                   help="a grid of trigger states, corners included")
+                   help="a grid of NX x NV trigger states, corners included (default: random draws)")
     g.add_argument("--x0", nargs=2, type=float, metavar=("LO", "HI"),
                    help="[m] trigger gap range (default: the plan's robust box less 0.04, "
                         "else its x0 +- 10 %%)")
@@ -56,8 +59,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--policy", choices=("robust", "replan", "refuse"),
                    help="trigger policy (default robust for a plan with a box, else replan)")
     g.add_argument("--config", help="flight configuration file (TOML), as for perchd fly")
-    g.add_argument("--table", help="outcome table, CSV (default ./campaigns/<time>-<plan>.csv)")
-    g.add_argument("--logs", help="keep each flight's log in this directory")
+    g.add_argument("--table", help="outcome table, CSV; its directory must exist "
+                                   "(default ./campaigns/<time>-<plan>.csv, directory made)")
+    g.add_argument("--logs", help="keep each flight's log (flight-NNNN.jsonl) in this existing "
+                                  "directory (default: none kept)")
+    g.add_argument("--force", action="store_true",
+                   help="overwrite an existing --table file or flight logs in --logs")
     g.add_argument("--jobs", type=int, default=CAMPAIGN_DEFAULTS["jobs"], help="worker processes (default 1)")
 
 
@@ -139,6 +146,8 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
     """(plan, flight config, spread, specs) from the options; errors name the option."""
 
     plan = load_plan(args.campaign)
+    if args.jobs < 1:  # before the table is made
+        raise ConfigError(f"--jobs {args.jobs}: at least 1")
     xr, vr = cp.default_ranges(plan)
     if not 0.0 <= args.latency <= 1.0:
         raise ConfigError(f"--latency {args.latency:g} s is outside 0..1 s")
@@ -156,23 +165,97 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
     return plan, cfg, spread, specs
 
 
+def table_path(args: argparse.Namespace) -> Path:
+    """--table checked (nothing overwritten without --force, no directory made), or the
+    default in ./campaigns, the one directory a campaign creates."""
+    if args.table:
+        return check_output(args.table, "--table", args.force, inputs=(args.campaign,))
+    table = Path("campaigns") / f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}.csv"
+    return check_output(table, "--table", args.force) if table.parent.is_dir() else table
+
+
+def check_log_dir(logs: str | None, indices: list[int], force: bool) -> None:
+    """--logs must be an existing directory whose flight logs are not overwritten unless --force."""
+    if logs is None:
+        return
+    if not Path(logs).is_dir():
+        raise OutputError(f"--logs {logs}: not an existing directory (perchd creates none)")
+    for i in indices:
+        check_output(Path(logs) / f"flight-{i:04d}.jsonl", "--logs", force)
+
+
 def run(args: argparse.Namespace) -> int:
 
     plan, cfg, spread, specs = build(args)
-    table = Path(args.table) if args.table else Path("campaigns") / (
-        f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}.csv")
+    table = table_path(args)
+    check_log_dir(args.logs, [s.index for s in specs], args.force)
     progress = Progress(len(specs))
+    rows: list[Any] = []
     t0 = time.monotonic()
-    try:
-        rows = cp.run_campaign(plan, cfg, spread, specs, args.jobs, args.logs, progress)
-    finally:
-        progress.close()
-    wall = time.monotonic() - t0
-    cp.write_table(rows, table)
+    stopped = None
+    with open_table(table, args.force) as writer, on_signals() as signals:
+        def finished(row: Any) -> None:
+            rows.append(row)
+            writer.write(row)  # as it finishes: an interrupted campaign keeps it
+            progress(row)
+        try:
+            cp.run_campaign(plan, cfg, spread, specs, args.jobs, args.logs, finished)
+        except Stopped as stop:
+            stopped = stop
+        finally:
+            progress.close()
+    rows.sort(key=lambda r: r.index)
+    report(args, cfg, spread, rows, table, time.monotonic() - t0, stopped, len(specs))
+    if stopped is not None:
+        return stopped.exit_code
+    return 0 if cp.summarize(rows).in_window == len(rows) else 1
+
+
+def report(args, cfg, spread, rows: list[Any], table: Path, wall: float,
+           stopped: "Stopped | None", planned: int) -> None:
+    """The summary of the flights that finished (all of them unless `stopped`)."""
     summary = cp.summarize(rows)
     if args.json:
         print(json.dumps({**asdict(summary), "plan": args.campaign, "policy": cfg.trigger.policy.value,
-                          "spread": asdict(spread), "table": str(table), "wall_s": wall}))
+                          "spread": asdict(spread), "table": str(table), "wall_s": wall,
+                          "interrupted": None if stopped is None else stopped.name,
+                          "planned": planned}))
     else:
         print(summary_text(summary, table, wall))
-    return 0 if summary.in_window == summary.flights else 1
+    if stopped is not None:
+        print(f"perchd sim: interrupted by {stopped.name} after {len(rows)} of {planned} "
+              f"flights; the table holds those", file=sys.stderr)
+
+
+class Stopped(BaseException):
+    """SIGINT/SIGTERM during a campaign: stop flying, keep what finished (docs/contracts.md §6)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.name = signal.Signals(signum).name
+        self.exit_code = 128 + signum
+
+
+@contextlib.contextmanager
+def on_signals():
+    """SIGINT and SIGTERM raise Stopped in the main thread while the campaign runs."""
+    def stop(signum, _frame):
+        raise Stopped(signum)
+    previous = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def open_table(table: Path, force: bool):
+    """The table's writer; the default ./campaigns is the one directory a campaign makes."""
+    if table.parent == Path("campaigns"):
+        table.parent.mkdir(exist_ok=True)
+    try:
+        return cp.TableWriter(table, overwrite=force)
+    except FileExistsError:
+        raise OutputError(f"--table {table}: exists (pass --force to overwrite)") from None
+    except OSError as err:
+        raise OutputError(f"--table {table}: cannot write ({err.strerror})") from None

@@ -15,12 +15,17 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import signal
 import sys
 import time
 from pathlib import Path
 
+from perchd.commands.argcheck import numbers_as_values, within
+from perchd.core.errors import ConfigError
+from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
+from perchd.core.uriparams import params_help
 from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
 from perchd.flight.vehiclestate import VehicleStore, default_path
@@ -28,12 +33,22 @@ from perchd.service.config import load_flight_config
 from perchd.sim.session import open_links
 from perchd.tau import load_plan
 
+EPILOG = f"""URI query parameters, KEY [unit] (default); any other key is refused
+(docs/contracts.md §7), e.g. sim://?latency=0.02&noise=0.001:
+{params_help()}
+
+sim:// flies on a simulated clock, faster than real time. In real time: run
+`perchd sim --pose-out natnet://127.0.0.1:0 --setpoint-in zmq://127.0.0.1:0` and fly
+against the URIs it prints, or use sim:// links under `perchd serve`."""
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("fly", help="fly a perch along a plan",
                               description="Fly a perch along a plan file, e.g. "
                                           "perchd fly plans/case1-ipts-n3.json "
-                                          "--driver sim:// --mocap sim://")
+                                          "--driver sim:// --mocap sim://",
+                              epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    numbers_as_values(p)
     p.add_argument("plan", help="plan file (perchd.plan/1 JSON)")
     p.add_argument("--driver", required=True, help="vehicle URI (sim://, radio://..., ...)")
     p.add_argument("--mocap", required=True, help="mocap URI (sim://, natnet://..., ...)")
@@ -42,7 +57,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="[m] a point on the surface, world frame (default 0 0 0)")
     p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
                    help="surface normal along the approach, world frame (default 1 0 0)")
-    p.add_argument("--log", help="flight log path (default ./flightlogs/<time>-<strategy>.jsonl)")
+    p.add_argument("--log", help="flight log path; its directory must exist "
+                                 "(default ./flightlogs/<time>-<strategy>.jsonl, directory made)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --log file")
     p.add_argument("--state", help="per-vehicle memory of learned hover thrusts (JSON; default "
                                    "$XDG_STATE_HOME/perchd/vehicles.json, i.e. "
                                    "~/.local/state/perchd/vehicles.json)")
@@ -61,7 +78,25 @@ def load_config(args: argparse.Namespace):
         surface = dataclasses.replace(surface, point=tuple(args.surface))
     if args.normal:
         surface = dataclasses.replace(surface, normal=tuple(args.normal))
+    where = f"in --config {args.config}" if args.config else "default"
+    check_geometry(surface.point, surface.normal,
+                   "--surface" if args.surface else f"[surface] point ({where})",
+                   "--normal" if args.normal else f"[surface] normal ({where})")
     return dataclasses.replace(cfg, surface=SurfaceConfig(surface.point, surface.normal))
+
+
+MAX_COORD_M = 1000.0
+"""[m] largest |coordinate| of a surface point: no flying room is bigger; 1e300 is a typo."""
+
+
+def check_geometry(point, normal, point_flag: str, normal_flag: str) -> None:
+    """Refuse non-finite or absurd geometry before any link opens (a NaN surface used to start
+    a flight that ended STALE_MOCAP)."""
+    within(point_flag, point, -MAX_COORD_M, MAX_COORD_M, "m")
+    within(normal_flag, normal, -1e6, 1e6, "")
+    if math.sqrt(sum(c * c for c in normal)) < 1e-9:
+        raise ConfigError(f"{normal_flag} {' '.join(f'{c:g}' for c in normal)}: "
+                          "must be a non-zero direction")
 
 
 class StatusLine:
@@ -113,12 +148,20 @@ def summary_text(res) -> str:
     return "\n".join(lines)
 
 
+def log_path(args: argparse.Namespace, strategy: str) -> Path:
+    """--log checked (nothing overwritten without --force, no directory made), or the default
+    in ./flightlogs, the one directory a flight creates."""
+    if args.log:
+        return check_output(args.log, "--log", args.force, inputs=(args.plan,))
+    log = Path("flightlogs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{strategy}.jsonl"
+    return check_output(log, "--log", args.force) if log.parent.is_dir() else log
+
+
 def run(args: argparse.Namespace) -> int:
     plan = load_plan(args.plan)
     store = VehicleStore(Path(args.state) if args.state else default_path(), _warn)
     cfg = store.with_learned_guess(args.driver, load_config(args))
-    log = Path(args.log) if args.log else Path("flightlogs") / (
-        f"{time.strftime('%Y%m%d-%H%M%S')}-{plan.strategy}.jsonl")
+    log = log_path(args, plan.strategy)
     abort = FlightAbort()
     handlers = {s: signal.signal(s, lambda *_: abort.request(EndReason.SIGNAL))
                 for s in (signal.SIGINT, signal.SIGTERM)}

@@ -8,7 +8,9 @@ import argparse
 import json
 from pathlib import Path
 
+from perchd.commands.plan import draw
 from perchd.core.errors import PerchdError
+from perchd.core.safefile import check_output
 from perchd.logs.flightlog import read_log
 from perchd.logs.plot import plot_flights
 from perchd.logs.summary import summarize, summary_text
@@ -24,7 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     q = sub.add_parser("plot", help="distance, velocity and tau against the reference (PNG)")
     q.add_argument("log", nargs="+", help="flight log(s) (.jsonl): one column each, e.g. "
                                           "CTDTS and IPTS side by side as in the paper")
-    q.add_argument("--out", help="image path (default: the first log's path with .png)")
+    q.add_argument("--out", help="image path (default: the first log's path with .png); "
+                                 "its directory must exist")
+    q.add_argument("--force", action="store_true", help="overwrite an existing image")
     p.set_defaults(run=run)
 
 
@@ -44,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     out = Path(args.out) if args.out else Path(args.log[0]).with_suffix(".png")
-    plot_flights([_read(p) for p in args.log], out, [Path(p).name for p in args.log])
+    check_output(out, "--out", args.force, inputs=tuple(args.log))
+    logs = [_read(p) for p in args.log]
+    names = [Path(p).name for p in args.log]
+    draw(lambda data, path: plot_flights(data, path, names), logs, out, "--out")
     print(out)
     return 0

@@ -54,9 +54,17 @@ def pose_line(pose: Pose) -> str:
             f"latency {pose.latency * 1000:.2f} ms")
 
 
+def with_timeout(uri: str, timeout: float) -> str:
+    """A natnet:// URI without its own timeout= waits --timeout for the server too (it said
+    "within 2.0 s" whatever --timeout was); the URI's own value wins."""
+    if not uri.startswith("natnet://") or "timeout=" in uri:
+        return uri
+    return f"{uri}{'&' if '?' in uri else '?'}timeout={min(max(timeout, 0.05), 60.0):g}"
+
+
 def run(args: argparse.Namespace) -> int:
 
-    source = open_source(args.uri, Runtime.real())
+    source = open_source(with_timeout(args.uri, args.timeout), Runtime.real())
     source.start()
     shown, seq = 0, -(2 ** 63)
     try:

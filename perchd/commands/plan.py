@@ -5,11 +5,18 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
+
+import numpy as np
 
 from perchd.commands.plan_library import register as register_library
 from perchd.commands.plan_robust import register as register_robust
 from perchd.logs.planplot import plot_plan
-from perchd.tau import load_plan, plan_ctds, plan_ctdts, plan_ipts, report, save_plan
+from perchd.commands.argcheck import numbers_as_values, within
+from perchd.core.errors import PlanError
+from perchd.core.safefile import OutputError, check_output, write_text
+from perchd.tau import load_plan, plan_ctds, plan_ctdts, plan_ipts, report
+from perchd.tau.planfile import plan_text
 from perchd.tau.ipts import MAX_ORDER, UNBOUNDED
 
 
@@ -26,14 +33,19 @@ def register(sub) -> None:
     check = plan_sub.add_parser("check", help="re-derive and verify a plan file")
     check.add_argument("file")
     check.add_argument("--json", action="store_true", help="print one JSON object")
-    check.add_argument("--plot", metavar="FILE.png", help="draw X, V, A and tau against time")
+    check.add_argument("--plot", metavar="FILE.png",
+                       help="draw X, V, A and tau against time into this new image "
+                            "(its directory must exist)")
+    check.add_argument("--force", action="store_true", help="overwrite an existing --plot file")
     check.set_defaults(run=run_check)
 
 
 def _common(p: argparse.ArgumentParser) -> None:
+    numbers_as_values(p)
     p.add_argument("--x0", type=float, required=True, help="gap at trigger [m], < 0")
     p.add_argument("--v0", type=float, required=True, help="closing speed at trigger [m/s] > 0")
-    p.add_argument("--out", help="plan file to write (default: none)")
+    p.add_argument("--out", help="plan file to write (default: none); its directory must exist")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -49,7 +61,7 @@ def _ctds(plan_sub) -> None:
     p = plan_sub.add_parser("ctds", help="constant tau-dot: zero contact speed")
     _common(p)
     p.add_argument("--c", type=float, default=0.5, help="tau-dot in (0, 0.5] (default: 0.5)")
-    p.set_defaults(run=lambda a: _emit(a, _plan_ctds(a)))
+    p.set_defaults(run=lambda a: _make(a, _plan_ctds))
 
 
 def _ctdts(plan_sub) -> None:
@@ -60,7 +72,7 @@ def _ctdts(plan_sub) -> None:
     p.add_argument("--v-window", type=float, nargs=2, metavar=("LO", "HI"),
                    help="contact speeds the vehicle tolerates [m/s] (default: V_c only)")
     _limit_args(p, searched=False)
-    p.set_defaults(run=lambda a: _emit(a, _plan_ctdts(a)))
+    p.set_defaults(run=lambda a: _make(a, _plan_ctdts))
 
 
 def _ipts(plan_sub) -> None:
@@ -72,7 +84,7 @@ def _ipts(plan_sub) -> None:
     _limit_args(p, searched=True)
     p.add_argument("--order", type=int, default=3,
                    help=f"polynomial order 1..{MAX_ORDER} (default: 3)")
-    p.set_defaults(run=lambda a: _emit(a, _plan_ipts(a)))
+    p.set_defaults(run=lambda a: _make(a, _plan_ipts))
 
 
 def _note_unset_limits(a, searched: bool) -> None:
@@ -103,10 +115,34 @@ def _plan_ipts(a):
     return plan
 
 
-def _emit(args, plan) -> int:
+MAX_METRES = 1000.0  # [m] largest |gap| planned for; larger is a typo, not a perch
+MAX_SPEED = 1000.0  # [m/s], [m/s^2] and [s]: the same sanity bound on the other inputs
 
+
+def check_numbers(a) -> None:
+    """Every numeric flag finite and of sane size, before numpy sees it (1e308 overflowed there)."""
+    within("--x0", a.x0, -MAX_METRES, MAX_METRES, "m", PlanError)
+    within("--v0", a.v0, -MAX_SPEED, MAX_SPEED, "m/s", PlanError)
+    for flag, unit in (("tau_s", "s"), ("v_contact", "m/s"), ("v_window", "m/s"), ("c", ""),
+                       ("v_max", "m/s"), ("a_max", "m/s^2")):
+        within("--" + flag.replace("_", "-"), getattr(a, flag, None), -MAX_SPEED, MAX_SPEED,
+               unit, PlanError)
+
+
+def _make(args, planner) -> int:
+    """Check the numbers and --out before planning (nothing is destroyed), then plan."""
+    check_numbers(args)
     if args.out:
-        save_plan(plan, args.out)
+        check_output(args.out, "--out", args.force)
+    with np.errstate(all="ignore"):  # overflow is handled as infeasible; no warning line
+        plan = planner(args)
+    return _emit(args, plan)
+
+
+def _emit(args, plan) -> int:
+    if args.out:
+        write_text(Path(args.out), plan_text(plan), "--out", args.force)
+        print(f"perchd plan: wrote {args.out}", file=sys.stderr)
     rep = report(plan)
     print(json.dumps(rep.to_json()) if args.json else table(rep, plan))
     return 0 if rep.feasible else 1
@@ -114,11 +150,20 @@ def _emit(args, plan) -> int:
 
 def run_check(args) -> int:
 
+    if args.plot:
+        check_output(args.plot, "--plot", args.force, inputs=(args.file,))
     plan = load_plan(args.file)
     if args.plot:
-
-        plot_plan(plan, args.plot)
+        draw(plot_plan, plan, args.plot, "--plot")
     return _emit(argparse.Namespace(out=None, json=args.json), plan)
+
+
+def draw(plotter, data, out, flag: str) -> None:
+    """plotter(data, out), matplotlib's refusals (a format it lacks, a write error) as one line."""
+    try:
+        plotter(data, out)
+    except (OSError, ValueError) as err:
+        raise OutputError(f"{flag} {out}: cannot draw ({err})") from None
 
 
 def table(rep, plan) -> str:

@@ -10,35 +10,44 @@ from __future__ import annotations
 import json
 import sys
 import time
+from pathlib import Path
 
-from perchd.tau.library import build_library, save_library
+from perchd.commands.argcheck import numbers_as_values
+from perchd.core.safefile import check_output, write_text
+from perchd.tau.library import build_library, library_text
 
 
 def register(plan_sub) -> None:
     """Add `library` to the `perchd plan` subparsers."""
-    p = plan_sub.add_parser("library", help="IPTS plans over a grid of trigger states, one file")
-    p.add_argument("--x0", type=float, nargs=2, required=True, metavar=("LO", "HI"), help="[m]")
-    p.add_argument("--v0", type=float, nargs=2, required=True, metavar=("LO", "HI"), help="[m/s]")
+    p = numbers_as_values(plan_sub.add_parser(
+        "library", help="IPTS plans over a grid of trigger states, one file"))
+    p.add_argument("--x0", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="trigger gaps the grid spans [m], < 0")
+    p.add_argument("--v0", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="trigger closing speeds the grid spans [m/s], > 0")
     p.add_argument("--nodes", type=int, nargs=2, default=(11, 13), metavar=("NX", "NV"),
                    help="grid nodes along x0 and v0 (default 11 13)")
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
+    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="contact speeds allowed [m/s], 0 < LO <= HI")
     p.add_argument("--v-max", type=float,
                    help="peak closing speed limit [m/s] (default: none, searched as 1000 m/s)")
     p.add_argument("--a-max", type=float,
                    help="peak |acceleration| limit [m/s^2] (default: none, searched as 1000 m/s^2)")
     p.add_argument("--order", type=int, default=3, help="polynomial order 1..9 (default: 3)")
-    p.add_argument("--out", required=True, help="library file to write")
+    p.add_argument("--out", required=True, help="library file to write; its directory must exist")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
 
 
 def run(a) -> int:
 
+    check_output(a.out, "--out", a.force)  # before minutes of planning
     start = time.perf_counter()
     lib = build_library(tuple(a.x0), tuple(a.v0), tuple(a.nodes), a.tau_s, tuple(a.v_contact),
                         a.v_max, a.a_max, a.order, progress=None if a.json else _progress)
-    save_library(lib, a.out)
+    write_text(Path(a.out), library_text(lib), "--out", a.force)
     plans = sum(node is not None for row in lib.nodes for node in row)
     out = {"library": a.out, "nodes": len(lib.x0s) * len(lib.v0s), "plans": plans,
            "build_s": time.perf_counter() - start}

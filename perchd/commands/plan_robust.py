@@ -11,10 +11,13 @@ given) with "robust": {"x0": [lo, hi], "v0": [lo, hi]} and a "certificate" recor
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+from perchd.commands.argcheck import numbers_as_values
 from perchd.core.errors import PlanError
+from perchd.core.safefile import check_output, write_text
 from perchd.tau.certify import Box
-from perchd.tau.planfile import load_plan, save_plan
+from perchd.tau.planfile import load_plan, plan_text
 from perchd.tau.robust import (
     RobustLimits,
     RobustResult,
@@ -27,11 +30,13 @@ from perchd.tau.robustplan import certified_plan, check_plan
 
 def register(plan_sub) -> None:
     """Add `robust` to the `perchd plan` subparsers."""
-    p = plan_sub.add_parser("robust", help="one IPTS k certified over a box of trigger states")
+    p = numbers_as_values(plan_sub.add_parser(
+        "robust", help="one IPTS k certified over a box of trigger states"))
     p.add_argument("--x0", type=float, nargs="+", metavar="X", help="box LO HI, or nominal [m]")
     p.add_argument("--v0", type=float, nargs="+", metavar="V", help="box LO HI, or nominal [m/s]")
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"))
+    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"),
+                   help="contact speeds allowed [m/s], 0 < LO <= HI")
     p.add_argument("--v-max", type=float, required=True, help="peak closing speed limit [m/s]")
     p.add_argument("--a-max", type=float, required=True, help="peak |acceleration| limit [m/s^2]")
     p.add_argument("--order", type=int, default=3, help="polynomial order (default: 3)")
@@ -42,7 +47,8 @@ def register(plan_sub) -> None:
     p.add_argument("--maxiter", type=int, default=40, help="differential-evolution generations (default: 40)")
     p.add_argument("--seed", type=int, default=0, help="search random seed (default: 0)")
     p.add_argument("--start", metavar="PLAN", help="a lower-order robust plan whose k seeds the search")
-    p.add_argument("--out", required=True, help="plan file to write")
+    p.add_argument("--out", required=True, help="plan file to write; its directory must exist")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(run=run)
 
@@ -76,6 +82,7 @@ def _pair(name: str, values, sign: int):
 def run(args) -> int:
 
     lim = limits_from(args)
+    check_output(args.out, "--out", args.force, inputs=(args.start,) if args.start else ())
     x0, v0 = _pair("--x0", args.x0, -1), _pair("--v0", args.v0, +1)
     if (x0 is None) != (v0 is None) or (x0 and len(x0) != len(v0)):
         raise PlanError("--x0 and --v0 go together: both boxes (LO HI) or both nominal values")
@@ -93,7 +100,7 @@ def run(args) -> int:
         mode = "grow" if nominal else "largest"
 
     plan = certified_plan(result, lim, nominal)
-    save_plan(plan, args.out)
+    write_text(Path(args.out), plan_text(plan), "--out", args.force)
     cert = plan.extra["certificate"]
     summary = {"mode": mode, "order": args.order, "k": list(plan.k[1:]),
                "robust": {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])},

@@ -16,10 +16,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                     "else /run/perchd/control.sock)")
     p.add_argument("--driver", help="vehicle URI (overrides [service] driver)")
     p.add_argument("--mocap", help="mocap URI (overrides [service] mocap)")
+    p.add_argument("--log-dir", help="flight log directory (overrides [service] log_dir; "
+                                     "default /var/log/perchd, or the unit's LogsDirectory)")
+    p.add_argument("--plan-dir", help="plan directory (overrides [service] plan_dir; default "
+                                      "/var/lib/perchd/plans, or the unit's StateDirectory/plans)")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
 
     return serve(args.config, {"socket": args.socket, "driver": args.driver,
-                               "mocap": args.mocap})
+                               "mocap": args.mocap, "log_dir": args.log_dir,
+                               "plan_dir": args.plan_dir})

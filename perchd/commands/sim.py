@@ -36,10 +36,13 @@ from typing import TYPE_CHECKING, Any
 
 from perchd.commands import campaign as campaign_cli
 from perchd.commands import sim_firmware
+from perchd.commands.argcheck import numbers_as_values, within
+from perchd.commands.fly import MAX_COORD_M, check_geometry
 from perchd.commands.campaign import add_arguments
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import UriError
-from perchd.mocap.outputs import open_pose_output
+from perchd.core.errors import LinkError
+from perchd.mocap.outputs import open_pose_output, port_error
 from perchd.sim.plant import PlantParams
 from perchd.sim.receiver import Counts, SetpointInbox
 from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
@@ -55,6 +58,7 @@ STOP_GRACE_S = 0.5
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("sim", help="run the simulated vehicle as its own process",
                               description=__doc__.splitlines()[0])
+    numbers_as_values(p)
     p.add_argument("--pose-out", help="natnet://HOST[:PORT] or zmq://HOST:PORT (required "
                                        "without --campaign)")
     p.add_argument("--setpoint-in", help="zmq://HOST:PORT to bind for setpoints (required "
@@ -86,6 +90,8 @@ def make_world(args: argparse.Namespace) -> Any:
         raise UriError(f"--latency {args.latency:g} s is outside 0..1 s")
     if not 0.0 <= args.noise <= 0.1:
         raise UriError(f"--noise {args.noise:g} m is outside 0..0.1 m")
+    check_geometry(args.surface, args.normal, "--surface", "--normal")
+    within("--start", args.start, -MAX_COORD_M, MAX_COORD_M, "m")
     params = WorldParams(plant=PlantParams(latency_s=args.latency),
                          mocap=MocapParams(noise_m=args.noise),
                          start=tuple(args.start) if args.start else None,
@@ -138,6 +144,9 @@ def run(args: argparse.Namespace) -> int:
     output = open_pose_output(args.pose_out, [args.body], world.clock)
     try:
         inbox = SetpointInbox(args.setpoint_in, world, args.body, counts, watchdog)
+    except LinkError as err:
+        output.close()
+        raise port_error(f"--setpoint-in {args.setpoint_in}", err) from None
     except BaseException:
         output.close()
         raise

@@ -32,28 +32,30 @@ def confine(name: str | os.PathLike, root: str | os.PathLike, what: str,
 
 def read_regular(path: str | os.PathLike, what: str, error: type[PerchdError],
                  max_bytes: int = MAX_FILE_BYTES) -> str:
-    """The UTF-8 text of a regular file of at most `max_bytes`; `error` naming why not."""
+    """The UTF-8 text of a regular file of at most `max_bytes`; `error` naming why not,
+    as "WHAT PATH: why" (or "PATH: why" when `what` is empty)."""
+    what = f"{what} {path}" if what else str(path)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOCTTY)
     except OSError as err:
-        raise error(f"{what} {path}: cannot read ({err.strerror})") from None
+        raise error(f"{what}: cannot read ({err.strerror})") from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise error(f"{what} {path}: not a regular file ({_kind(st.st_mode)})")
+            raise error(f"{what}: not a regular file ({_kind(st.st_mode)})")
         if st.st_size > max_bytes:
-            raise error(f"{what} {path}: {st.st_size} bytes, over the {max_bytes} byte limit "
+            raise error(f"{what}: {st.st_size} bytes, over the {max_bytes} byte limit "
                         f"by {st.st_size - max_bytes}")
         with os.fdopen(os.dup(fd), "rb") as f:
             data = f.read(max_bytes + 1)
     finally:
         os.close(fd)
     if len(data) > max_bytes:  # grew after the check
-        raise error(f"{what} {path}: over the {max_bytes} byte limit")
+        raise error(f"{what}: over the {max_bytes} byte limit")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as err:
-        raise error(f"{what} {path}: not UTF-8 text (byte {err.start})") from None
+        raise error(f"{what}: not UTF-8 text (byte {err.start})") from None
 
 
 def _kind(mode: int) -> str:
@@ -63,3 +65,39 @@ def _kind(mode: int) -> str:
         if test(mode):
             return name
     return "not a file"
+
+
+class OutputError(PerchdError, OSError):
+    """An output path that would destroy data or needs directories made (exit 2)."""
+
+
+def check_output(path: str | os.PathLike, flag: str, force: bool = False,
+                 inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
+    """`path` if writing it destroys nothing: its directory exists (none is created), it is
+    not a directory, not one of `inputs`, and absent unless `force`; else OutputError
+    naming `flag`."""
+    out = Path(path)
+    if out.is_dir():
+        raise OutputError(f"{flag} {out}: is a directory (give a file path inside it)")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(f"{flag} {out}: directory {parent} does not exist "
+                          "(perchd creates none; make it first)")
+    for given in inputs:
+        if os.path.exists(given) and out.exists() and os.path.samefile(out, given):
+            raise OutputError(f"{flag} {out}: is the input {given}; give another path")
+    if out.exists() and not force:
+        raise OutputError(f"{flag} {out}: exists (pass --force to overwrite)")
+    return out
+
+
+def write_text(path: Path, text: str, flag: str, force: bool) -> None:
+    """Write `text` to `path` (checked by check_output); created exclusively unless `force`,
+    so a file appearing meanwhile is not overwritten either. OSError as one OutputError."""
+    try:
+        with open(path, "w" if force else "x", encoding="utf-8") as f:
+            f.write(text)
+    except FileExistsError:
+        raise OutputError(f"{flag} {path}: exists (pass --force to overwrite)") from None
+    except OSError as err:
+        raise OutputError(f"{flag} {path}: cannot write ({err.strerror})") from None

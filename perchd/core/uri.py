@@ -68,4 +68,7 @@ class Registry(Generic[T]):
 
     def open(self, text: str, runtime: Any) -> T:
         uri = parse_uri(text)
-        return self.factory(uri.scheme)(uri, runtime)
+        factory = self.factory(uri.scheme)
+        from perchd.core.uriparams import check_params  # imports this module
+        check_params(self.kind, uri)  # a misspelt key is refused, not ignored (contracts §7)
+        return factory(uri, runtime)

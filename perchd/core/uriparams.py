@@ -43,3 +43,86 @@ def bool_param(uri: Uri, key: str, default: bool = False) -> bool:
     if text.lower() in ("0", "false", "no", "off"):
         return False
     raise UriError(f"{uri.raw}: {key}={text!r} must be 1/0, true/false, yes/no or on/off")
+
+
+# -- every scheme's parameters, in one place (docs/contracts.md §7, `perchd fly --help`) -------
+# (name, unit, default, meaning); the factories read them, Registry.open refuses any other key.
+SIM = (
+    ("latency", "s", "0", "setpoint-to-vehicle delay, 0..1"),
+    ("attitude_tau", "s", "0.07", "attitude response time constant, 0.005..1"),
+    ("motor_tau", "s", "0.03", "motor response time constant, 0.001..1"),
+    ("mass", "kg", "0.03", "vehicle mass, 0.005..50"),
+    ("mocap_rate", "Hz", "120", "mocap frame rate, 1..1000"),
+    ("mocap_latency", "s", "0.004", "mocap latency, 0..0.5"),
+    ("noise", "m", "0", "mocap noise std per axis, 0..0.1"),
+    ("start", "m", "4.5 m before the surface, 1 m up", "start position X,Y,Z"),
+    ("seed", "", "0", "noise seed"),
+    ("body", "", "cf1", "rigid body name"),
+    ("stall", "s", "none", "AT,FOR: hold the link FOR s at AT s (docs/safety.md)"),
+)
+CRAZYFLIE = (
+    ("hover", "units", "36000", "hover thrust, 1000..60000 of 65535"),
+    ("mass", "kg", "0.03", "vehicle mass, 0.010..0.100"),
+    ("timeout", "s", "0.5", "no link reply this long = link lost, 0.01..10"),
+    ("extpose", "", "0", "1: send mocap poses to the vehicle's estimator"),
+    ("wait", "s", "2", "connect() waits this long, 0.05..60"),
+)
+PARAMS: dict[tuple[str, str], tuple[tuple[str, str, str, str], ...]] = {
+    ("driver", "sim"): SIM,
+    ("driver", "radio"): CRAZYFLIE,
+    ("driver", "udp"): CRAZYFLIE,
+    ("driver", "mavlink"): (
+        ("mass", "kg", "required", "vehicle mass, 0.01..50"),
+        ("hover", "", "read from the autopilot", "normalised hover thrust, 0.05..0.95"),
+        ("arm", "", "0", "1: arm after the mode switch"),
+        ("timeout", "s", "1.5", "no message this long = link lost, 0.01..30"),
+        ("stream", "Hz", "50", "ATTITUDE stream rate asked for, 1..500"),
+        ("wait", "s", "5", "connect() waits this long for each answer, 0.1..60")),
+    ("driver", "zmq"): (
+        ("vehicle", "", "cf1", "vehicle name in setpoints"),
+        ("bind", "", "0", "1: bind instead of connect"),
+        ("public", "", "0", "1: allow a non-loopback bind"),
+        ("wait", "s", "2", "connect() waits this long for a subscriber, 0..60")),
+    ("mocap", "sim"): SIM,
+    ("mocap", "natnet"): (
+        ("body", "", "required", "rigid body name"),
+        ("transport", "", "from the server", "unicast or multicast (NatNet 2.x)"),
+        ("multicast", "", "239.255.42.99", "multicast group (NatNet 2.x)"),
+        ("data_port", "", "1511", "data port (NatNet 2.x)"),
+        ("local", "", "0.0.0.0", "local interface address"),
+        ("up", "", "y", "the server's up axis, y or z"),
+        ("timeout", "s", "2", "server reply timeout, 0.05..60"),
+        ("max_age", "s", "0.5", "a pose older than this is stale, 0.001..10")),
+    ("mocap", "zmq"): (
+        ("body", "", "required", "rigid body name"),
+        ("bind", "", "0", "1: bind instead of connect"),
+        ("public", "", "0", "1: allow a non-loopback bind"),
+        ("clock", "", "local", "local or remote: whose clock stamps poses"),
+        ("max_age", "s", "0.5", "a pose older than this is stale, 0.001..10")),
+}
+
+
+def query_of(uri: Uri) -> dict[str, str]:
+    """The URI's options; `mavlink:udpout:H:P?k=v` keeps them in its path."""
+    return uri.query if uri.query or "?" not in uri.path else split_query(uri.path)[1]
+
+
+def check_params(kind: str, uri: Uri) -> None:
+    """UriError naming the first unknown key of a scheme that lists its parameters."""
+    known = PARAMS.get((kind, uri.scheme))
+    if known is None:
+        return
+    names = [p[0] for p in known]
+    unknown = sorted(set(query_of(uri)) - set(names))
+    if unknown:
+        raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; {uri.scheme}:// takes "
+                       f"{', '.join(names)} (perchd fly --help)")
+
+
+def params_help() -> str:
+    """The table for `perchd fly --help`: scheme, then each key [unit] (default) meaning."""
+    lines = []
+    for (kind, scheme), params in PARAMS.items():
+        keys = "; ".join(f"{n}{f' [{u}]' if u else ''} ({d or '-'})" for n, u, d, _ in params)
+        lines.append(f"--{kind} {scheme}:  {keys}")
+    return "\n".join(lines)

@@ -100,7 +100,7 @@ def _ms(s: Spread | None) -> str:
 
 
 def summary_text(s: LogSummary) -> str:
-    lines = [f"outcome: {s.outcome} ({s.detail})"]
+    lines = [f"outcome: {s.outcome}" + (f" ({s.detail})" if s.detail else "")]  # no empty "()"
     if s.contact_speed is not None:
         plan = f" (plan {s.v_contact_plan:.3f}, error {s.contact_speed - s.v_contact_plan:+.3f} m/s)" \
             if s.v_contact_plan is not None else ""

@@ -12,10 +12,11 @@
 
 from __future__ import annotations
 
+import errno
 from typing import Protocol
 
 from perchd.core.clock import Clock
-from perchd.core.errors import UriError
+from perchd.core.errors import LinkError, UriError
 from perchd.core.types import Pose
 from perchd.core.uri import parse_uri
 from perchd.core.uriparams import bool_param, float_param
@@ -42,7 +43,11 @@ def open_pose_output(text: str, bodies: list[str], clock: Clock) -> PoseOutput:
     if uri.scheme == "zmq":
         if not uri.host or uri.port is None or set(uri.query) - {"public"}:
             raise UriError(f"{text}: a zmq pose output is zmq://HOST:PORT[?public=1]")
-        return ZmqPosePublisher(f"tcp://{uri.host}:{uri.port}", public=bool_param(uri, "public"))
+        try:
+            return ZmqPosePublisher(f"tcp://{uri.host}:{uri.port}",
+                                    public=bool_param(uri, "public"))
+        except LinkError as err:
+            raise port_error(uri.raw, err) from None
     if uri.scheme == "natnet":
         return _natnet_output(uri, bodies, clock)
     raise UriError(f"{text}: a pose output is natnet://HOST[:PORT] or zmq://HOST:PORT")
@@ -63,9 +68,21 @@ def _natnet_output(uri, bodies: list[str], clock: Clock):
                               multicast=bool_param(uri, "multicast"),
                               group=uri.param("group", "239.255.42.99") or "239.255.42.99",
                               rate_hz=rate, up=uri.param("up", "y") or "y", clock=clock)
-    except (OSError, ValueError) as err:
+    except OSError as err:
+        raise port_error(uri.raw, err) from None
+    except ValueError as err:
         raise UriError(f"{uri.raw}: cannot serve NatNet: {err}") from None
     return _NatNetOutput(server.start())
+
+
+def port_error(what: str, err: Exception) -> Exception:
+    """A taken port is bad input (exit 2, docs/contracts.md §6), whatever the transport; other
+    failures to listen stay what they were (an OSError or LinkError becomes a LinkError)."""
+    text = getattr(err, "strerror", None) or str(err)
+    if getattr(err, "errno", None) == errno.EADDRINUSE or "Address already in use" in text:
+        return UriError(f"{what}: the port is taken (another perchd sim, Motive or server is "
+                        "listening there); choose another PORT, or 0 for any free one")
+    return err if isinstance(err, LinkError) else LinkError(f"{what}: cannot listen: {text}")
 
 
 def _version(uri) -> tuple[int, int]:

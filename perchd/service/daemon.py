@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from perchd.core.clock import MonotonicClock
-from perchd.core.errors import PerchdError, PlanError
+from perchd.core.errors import ConfigError, PerchdError, PlanError
 from perchd.core.runtime import Runtime
 from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
@@ -185,6 +185,7 @@ class Daemon:
 
     def _start(self) -> None:
         svc = self.config.service
+        check_dirs(svc)  # before READY=1: a service that cannot log a flight is not ready
         self.server = ControlServer(svc.socket, self.dispatch, peers=svc.peer_policy(),
                                     on_refuse=lambda why: say(f"control socket: refused {why}"))
         self.notifier.status(f"{svc.vehicle}: connecting {svc.mocap_uri()} and {svc.driver}")
@@ -250,6 +251,7 @@ class Daemon:
             return
         try:
             new = apply_overrides(load_config(self.config_path), self.overrides)
+            check_dirs(new.service)
             peers = new.service.peer_policy()
             if new.service.socket != self.config.service.socket:
                 say("SIGHUP: [service] socket changes only on restart; keeping "
@@ -341,10 +343,37 @@ class Daemon:
         return path
 
 
-def apply_overrides(config: Config, overrides: dict[str, str]) -> Config:
-    """Command-line --socket/--driver/--mocap win over the file."""
+def apply_overrides(config: Config, overrides: dict[str, str],
+                    environ: dict[str, str] | None = None) -> Config:
+    """Command-line --socket/--driver/--mocap/--log-dir/--plan-dir win over the file; a
+    log_dir/plan_dir left at its default follows the unit's LogsDirectory=/StateDirectory=
+    (systemd's $LOGS_DIRECTORY, $STATE_DIRECTORY), so perchd@NAME logs to /var/log/perchd/NAME,
+    the one log directory its sandbox lets it write."""
     given = {k: v for k, v in overrides.items() if v}
-    return dataclasses.replace(config, service=dataclasses.replace(config.service, **given))
+    env = os.environ if environ is None else environ
+    defaults = ServiceConfig()
+    svc = config.service
+    if svc.log_dir == defaults.log_dir and env.get("LOGS_DIRECTORY"):
+        given.setdefault("log_dir", env["LOGS_DIRECTORY"].split(":")[0])
+    if svc.plan_dir == defaults.plan_dir and env.get("STATE_DIRECTORY"):
+        given.setdefault("plan_dir", str(Path(env["STATE_DIRECTORY"].split(":")[0]) / "plans"))
+    return dataclasses.replace(config, service=dataclasses.replace(svc, **given))
+
+
+def check_dirs(svc: ServiceConfig) -> None:
+    """plan_dir and log_dir exist (made if missing: they are configured) and are usable:
+    plan_dir readable, log_dir writable; else one ConfigError naming the key."""
+    for key, need, what in (("plan_dir", os.R_OK | os.X_OK, "readable"),
+                            ("log_dir", os.W_OK | os.X_OK, "writable")):
+        path = Path(getattr(svc, key))
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ConfigError(f"[service] {key} = {str(path)!r}: cannot create it "
+                              f"({err.strerror}); create it or set {key}") from None
+        if not os.access(path, need):
+            raise ConfigError(f"[service] {key} = {str(path)!r}: not {what} by uid "
+                              f"{os.geteuid()}; fix its permissions or set {key}")
 
 
 def serve(config_path: str | None, overrides: dict[str, str]) -> int:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import signal
 import statistics
 import tempfile
 from collections import Counter
@@ -292,22 +293,51 @@ def _map(work: list[tuple], jobs: int) -> Iterator[FlightRow]:
         yield from map(_fly_logged, work)
         return
 
-    with ProcessPoolExecutor(max_workers=min(jobs, len(work))) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(work)), initializer=_leave_signals)
+    try:
         for fut in as_completed([pool.submit(_fly_logged, w) for w in work]):
             yield fut.result()
+    finally:  # interrupted: drop the queued flights, let the running ones end
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _leave_signals() -> None:
+    """Workers ignore Ctrl-C: the parent decides, and writes what has finished."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 # --- the table and its summary -------------------------------------------------------------
 def write_table(rows: list[FlightRow], path: str | Path) -> None:
     """CSV, one row per flight, COLUMNS as the header; floats to 7 significant digits,
-    None as an empty cell."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        out = csv.writer(f)
-        out.writerow(COLUMNS)
+    None as an empty cell. Makes no directory (the caller's choice, docs/contracts.md §2)."""
+    with TableWriter(path, overwrite=True) as table:
         for row in rows:
-            out.writerow([_cell(v) for v in dataclasses.astuple(row)])
+            table.write(row)
+
+
+class TableWriter:
+    """The CSV table written a row at a time as flights finish, each row flushed, so an
+    interrupted campaign keeps every flight that ended. Created exclusively unless `overwrite`."""
+
+    def __init__(self, path: str | Path, overwrite: bool = False) -> None:
+        self.path = Path(path)
+        self._f = open(self.path, "w" if overwrite else "x", newline="")
+        self._csv = csv.writer(self._f)
+        self._csv.writerow(COLUMNS)
+        self._f.flush()
+
+    def write(self, row: FlightRow) -> None:
+        self._csv.writerow([_cell(v) for v in dataclasses.astuple(row)])
+        self._f.flush()
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> "TableWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def _cell(value: Any) -> Any:

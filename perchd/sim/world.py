@@ -27,7 +27,7 @@ from perchd.core.errors import UriError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Pose, Setpoint, Vec3
 from perchd.core.uri import Uri
-from perchd.core.uriparams import float_param
+from perchd.core.uriparams import check_params, float_param
 from perchd.mocap.base import SourceStats
 from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
@@ -214,7 +214,9 @@ class SimWorld:
 
 
 def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldParams:
-    """Apply a sim:// URI's options to `base` (defaults); bad values are one UriError."""
+    """Apply a sim:// URI's options to `base` (defaults); bad values and unknown keys are one
+    UriError (the keys: perchd.core.uriparams.SIM, docs/contracts.md §7)."""
+    check_params("mocap", uri)
 
     wp = base or WorldParams()
     plant = replace(

@@ -145,8 +145,12 @@ def library_to_json(lib: PlanLibrary) -> dict:
                        for n in row] for row in lib.nodes]}
 
 
+def library_text(lib: PlanLibrary) -> str:
+    return json.dumps(library_to_json(lib)) + "\n"
+
+
 def save_library(lib: PlanLibrary, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(library_to_json(lib)) + "\n")
+    Path(path).write_text(library_text(lib))
 
 
 def load_library(path: str | Path) -> PlanLibrary:
@@ -155,11 +159,17 @@ def load_library(path: str | Path) -> PlanLibrary:
     return load_json(path, library_from_json, "plan library")
 
 
+KEYS = {"schema", "strategy", "order", "tau_s", "limits", "x0", "v0", "nodes"}
+
+
 def library_from_json(doc: object) -> PlanLibrary:
     if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
         raise PlanError(f"schema must be {SCHEMA!r}")
     if doc.get("strategy") != "ipts":
         raise PlanError("strategy must be 'ipts'")
+    unknown = sorted(doc.keys() - KEYS, key=str)
+    if unknown:  # as plan files and the config: a misspelt key is refused
+        raise PlanError(f"unknown key {unknown[0]!r} (allowed: {', '.join(sorted(KEYS))})")
     order, tau_s = doc.get("order"), _finite(doc.get("tau_s"), "tau_s")
 
     if not (isinstance(order, int) and 1 <= order <= MAX_ORDER):

@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 from perchd.core.errors import PlanError
+from perchd.core.safefile import read_regular
 from perchd.tau.ipts import MAX_ORDER
 from perchd.tau.limits import Limits
 from perchd.tau.plan import STRATEGIES, Plan, make_plan
@@ -31,8 +32,12 @@ def plan_to_json(plan: Plan) -> dict:
     return doc
 
 
+def plan_text(plan: Plan) -> str:
+    return json.dumps(plan_to_json(plan), indent=2) + "\n"
+
+
 def save_plan(plan: Plan, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(plan_to_json(plan), indent=2) + "\n")
+    Path(path).write_text(plan_text(plan))
 
 
 def load_plan(path: str | Path, text: str | None = None) -> Plan:
@@ -43,13 +48,8 @@ def load_plan(path: str | Path, text: str | None = None) -> Plan:
 
 def load_json(path: str | Path, parse, what: str, text: str | None = None):
     """parse(JSON document of file `path`), every error one PlanError naming the file."""
-    if text is None:
-        try:
-            text = Path(path).read_text()
-        except OSError as err:
-            raise PlanError(f"{path}: cannot read {what} ({err.strerror})") from None
-        except UnicodeDecodeError as err:
-            raise PlanError(f"{path}: not UTF-8 text (byte {err.start})") from None
+    if text is None:  # one bounded regular-file rule for the CLI and the service
+        text = read_regular(path, "", PlanError)  # "PATH: why", as below
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as err:
@@ -67,6 +67,7 @@ def plan_from_json(doc: object) -> Plan:
         raise PlanError("a plan file holds one JSON object")
     if doc.get("schema") != SCHEMA:
         raise PlanError(f"schema: expected {SCHEMA!r}, got {doc.get('schema')!r}")
+    _known_keys(doc)
     strategy = doc.get("strategy")
     if strategy not in STRATEGIES:
         raise PlanError(f"strategy: expected one of {', '.join(STRATEGIES)}, got {strategy!r}")
@@ -77,12 +78,22 @@ def plan_from_json(doc: object) -> Plan:
     plan = make_plan(strategy, _number(doc, "x0"), _number(doc, "v0"), tau_s, _limits(doc),
                      robust=_robust(doc), **params)
     _agree(doc, plan)
-    extra = {key: doc[key] for key in doc.keys() - KNOWN}
+    extra = {key: doc[key] for key in doc.keys() & OPTIONAL_EXTRA}
     return Plan(**{**plan.__dict__, "extra": extra}) if extra else plan
 
 
 KNOWN = {"schema", "strategy", "x0", "v0", "tau_s", "stage1", "t_switch", "duration",
          "v_contact", "limits", "peaks", "robust"}
+OPTIONAL_EXTRA = {"certificate"}
+"""Documented keys carried through unchecked (docs/contracts.md §1)."""
+
+
+def _known_keys(doc: dict) -> None:
+    """Refuse unknown top-level keys, as the config loader does: a misspelt key is a mistake."""
+    unknown = sorted(doc.keys() - KNOWN - OPTIONAL_EXTRA, key=str)
+    if unknown:
+        allowed = ", ".join(sorted(KNOWN | OPTIONAL_EXTRA))
+        raise PlanError(f"unknown key {unknown[0]!r} (allowed: {allowed})")
 
 
 def _agree(doc: dict, plan: Plan) -> None:

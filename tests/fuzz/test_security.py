@@ -295,11 +295,16 @@ def test_a_plan_inside_the_directory_flies_by_name_absolute_path_or_inner_symlin
 
 
 def test_ctl_fly_outside_the_plan_directory_prints_one_refusal_and_exits_1(service):
-    done = subprocess.run([sys.executable, "-m", "perchd", "ctl", "--socket", str(service.sock), "fly",
-                           str(service.tmp / "outside.json")], capture_output=True, text=True, timeout=30)
+    argv = [sys.executable, "-m", "perchd", "ctl", "--socket", str(service.sock), "fly",
+            str(service.tmp / "outside.json")]
+    done = subprocess.run(argv + ["--json"], capture_output=True, text=True, timeout=30)
     assert done.returncode == 1 and done.stderr == ""
     assert json.loads(done.stdout)["error"].endswith("outside the plan directory "
                                                      f"{service.plans} (plan_dir in [service])")
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=30)  # readable: on stderr
+    assert done.returncode == 1 and done.stdout == ""
+    assert done.stderr.startswith("perchd ctl: ") and done.stderr.count("\n") == 1
+    assert done.stderr.strip().endswith("(plan_dir in [service])")
 
 
 @pytest.mark.parametrize("make, why", [

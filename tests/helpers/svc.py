@@ -76,7 +76,7 @@ def perchd(*args: str, **kw) -> subprocess.CompletedProcess:
 
 
 def ctl(sock: Path, *args: str) -> dict:
-    done = perchd("ctl", "--socket", str(sock), *args)
+    done = perchd("ctl", "--socket", str(sock), "--json", *args)
     assert done.stdout, done.stderr
     return json.loads(done.stdout)
 

@@ -150,7 +150,7 @@ def test_a_flight_through_ctl_wait_perches_on_the_configured_surface(tmp_path, n
     serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://", tables=wall)
     try:
         notify.wait_for("READY=1")
-        done = subprocess.run([sys.executable, "-m", "perchd", "ctl", "fly", str(PLAN), "--wait",
+        done = subprocess.run([sys.executable, "-m", "perchd", "ctl", "fly", str(PLAN), "--wait", "--json",
                                "--socket", str(serve.sock)], capture_output=True, text=True, timeout=30)
         serve.proc.send_signal(signal.SIGTERM)
         serve.stop()

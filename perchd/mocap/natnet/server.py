@@ -176,10 +176,15 @@ class NatNetServer:
     # ------------------------------------------------------------ internals
 
     def _bind(self, port: int) -> socket.socket:
+        # Exclusive: no SO_REUSEADDR/SO_REUSEPORT, so a second server on a taken command port
+        # fails here instead of sharing it and stealing clients (the ZMQ path refuses too).
+        # The data socket is an ephemeral sender; clients bind their own data port.
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        # clients on this host bind the data port too (OptiTrack's own client does)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        sock.bind((self.host, port))
+        try:
+            sock.bind((self.host, port))
+        except OSError:
+            sock.close()
+            raise
         return sock
 
     def _spawn(self, target, name: str) -> None:
