@@ -1,5 +1,8 @@
 """`perchd sim firmware`: a vehicle's real flight firmware in the loop (docs/firmware.md).
 
+    perchd sim firmware --px4 BUILD_DIR [--px4-instance N] [--px4-stock-params] [--ahead M]
+                        [--pose-out ...] [--body cf1] [--noise M] [--mocap-rate HZ]
+                        [--fw-log PATH] [--duration S] [--json]
     perchd sim firmware --cf2 PATH [--pose-out zmq://127.0.0.1:0 | natnet://127.0.0.1[:PORT]]
                         [--link udp://127.0.0.1:19850] [--fw-port PORT] [--body cf1]
                         [--start X Y Z] [--surface X Y Z] [--normal NX NY NZ]
@@ -12,6 +15,11 @@ waits until it has calibrated, then prints one line on stderr, as `perchd sim` d
 and publishes the vehicle's true pose as mocap until SIGINT/SIGTERM or --duration. Then it
 stops every process it started and prints a summary (text, or with --json one JSON object
 on stdout: contact time [s] and speed [m/s], the IMU rate achieved, the launches).
+
+With --px4 it starts PX4 SITL with its own physics (SIH) headless from a PX4 build folder
+instead (perchd.sim.firmware.px4), lets PX4 take off to its Hold, prints
+    perchd sim: px4: surface X Y Z normal NX NY NZ (--ahead M along the heading)
+and then the ready line; the driver URI is PX4's offboard link.
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ from typing import Any
 from perchd.core.errors import UriError
 from perchd.mocap.outputs import open_pose_output
 from perchd.sim.firmware.cf2 import Cf2Params, Cf2Vehicle, SensorNoise, Surface
+from perchd.sim.firmware.px4 import Px4Params, Px4Vehicle
 from perchd.sim.firmware.harness import (Interrupted, MocapParams, ProcessGroup,
                                          TruthPublisher, ready_line)
 from perchd.core.clock import MonotonicClock
@@ -39,8 +48,17 @@ def register_under(sim_parser: argparse.ArgumentParser) -> None:
                                     parser_class=type(sim_parser))
     p = sub.add_parser("firmware", help="fly a vehicle's own firmware in the loop",
                        description=__doc__.splitlines()[0])
-    p.add_argument("--cf2", required=True, metavar="PATH",
-                   help="the Crazyflie SITL firmware binary (docs/firmware.md)")
+    fw = p.add_mutually_exclusive_group(required=True)
+    fw.add_argument("--cf2", metavar="PATH",
+                    help="the Crazyflie SITL firmware binary (docs/firmware.md)")
+    fw.add_argument("--px4", metavar="BUILD_DIR",
+                    help="a PX4 SITL build folder with bin/px4 and etc/ (docs/firmware.md)")
+    p.add_argument("--px4-instance", type=int, default=0,
+                   help="PX4 instance N: ports 14540+N, 19410+N, MAV_SYS_ID N+1 (default 0)")
+    p.add_argument("--px4-stock-params", action="store_true",
+                   help="leave PX4's failsafe defaults (perchd's driver then refuses them)")
+    p.add_argument("--ahead", type=float, default=4.5,
+                   help="[m] PX4: the surface this far ahead of the hover point (default 4.5)")
     p.add_argument("--pose-out", default="zmq://127.0.0.1:0",
                    help="natnet://HOST[:PORT] or zmq://HOST:PORT (default zmq://127.0.0.1:0)")
     p.add_argument("--link", default="udp://127.0.0.1:19850",
@@ -89,6 +107,8 @@ wait a whole default interval behind another thread's Python code."""
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.px4:
+        return run_px4(args)
     cf2, mocap = params_from(args)
     sys.setswitchinterval(GIL_SWITCH_S)
     clock = MonotonicClock()
@@ -118,9 +138,57 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def serve(vehicle: Cf2Vehicle, procs: ProcessGroup, output: Any, mocap: MocapParams,
+def run_px4(args: argparse.Namespace) -> int:
+    if not 0.5 <= args.ahead <= 50.0:
+        raise UriError(f"--ahead {args.ahead:g} m is outside 0.5..50 m")
+    _, mocap = params_from(args)
+    px4 = Px4Params(args.px4, instance=args.px4_instance, surface_ahead_m=args.ahead,
+                    stock_params=args.px4_stock_params,
+                    log=Path(args.fw_log) if args.fw_log else None)
+    clock = MonotonicClock()
+    done = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with ProcessGroup() as procs:
+            vehicle = Px4Vehicle(px4, clock)
+            try:
+                output = open_pose_output(args.pose_out, [mocap.body], clock)
+                try:
+                    result = serve(vehicle, procs, output, mocap, done, args.duration)
+                finally:
+                    output.close()
+            finally:
+                vehicle.close()
+    except Interrupted:
+        print("perchd sim: interrupted before PX4 was ready", file=sys.stderr)
+        return 130
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    print(json.dumps(result) if args.json else px4_summary_text(result))
+    return 0
+
+
+def px4_summary_text(r: dict[str, Any]) -> str:
+    c = r["contact"]
+    contact = f"contact at {c['speed']:.3f} m/s" if c else "no contact"
+    return (f"{contact}; modes {' -> '.join(r['modes'])}; {r['truth_samples']} truth samples; "
+            f"{r['poses']} poses; PX4 log {r['log']}")
+
+
+def surface_line(vehicle: Any) -> str | None:
+    s = getattr(vehicle, "surface", None)
+    if s is None or vehicle.name != "px4":
+        return None
+    fmt = lambda v: " ".join(f"{c:.3f}" for c in v)  # noqa: E731
+    return f"perchd sim: px4: surface {fmt(s.point)} normal {fmt(s.normal)}"
+
+
+def serve(vehicle: Any, procs: ProcessGroup, output: Any, mocap: MocapParams,
           done: threading.Event, duration: float | None) -> dict[str, Any]:
     vehicle.start(procs, done)
+    if (line := surface_line(vehicle)) is not None:
+        print(line, file=sys.stderr, flush=True)
     mocap_uri, driver_uri = output.uri(mocap.body), vehicle.driver_uri()
     print(ready_line(mocap_uri, driver_uri), file=sys.stderr, flush=True)
     publisher = TruthPublisher(vehicle, output, mocap, vehicle.clock)
