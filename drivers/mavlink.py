@@ -14,8 +14,11 @@ first partner (PX4) answers only that one: give it a fixed one with `sport=` (or
   asks for ATTITUDE at `stream` Hz (default 50) so a short timeout is usable.
 - wait [s, default 5]: how long connect() waits for each answer.
 - yaw0 [deg, default 0]: the autopilot's heading (NED yaw, from north) of the world X axis:
-  0 when its yaw zero faces mocap X, 90 for an ENU world on a north-referenced autopilot
-  (PX4 SIH with its magnetometer: `perchd sim firmware --px4`).
+  0 when its yaw zero faces mocap X, 90 for an ENU world on a north-referenced autopilot.
+  `yaw0=auto`: measured from every pose (the autopilot's heading from ATTITUDE plus the
+  mocap yaw, low-passed over YAW0_TRACK_S), for an autopilot whose heading comes from its
+  compass and drifts off the mocap's (PX4 SIH: `perchd sim firmware --px4`, degrees per
+  second in hover). Tracking the offset closes the heading loop on the mocap.
 - configure=1: set the failsafe parameters below to perchd's values (PARAM_SET, read
   back, logged) instead of refusing to fly.
 
@@ -89,6 +92,9 @@ MODE_CONFIRM_S = 1.5
 before the switch (heartbeats come at 1 Hz); past this the vehicle really is elsewhere."""
 PX4_INT_PARAMS = {"COM_OBL_RC_ACT"}
 """PX4 sends and takes integer parameters bytewise in PARAM_VALUE's float field."""
+YAW0_TRACK_S = 0.5
+"""[s] time constant of yaw0=auto's offset tracking: slower than one mocap frame's jitter,
+faster than a compass heading drifts (PX4 SIH: ~3 deg/s)."""
 PX4_OFFBOARD_PORT = 14540
 NO_HEARTBEAT_CAUSES = (
     "is the autopilot running and sending to this address? PX4 sends only to its fixed "
@@ -151,9 +157,22 @@ def open_mavlink(uri: Uri, runtime: Runtime) -> "MavlinkDriver":
         timeout=float_param(opts, "timeout", 1.5, 0.01, 30.0, " s"),
         stream_hz=float_param(opts, "stream", 50.0, 1.0, 500.0, " Hz"),
         wait=float_param(opts, "wait", 5.0, 0.1, 60.0, " s"),
-        yaw0=math.radians(float_param(opts, "yaw0", 0.0, -360.0, 360.0, " deg")),
+        yaw0=heading_offset(opts),
         configure=bool_param(opts, "configure"),
         sport=source_port(opts, device))
+
+
+def heading_offset(opts: Uri) -> float | None:
+    """?yaw0=DEG [rad], or None for yaw0=auto."""
+    if (opts.param("yaw0") or "").lower() == "auto":
+        return None
+    return math.radians(float_param(opts, "yaw0", 0.0, -360.0, 360.0, " deg"))
+
+
+def pose_yaw(q: tuple[float, float, float, float]) -> float:
+    """[rad] Z-Y-X yaw of an (x, y, z, w) quaternion."""
+    x, y, z, w = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def source_port(opts: Uri, device: str) -> int | None:
@@ -250,7 +269,7 @@ def px4_custom_mode(main: int, sub: int) -> int:
 class MavlinkDriver(DriverBase):
     def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float,
                  hover: float | None, arm: bool, timeout: float, stream_hz: float,
-                 wait: float, yaw0: float = 0.0, configure: bool = False,
+                 wait: float, yaw0: float | None = 0.0, configure: bool = False,
                  sport: int | None = None) -> None:
         self.uri = uri
         self.device = device
@@ -262,6 +281,8 @@ class MavlinkDriver(DriverBase):
         self.stream_hz = stream_hz
         self.wait = wait
         self.yaw0 = yaw0
+        self._yaw0_auto = yaw0 is None
+        self._yaw0_t: float | None = None  # [s] pose time of the last yaw0=auto update
         self.configure = configure
         self.sport = sport
         self.model: NormalisedThrust | None = None
@@ -312,8 +333,28 @@ class MavlinkDriver(DriverBase):
     def send(self, setpoint: Setpoint) -> None:
         if self._stopped or self._conn is None or self.model is None:
             return
+        if self.yaw0 is None:  # auto, and no pose yet: it faces where it is told to
+            self._align_heading((self._yaw_ned or 0.0) + setpoint.yaw)
         self._level_yaw = ned_yaw(setpoint.yaw, self.yaw0)
         self._send_target(ned_attitude(setpoint, self.yaw0), self.model.fraction(setpoint.thrust))
+
+    def observe_pose(self, pose: Any) -> None:
+        """yaw0=auto: each pose with the autopilot's newest heading measures the offset
+        between its heading and the mocap's; yaw0 follows it through a first-order lag."""
+        if not self._yaw0_auto or self._yaw_ned is None or not getattr(pose, "valid", True):
+            return
+        measured = self._yaw_ned + pose_yaw(pose.q)
+        if self.yaw0 is None or self._yaw0_t is None:
+            self._align_heading(measured)
+        else:
+            gain = min(1.0, max(0.0, pose.t - self._yaw0_t) / YAW0_TRACK_S)
+            self.yaw0 += gain * math.remainder(measured - self.yaw0, math.tau)
+        self._yaw0_t = pose.t
+
+    def _align_heading(self, yaw0: float) -> None:
+        self.yaw0 = yaw0
+        log.info("%s: yaw0=auto: world X is at autopilot heading %.1f deg", self.uri,
+                 math.degrees(yaw0))
 
     def failsafe(self, reason: EndReason) -> None:
         self.failsafe_reasons.append(reason)

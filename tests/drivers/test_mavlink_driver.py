@@ -21,7 +21,7 @@ from ticks import level, ticks_until_lost
 
 from perchd.core.errors import ConfigError, LinkError, MissingExtraError, UriError
 from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.core.types import EndReason, Phase, Pose, Setpoint
 
 MASS = 0.5
 WEIGHT = MASS * 9.81
@@ -319,6 +319,28 @@ def test_yaw0_turns_an_enu_world_onto_a_north_referenced_autopilot(px4):
         assert heading_of(px4.targets[-1].q) == pytest.approx(0.0, abs=1e-3)  # north
     finally:
         drv.close()
+
+
+def test_yaw0_auto_takes_the_offset_from_the_first_pose_and_the_vehicles_heading():
+    v = VehicleDouble(PX4, yaw_deg=97.0)  # a compass 7 deg off an ENU world's north
+    drv = connected(v, "&yaw0=auto")
+    try:
+        facing = math.radians(0.0)  # the mocap says it faces world +Y (ENU north)
+        q = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))
+        drv.observe_pose(Pose("b", 1, 0.0, (0.0, 0.0, 1.0), q))
+        drv.send(Setpoint(0.0, 0.0, 0.0, math.pi / 2 + facing, WEIGHT, 1, Phase.HOLD))
+        assert v.wait_for(lambda: v.targets[-1].thrust > 0.4)
+        assert heading_of(v.targets[-1].q) == pytest.approx(97.0, abs=1e-3)  # no turn
+        drv.send(Setpoint(0.0, 0.0, 0.0, math.pi / 2 - math.radians(10), WEIGHT, 2, Phase.HOLD))
+        assert v.wait_for(lambda: abs(heading_of(v.targets[-1].q) - 107.0) < 1e-3)  # 10 deg right
+        v.yaw = math.radians(99.0)  # the compass drifts 2 deg; the mocap sees no turn
+        v.wait_for(lambda: False, timeout=0.1)
+        drv.observe_pose(Pose("b", 2, 1.0, (0.0, 0.0, 1.0), q))  # 1 s on: the lag has caught up
+        drv.send(Setpoint(0.0, 0.0, 0.0, math.pi / 2, WEIGHT, 3, Phase.HOLD))
+        assert v.wait_for(lambda: abs(heading_of(v.targets[-1].q) - 99.0) < 1e-3)
+    finally:
+        drv.close()
+        v.close()
 
 
 def test_a_refused_mode_switch_is_named_at_once():

@@ -172,7 +172,8 @@ class Px4Vehicle(FirmwareVehicle):
 
     def driver_uri(self) -> str:
         port = OFFBOARD_PORT + self.params.instance
-        return f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}&yaw0=90"
+        # yaw0=auto: SIH's EKF heading comes from its compass, degrees off the truth
+        return f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}&yaw0=auto"
 
     def contact(self) -> Contact | None:
         return self._contact
