@@ -1,6 +1,7 @@
 """`perchd sim firmware`: a vehicle's real flight firmware in the loop (docs/firmware.md).
 
-    perchd sim firmware --px4 BUILD_DIR [--px4-instance N] [--px4-stock-params] [--ahead M]
+    perchd sim firmware --px4 BUILD_DIR [--px4-instance N] [--px4-stock-params]
+                        [--px4-param NAME=VALUE ...] [--ahead M]
                         [--pose-out ...] [--body cf1] [--noise M] [--mocap-rate HZ]
                         [--fw-log PATH] [--duration S] [--json]
     perchd sim firmware --cf2 PATH [--pose-out zmq://127.0.0.1:0 | natnet://127.0.0.1[:PORT]]
@@ -57,6 +58,8 @@ def register_under(sim_parser: argparse.ArgumentParser) -> None:
                    help="PX4 instance N: ports 14540+N, 19410+N, MAV_SYS_ID N+1 (default 0)")
     p.add_argument("--px4-stock-params", action="store_true",
                    help="leave PX4's failsafe defaults (perchd's driver then refuses them)")
+    p.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="PX4: a parameter set at boot (repeatable), e.g. SIH_KDV=0.1")
     p.add_argument("--ahead", type=float, default=4.5,
                    help="[m] PX4: the surface this far ahead of the hover point (default 4.5)")
     p.add_argument("--pose-out", default="zmq://127.0.0.1:0",
@@ -142,8 +145,10 @@ def run_px4(args: argparse.Namespace) -> int:
     if not 0.5 <= args.ahead <= 50.0:
         raise UriError(f"--ahead {args.ahead:g} m is outside 0.5..50 m")
     _, mocap = params_from(args)
+    sys.setswitchinterval(GIL_SWITCH_S)  # the publisher must not wait behind the receiver
     px4 = Px4Params(args.px4, instance=args.px4_instance, surface_ahead_m=args.ahead,
                     stock_params=args.px4_stock_params,
+                    extra_params=tuple(px4_param(a) for a in args.px4_param),
                     log=Path(args.fw_log) if args.fw_log else None)
     clock = MonotonicClock()
     done = threading.Event()
@@ -167,6 +172,13 @@ def run_px4(args: argparse.Namespace) -> int:
             signal.signal(s, handler)
     print(json.dumps(result) if args.json else px4_summary_text(result))
     return 0
+
+
+def px4_param(text: str) -> tuple[str, str]:
+    name, sep, value = text.partition("=")
+    if not (sep and name and value and name.replace("_", "").isalnum()):
+        raise UriError(f"--px4-param {text!r}: expected NAME=VALUE")
+    return name.upper(), value
 
 
 def px4_summary_text(r: dict[str, Any]) -> str:

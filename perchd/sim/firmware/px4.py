@@ -20,7 +20,7 @@ import shutil
 import tempfile
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -54,13 +54,16 @@ class Px4Params:
     makes MAV_SYS_ID N+1; takeoff: climb to MIS_TAKEOFF_ALT (2.5 m) and hold before ready;
     surface_ahead_m [m]: the surface is put this far ahead of the hover point along the
     heading (None: no surface); stock_params: leave PX4's failsafe defaults (to try the
-    driver's refusal or ?configure=1); log: PX4's console output."""
+    driver's refusal or ?configure=1); extra_params: more PX4 parameters set at boot, e.g.
+    (("SIH_KDV", "0.1"),) (SIH's linear drag, 1.0 N/(m/s) by default); log: PX4's console
+    output."""
 
     build: str
     instance: int = 0
     takeoff: bool = True
     surface_ahead_m: float | None = 4.5
     stock_params: bool = False
+    extra_params: tuple[tuple[str, str], ...] = ()
     log: Path | None = None
 
 
@@ -168,7 +171,11 @@ class Px4Vehicle(FirmwareVehicle):
             self.surface = surface_ahead(truth.p, self.start_heading, self.params.surface_ahead_m)
 
     def truth(self) -> Truth | None:
-        return self._truth
+        """The newest sample, stamped now: SIH runs in lockstep, so while px4 is held up
+        (a loaded machine) its vehicle is frozen too and the last sample is still its state;
+        the receipt time would age it into perchd's stale-mocap rule for nothing."""
+        truth = self._truth
+        return None if truth is None else replace(truth, t=self.clock.now())
 
     def driver_uri(self) -> str:
         port = OFFBOARD_PORT + self.params.instance
@@ -199,16 +206,19 @@ class Px4Vehicle(FirmwareVehicle):
     def _launch(self, procs: ProcessGroup) -> None:
         """px4 through env(1) (it execs, so the pid is px4's): the simulator, the airframe
         and the parameters PX4's rcS applies after the airframe (PX4_PARAM_<NAME>)."""
-        params = {"SDLOG_BACKEND": "0"} if self.params.stock_params else SAFE_PARAMS
+        params = {"SDLOG_BACKEND": "0"} if self.params.stock_params else dict(SAFE_PARAMS)
+        params.update(self.params.extra_params)
         env = ["PX4_SIMULATOR=sihsim", "PX4_SIM_MODEL=sihsim_quadx",
                *(f"PX4_PARAM_{k}={v}" for k, v in params.items())]
         procs.launch(["env", *env, str(self.binary), "-d", "-i", str(self.params.instance),
                       "-w", str(self.workdir), str(self.etc)], self.log)
 
     def _ask_truth(self) -> None:
-        """SET_MESSAGE_INTERVAL for HIL_STATE_QUATERNION at 100 Hz (sim time)."""
+        """HIL_STATE_QUATERNION at 100 Hz (sim time), and the display link's
+        HIL_ACTUATOR_CONTROLS (~200 Hz) off: parsing it in Python starves the publisher."""
         if self._conn.clients:
             self._command(511, 115, 10000)
+            self._command(511, 93, -1)
 
     def _take_off(self, cancel: threading.Event) -> None:
         """NAV_TAKEOFF then ARM (PX4's own take-off to MIS_TAKEOFF_ALT); ready once PX4
