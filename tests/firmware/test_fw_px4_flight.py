@@ -124,10 +124,11 @@ def hold_height(v: Px4Vehicle, drv, z_ref: float, yaw: float, seconds: float) ->
 
 # -- whole perches through the CLI ------------------------------------------------------------
 
-def harness(tmp: Path) -> tuple[subprocess.Popen, str, str, list[str]]:
+def harness(tmp: Path, *extra: str) -> tuple[subprocess.Popen, str, str, list[str]]:
     proc = subprocess.Popen(
         [sys.executable, "-m", "perchd", "sim", "firmware", "--px4", PX4, "--px4-instance",
-         str(INSTANCE), "--ahead", str(AHEAD_M), "--px4-param", f"SIH_KDV={DRAG}", "--fw-log", str(tmp / "px4.log"), "--json"],
+         str(INSTANCE), "--ahead", str(AHEAD_M), "--px4-param", f"SIH_KDV={DRAG}",
+         "--fw-log", str(tmp / "px4.log"), "--json", *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
     surface: list[str] = []
     for line in proc.stderr:
@@ -227,8 +228,13 @@ def test_the_agent_perches_on_px4_sih(tmp_path, flight):
     assert "AUTO.RTL" not in sim["modes"]
 
 
-def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path):
-    proc, mocap, driver, surface = harness(tmp_path)
+@pytest.mark.parametrize("boot", ["safe-params", "stock-params+configure"])
+def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, boot):
+    """PX4's defaults (COM_OBL_RC_ACT = 0: Position, without RC escalating to Return) are
+    either set at boot by the harness or by the driver's ?configure=1."""
+    stock = boot != "safe-params"
+    proc, mocap, driver, surface = harness(tmp_path, *(["--px4-stock-params"] if stock else []))
+    driver += "&configure=1" if stock else ""
     try:
         fly = subprocess.Popen(fly_argv(tmp_path, mocap, driver, surface), env=ENV,
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -244,7 +250,7 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path):
             if p.poll() is None:
                 p.kill()
     modes = sim["modes"]
-    report({"test": "px4-sigkill", "modes": modes})
+    report({"test": "px4-sigkill", "boot": boot, "modes": modes})
     assert "OFFBOARD" in modes
     after = modes[len(modes) - 1 - modes[::-1].index("OFFBOARD") + 1:]
     assert after and after[0] in ("AUTO.LAND", "AUTO.LOITER"), modes
