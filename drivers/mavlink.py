@@ -1,7 +1,11 @@
 """MAVLink autopilots over pymavlink: ArduPilot in GUIDED_NOGPS, PX4 in OFFBOARD, both flown
 with SET_ATTITUDE_TARGET (attitude quaternion + normalised thrust).
 
-`mavlink:udpout:HOST:PORT[?arm=1&hover=F&timeout=S&stream=HZ&wait=S&mass=KG]`
+`mavlink:DEVICE[?mass=KG&arm=1&hover=F&timeout=S&stream=HZ&wait=S&yaw0=DEG&configure=1&sport=P]`
+DEVICE: `udpin:127.0.0.1:14540` for PX4 (SITL instance N: 14540+N; PX4 sends to that fixed
+port and ignores anyone else), `udpin:`/`udpout:HOST:PORT`/`tcp:HOST:PORT` for ArduPilot, or a
+serial device. A `udpout:` link speaks from one source port; a vehicle that locks onto its
+first partner (PX4) answers only that one: give it a fixed one with `sport=` (or use udpin).
 - mass: the thrust model's mass (drivers.thrust.NormalisedThrust) comes from the flight
   config (`[vehicle] mass_kg`, bind_mass); a mass= here must agree with it, else the flight
   is refused before the mode switch or arming. Only a driver never bound uses it alone.
@@ -11,10 +15,24 @@ with SET_ATTITUDE_TARGET (attitude quaternion + normalised thrust).
 - timeout [s, default 1.5]: no message from the vehicle this long = link lost. The driver
   asks for ATTITUDE at `stream` Hz (default 50) so a short timeout is usable.
 - wait [s, default 5]: how long connect() waits for each answer.
+- yaw0 [deg, default 0]: the autopilot's heading (NED yaw, from north) of the world X axis:
+  0 when its yaw zero faces mocap X, 90 for an ENU world on a north-referenced autopilot.
+  `yaw0=auto`: measured from every pose (the autopilot's heading from ATTITUDE plus the
+  mocap yaw, low-passed over YAW0_TRACK_S), for an autopilot whose heading comes from its
+  compass and drifts off the mocap's (PX4 SIH: `perchd sim firmware --px4`, degrees per
+  second in hover). Tracking the offset closes the heading loop on the mocap.
+- configure=1: set the failsafe parameters below to perchd's values (PARAM_SET, read
+  back, logged) instead of refusing to fly.
+
+Failsafe parameters (docs/safety.md, "Autopilot failsafe parameters") are read at connect:
+a vehicle that would keep flying a dead agent's setpoint, or fly home, is refused by name.
+Taking over a vehicle in the air (armed, not landed) streams level at its current heading
+with the hover thrust, never zero thrust, and flies as soon as the mode switch is
+acknowledged (COMMAND_ACK ACCEPTED), not at the next 1 Hz heartbeat.
 
 Frames: perchd's world is Z-up with Z-Y-X Euler angles; autopilots want the body FRD
 attitude in NED. Rotating by pi about X maps one onto the other: roll stays, pitch and
-yaw change sign. The quaternion goes out w-first. Yaw is relative to the autopilot's own
+yaw change sign (yaw then measured from yaw0). The quaternion goes out w-first. Yaw is relative to the autopilot's own
 heading reference, so its yaw zero must face the mocap X axis (as the paper's does).
 
 ArduPilot reads the thrust field as a climb rate unless GUID_OPTIONS bit 3 (value 8) is
@@ -23,10 +41,13 @@ set; the driver reads the parameter and refuses to fly without it.
 
 from __future__ import annotations
 
+import logging
 import math
 import socket
+import struct
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any, Callable
 
 from perchd.drivers.base import DriverBase, agreed_mass
@@ -39,6 +60,8 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, split_query
+
+log = logging.getLogger("perchd.drivers.mavlink")
 
 HEARTBEAT_S = 0.5
 """[s] our heartbeat period (MAVLink asks for at least 1 Hz)."""
@@ -62,8 +85,50 @@ PX4_OFFBOARD = (6, 0)  # (main mode, sub mode)
 PX4_AUTO_LAND = (4, 6)
 HOVER_PARAM = {ARDUPILOT: "MOT_THST_HOVER", PX4: "MPC_THR_HOVER"}
 IGNORE_BODY_RATES = 0b0000_0111
-ATTITUDE_MSG_ID = 30
+ATTITUDE_MSG_ID, EXTENDED_SYS_STATE_MSG_ID = 30, 245
 CMD_DO_SET_MODE, CMD_ARM, CMD_SET_MESSAGE_INTERVAL = 176, 400, 511
+MAV_RESULT_ACCEPTED, MAV_RESULT_IN_PROGRESS = 0, 5
+LANDED_ON_GROUND = 1  # MAV_LANDED_STATE
+MODE_CONFIRM_S = 1.5
+"""[s] after an acknowledged mode switch a heartbeat still showing the old mode is one sent
+before the switch (heartbeats come at 1 Hz); past this the vehicle really is elsewhere."""
+PX4_INT_PARAMS = {"COM_OBL_RC_ACT"}
+"""PX4 sends and takes integer parameters bytewise in PARAM_VALUE's float field."""
+YAW0_TRACK_S = 0.5
+"""[s] time constant of yaw0=auto's offset tracking: slower than one mocap frame's jitter,
+faster than a compass heading drifts (PX4 SIH: ~3 deg/s)."""
+PX4_OFFBOARD_PORT = 14540
+NO_HEARTBEAT_CAUSES = (
+    "is the autopilot running and sending to this address? PX4 sends only to its fixed "
+    f"offboard port: use mavlink:udpin:127.0.0.1:{PX4_OFFBOARD_PORT} (SITL instance N: "
+    f"{PX4_OFFBOARD_PORT}+N); a PX4 that already heard a udpout: link from another source "
+    "port answers only that one (restart it, use udpin:, or keep one port with ?sport=); "
+    "ArduPilot SITL: mavlink:tcp:127.0.0.1:5760 or its --out udp port with udpin:")
+
+
+@dataclass(frozen=True, slots=True)
+class FailsafeRule:
+    """One autopilot parameter that decides what the vehicle does once perchd is gone.
+    ok(value) says whether `value` is safe; `wanted` names the safe values for the user;
+    `configure` is what ?configure=1 sets (docs/safety.md, "Autopilot failsafe parameters")."""
+
+    name: str
+    ok: Callable[[float], bool]
+    wanted: str
+    configure: float
+
+
+FAILSAFE_RULES: dict[int, tuple[FailsafeRule, ...]] = {
+    PX4: (
+        FailsafeRule("COM_OF_LOSS_T", lambda v: 0.0 < v <= 0.5, "<= 0.5 s", 0.5),
+        FailsafeRule("COM_OBL_RC_ACT", lambda v: int(v) in (4, 5), "4 (Land) or 5 (Hold)", 4),
+    ),
+    ARDUPILOT: (
+        FailsafeRule("GUID_TIMEOUT", lambda v: 0.0 < v <= 0.5, "<= 0.5 s", 0.5),
+        FailsafeRule("FS_GCS_ENABLE", lambda v: int(v) == 5, "5 (Land)", 5),
+        FailsafeRule("FS_GCS_TIMEOUT", lambda v: 0.0 < v <= 2.0, "<= 2 s", 2.0),
+    ),
+}
 
 
 def _check_network_port(raw: str, device: str) -> None:
@@ -80,7 +145,8 @@ def open_mavlink(uri: Uri, runtime: Runtime) -> "MavlinkDriver":
     require("pymavlink", "mavlink")
     device, query = split_query(uri.path)
     if not device.startswith(("udpout:", "udpin:", "udp:", "tcp:", "/dev/", "COM")):
-        raise UriError(f"{uri.raw}: expected mavlink:udpout:HOST:PORT (or udpin:, tcp:, a serial device)")
+        raise UriError(f"{uri.raw}: expected mavlink:udpin:HOST:PORT (PX4: udpin:127.0.0.1:"
+                       f"{PX4_OFFBOARD_PORT}; or udpout:, tcp:, a serial device)")
     _check_network_port(uri.raw, device)
     opts = Uri(uri.raw, uri.scheme, "", None, device, query)
     mass = float_param(opts, "mass", None, 0.01, 50.0, " kg")
@@ -90,7 +156,33 @@ def open_mavlink(uri: Uri, runtime: Runtime) -> "MavlinkDriver":
         arm=bool_param(opts, "arm"),
         timeout=float_param(opts, "timeout", 1.5, 0.01, 30.0, " s"),
         stream_hz=float_param(opts, "stream", 50.0, 1.0, 500.0, " Hz"),
-        wait=float_param(opts, "wait", 5.0, 0.1, 60.0, " s"))
+        wait=float_param(opts, "wait", 5.0, 0.1, 60.0, " s"),
+        yaw0=heading_offset(opts),
+        configure=bool_param(opts, "configure"),
+        sport=source_port(opts, device))
+
+
+def heading_offset(opts: Uri) -> float | None:
+    """?yaw0=DEG [rad], or None for yaw0=auto."""
+    if (opts.param("yaw0") or "").lower() == "auto":
+        return None
+    return math.radians(float_param(opts, "yaw0", 0.0, -360.0, 360.0, " deg"))
+
+
+def pose_yaw(q: tuple[float, float, float, float]) -> float:
+    """[rad] Z-Y-X yaw of an (x, y, z, w) quaternion."""
+    x, y, z, w = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def source_port(opts: Uri, device: str) -> int | None:
+    """?sport=PORT: the fixed local port of a udpout: link (None: an ephemeral one)."""
+    port = float_param(opts, "sport", None, 1, 65535)
+    if port is None:
+        return None
+    if not device.startswith("udpout:") or port != int(port):
+        raise UriError(f"{opts.raw}: sport= is a whole port number, for udpout: links only")
+    return int(port)
 
 
 def quaternion_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
@@ -102,9 +194,28 @@ def quaternion_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float
             cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
 
 
-def ned_attitude(sp: Setpoint) -> tuple[float, float, float, float]:
+def ned_attitude(sp: Setpoint, yaw0: float = 0.0) -> tuple[float, float, float, float]:
     """perchd's Z-up attitude as the FRD-in-NED quaternion an autopilot takes."""
-    return quaternion_wxyz(sp.roll, -sp.pitch, -sp.yaw)
+    return quaternion_wxyz(sp.roll, -sp.pitch, ned_yaw(sp.yaw, yaw0))
+
+
+def ned_yaw(yaw: float, yaw0: float) -> float:
+    """[rad] autopilot heading of a world (Z-up) yaw, yaw0 the heading of world X."""
+    return yaw0 - yaw
+
+
+def level_ned(yaw_ned: float) -> tuple[float, float, float, float]:
+    """Roll 0, pitch 0 at an autopilot heading: level, never "level facing north"."""
+    return quaternion_wxyz(0.0, 0.0, yaw_ned)
+
+
+def px4_param_float(value: int) -> float:
+    """An integer as PX4 carries it in PARAM_SET/PARAM_VALUE's float (bytewise)."""
+    return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+
+
+def px4_param_int(value: float) -> int:
+    return struct.unpack("<i", struct.pack("<f", value))[0]
 
 
 def watch_refusals(conn: Any, on_refused: Callable[[], None]) -> None:
@@ -139,6 +250,18 @@ def watch_refusals(conn: Any, on_refused: Callable[[], None]) -> None:
     conn.recv, conn.write = recv, write
 
 
+def bind_source_port(conn: Any, port: int, uri: str) -> None:
+    """Give a udpout: link a fixed source port, so a vehicle that answers only the first
+    port it heard from (PX4) still answers the next run."""
+    sock = conn.port
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind(("0.0.0.0", port))
+    except OSError as err:
+        conn.close()
+        raise LinkError(f"{uri}: cannot bind source port {port}: {err.strerror or err}") from None
+
+
 def px4_custom_mode(main: int, sub: int) -> int:
     return (main << 16) | (sub << 24)
 
@@ -146,7 +269,8 @@ def px4_custom_mode(main: int, sub: int) -> int:
 class MavlinkDriver(DriverBase):
     def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float | None,
                  hover: float | None, arm: bool, timeout: float, stream_hz: float,
-                 wait: float) -> None:
+                 wait: float, yaw0: float | None = 0.0, configure: bool = False,
+                 sport: int | None = None) -> None:
         self.uri = uri
         self.device = device
         self.clock = runtime.clock
@@ -157,6 +281,11 @@ class MavlinkDriver(DriverBase):
         self.timeout = timeout
         self.stream_hz = stream_hz
         self.wait = wait
+        self.yaw0 = yaw0
+        self._yaw0_auto = yaw0 is None
+        self._yaw0_t: float | None = None  # [s] pose time of the last yaw0=auto update
+        self.configure = configure
+        self.sport = sport
         self.model: NormalisedThrust | None = None
         self.autopilot: int | None = None
         self._conn: Any = None
@@ -166,6 +295,11 @@ class MavlinkDriver(DriverBase):
         self._heard: float | None = None  # clock time of the vehicle's last message
         self._mode: int | None = None  # custom_mode from its last heartbeat
         self._armed = False
+        self._landed_state: int | None = None  # EXTENDED_SYS_STATE, once heard
+        self._yaw_ned: float | None = None  # [rad] from ATTITUDE
+        self._level_yaw: float | None = None  # [rad] NED heading to level out at
+        self._mode_seen = False  # a heartbeat has shown the flight mode
+        self._switched_at = 0.0  # time.monotonic() of the acknowledged switch
         self._params: dict[str, float] = {}
         self._acks: dict[int, int] = {}
         self._flight_mode: int | None = None  # the custom mode we fly in
@@ -184,6 +318,8 @@ class MavlinkDriver(DriverBase):
         self._conn = mavutil.mavlink_connection(self.device, source_system=255,
                                                 source_component=191)  # onboard computer
         self._refused = ""
+        if self.sport is not None:
+            bind_source_port(self._conn, self.sport, self.uri)
         if self.device.startswith("udpout:"):
             watch_refusals(self._conn, self._on_refused)
         self._stopped = False
@@ -198,7 +334,28 @@ class MavlinkDriver(DriverBase):
     def send(self, setpoint: Setpoint) -> None:
         if self._stopped or self._conn is None or self.model is None:
             return
-        self._send_target(ned_attitude(setpoint), self.model.fraction(setpoint.thrust))
+        if self.yaw0 is None:  # auto, and no pose yet: it faces where it is told to
+            self._align_heading((self._yaw_ned or 0.0) + setpoint.yaw)
+        self._level_yaw = ned_yaw(setpoint.yaw, self.yaw0)
+        self._send_target(ned_attitude(setpoint, self.yaw0), self.model.fraction(setpoint.thrust))
+
+    def observe_pose(self, pose: Any) -> None:
+        """yaw0=auto: each pose with the autopilot's newest heading measures the offset
+        between its heading and the mocap's; yaw0 follows it through a first-order lag."""
+        if not self._yaw0_auto or self._yaw_ned is None or not getattr(pose, "valid", True):
+            return
+        measured = self._yaw_ned + pose_yaw(pose.q)
+        if self.yaw0 is None or self._yaw0_t is None:
+            self._align_heading(measured)
+        else:
+            gain = min(1.0, max(0.0, pose.t - self._yaw0_t) / YAW0_TRACK_S)
+            self.yaw0 += gain * math.remainder(measured - self.yaw0, math.tau)
+        self._yaw0_t = pose.t
+
+    def _align_heading(self, yaw0: float) -> None:
+        self.yaw0 = yaw0
+        log.info("%s: yaw0=auto: world X is at autopilot heading %.1f deg", self.uri,
+                 math.degrees(yaw0))
 
     def failsafe(self, reason: EndReason) -> None:
         self.failsafe_reasons.append(reason)
@@ -212,7 +369,7 @@ class MavlinkDriver(DriverBase):
             return LinkHealth(False, age, f"connection lost: {self._refused}")
         if age > self.timeout:
             return LinkHealth(False, age, f"connection lost: no message from the vehicle for {age:.2f} s")
-        if not self._stopped and self._flight_mode is not None and self._mode != self._flight_mode:
+        if not self._stopped and self._flight_mode is not None and self._left_flight_mode():
             return LinkHealth(False, age, f"vehicle left the offboard mode (custom mode {self._mode})")
         return LinkHealth(True, age)
 
@@ -238,44 +395,112 @@ class MavlinkDriver(DriverBase):
         if self.mass_kg is None:
             raise ConfigError(f"{self.uri}: the vehicle mass is unknown: fly with a flight "
                               f"config ([vehicle] mass_kg) or add ?mass=KG")
-        self._await(lambda: self._heard is not None, "a heartbeat from the vehicle")
+        self._await(lambda: self._heard is not None, "a heartbeat from the vehicle",
+                    NO_HEARTBEAT_CAUSES)
         if self.autopilot not in (ARDUPILOT, PX4):
             raise LinkError(f"{self.uri}: autopilot type {self.autopilot} is neither ArduPilot nor PX4")
         self._command(CMD_SET_MESSAGE_INTERVAL, ATTITUDE_MSG_ID, 1e6 / self.stream_hz)
+        self._command(CMD_SET_MESSAGE_INTERVAL, EXTENDED_SYS_STATE_MSG_ID, 1e5)  # landed state
         if self.autopilot == ARDUPILOT:
             options = int(self._param("GUID_OPTIONS"))
             if not options & GUIDED_THRUST_BIT:
                 raise ConfigError(
                     f"{self.uri}: GUID_OPTIONS={options} lacks bit 3 (thrust as thrust); "
                     f"set GUID_OPTIONS={options | GUIDED_THRUST_BIT} on the vehicle")
+        self._check_failsafe_params()
         hover = self.hover if self.hover is not None else self._param(HOVER_PARAM[self.autopilot])
         try:
             self.model = NormalisedThrust(self.mass_kg, hover)
         except ValueError as err:
             raise ConfigError(f"{self.uri}: {err}") from None
-        self._send_target((1.0, 0.0, 0.0, 0.0), 0.0)  # level, no thrust, until the loop runs
+        self._prestream()
+        self._switch_mode()
+        if self.arm:
+            self._arm()
+
+    def _prestream(self) -> None:
+        """Level at the vehicle's current heading until the loop runs: in the air with the
+        hover thrust (zero thrust would drop it for as long as the switch takes), on the
+        ground with none. PX4 wants > 1 s of setpoints before OFFBOARD."""
+        self._await(lambda: self._yaw_ned is not None, "the vehicle's attitude (ATTITUDE)")
+        self._level_yaw = self._yaw_ned
+        airborne = self._airborne()
+        thrust = self.model.hover_fraction if airborne else 0.0
+        log.info("%s: taking over %s, streaming level at heading %.1f deg, thrust %.3f",
+                 self.uri, "in the air" if airborne else "on the ground",
+                 math.degrees(self._level_yaw), thrust)
+        self._send_target(level_ned(self._level_yaw), thrust)
         if self.autopilot == PX4:
             time.sleep(PX4_PRESTREAM_S)  # the keep-alive streams meanwhile
+
+    def _airborne(self) -> bool:
+        """Armed and not known to be on the ground (EXTENDED_SYS_STATE, when it streams)."""
+        return self._armed and self._landed_state != LANDED_ON_GROUND
+
+    def _switch_mode(self) -> None:
+        """Ask for the offboard mode; its COMMAND_ACK ACCEPTED is the confirmation (the
+        heartbeat that shows it may be a second away), a refusal is named."""
+        if self.autopilot == PX4:
             mode, main_sub = px4_custom_mode(*PX4_OFFBOARD), PX4_OFFBOARD
         else:
             mode, main_sub = ARDUPILOT_GUIDED_NOGPS, (ARDUPILOT_GUIDED_NOGPS, 0)
+        self._acks.pop(CMD_DO_SET_MODE, None)
+        self._mode_seen = False
         self._set_mode(*main_sub)
-        self._await(lambda: self._mode == mode, f"the switch to custom mode {mode}")
+        result = lambda: self._acks.get(CMD_DO_SET_MODE, MAV_RESULT_IN_PROGRESS)  # noqa: E731
+        self._await(lambda: self._mode == mode or result() != MAV_RESULT_IN_PROGRESS,
+                    f"the switch to custom mode {mode}")
+        if self._mode != mode and result() != MAV_RESULT_ACCEPTED:
+            raise LinkError(f"{self.uri}: the vehicle refused custom mode {mode} "
+                            f"(MAV_RESULT {result()})")
+        self._switched_at = time.monotonic()
         self._flight_mode = mode
-        if self.arm:
-            self._acks.pop(CMD_ARM, None)
-            self._command(CMD_ARM, 1)
-            self._await(lambda: self._armed or self._acks.get(CMD_ARM, 0) not in (0, 5),
-                        "arming")
-            if not self._armed:
-                raise LinkError(f"{self.uri}: the vehicle refused to arm "
-                                f"(MAV_RESULT {self._acks.get(CMD_ARM)})")
+        self._mode_seen = self._mode == mode
 
-    def _await(self, done: Callable[[], bool], what: str) -> None:
+    def _left_flight_mode(self) -> bool:
+        if self._mode == self._flight_mode:
+            return False
+        return self._mode_seen or time.monotonic() - self._switched_at > MODE_CONFIRM_S
+
+    def _arm(self) -> None:
+        self._acks.pop(CMD_ARM, None)
+        self._command(CMD_ARM, 1)
+        self._await(lambda: self._armed or self._acks.get(CMD_ARM, 0) not in (0, 5), "arming")
+        if not self._armed:
+            raise LinkError(f"{self.uri}: the vehicle refused to arm "
+                            f"(MAV_RESULT {self._acks.get(CMD_ARM)})")
+
+    def _check_failsafe_params(self) -> None:
+        """Refuse a vehicle whose own failsafe would fly a dead agent's setpoint or fly it
+        home; with ?configure=1 set perchd's values instead (docs/safety.md)."""
+        rules = FAILSAFE_RULES[self.autopilot]
+        bad = [(r, self._param(r.name)) for r in rules if not r.ok(self._param(r.name))]
+        if bad and not self.configure:
+            named = "; ".join(f"{r.name}={v:g} (wanted {r.wanted})" for r, v in bad)
+            raise ConfigError(f"{self.uri}: unsafe failsafe parameters: {named}; set them on "
+                              f"the vehicle or add configure=1 to the driver URI")
+        for rule, value in bad:
+            self._set_param(rule, value)
+
+    def _set_param(self, rule: FailsafeRule, old: float) -> None:
+        is_int = self.autopilot == PX4 and rule.name in PX4_INT_PARAMS
+        wire = px4_param_float(int(rule.configure)) if is_int else float(rule.configure)
+        kind = 6 if is_int else 9  # MAV_PARAM_TYPE_INT32 / REAL32
+        self._params.pop(rule.name, None)
+        with self._lock:
+            self._conn.mav.param_set_send(*self._target, rule.name.encode(), wire, kind)
+        new = self._param(rule.name)
+        if not rule.ok(new):
+            raise ConfigError(f"{self.uri}: set {rule.name}={rule.configure:g} but the vehicle "
+                              f"reads back {new:g} (wanted {rule.wanted})")
+        log.warning("%s: set %s from %g to %g (configure=1)", self.uri, rule.name, old, new)
+
+    def _await(self, done: Callable[[], bool], what: str, causes: str = "") -> None:
         deadline = time.monotonic() + self.wait
         while not done():
             if time.monotonic() > deadline:
-                raise LinkError(f"{self.uri}: waited {self.wait:g} s for {what} in vain")
+                hint = f": {causes}" if causes else ""
+                raise LinkError(f"{self.uri}: waited {self.wait:g} s for {what} in vain{hint}")
             time.sleep(0.005)
 
     def _param(self, name: str) -> float:
@@ -318,7 +543,7 @@ class MavlinkDriver(DriverBase):
             with self._lock:
                 self._conn.mav.heartbeat_send(18, 8, 0, 0, 4)  # onboard controller, no autopilot, active
         if not self._stopped and self._last_target and now - self._last_sent >= KEEPALIVE_S:
-            self._send_target((1.0, 0.0, 0.0, 0.0), self._last_target[1])
+            self._send_target(level_ned(self._level_yaw or 0.0), self._last_target[1])
         if (self._stopped and now < self._land_until and now - self._land_sent >= LAND_RETRY_S
                 and not self._land_taken()):
             self._command_land(repeats=1)
@@ -357,9 +582,19 @@ class MavlinkDriver(DriverBase):
         self._heard = self.clock.now()
         kind = msg.get_type()
         if kind == "PARAM_VALUE":
-            self._params[msg.param_id] = float(msg.param_value)
+            self._params[msg.param_id] = self._param_value(msg)
         elif kind == "COMMAND_ACK":
             self._acks[msg.command] = msg.result
+        elif kind == "ATTITUDE":
+            self._yaw_ned = float(msg.yaw)
+        elif kind == "EXTENDED_SYS_STATE":
+            self._landed_state = int(msg.landed_state)
+
+    def _param_value(self, msg: Any) -> float:
+        """PX4 carries integer parameters bytewise; ArduPilot casts them to float."""
+        if self.autopilot == PX4 and 1 <= msg.param_type <= 8:
+            return float(px4_param_int(msg.param_value))
+        return float(msg.param_value)
 
     def _on_refused(self) -> None:
         if self._heard is not None:  # before the first heartbeat, connect() waits it out
@@ -374,6 +609,8 @@ class MavlinkDriver(DriverBase):
             self._heard = self.clock.now()
         if msg.get_srcSystem() == self._target[0]:
             self._mode = msg.custom_mode
+            self._mode_seen = self._mode_seen or (
+                self._flight_mode is not None and self._mode == self._flight_mode)
             self._armed = bool(msg.base_mode & 128)  # MAV_MODE_FLAG_SAFETY_ARMED
 
     def _release(self) -> None:

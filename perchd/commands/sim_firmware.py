@@ -1,6 +1,8 @@
 """`perchd sim firmware`: a vehicle's real flight firmware in the loop (docs/firmware.md).
 
     perchd sim firmware --arducopter PATH [--defaults FILE] [--frame nwu|enu] [--pose-out ...]
+    perchd sim firmware --px4 BUILD_DIR [--px4-instance N] [--px4-stock-params]
+                        [--px4-param NAME=VALUE ...] [--ahead M] [--pose-out ...]
     perchd sim firmware --cf2 PATH [--pose-out zmq://127.0.0.1:0 | natnet://127.0.0.1[:PORT]]
                         [--link udp://127.0.0.1:19850] [--fw-port PORT] [--body cf1]
                         [--start X Y Z] [--surface X Y Z] [--normal NX NY NZ]
@@ -26,13 +28,19 @@ import time
 from pathlib import Path
 from typing import Any
 
+from perchd.core.clock import MonotonicClock
 from perchd.core.errors import UriError
 from perchd.mocap.outputs import open_pose_output
 from perchd.sim.firmware.ardupilot import ArduPilotParams, ArduPilotVehicle
 from perchd.sim.firmware.cf2 import Cf2Params, Cf2Vehicle, SensorNoise, Surface
-from perchd.sim.firmware.harness import (Interrupted, MocapParams, ProcessGroup,
-                                         TruthPublisher, ready_line)
-from perchd.core.clock import MonotonicClock
+from perchd.sim.firmware.harness import (
+    Interrupted,
+    MocapParams,
+    ProcessGroup,
+    TruthPublisher,
+    ready_line,
+)
+from perchd.sim.firmware.px4 import Px4Params, Px4Vehicle
 
 
 def register_under(sim_parser: argparse.ArgumentParser) -> None:
@@ -46,6 +54,16 @@ def register_under(sim_parser: argparse.ArgumentParser) -> None:
                        help="the Crazyflie SITL firmware binary (docs/firmware.md)")
     which.add_argument("--arducopter", metavar="PATH",
                        help="ArduCopter's SITL binary (docs/firmware.md, ArduPilot)")
+    which.add_argument("--px4", metavar="BUILD_DIR",
+                       help="a PX4 SITL build folder with bin/px4 and etc/ (docs/firmware.md)")
+    p.add_argument("--px4-instance", type=int, default=0,
+                   help="PX4 instance N: ports 14540+N, 19410+N, MAV_SYS_ID N+1 (default 0)")
+    p.add_argument("--px4-stock-params", action="store_true",
+                   help="leave PX4's failsafe defaults (perchd's driver then refuses them)")
+    p.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="PX4: a parameter set at boot (repeatable), e.g. SIH_KDV=0.1")
+    p.add_argument("--ahead", type=float, default=4.5,
+                   help="[m] PX4: the surface this far ahead of the hover point (default 4.5)")
     p.add_argument("--defaults", metavar="FILE", help="ArduCopter: the defaults .parm (default: "
                    "Tools/autotest/default_params/copter.parm of the binary's source tree)")
     p.add_argument("--frame", choices=("nwu", "enu"), default="nwu",
@@ -106,18 +124,36 @@ def arducopter_params(args: argparse.Namespace) -> ArduPilotParams:
                            log=Path(args.fw_log) if args.fw_log else None)
 
 
+def px4_params(args: argparse.Namespace) -> Px4Params:
+    if not 0.5 <= args.ahead <= 50.0:
+        raise UriError(f"--ahead {args.ahead:g} m is outside 0.5..50 m")
+    return Px4Params(args.px4, instance=args.px4_instance, surface_ahead_m=args.ahead,
+                     stock_params=args.px4_stock_params,
+                     extra_params=tuple(px4_param(a) for a in args.px4_param),
+                     log=Path(args.fw_log) if args.fw_log else None)
+
+
+def px4_param(text: str) -> tuple[str, str]:
+    name, sep, value = text.partition("=")
+    if not (sep and name and value and name.replace("_", "").isalnum()):
+        raise UriError(f"--px4-param {text!r}: expected NAME=VALUE")
+    return name.upper(), value
+
+
 def open_vehicle(args: argparse.Namespace, clock: MonotonicClock) -> Any:
     """The FirmwareVehicle the command line names."""
     if args.arducopter:
         return ArduPilotVehicle(arducopter_params(args), clock)
+    if args.px4:
+        return Px4Vehicle(px4_params(args), clock)
     return Cf2Vehicle(params_from(args)[0], clock)
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.arducopter:
-        mocap = MocapParams(rate_hz=args.mocap_rate, noise_m=args.noise, body=args.body)
-    else:
+    if args.cf2:
         _, mocap = params_from(args)
+    else:
+        mocap = MocapParams(rate_hz=args.mocap_rate, noise_m=args.noise, body=args.body)
     sys.setswitchinterval(GIL_SWITCH_S)
     clock = MonotonicClock()
     done = threading.Event()
@@ -142,13 +178,16 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
     else:
-        print(summary_text(result) if "imu" in result else arducopter_text(result))
+        text = arducopter_text if args.arducopter else px4_text if args.px4 else summary_text
+        print(text(result))
     return 0
 
 
 def serve(vehicle: Any, procs: ProcessGroup, output: Any, mocap: MocapParams,
           done: threading.Event, duration: float | None) -> dict[str, Any]:
     vehicle.start(procs, done)
+    if (line := surface_line(vehicle)) is not None:
+        print(line, file=sys.stderr, flush=True)
     mocap_uri, driver_uri = output.uri(mocap.body), vehicle.driver_uri()
     print(ready_line(mocap_uri, driver_uri), file=sys.stderr, flush=True)
     publisher = TruthPublisher(vehicle, output, mocap, vehicle.clock)
@@ -158,6 +197,22 @@ def serve(vehicle: Any, procs: ProcessGroup, output: Any, mocap: MocapParams,
     out.update({"mocap": mocap_uri, "driver": driver_uri, "poses": publisher.poses,
                 "yaw_range_rad": publisher.yaw_range})
     return out
+
+
+def surface_line(vehicle: Any) -> str | None:
+    """PX4 places the surface ahead of where it hovers: say where, for `perchd fly`."""
+    s = getattr(vehicle, "surface", None)
+    if s is None or vehicle.name != "px4":
+        return None
+    fmt = lambda v: " ".join(f"{c:.3f}" for c in v)  # noqa: E731
+    return f"perchd sim: px4: surface {fmt(s.point)} normal {fmt(s.normal)}"
+
+
+def px4_text(r: dict[str, Any]) -> str:
+    c = r["contact"]
+    contact = f"contact at {c['speed']:.3f} m/s" if c else "no contact"
+    return (f"{contact}; modes {' -> '.join(r['modes'])}; {r['truth_samples']} truth samples; "
+            f"{r['poses']} poses; PX4 log {r['log']}")
 
 
 def summary_text(r: dict[str, Any]) -> str:

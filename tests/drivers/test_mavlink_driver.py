@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import logging
 import math
+import re
+import socket
 import sys
+import time
 
 import pytest
 
 pytest.importorskip("pymavlink")
 
-from mavlink_double import ARDUPILOT, PX4, VehicleDouble
+from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble
 from perchd.drivers.base import open_driver
 from pymavlink import mavutil
 from pymavlink.quaternion import Quaternion
@@ -17,7 +21,7 @@ from ticks import level, ticks_until_lost
 
 from perchd.core.errors import ConfigError, LinkError, MissingExtraError, UriError
 from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.core.types import EndReason, Phase, Pose, Setpoint
 
 MASS = 0.5
 WEIGHT = MASS * 9.81
@@ -193,15 +197,17 @@ def test_a_pilot_taking_the_vehicle_back_makes_the_link_unhealthy(ardupilot):
         drv.close()
 
 
-def test_no_vehicle_fails_the_connect_by_name():
+def test_no_vehicle_fails_the_connect_by_name_and_names_the_likely_causes():
     drv = open_driver("mavlink:udpout:127.0.0.1:9?mass=1&wait=0.3", Runtime.real())
-    with pytest.raises(LinkError, match="0.3 s for a heartbeat from the vehicle"):
+    with pytest.raises(LinkError, match="0.3 s for a heartbeat from the vehicle") as err:
         drv.connect()
+    assert "mavlink:udpin:127.0.0.1:14540" in str(err.value)  # the PX4 form
+    assert "?sport=" in str(err.value) and "ArduPilot" in str(err.value)
 
 
 @pytest.mark.parametrize("uri, message", [
     ("mavlink:udpout:127.0.0.1:14550?mass=90", "mass=90 kg is outside"),
-    ("mavlink:nonsense", "expected mavlink:udpout"),
+    ("mavlink:nonsense", "expected mavlink:udpin:HOST:PORT .PX4: udpin:127.0.0.1:14540"),
 ])
 def test_bad_uris_are_refused_by_name(uri, message):
     with pytest.raises(UriError, match=message):
@@ -249,3 +255,169 @@ def test_without_pymavlink_the_factory_names_the_extra_to_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "pymavlink", None)  # as if not installed
     with pytest.raises(MissingExtraError, match=r"pip install 'perchd\[mavlink\]'"):
         open_driver("mavlink:udpout:127.0.0.1:14550?mass=1", Runtime.real())
+
+
+# -- issue 20: airborne take-over, level at the heading, udpout to PX4, failsafe parameters --
+
+def heading_of(q) -> float:
+    """[deg] NED yaw of a (w, x, y, z) target."""
+    return math.degrees(Quaternion(list(q)).euler[2])
+
+
+def test_px4_in_the_air_is_taken_over_at_hover_thrust_and_its_heading_on_the_ack():
+    """No zero-thrust gap, no swing to north, no wait for the next 1 Hz heartbeat."""
+    v = VehicleDouble(PX4, airborne=True, yaw_deg=120.0, prompt=False, heartbeat_s=3.0)
+    try:
+        drv = connected(v)
+        returned = time.monotonic()
+        switch_t = next(t for t, c, p in v.commands if c == 176 and int(p[1]) == 6)
+        assert returned - switch_t < 0.3  # the ACK, not a heartbeat up to 3 s later
+        assert drv.health().ok  # the heartbeat still showing HOLD predates the switch
+        before = [t for t in v.targets if t.t <= switch_t]
+        assert len(before) >= 10 and switch_t - before[0].t > 1.0
+        assert {round(t.thrust, 4) for t in before} == {0.42}  # MPC_THR_HOVER, never 0
+        for t in before:
+            roll, pitch, _ = Quaternion(list(t.q)).euler
+            assert (roll, pitch) == pytest.approx((0.0, 0.0), abs=1e-6)
+            assert heading_of(t.q) == pytest.approx(120.0, abs=1e-3)
+        drv.close()
+    finally:
+        v.close()
+
+
+def test_on_the_ground_the_prestream_has_no_thrust_but_the_current_heading():
+    v = VehicleDouble(PX4, yaw_deg=-45.0)
+    try:
+        drv = connected(v)
+        assert {t.thrust for t in v.targets} == {0.0}
+        assert heading_of(v.targets[-1].q) == pytest.approx(-45.0, abs=1e-3)
+        drv.close()
+    finally:
+        v.close()
+
+
+def test_the_keepalive_levels_at_the_last_commanded_heading_not_north(px4):
+    drv = connected(px4)
+    try:
+        drv.send(Setpoint(0.0, 0.2, 0.1, -0.5, WEIGHT, 3, Phase.STAGE1))  # world yaw -0.5 rad
+        px4.wait_for(lambda: False, timeout=0.3)  # silent loop: the keep-alive repeats
+        last = px4.targets[-1]
+        roll, pitch, yaw = Quaternion(list(last.q)).euler
+        assert (roll, pitch) == pytest.approx((0.0, 0.0), abs=1e-6)
+        assert yaw == pytest.approx(0.5, abs=1e-6)  # NED heading of world yaw -0.5
+        assert last.thrust == pytest.approx(0.42, abs=1e-4)
+    finally:
+        drv.close()
+
+
+def test_yaw0_turns_an_enu_world_onto_a_north_referenced_autopilot(px4):
+    drv = connected(px4, "&yaw0=90")
+    try:
+        drv.send(Setpoint(0.0, 0.0, 0.0, math.pi / 2, WEIGHT, 3, Phase.STAGE1))  # world +Y
+        assert px4.wait_for(lambda: px4.targets[-1].thrust > 0.4)
+        assert heading_of(px4.targets[-1].q) == pytest.approx(0.0, abs=1e-3)  # north
+    finally:
+        drv.close()
+
+
+def test_yaw0_auto_takes_the_offset_from_the_first_pose_and_the_vehicles_heading():
+    v = VehicleDouble(PX4, yaw_deg=97.0)  # a compass 7 deg off an ENU world's north
+    drv = connected(v, "&yaw0=auto")
+    try:
+        facing = math.radians(0.0)  # the mocap says it faces world +Y (ENU north)
+        q = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))
+        drv.observe_pose(Pose("b", 1, 0.0, (0.0, 0.0, 1.0), q))
+        drv.send(Setpoint(0.0, 0.0, 0.0, math.pi / 2 + facing, WEIGHT, 1, Phase.HOLD))
+        assert v.wait_for(lambda: v.targets[-1].thrust > 0.4)
+        assert heading_of(v.targets[-1].q) == pytest.approx(97.0, abs=1e-3)  # no turn
+        drv.send(Setpoint(0.0, 0.0, 0.0, math.pi / 2 - math.radians(10), WEIGHT, 2, Phase.HOLD))
+        assert v.wait_for(lambda: abs(heading_of(v.targets[-1].q) - 107.0) < 1e-3)  # 10 deg right
+        v.yaw = math.radians(99.0)  # the compass drifts 2 deg; the mocap sees no turn
+        v.wait_for(lambda: False, timeout=0.1)
+        drv.observe_pose(Pose("b", 2, 1.0, (0.0, 0.0, 1.0), q))  # 1 s on: the lag has caught up
+        drv.send(Setpoint(0.0, 0.0, 0.0, math.pi / 2, WEIGHT, 3, Phase.HOLD))
+        assert v.wait_for(lambda: abs(heading_of(v.targets[-1].q) - 99.0) < 1e-3)
+    finally:
+        drv.close()
+        v.close()
+
+
+def test_a_refused_mode_switch_is_named_at_once():
+    v = VehicleDouble(ARDUPILOT)
+    obey = v._command
+    v._command = lambda command, p, now: 2 if command == 176 else obey(command, p, now)  # DENIED
+    try:
+        start = time.monotonic()
+        with pytest.raises(LinkError, match=r"refused custom mode 20 \(MAV_RESULT 2\)"):
+            connected(v)
+        assert time.monotonic() - start < 2.0
+    finally:
+        v.close()
+
+
+def test_udpout_to_a_px4_that_locks_onto_its_first_partner_needs_a_fixed_source_port():
+    v = VehicleDouble(PX4, lock_partner=True)
+    try:
+        port = free_udp_port()
+        for _ in range(2):  # two runs of perchd against one PX4 boot
+            drv = connected(v, f"&sport={port}")
+            drv.close()
+        with pytest.raises(LinkError, match="udpin:127.0.0.1:14540"):
+            connected(v, "&wait=0.5")  # an ephemeral port: PX4 would not answer it
+    finally:
+        v.close()
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("uri", ["mavlink:udpin:127.0.0.1:14540?mass=1&sport=5000",
+                                 "mavlink:udpout:127.0.0.1:14580?mass=1&sport=1.5"])
+def test_sport_is_for_udpout_only(uri):
+    with pytest.raises(UriError, match="sport= is a whole port number, for udpout: links only"):
+        open_driver(uri, Runtime.real())
+
+
+@pytest.mark.parametrize("autopilot, params, named", [
+    (PX4, {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0.0},
+     [r"COM_OF_LOSS_T=1 \(wanted <= 0.5 s\)", r"COM_OBL_RC_ACT=0 \(wanted 4 \(Land\) or 5 \(Hold\)\)"]),
+    (PX4, {"COM_OBL_RC_ACT": 3.0}, [r"COM_OBL_RC_ACT=3 \(wanted"]),  # Return
+    (ARDUPILOT, {"GUID_TIMEOUT": 3.0, "FS_GCS_ENABLE": 1.0, "FS_GCS_TIMEOUT": 5.0},
+     [r"GUID_TIMEOUT=3 \(wanted <= 0.5 s\)", r"FS_GCS_ENABLE=1 \(wanted 5 \(Land\)\)",
+      r"FS_GCS_TIMEOUT=5 \(wanted <= 2 s\)"]),
+])
+def test_unsafe_failsafe_parameters_are_refused_by_name_before_any_mode_change(
+        autopilot, params, named):
+    v = VehicleDouble(autopilot, params={**SAFE_PARAMS[autopilot], **params})
+    try:
+        with pytest.raises(ConfigError, match="unsafe failsafe parameters") as err:
+            connected(v)
+        for pattern in named:
+            assert re.search(pattern, str(err.value)), str(err.value)
+        assert "configure=1" in str(err.value) and v.modes == []
+    finally:
+        v.close()
+
+
+@pytest.mark.parametrize("autopilot, params, wanted", [
+    (PX4, {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0.0},
+     {"COM_OF_LOSS_T": 0.5, "COM_OBL_RC_ACT": 4.0}),
+    (ARDUPILOT, {"GUID_TIMEOUT": 3.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0},
+     {"GUID_TIMEOUT": 0.5, "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 2.0}),
+])
+def test_configure_sets_the_failsafe_parameters_reads_them_back_and_logs_them(
+        autopilot, params, wanted, caplog):
+    v = VehicleDouble(autopilot, params={**SAFE_PARAMS[autopilot], **params})
+    try:
+        with caplog.at_level(logging.WARNING, logger="perchd.drivers.mavlink"):
+            drv = connected(v, "&configure=1")
+        drv.close()
+        assert dict(v.param_sets) == wanted  # PX4's integer went bytewise and came back 4
+        assert {k: v.params[k] for k in wanted} == wanted
+        for name in wanted:
+            assert f"set {name} from" in caplog.text
+    finally:
+        v.close()

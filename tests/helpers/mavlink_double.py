@@ -1,20 +1,26 @@
 """A MAVLink vehicle double on loopback UDP, built on pymavlink, for tests.
 
 It behaves like the slice of ArduPilot or PX4 the driver talks to:
-- HEARTBEAT at 1 Hz (and at once on every mode or arming change), type quadrotor,
-  autopilot ArduPilot (3) or PX4 (12), custom_mode and the armed flag in base_mode;
-- PARAM_REQUEST_READ -> PARAM_VALUE for the parameters it holds (unknown ones unanswered);
+- HEARTBEAT every heartbeat_s (1 s), and at once on every mode or arming change unless
+  prompt=False (PX4 waits for its next 1 Hz beat), type quadrotor, autopilot ArduPilot (3)
+  or PX4 (12), custom_mode and the armed flag in base_mode;
+- PARAM_REQUEST_READ -> PARAM_VALUE for the parameters it holds (unknown ones unanswered),
+  PARAM_SET -> stored and echoed; PX4's integer parameters travel bytewise, as PX4 sends them;
+- airborne=True: armed, in the air (EXTENDED_SYS_STATE landed_state 2), at heading yaw_deg;
+- lock_partner=True: answers only the first address it heard from (PX4's offboard link);
 - COMMAND_LONG DO_SET_MODE (176): ArduPilot takes param2 as the custom mode; PX4 takes
   param2/param3 as main/sub mode and refuses OFFBOARD (MAV_RESULT_DENIED) unless attitude
   targets have streamed for more than 1 s and the last is under 0.5 s old;
-- COMMAND_LONG COMPONENT_ARM_DISARM (400), SET_MESSAGE_INTERVAL (511) for ATTITUDE,
-  both acknowledged; ATTITUDE is then streamed at the asked rate;
+- COMMAND_LONG COMPONENT_ARM_DISARM (400), SET_MESSAGE_INTERVAL (511) for ATTITUDE and
+  EXTENDED_SYS_STATE, acknowledged; those are then streamed at the asked rate;
 - SET_ATTITUDE_TARGET recorded with its arrival time.
 mute() stops all sending (a hung autopilot), unmute() resumes it; die() closes the socket.
 """
 
 from __future__ import annotations
 
+import math
+import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -24,6 +30,21 @@ from ticks import wait_for
 
 ARDUPILOT, PX4 = 3, 12
 ACCEPTED, DENIED = 0, 2
+SAFE_PARAMS = {
+    ARDUPILOT: {"GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.35, "GUID_TIMEOUT": 0.5,
+                "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 2.0},
+    PX4: {"MPC_THR_HOVER": 0.42, "COM_OF_LOSS_T": 0.5, "COM_OBL_RC_ACT": 4.0},
+}
+"""Parameters with perchd's failsafe values (docs/safety.md)."""
+PX4_INTS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT"}
+
+
+def bytewise(value: float) -> float:
+    return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+
+
+def from_bytewise(value: float) -> int:
+    return struct.unpack("<i", struct.pack("<f", value))[0]
 
 
 @dataclass(frozen=True)
@@ -37,18 +58,29 @@ class Target:
 
 class VehicleDouble:
     def __init__(self, autopilot: int = ARDUPILOT, params: dict[str, float] | None = None,
-                 refuse_arm: bool = False) -> None:
+                 refuse_arm: bool = False, *, airborne: bool = False, yaw_deg: float = 0.0,
+                 prompt: bool = True, heartbeat_s: float = 1.0,
+                 lock_partner: bool = False) -> None:
         self.autopilot = autopilot
-        default = {"GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.35} if autopilot == ARDUPILOT \
-            else {"MPC_THR_HOVER": 0.42}
-        self.params = default if params is None else params
+        self.params = dict(SAFE_PARAMS[autopilot]) if params is None else params
         self.refuse_arm = refuse_arm
+        self.prompt, self.heartbeat_s = prompt, heartbeat_s
+        self.yaw = math.radians(yaw_deg)  # [rad] NED heading
+        self.landed_state = 2 if airborne else 1  # MAV_LANDED_STATE_IN_AIR / ON_GROUND
+        self.partner = None  # lock_partner: the first address heard
         self.conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=1,
                                                source_component=1)
         self.port = self.conn.port.getsockname()[1]
         self.uri = f"mavlink:udpout:127.0.0.1:{self.port}"
         self.custom_mode = 0 if autopilot == ARDUPILOT else (3 << 16)  # STABILIZE / POSCTL
-        self.armed = False
+        if airborne:
+            self.custom_mode = 5 if autopilot == ARDUPILOT else (4 << 16) | (3 << 24)  # LOITER / HOLD
+        self.armed = airborne
+        self.param_sets: list[tuple[str, float]] = []
+        self.sys_state_interval: float | None = None
+        self._next_sys_state = 0.0
+        if lock_partner:
+            self._lock_partner()
         self.targets: list[Target] = []
         self.commands: list[tuple[float, int, tuple[float, ...]]] = []
         self.modes: list[tuple[float, int]] = []
@@ -75,14 +107,34 @@ class VehicleDouble:
                 self._heartbeat()
             if self.attitude_interval and now >= self._next_attitude:
                 self._next_attitude = now + self.attitude_interval
-                self._send(lambda m: m.attitude_send(int(now * 1000) & 0xFFFFFFFF, 0, 0, 0, 0, 0, 0))
+                self._send(lambda m: m.attitude_send(int(now * 1000) & 0xFFFFFFFF, 0, 0,
+                                                     self.yaw, 0, 0, 0))
+            if self.sys_state_interval and now >= self._next_sys_state:
+                self._next_sys_state = now + self.sys_state_interval
+                self._send(lambda m: m.extended_sys_state_send(0, self.landed_state))
+
+    def _lock_partner(self) -> None:
+        """Drop datagrams from all but the first sender, as PX4's offboard link does."""
+        sock, conn = self.conn.port, self.conn
+
+        def recv(n=None):
+            try:
+                data, addr = sock.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                return ""
+            self.partner = self.partner or addr
+            if addr != self.partner:
+                return ""
+            conn.clients = {addr}
+            return data
+        conn.recv = recv
 
     def _send(self, fn) -> None:
         if self._sending and self._alive and self.conn.clients:
             fn(self.conn.mav)
 
     def _heartbeat(self) -> None:
-        self._next_heartbeat = time.monotonic() + 1.0
+        self._next_heartbeat = time.monotonic() + self.heartbeat_s
         base = 1 | (128 if self.armed else 0)
         self._send(lambda m: m.heartbeat_send(2, self.autopilot, base, self.custom_mode, 4))
 
@@ -93,8 +145,14 @@ class VehicleDouble:
             if len(self.gcs_heartbeats) == 1:
                 self._heartbeat()  # a new client hears from us at once (saves test time)
         elif kind == "PARAM_REQUEST_READ" and msg.param_id in self.params:
-            value = self.params[msg.param_id]
-            self._send(lambda m: m.param_value_send(msg.param_id.encode(), value, 9, len(self.params), 0))
+            self._param_value(msg.param_id)
+        elif kind == "PARAM_SET" and msg.param_id in self.params:
+            value = msg.param_value
+            if self.autopilot == PX4 and msg.param_id in PX4_INTS:
+                value = float(from_bytewise(value))
+            self.params[msg.param_id] = value
+            self.param_sets.append((msg.param_id, value))
+            self._param_value(msg.param_id)
         elif kind == "SET_ATTITUDE_TARGET":
             self.targets.append(Target(now, tuple(msg.q), msg.thrust, msg.type_mask,
                                        (msg.target_system, msg.target_component)))
@@ -102,6 +160,12 @@ class VehicleDouble:
             params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
             self.commands.append((now, msg.command, params))
             self._ack(msg.command, self._command(msg.command, params, now))
+
+    def _param_value(self, name: str) -> None:
+        value, kind = self.params[name], 9  # MAV_PARAM_TYPE_REAL32
+        if self.autopilot == PX4 and name in PX4_INTS:
+            value, kind = bytewise(value), 6  # INT32, bytewise as PX4 sends it
+        self._send(lambda m: m.param_value_send(name.encode(), value, kind, len(self.params), 0))
 
     def _command(self, command: int, p: tuple[float, ...], now: float) -> int:
         if command == 176:
@@ -116,7 +180,10 @@ class VehicleDouble:
             self.armed = p[0] == 1
         elif command == 511 and int(p[0]) == 30:
             self.attitude_interval = p[1] / 1e6 if p[1] > 0 else None
-        self._heartbeat()
+        elif command == 511 and int(p[0]) == 245:
+            self.sys_state_interval = p[1] / 1e6 if p[1] > 0 else None
+        if self.prompt:
+            self._heartbeat()
         return ACCEPTED
 
     def _offboard_ready(self, now: float) -> bool:

@@ -78,8 +78,8 @@ class MavlinkRig(RealLink):
     HOVER = 0.35
 
     def __init__(self) -> None:
-        from mavlink_double import VehicleDouble
-        self.peer = VehicleDouble(params={"GUID_OPTIONS": 8.0, "MOT_THST_HOVER": self.HOVER})
+        from mavlink_double import ARDUPILOT, SAFE_PARAMS, VehicleDouble
+        self.peer = VehicleDouble(params={**SAFE_PARAMS[ARDUPILOT], "MOT_THST_HOVER": self.HOVER})
         self.uri = f"{self.peer.uri}?mass={MASS}"
 
     def commanded(self):

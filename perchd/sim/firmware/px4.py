@@ -1,0 +1,291 @@
+"""PX4 SITL with its own physics (SIH), headless, on loopback: a FirmwareVehicle.
+
+PX4's simulator-in-hardware model flies inside the px4 process, so there is no physics
+here: the harness starts `bin/px4 -d -i N -w TMPDIR BUILD/etc` (airframe sihsim_quadx) in a
+fresh temporary working directory, asks SIH's display link (UDP 19410+N) for ground truth
+(HIL_STATE_QUATERNION) at the mocap rate, takes off to PX4's own Hold, and from then on
+converts every truth sample into perchd's world frame (ENU, Z up, metres, origin on the
+ground where the vehicle started; truth_from_hil). perchd flies it over PX4's offboard link,
+`mavlink:udpin:127.0.0.1:14540+N` (docs/firmware.md, "PX4 SIH").
+
+PX4 is not part of perchd: the build folder is the user's (docs/firmware.md names the
+version the tests were run with).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from perchd.core.clock import Clock, MonotonicClock
+from perchd.core.errors import LinkError, UriError
+from perchd.core.extras import require
+from perchd.core.types import Quat, Vec3
+from perchd.sim.firmware.cf2 import Surface
+from perchd.sim.firmware.harness import (FirmwareVehicle, Interrupted, ProcessGroup, Truth,
+                                         contact_json, default_log, yaw_of)
+from perchd.sim.world import Contact
+
+EARTH_RADIUS_M = 6371000.0
+"""[m] the radius PX4's map projection uses (CONSTANTS_RADIUS_OF_EARTH)."""
+SIH_MASS_KG = 1.0
+"""[kg] SIH_MASS of airframe 10040 (sihsim_quadx)."""
+SIH_HOVER = SIH_MASS_KG * 9.81 / (4 * 5.0)
+"""Normalised hover thrust: SIH's thrust is linear in the motor command, 4 rotors of
+SIH_T_MAX = 5 N each (the driver's hover=, instead of MPC_THR_HOVER's 0.5)."""
+OFFBOARD_PORT, DISPLAY_PORT = 14540, 19410
+"""PX4 sends to these + instance: the offboard API link, SIH's display link (truth)."""
+SAFE_PARAMS = {"COM_OF_LOSS_T": "0.5", "COM_OBL_RC_ACT": "4", "SDLOG_BACKEND": "0"}
+"""Set at boot (PX4_PARAM_*): perchd's failsafe values (docs/safety.md), and no .ulg logs."""
+HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
+BOOT_TIMEOUT_S, TAKEOFF_TIMEOUT_S = 30.0, 40.0
+
+
+@dataclass(frozen=True, slots=True)
+class Px4Params:
+    """build: PX4's build folder (bin/px4, etc/); instance N moves every port by N and
+    makes MAV_SYS_ID N+1; takeoff: climb to MIS_TAKEOFF_ALT (2.5 m) and hold before ready;
+    surface_ahead_m [m]: the surface is put this far ahead of the hover point along the
+    heading (None: no surface); stock_params: leave PX4's failsafe defaults (to try the
+    driver's refusal or ?configure=1); extra_params: more PX4 parameters set at boot, e.g.
+    (("SIH_KDV", "0.1"),) (SIH's linear drag, 1.0 N/(m/s) by default); log: PX4's console
+    output."""
+
+    build: str
+    instance: int = 0
+    takeoff: bool = True
+    surface_ahead_m: float | None = 4.5
+    stock_params: bool = False
+    extra_params: tuple[tuple[str, str], ...] = ()
+    log: Path | None = None
+
+
+def enu_from_geodetic(lat_deg: float, lon_deg: float, alt_m: float,
+                      origin: tuple[float, float, float]) -> Vec3:
+    """[m] east, north, up of a point from the origin (lat [deg], lon [deg], alt [m]):
+    equirectangular, exact to well under a millimetre over a room."""
+    lat0, lon0, alt0 = origin
+    north = math.radians(lat_deg - lat0) * EARTH_RADIUS_M
+    east = math.radians(lon_deg - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
+    return (east, north, alt_m - alt0)
+
+
+def quat_mul(a: tuple[float, float, float, float],
+             b: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    """Hamilton product of (w, x, y, z) quaternions."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+R2 = math.sqrt(0.5)
+ENU_FROM_NED = (0.0, R2, R2, 0.0)
+"""pi about (1, 1, 0)/sqrt2: swaps north and east, flips down to up."""
+FRD_FROM_FLU = (0.0, 1.0, 0.0, 0.0)
+"""pi about x: body front-left-up -> front-right-down."""
+
+
+def enu_quat(q_ned_wxyz: tuple[float, float, float, float]) -> Quat:
+    """PX4's body FRD -> NED attitude (w, x, y, z) as perchd's body FLU -> ENU (x, y, z, w),
+    with w >= 0 (PX4 often sends the same attitude as -q)."""
+    w, x, y, z = quat_mul(quat_mul(ENU_FROM_NED, tuple(q_ned_wxyz)), FRD_FROM_FLU)
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    s = (1.0 if w >= 0 else -1.0) / n
+    return (x * s, y * s, z * s, w * s)
+
+
+def truth_from_hil(msg: Any, t: float, origin: tuple[float, float, float]) -> Truth:
+    """HIL_STATE_QUATERNION (lat/lon 1e-7 deg, alt mm AMSL, NED velocity cm/s, FRD rates)
+    -> Truth in perchd's world: ENU from `origin`, Z up, metres; t [s] of receipt
+    (PX4 sends time_usec = 0)."""
+    p = enu_from_geodetic(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, origin)
+    v = (msg.vy * 0.01, msg.vx * 0.01, -msg.vz * 0.01)
+    w = (msg.rollspeed, -msg.pitchspeed, -msg.yawspeed)
+    return Truth(t, p, v, enu_quat(tuple(msg.attitude_quaternion)), w)
+
+
+def surface_ahead(p: Vec3, yaw: float, distance_m: float) -> Surface:
+    """A wall `distance_m` ahead of p along the horizontal heading yaw [rad, ENU]."""
+    n = (math.cos(yaw), math.sin(yaw), 0.0)
+    return Surface(tuple(p[i] + distance_m * n[i] for i in range(3)), n)  # type: ignore[arg-type]
+
+
+def px4_mode(custom_mode: int) -> tuple[int, int]:
+    return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+
+
+class Px4Vehicle(FirmwareVehicle):
+    name = "px4"
+
+    def __init__(self, params: Px4Params, clock: Clock | None = None) -> None:
+        self.params = params
+        self.clock = clock or MonotonicClock()
+        build = Path(params.build)
+        self.binary, self.etc = build / "bin" / "px4", build / "etc"
+        if not (os.access(self.binary, os.X_OK) and self.etc.is_dir()):
+            raise UriError(f"{build}: not a PX4 SITL build folder (needs bin/px4 and etc/)")
+        if not 0 <= params.instance <= 9:
+            raise UriError(f"PX4 instance {params.instance} is outside 0..9")
+        self.log = params.log or default_log("px4")
+        self.workdir: Path | None = None
+        self.surface: Surface | None = None
+        self.start_heading: float | None = None  # [rad] ENU yaw when ready
+        self._conn: Any = None
+        self._truth: Truth | None = None
+        self._origin: tuple[float, float, float] | None = None
+        self._mode: tuple[int, int] | None = None
+        self._armed = False
+        self._contact: Contact | None = None
+        self._modes_seen: list[str] = []
+        self._samples = 0
+        self._truth_acked = False  # PX4 took the 100 Hz truth rate (25 Hz before)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # -- FirmwareVehicle ---------------------------------------------------------------
+    def start(self, procs: ProcessGroup, cancel: threading.Event) -> None:
+        require("pymavlink", "mavlink")
+        from pymavlink import mavutil
+        self.workdir = Path(tempfile.mkdtemp(prefix="perchd-px4-"))
+        port = DISPLAY_PORT + self.params.instance
+        self._conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}",
+                                                source_system=246, source_component=190)
+        self._launch(procs)
+        self._thread = threading.Thread(target=self._receive, name="px4-truth", daemon=True)
+        self._thread.start()
+        self._wait(lambda: self._origin is not None and self._truth_acked, BOOT_TIMEOUT_S,
+                   cancel, "ground truth (HIL_STATE_QUATERNION) from PX4 SIH", self._ask_truth)
+        if self.params.takeoff:
+            self._take_off(cancel)
+        truth = self._truth
+        self.start_heading = yaw_of(truth.q)
+        if self.params.surface_ahead_m is not None:
+            self.surface = surface_ahead(truth.p, self.start_heading, self.params.surface_ahead_m)
+
+    def truth(self) -> Truth | None:
+        """The newest sample, stamped now: SIH runs in lockstep, so while px4 is held up
+        (a loaded machine) its vehicle is frozen too and the last sample is still its state;
+        the receipt time would age it into perchd's stale-mocap rule for nothing."""
+        truth = self._truth
+        return None if truth is None else replace(truth, t=self.clock.now())
+
+    def driver_uri(self) -> str:
+        port = OFFBOARD_PORT + self.params.instance
+        # yaw0=auto: SIH's EKF heading comes from its compass, degrees off the truth
+        return f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}&yaw0=auto"
+
+    def contact(self) -> Contact | None:
+        return self._contact
+
+    def summary(self) -> dict[str, Any]:
+        s = self.surface
+        return {"firmware": "px4", "instance": self.params.instance, "log": str(self.log),
+                "workdir": str(self.workdir), "truth_samples": self._samples,
+                "start_heading_rad": self.start_heading, "modes": self._modes_seen,
+                "surface": None if s is None else {"point": list(s.point), "normal": list(s.normal)},
+                "contact": contact_json(self._contact, 0.0)}
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+        if self._conn is not None:
+            self._conn.close()
+        if self.workdir is not None:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+
+    # -- start-up ----------------------------------------------------------------------
+    def _launch(self, procs: ProcessGroup) -> None:
+        """px4 through env(1) (it execs, so the pid is px4's): the simulator, the airframe
+        and the parameters PX4's rcS applies after the airframe (PX4_PARAM_<NAME>)."""
+        params = {"SDLOG_BACKEND": "0"} if self.params.stock_params else dict(SAFE_PARAMS)
+        params.update(self.params.extra_params)
+        env = ["PX4_SIMULATOR=sihsim", "PX4_SIM_MODEL=sihsim_quadx",
+               *(f"PX4_PARAM_{k}={v}" for k, v in params.items())]
+        procs.launch(["env", *env, str(self.binary), "-d", "-i", str(self.params.instance),
+                      "-w", str(self.workdir), str(self.etc)], self.log)
+
+    def _ask_truth(self) -> None:
+        """HIL_STATE_QUATERNION at 100 Hz (sim time), and the display link's
+        HIL_ACTUATOR_CONTROLS (~200 Hz) off: parsing it in Python starves the publisher."""
+        if self._conn.clients:
+            self._command(511, 115, 10000)
+            self._command(511, 93, -1)
+
+    def _take_off(self, cancel: threading.Event) -> None:
+        """NAV_TAKEOFF then ARM (PX4's own take-off to MIS_TAKEOFF_ALT); ready once PX4
+        is back in Hold above 2 m: the flight starts in the air, as a take-over does."""
+        def send() -> None:
+            if not self._armed:  # arming is refused until PX4's health checks pass
+                nan = float("nan")
+                self._command(22, 0, 0, 0, nan, nan, nan, nan)
+                self._command(400, 1)
+        self._wait(lambda: self._armed and self._mode == HOLD and self._truth.p[2] > 2.0,
+                   TAKEOFF_TIMEOUT_S, cancel, "PX4's take-off to Hold above 2 m", send, 2.0)
+
+    def _command(self, command: int, *params: float) -> None:
+        p = list(params) + [0.0] * (7 - len(params))
+        self._conn.mav.command_long_send(self.params.instance + 1, 1, command, 0, *p)
+
+    def _wait(self, done, timeout_s: float, cancel: threading.Event, what: str,
+              poke=None, every_s: float = 0.5) -> None:
+        deadline, poked = time.monotonic() + timeout_s, 0.0
+        while not done():
+            if cancel.is_set():
+                raise Interrupted()
+            now = time.monotonic()
+            if now > deadline:
+                raise LinkError(f"PX4 instance {self.params.instance}: no {what} within "
+                                f"{timeout_s:g} s (log: {self.log})")
+            if poke is not None and now - poked >= every_s:
+                poked = now
+                poke()
+            time.sleep(0.02)
+
+    # -- truth -------------------------------------------------------------------------
+    def _receive(self) -> None:
+        while not self._stop.is_set():
+            try:
+                msg = self._conn.recv_match(blocking=True, timeout=0.05)
+            except OSError:
+                return
+            if msg is None:
+                continue
+            kind = msg.get_type()
+            if kind == "HIL_STATE_QUATERNION":
+                self._on_truth(msg)
+            elif kind == "COMMAND_ACK" and msg.command == 511 and msg.result == 0:
+                self._truth_acked = True
+            elif kind == "HEARTBEAT" and msg.get_srcSystem() == self.params.instance + 1 \
+                    and msg.get_srcComponent() == 1:
+                self._on_heartbeat(msg)
+
+    def _on_truth(self, msg: Any) -> None:
+        if self._origin is None:  # on the ground at boot: that is the world origin
+            self._origin = (msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3)
+        truth = truth_from_hil(msg, self.clock.now(), self._origin)
+        previous, self._truth = self._truth, truth
+        self._samples += 1
+        if self._contact is None and self.surface is not None and previous is not None:
+            if self.surface.gap(previous.p) < 0 <= self.surface.gap(truth.p):
+                self._contact = Contact(truth.t, self.surface.speed(truth.v), truth.p)
+
+    def _on_heartbeat(self, msg: Any) -> None:
+        self._armed = bool(msg.base_mode & 128)
+        mode = px4_mode(msg.custom_mode)
+        if mode != self._mode:
+            self._modes_seen.append(mode_name(mode))
+        self._mode = mode
+
+
+def mode_name(mode: tuple[int, int]) -> str:
+    return {HOLD: "AUTO.LOITER", (4, 5): "AUTO.RTL", (4, 6): "AUTO.LAND", (4, 2): "AUTO.TAKEOFF",
+            OFFBOARD: "OFFBOARD"}.get(mode, f"{mode[0]}.{mode[1]}")

@@ -1,0 +1,117 @@
+"""PX4 SIH's ground truth into perchd's world, without PX4: HIL_STATE_QUATERNION (lat/lon/alt,
+NED velocity, FRD-in-NED quaternion, sometimes sent as -q) -> ENU, Z up, metres, (x, y, z, w);
+and the frames the driver sends in agree with the frame the harness publishes."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from perchd.core.types import Phase, Setpoint
+from perchd.drivers.mavlink import ned_attitude
+from perchd.sim.firmware.px4 import (EARTH_RADIUS_M, Px4Params, Px4Vehicle, enu_from_geodetic,
+                                     enu_quat, surface_ahead, truth_from_hil)
+from perchd.sim.firmware.quadrotor import euler_zyx
+from perchd.core.errors import UriError
+
+ORIGIN = (47.397743, 8.545594, 489.4)  # SIH_LOC_LAT0/LON0/H0
+ROOT = Path(__file__).parents[2]
+
+
+def rotate(q, v):
+    """v rotated by the (x, y, z, w) quaternion q."""
+    x, y, z, w = q
+    r = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    return tuple(sum(r[i][j] * v[j] for j in range(3)) for i in range(3))
+
+
+def ned_q(roll, pitch, yaw):
+    """(w, x, y, z) of FRD-in-NED Z-Y-X angles, as PX4 sends them."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+
+
+def test_lat_lon_alt_become_east_north_up_metres_from_the_origin():
+    lat0, lon0, h0 = ORIGIN
+    p = enu_from_geodetic(lat0 + 1e-5, lon0 + 2e-5, h0 + 2.5, ORIGIN)
+    north = math.radians(1e-5) * EARTH_RADIUS_M
+    east = math.radians(2e-5) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
+    assert p == pytest.approx((east, north, 2.5), abs=1e-9)
+    assert north == pytest.approx(1.112, abs=1e-3) and east == pytest.approx(1.506, abs=1e-3)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_level_facing_north_is_enu_yaw_90_and_minus_q_is_the_same_attitude(sign):
+    q = enu_quat(tuple(sign * c for c in ned_q(0.0, 0.0, 0.0)))
+    assert q[3] >= 0.0  # w >= 0 whichever sign PX4 sent
+    assert euler_zyx(q) == pytest.approx((0.0, 0.0, math.pi / 2), abs=1e-9)
+
+
+@pytest.mark.parametrize("ned_yaw_deg, enu_yaw_deg", [(0, 90), (90, 0), (180, -90), (-90, 180),
+                                                     (30, 60)])
+def test_headings_map_from_north_clockwise_to_east_anticlockwise(ned_yaw_deg, enu_yaw_deg):
+    yaw = euler_zyx(enu_quat(ned_q(0.0, 0.0, math.radians(ned_yaw_deg))))[2]
+    assert math.degrees(yaw) % 360 == pytest.approx(enu_yaw_deg % 360, abs=1e-6)
+
+
+def test_the_body_axes_land_where_they_should():
+    # NED: facing east, nose up 10 deg, right wing down 20 deg
+    q = enu_quat(ned_q(math.radians(20), math.radians(10), math.radians(90)))
+    nose = rotate(q, (1.0, 0.0, 0.0))
+    left = rotate(q, (0.0, 1.0, 0.0))
+    assert nose[0] > 0.9 and nose[2] == pytest.approx(math.sin(math.radians(10)), abs=1e-9)
+    assert left[2] > 0.0  # right wing down: the left wing (FLU +y) is up
+    assert left[1] > 0.0  # facing east, left is north
+
+
+def test_a_hil_message_becomes_truth_in_the_enu_world():
+    lat0, lon0, h0 = ORIGIN
+    msg = SimpleNamespace(lat=round((lat0 + 1e-5) * 1e7), lon=round(lon0 * 1e7),
+                          alt=round((h0 + 2.0) * 1e3), vx=100, vy=-50, vz=-30,
+                          rollspeed=0.1, pitchspeed=0.2, yawspeed=0.3,
+                          attitude_quaternion=[-1.0, 0.0, 0.0, 0.0])
+    origin = (round(lat0 * 1e7) * 1e-7, round(lon0 * 1e7) * 1e-7, round(h0 * 1e3) * 1e-3)
+    t = truth_from_hil(msg, 12.5, origin)
+    assert t.t == 12.5
+    assert t.p == pytest.approx((0.0, 1.112, 2.0), abs=2e-3)
+    assert t.v == pytest.approx((-0.5, 1.0, 0.3))  # east, north, up (climbing: vz < 0 in NED)
+    assert t.w == pytest.approx((0.1, -0.2, -0.3))  # FRD -> FLU rates
+    assert t.q == pytest.approx((0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)))
+
+
+@pytest.mark.parametrize("rpy", [(0.0, 0.0, 1.2), (0.1, -0.2, 2.0), (-0.3, 0.25, -2.5)])
+def test_what_the_driver_sends_with_yaw0_90_comes_back_as_the_same_enu_attitude(rpy):
+    roll, pitch, yaw = rpy
+    sent = ned_attitude(Setpoint(0.0, roll, pitch, yaw, 1.0, 0, Phase.HOLD), math.pi / 2)
+    assert euler_zyx(enu_quat(sent)) == pytest.approx(rpy, abs=1e-9)
+
+
+def test_the_surface_is_put_ahead_along_the_heading_and_contact_is_its_crossing():
+    s = surface_ahead((1.0, 2.0, 2.5), math.pi / 2, 4.5)
+    assert s.point == pytest.approx((1.0, 6.5, 2.5)) and s.normal == pytest.approx((0, 1, 0), abs=1e-12)
+    assert s.gap((1.0, 2.0, 2.5)) == pytest.approx(-4.5)
+    assert s.speed((0.3, 0.8, 0.0)) == pytest.approx(0.8)
+
+
+def test_a_folder_without_px4_is_refused_by_name(tmp_path):
+    with pytest.raises(UriError, match="not a PX4 SITL build folder"):
+        Px4Vehicle(Px4Params(str(tmp_path)))
+
+
+def test_the_cli_takes_px4_or_cf2_not_both(tmp_path):
+    run = subprocess.run([sys.executable, "-m", "perchd", "sim", "firmware", "--px4", str(tmp_path),
+                          "--cf2", "x"], capture_output=True, text=True, cwd=ROOT)
+    assert run.returncode != 0 and "not allowed with argument" in run.stderr
+    run = subprocess.run([sys.executable, "-m", "perchd", "sim", "firmware", "--px4", str(tmp_path)],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert run.returncode != 0 and "not a PX4 SITL build folder" in run.stderr
