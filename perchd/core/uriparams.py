@@ -72,12 +72,15 @@ PARAMS: dict[tuple[str, str], tuple[tuple[str, str, str, str], ...]] = {
     ("driver", "radio"): CRAZYFLIE,
     ("driver", "udp"): CRAZYFLIE,
     ("driver", "mavlink"): (
-        ("mass", "kg", "required", "vehicle mass, 0.01..50"),
+        ("mass", "kg", "the flight config's", "vehicle mass, 0.01..50; must agree with [vehicle]"),
         ("hover", "", "read from the autopilot", "normalised hover thrust, 0.05..0.95"),
         ("arm", "", "0", "1: arm after the mode switch"),
         ("timeout", "s", "1.5", "no message this long = link lost, 0.01..30"),
         ("stream", "Hz", "50", "ATTITUDE stream rate asked for, 1..500"),
-        ("wait", "s", "5", "connect() waits this long for each answer, 0.1..60")),
+        ("wait", "s", "5", "connect() waits this long for each answer, 0.1..60"),
+        ("yaw0", "deg", "0", "autopilot heading of world X, or auto (measured from the poses)"),
+        ("configure", "", "0", "1: set the autopilot's failsafe parameters (docs/safety.md)"),
+        ("sport", "", "any", "fixed local UDP source port of a udpout: link")),
     ("driver", "zmq"): (
         ("vehicle", "", "cf1", "vehicle name in setpoints"),
         ("bind", "", "0", "1: bind instead of connect"),
