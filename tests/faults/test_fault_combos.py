@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from aborts import assert_failsafe_and_closed_log
+from aborts import assert_failsafe_and_closed_log, safety
 from faultsim import PERIOD, TICK, fly, report
 from simflight import NOISY, Sim, case1
 
@@ -100,7 +100,12 @@ def test_a_signal_and_stale_mocap_on_the_same_tick_end_as_signal(tmp_path):
 def test_an_overrun_streak_during_mocap_trouble_still_names_the_overrun(tmp_path):
     def slow(sim):
         return lambda st: sim.runtime.clock.advance(0.012) if st.phase is Phase.STAGE1 else None
-    f = fly(tmp_path, Repeat(), Outliers(every=10), on_tick=slow)
+    # Overrunning ticks come 20 ms apart, so one rejected outlier between two of them ages the
+    # newest pose past the default 3 mocap periods (25 ms): stale mocap would rightly win
+    # whenever an outlier lands there. Give the stale rule room for that one frame (40 ms),
+    # so what is tested is the overrun streak amid duplicated and outlying frames.
+    f = fly(tmp_path, Repeat(), Outliers(every=10), cfg=safety(stale_timeout_s=0.04),
+            on_tick=slow)
     assert_failsafe_and_closed_log(f.sim, f.res, EndReason.DEADLINE_OVERRUN)
     report("combo: overrun streak + duplicated and outlying frames", "10 consecutive overruns",
            "DEADLINE_OVERRUN, failsafe", "motors off")
