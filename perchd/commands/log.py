@@ -1,17 +1,21 @@
-"""`perchd log summary F [--json]` and `perchd log plot F [--out PNG]`: read a flight log
-(docs/contracts.md §5). The plot is the paper's figure 6 layout: distance, velocity and tau, each
+"""`perchd log summary F [--json]`, `perchd log plot F [--out PNG]` and
+`perchd log export F --mcap OUT`: read a flight log (docs/contracts.md §5). The plot is the paper's figure 6 layout: distance, velocity and tau, each
 measured against the reference."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import sys
 from pathlib import Path
 
 from perchd.commands.plan import draw
 from perchd.core.errors import PerchdError
-from perchd.core.safefile import check_output
-from perchd.logs.flightlog import read_log
+from perchd.core.extras import require
+from perchd.core.safefile import OutputError, check_output
+from perchd.logs.flightlog import FlightLog, read_log
+from perchd.logs.mcapexport import write_mcap
 from perchd.logs.plot import plot_flights
 from perchd.logs.summary import summarize, summary_text
 
@@ -29,6 +33,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument("--out", help="image path (default: the first log's path with .png); "
                                  "its directory must exist")
     q.add_argument("--force", action="store_true", help="overwrite an existing image")
+    e = sub.add_parser("export", help="as MCAP for Foxglove or PlotJuggler (needs perchd[mcap])",
+                       description="One channel per stream (/perchd/estimate, reference, "
+                                   "setpoint, loop, phase, events, flight), JSON messages with "
+                                   "a JSON Schema each, log times from the flight's clock. "
+                                   "A log cut short exports what it has.")
+    e.add_argument("log", help="flight log (.jsonl)")
+    e.add_argument("--mcap", required=True, metavar="OUT",
+                   help="MCAP file to write; its directory must exist")
+    e.add_argument("--force", action="store_true", help="overwrite an existing MCAP file")
     p.set_defaults(run=run)
 
 
@@ -41,6 +54,8 @@ def _read(path: str):
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.action == "export":
+        return export(args)
     if args.action == "summary":
 
         s = summarize(_read(args.log))
@@ -54,3 +69,35 @@ def run(args: argparse.Namespace) -> int:
     draw(lambda data, path: plot_flights(data, path, names), logs, out, "--out")
     print(out)
     return 0
+
+
+def export(args: argparse.Namespace) -> int:
+    """`log export`: exit 0 once written, a log cut short included (said on stderr)."""
+    require("mcap.writer", "mcap")  # before any work: the one line naming the extra
+    out = check_output(args.mcap, "--mcap", args.force, inputs=(args.log,))
+    log = _read(args.log)
+    write_file(log, out, args.force)
+    if not log.complete:
+        print(f"perchd log export: {args.log}: no end line (a flight cut short); exported its "
+              f"{len(log.rows)} rows and {len(log.events)} events", file=sys.stderr)
+    print(out)
+    return 0
+
+
+def write_file(log: FlightLog, out: Path, force: bool, flag: str = "--mcap") -> None:
+    """`log` as MCAP at `out` (checked by check_output): created exclusively unless `force`,
+    so a file appearing meanwhile survives; a file left half written is removed."""
+    try:
+        f = open(out, "wb" if force else "xb")
+    except FileExistsError:
+        raise OutputError(f"{flag} {out}: exists (pass --force to overwrite)") from None
+    except OSError as err:
+        raise OutputError(f"{flag} {out}: cannot write ({err.strerror})") from None
+    try:
+        with f:
+            write_mcap(log, f)
+    except BaseException as err:
+        os.unlink(out)
+        if isinstance(err, OSError) and not isinstance(err, PerchdError):
+            raise OutputError(f"{flag} {out}: cannot write ({err.strerror})") from None
+        raise

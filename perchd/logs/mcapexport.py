@@ -1,0 +1,141 @@
+"""A flight log (docs/contracts.md §5) as an MCAP file that Foxglove and PlotJuggler open as is.
+
+One channel per stream, JSON messages, a JSON Schema per channel (undefined values stay
+`null`, which the schemas allow). Log and publish times are the flight's clock, `t` of each
+row or event in ns. The header carries no time of its own, so the one /perchd/flight message
+(header, end, complete) is logged at the first row's `t`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from typing import IO, Any, Iterator
+
+from perchd.core.errors import PerchdError
+from perchd.core.extras import require
+from perchd.logs.flightlog import FlightLog, LogRow, jsonable
+
+PREFIX = "/perchd"
+
+
+@dataclass(frozen=True)
+class RowStream:
+    """A channel carrying some of each row's fields."""
+
+    topic: str
+    fields: tuple[str, ...]
+
+
+ROW_STREAMS = (
+    RowStream(f"{PREFIX}/estimate", ("t", "x", "xdot", "tau", "y", "z", "age", "pose_seq")),
+    RowStream(f"{PREFIX}/reference", ("tau_ref", "x_plan", "v_plan", "a_plan")),
+    RowStream(f"{PREFIX}/setpoint", ("roll", "pitch", "yaw", "thrust", "ux", "uy", "uz", "e")),
+    RowStream(f"{PREFIX}/loop", ("k", "jitter_s", "compute_s", "end")),
+)
+PHASE = f"{PREFIX}/phase"
+EVENTS = f"{PREFIX}/events"
+FLIGHT = f"{PREFIX}/flight"
+TOPICS = tuple(s.topic for s in ROW_STREAMS) + (PHASE, EVENTS, FLIGHT)
+
+_NUMBER_OR_NULL = {"type": ["number", "null"]}
+# LogRow's annotations are strings (postponed evaluation): their JSON Schema types.
+_ROW_TYPES = {"float": {"type": "number"}, "float | None": _NUMBER_OR_NULL,
+              "int": {"type": "integer"}, "str": {"type": "string"},
+              "str | None": {"type": ["string", "null"]}}
+_ROW_FIELD_TYPES = {f.name: _ROW_TYPES[str(f.type)] for f in dataclasses.fields(LogRow)}
+
+
+def _schema(title: str, props: dict[str, Any]) -> dict[str, Any]:
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title,
+            "type": "object", "properties": props, "required": list(props)}
+
+
+def schemas() -> dict[str, dict[str, Any]]:
+    """The JSON Schema of every topic."""
+    out = {s.topic: _schema(f"perchd{s.topic.removeprefix(PREFIX).replace('/', '.')}",
+                            {name: _ROW_FIELD_TYPES[name] for name in s.fields})
+           for s in ROW_STREAMS}
+    out[PHASE] = _schema("perchd.phase", {"phase": {"type": "string"},
+                                          "previous": {"type": ["string", "null"]}})
+    out[EVENTS] = _schema("perchd.event", {
+        "t": {"type": "number"}, "kind": {"type": "string"}, "detail": {"type": "string"},
+        "values": {"type": "object", "additionalProperties": _NUMBER_OR_NULL}})
+    out[FLIGHT] = _schema("perchd.flight", {"header": {"type": "object"},
+                                            "end": {"type": ["object", "null"]},
+                                            "complete": {"type": "boolean"}})
+    return out
+
+
+def ns(t: float) -> int:
+    """Clock time [s] as an MCAP log time [ns]; MCAP times are unsigned."""
+    if t < 0:
+        raise PerchdError(f"time {t} s is negative; MCAP log times are unsigned")
+    return round(t * 1e9)
+
+
+@dataclass(frozen=True)
+class Message:
+    topic: str
+    log_time: int
+    payload: dict[str, Any]
+
+
+def messages(log: FlightLog) -> list[Message]:
+    """Every message of the export, sorted by log time (stable: rows before events at a tie)."""
+    return sorted([*_flight(log), *_rows(log), *_events(log)], key=lambda m: m.log_time)
+
+
+def _flight(log: FlightLog) -> Iterator[Message]:
+    start = log.rows[0].t if log.rows else (log.events[0].t if log.events else 0.0)
+    yield Message(FLIGHT, ns(start),
+                  {"header": log.header, "end": log.end, "complete": log.complete})
+
+
+def _rows(log: FlightLog) -> Iterator[Message]:
+    previous: str | None = None
+    for row in log.rows:
+        t = ns(row.t)
+        for s in ROW_STREAMS:
+            yield Message(s.topic, t, {name: getattr(row, name) for name in s.fields})
+        if row.phase != previous:  # phase changes only
+            yield Message(PHASE, t, {"phase": row.phase, "previous": previous})
+            previous = row.phase
+
+
+def _events(log: FlightLog) -> Iterator[Message]:
+    for ev in log.events:
+        yield Message(EVENTS, ns(ev.t), {"t": ev.t, "kind": ev.kind, "detail": ev.detail,
+                                         "values": ev.values})
+
+
+def _json(payload: dict[str, Any]) -> bytes:
+    # jsonable: a non-finite float (read from a hand-edited log) is null, never a bare NaN.
+    return json.dumps(jsonable(payload), separators=(",", ":"), allow_nan=False).encode()
+
+
+def write_mcap(log: FlightLog, out: IO[bytes]) -> int:
+    """Write `log` as MCAP to the binary stream `out`; the number of messages written.
+    MissingExtraError (exit 2) without the `mcap` extra."""
+    mcap_writer = require("mcap.writer", "mcap")
+    w = mcap_writer.Writer(out)
+    w.start(profile="", library="perchd")
+    channels = {}
+    for topic, schema in schemas().items():
+        sid = w.register_schema(name=schema["title"], encoding="jsonschema",
+                                data=json.dumps(schema).encode())
+        channels[topic] = w.register_channel(topic=topic, message_encoding="json",
+                                             schema_id=sid)
+    seq = dict.fromkeys(channels, 0)
+    msgs = messages(log)
+    for m in msgs:
+        w.add_message(channel_id=channels[m.topic], log_time=m.log_time,
+                      publish_time=m.log_time, sequence=seq[m.topic],
+                      data=_json(m.payload))
+        seq[m.topic] += 1
+    w.add_metadata("perchd.flightlog", {"schema": str(log.header.get("schema", "")),
+                                        "outcome": str((log.end or {}).get("outcome", "")),
+                                        "complete": str(log.complete).lower()})
+    w.finish()
+    return len(msgs)
