@@ -2,6 +2,9 @@
 [--normal NX NY NZ] [--log F] [--state F] [--json]`: fly one perch and report it
 (docs/contracts.md §2).
 
+`--log F.mcap` writes the flight log beside it as F.jsonl while flying and, when the flight
+ends, F.mcap from it (`perchd log export`, needs perchd[mcap]); docs/contracts.md §5.
+
 The hover thrust the hold learns is kept per vehicle (the driver URI) in --state (default
 $XDG_STATE_HOME/perchd/vehicles.json, flight/vehiclestate.py) and is the next flight's guess.
 
@@ -22,13 +25,16 @@ import time
 from pathlib import Path
 
 from perchd.commands.argcheck import numbers_as_values, within
-from perchd.core.errors import ConfigError
+from perchd.commands.log import write_file
+from perchd.core.errors import ConfigError, PerchdError
+from perchd.core.extras import require
 from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
 from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
 from perchd.flight.vehiclestate import VehicleStore, default_path
+from perchd.logs.flightlog import read_log
 from perchd.service.config import load_flight_config
 from perchd.sim.session import open_links
 from perchd.tau import load_plan
@@ -58,8 +64,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
                    help="surface normal along the approach, world frame (default 1 0 0)")
     p.add_argument("--log", help="flight log path; its directory must exist "
-                                 "(default ./flightlogs/<time>-<strategy>.jsonl, directory made)")
-    p.add_argument("--force", action="store_true", help="overwrite an existing --log file")
+                                 "(default ./flightlogs/<time>-<strategy>.jsonl, directory made). "
+                                 "F.mcap: the log is written as F.jsonl beside it during the "
+                                 "flight and exported to F.mcap at its end (perchd[mcap])")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --log file(s)")
     p.add_argument("--state", help="per-vehicle memory of learned hover thrusts (JSON; default "
                                    "$XDG_STATE_HOME/perchd/vehicles.json, i.e. "
                                    "~/.local/state/perchd/vehicles.json)")
@@ -157,10 +165,31 @@ def log_path(args: argparse.Namespace, strategy: str) -> Path:
     return check_output(log, "--log", args.force) if log.parent.is_dir() else log
 
 
+def mcap_path(args: argparse.Namespace) -> Path | None:
+    """--log F.mcap checked, with the extra, before anything flies; None for a JSONL --log."""
+    if not (args.log and args.log.endswith(".mcap")):
+        return None
+    require("mcap.writer", "mcap")
+    return check_output(args.log, "--log", args.force, inputs=(args.plan,))
+
+
+def write_mcap(log: Path, out: Path, force: bool) -> bool:
+    """The flown log exported to `out`; a failure is a warning: the flight and its JSONL stand."""
+    try:
+        write_file(read_log(log), out, force, "--log")
+        return True
+    except (PerchdError, OSError) as err:
+        _warn(f"{out} not written ({err}); the flight log is {log}")
+        return False
+
+
 def run(args: argparse.Namespace) -> int:
     plan = load_plan(args.plan)
     store = VehicleStore(Path(args.state) if args.state else default_path(), _warn)
     cfg = store.with_learned_guess(args.driver, load_config(args))
+    mcap = mcap_path(args)
+    if mcap is not None:
+        args.log = str(mcap.with_suffix(".jsonl"))
     log = log_path(args, plan.strategy)
     abort = FlightAbort()
     handlers = {s: signal.signal(s, lambda *_: abort.request(EndReason.SIGNAL))
@@ -176,7 +205,11 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(s, h)
     if res.hover_n is not None:
         store.remember(args.driver, res.hover_n, cfg)
-    print(json.dumps(res.to_json()) if args.json else summary_text(res))
+    out = res.to_json()
+    if mcap is not None and write_mcap(log, mcap, args.force):
+        out["mcap"] = str(mcap)
+    text = summary_text(res) + (f"\nmcap: {mcap}" if "mcap" in out else "")
+    print(json.dumps(out) if args.json else text)
     return 0 if res.outcome is EndReason.CONTACT else 1
 
 

@@ -152,3 +152,30 @@ def test_the_real_require_names_the_extra_when_mcap_cannot_be_imported(flown, tm
     assert export(flown, tmp_path / "o.mcap") == 2
     assert capsys.readouterr().err == "perchd log: mcap is not installed: pip install 'perchd[mcap]'\n"
     assert not (tmp_path / "o.mcap").exists()
+
+
+PLAN = Path(__file__).resolve().parents[2] / "plans" / "case1-ipts-n3.json"
+
+
+def fly(log: Path, *more: str) -> int:
+    return main(["fly", str(PLAN), "--driver", "sim://", "--mocap", "sim://", "--log", str(log),
+                 "--json", *more])
+
+
+def test_fly_log_mcap_writes_the_jsonl_beside_it_and_the_same_export(tmp_path, capsys):
+    assert fly(tmp_path / "g.mcap") == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["log"], out["mcap"]) == (str(tmp_path / "g.jsonl"), str(tmp_path / "g.mcap"))
+    assert export(tmp_path / "g.jsonl", tmp_path / "again.mcap") == 0
+    assert read_mcap(tmp_path / "g.mcap") == read_mcap(tmp_path / "again.mcap")
+
+
+def test_fly_log_mcap_refuses_before_flying(tmp_path, capsys, monkeypatch):
+    (tmp_path / "h.jsonl").write_text("keep")  # the JSONL beside it is an output too
+    assert fly(tmp_path / "h.mcap") == 2
+    assert "h.jsonl: exists" in capsys.readouterr().err
+    assert not (tmp_path / "h.mcap").exists() and (tmp_path / "h.jsonl").read_text() == "keep"
+    monkeypatch.setitem(sys.modules, "mcap.writer", None)
+    assert fly(tmp_path / "i.mcap") == 2
+    assert "pip install 'perchd[mcap]'" in capsys.readouterr().err
+    assert not list(tmp_path.glob("i.*"))
