@@ -1,6 +1,6 @@
 """`perchd log summary F [--json]`, `perchd log plot F [--out PNG]` and
-`perchd log export F --mcap OUT`: read a flight log (docs/contracts.md §5). The plot is the paper's figure 6 layout: distance, velocity and tau, each
-measured against the reference."""
+`perchd log export F --mcap OUT`: read a flight log (docs/contracts.md §5). The plot is the
+paper's figure 6 layout: distance, velocity and tau, each measured against the reference."""
 
 from __future__ import annotations
 

@@ -150,7 +150,8 @@ def test_the_real_require_names_the_extra_when_mcap_cannot_be_imported(flown, tm
     for name in ("mcap", "mcap.writer"):
         monkeypatch.setitem(sys.modules, name, None)  # import of mcap halted: as if absent
     assert export(flown, tmp_path / "o.mcap") == 2
-    assert capsys.readouterr().err == "perchd log: mcap is not installed: pip install 'perchd[mcap]'\n"
+    err = capsys.readouterr().err
+    assert err == "perchd log: mcap is not installed: pip install 'perchd[mcap]'\n"
     assert not (tmp_path / "o.mcap").exists()
 
 
