@@ -29,9 +29,16 @@ from typing import Any, Callable
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
-from perchd.core.types import Quat, Vec3
-from perchd.sim.firmware.harness import (FirmwareVehicle, Interrupted, ProcessGroup, Truth,
-                                         contact_json, default_log)
+from perchd.core.types import Vec3
+from perchd.sim.firmware.harness import (
+    FirmwareVehicle,
+    Interrupted,
+    ProcessGroup,
+    Truth,
+    contact_json,
+    default_log,
+)
+from perchd.sim.firmware.ned import world_quat, world_vec
 from perchd.sim.world import Contact
 
 DEG7_M = 0.011131884502145034
@@ -52,38 +59,7 @@ DEFAULT_PARAMS = (("GUID_OPTIONS", 8.0),)
 driver flies newtons and refuses without it (drivers/mavlink.py)."""
 
 
-# -- truth conversion (pure) -----------------------------------------------------------
-def qmul(a: tuple[float, float, float, float],
-         b: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    """Hamilton product of (w, x, y, z) quaternions."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
-_H = math.sqrt(0.5)
-WORLD_FROM_NED = {"nwu": (0.0, 1.0, 0.0, 0.0), "enu": (0.0, _H, _H, 0.0)}
-"""(w, x, y, z): NWU is pi about X; ENU is pi about (1, 1, 0)/sqrt 2 (swap N/E, negate D)."""
-FRD_FROM_FLU = (0.0, 1.0, 0.0, 0.0)
-"""perchd's body is FLU (Z up), ArduPilot's FRD: pi about X."""
-
-
-def world_vec(ned: Vec3, frame: str) -> Vec3:
-    n, e, d = ned
-    return (n, -e, -d) if frame == "nwu" else (e, n, -d)
-
-
-def world_quat(q_ned_wxyz: tuple[float, float, float, float], frame: str) -> Quat:
-    """SIM_STATE's q1..q4 (w, x, y, z; body FRD -> NED) as perchd's (x, y, z, w), body FLU
-    -> world."""
-    w, x, y, z = qmul(qmul(WORLD_FROM_NED[frame], q_ned_wxyz), FRD_FROM_FLU)
-    if w < 0:  # one sign for a given attitude
-        w, x, y, z = -w, -x, -y, -z
-    n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
-    return (x / n, y / n, z / n, w / n)
-
-
+# -- truth conversion (pure; the frames are perchd.sim.firmware.ned) ---------------------
 @dataclass(frozen=True, slots=True)
 class GeoOrigin:
     """lat_e7, lon_e7 [1e-7 deg] and alt_m [m AMSL] of world position `start`."""

@@ -31,9 +31,16 @@ from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.types import Vec3
 from perchd.sim.firmware import cf2wire as wire
-from perchd.sim.firmware.harness import (FirmwareVehicle, Interrupted, ProcessGroup, Truth,
-                                         contact_json, default_log, line_buffered,
-                                         wait_or_cancel)
+from perchd.sim.firmware.harness import (
+    FirmwareVehicle,
+    Interrupted,
+    ProcessGroup,
+    Truth,
+    contact_json,
+    default_log,
+    line_buffered,
+    wait_or_cancel,
+)
 from perchd.sim.firmware.quadrotor import QuadModel, Quadrotor
 from perchd.sim.firmware.relay import ClientRelay
 from perchd.sim.world import Contact

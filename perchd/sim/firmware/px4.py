@@ -29,8 +29,16 @@ from perchd.core.errors import LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.types import Quat, Vec3
 from perchd.sim.firmware.cf2 import Surface
-from perchd.sim.firmware.harness import (FirmwareVehicle, Interrupted, ProcessGroup, Truth,
-                                         contact_json, default_log, yaw_of)
+from perchd.sim.firmware.harness import (
+    FirmwareVehicle,
+    Interrupted,
+    ProcessGroup,
+    Truth,
+    contact_json,
+    default_log,
+    yaw_of,
+)
+from perchd.sim.firmware.ned import world_quat
 from perchd.sim.world import Contact
 
 EARTH_RADIUS_M = 6371000.0
@@ -77,29 +85,9 @@ def enu_from_geodetic(lat_deg: float, lon_deg: float, alt_m: float,
     return (east, north, alt_m - alt0)
 
 
-def quat_mul(a: tuple[float, float, float, float],
-             b: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    """Hamilton product of (w, x, y, z) quaternions."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
-R2 = math.sqrt(0.5)
-ENU_FROM_NED = (0.0, R2, R2, 0.0)
-"""pi about (1, 1, 0)/sqrt2: swaps north and east, flips down to up."""
-FRD_FROM_FLU = (0.0, 1.0, 0.0, 0.0)
-"""pi about x: body front-left-up -> front-right-down."""
-
-
 def enu_quat(q_ned_wxyz: tuple[float, float, float, float]) -> Quat:
-    """PX4's body FRD -> NED attitude (w, x, y, z) as perchd's body FLU -> ENU (x, y, z, w),
-    with w >= 0 (PX4 often sends the same attitude as -q)."""
-    w, x, y, z = quat_mul(quat_mul(ENU_FROM_NED, tuple(q_ned_wxyz)), FRD_FROM_FLU)
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    s = (1.0 if w >= 0 else -1.0) / n
-    return (x * s, y * s, z * s, w * s)
+    """PX4's body FRD -> NED attitude (w, x, y, z) as perchd's body FLU -> ENU (x, y, z, w)."""
+    return world_quat(q_ned_wxyz, "enu")
 
 
 def truth_from_hil(msg: Any, t: float, origin: tuple[float, float, float]) -> Truth:
