@@ -41,7 +41,7 @@ STATUS = struct.Struct("<dd")
 PING_S = 0.02
 """[s] period of CRTP link-echo pings and of status reports to the driver."""
 KEEPALIVE_S = 0.1
-"""[s] silence after which the last thrust is re-sent levelled (the firmware levels at 0.5 s)."""
+"""[s] no setpoint this long: the hold thrust goes out levelled (the firmware levels at 0.5 s)."""
 SILENT_S = 0.25
 """[s] no message from the driver (it sends one every PING_S) = the agent is hung: descend."""
 RAMP_S = 0.2
@@ -204,7 +204,8 @@ class Keeper:
             else:
                 self.send_cmd((0.0, 0.0, 0.0, thrust))
         elif now - self.last_sent >= KEEPALIVE_S:
-            self.send_cmd((0.0, 0.0, 0.0, self.last_cmd[3]))
+            # levelled at the hold thrust: the tilted thrust, levelled, would climb
+            self.send_cmd((0.0, 0.0, 0.0, self.hold_units))
 
     def read_driver(self, timeout: float) -> None:
         if self.agent_gone:
