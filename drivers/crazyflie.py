@@ -274,7 +274,7 @@ class CrazyflieDriver(DriverBase):
             return
         try:
             msg = sock.recv(512)
-        except socket.timeout:
+        except TimeoutError:
             return
         except OSError as err:
             msg = b""
