@@ -1,7 +1,9 @@
 """Crazyflie 2.x over cflib: a Crazyradio (`radio://0/80/2M/E7E7E7E7E7`) or cflib's `udp://`
 link (software-in-the-loop, and the tests' CRTP responder).
 
-The driver speaks the low-level CRTP link (cflib.crtp.get_link_driver) with cflib's own
+The link lives in a child process, the keeper (drivers/cflink.py): when this process dies
+it flies a bounded descent and stops the motors (docs/safety.md, "When the agent dies").
+It speaks the low-level CRTP link (cflib.crtp.get_link_driver) with cflib's own
 Commander and Localization encoders, not the full `Crazyflie` object: that one downloads the
 log/param TOCs and memories on connect, which the attitude stream does not need.
 
@@ -30,12 +32,17 @@ on-board estimator).
 from __future__ import annotations
 
 import math
-import struct
+import os
+import socket
+import subprocess
+import sys
 import threading
 import time
-from collections import deque
-from typing import Any
+from dataclasses import dataclass
+from pathlib import Path
 
+import perchd
+from perchd.drivers import cflink
 from perchd.drivers.base import DriverBase, agreed_mass
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.drivers.ticker import Ticker
@@ -48,25 +55,28 @@ from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, without_query
 from perchd.core.vehicle import CRAZYFLIE_HOVER_UNITS, CRAZYFLIE_MASS_KG
 
-KEEPALIVE_S = 0.1
-"""[s] silence after which the keep-alive re-sends (the firmware levels at 0.5 s, cuts at 2 s)."""
-PING_S = 0.02
-"""[s] period of CRTP link-echo pings, the proof of life on links without acks (udp)."""
-PING_TAG = b"pd"  # our echoes, told apart from anything else echoed on the link
-RTT_SAMPLES = 10  # the round trip is the median of the last 10 echoes (200 ms)
-FAILSAFE_REPEAT_S = 3.0
-"""[s] after failsafe() the stop goes out again with every ping for this long (or until
-close()): one sent into a dead link is lost, and a link back within this window still
-delivers it. Past it the firmware has cut the motors itself (2 s without a setpoint)."""
+PING_S = cflink.PING_S
+"""[s] period of CRTP link-echo pings (the keeper's) and of the driver's alive messages."""
+FAILSAFE_REPEAT_S = cflink.FAILSAFE_REPEAT_S
+"""[s] after failsafe() the keeper repeats the stop with every ping this long (or until
+close()): one sent into a dead link is lost. Past it the firmware has cut the motors."""
+KEEPER_START_S = 15.0
+"""[s] for the keeper process to start and open the link (python + cflib imports, loaded
+machine); the connect's wait= for the echo counts from then."""
 K_YAW = 2.0
 """[1/s] yaw-rate gain on the yaw error when a measured yaw is known."""
 YAW_RATE_MAX = 90.0
 """[deg/s] clamp on the commanded yaw rate."""
 
-ECHO_HEADER = 0xFC
-"""CRTP port 15 (link control) channel 0 (echo) with cflib's reserved bits 0b11."""
 
-_crtp_ready = False
+@dataclass(frozen=True)
+class KeeperStatus:
+    """The keeper's last report on the link."""
+
+    at: float  # [s] time.monotonic() it arrived
+    heard_age_s: float  # [s] since the vehicle was last heard when sent; < 0: never
+    rtt_s: float | None  # [s] echo round trip (median of the last 10)
+    error: str  # cflib's link error, "" while fine
 
 
 def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
@@ -99,16 +109,6 @@ def _check_radio(uri: Uri) -> None:
                        "address 10 hex digits)")
 
 
-def _init_cflib() -> Any:
-    """cflib.crtp.init_drivers() once: it appends to a global driver list on every call."""
-    global _crtp_ready
-    import cflib.crtp
-    if not _crtp_ready:
-        cflib.crtp.init_drivers()
-        _crtp_ready = True
-    return cflib.crtp
-
-
 def wrap_angle(a: float) -> float:
     """[rad] into [-pi, pi)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
@@ -120,23 +120,9 @@ def yaw_of(q: tuple[float, float, float, float]) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-class _LinkPort:
-    """The slice of cflib's Crazyflie that Commander and Localization use."""
-
-    def __init__(self, link: Any) -> None:
-        self.link = link
-        self.lock = threading.Lock()
-
-    def send_packet(self, pk: Any) -> None:
-        with self.lock:
-            if self.link is not None:
-                self.link.send_packet(pk)
-
-    def add_port_callback(self, port: int, cb: Any) -> None:
-        """Incoming packets are drained by the driver itself; nothing dispatches them."""
-
-
 class CrazyflieDriver(DriverBase):
+    """Converts SI setpoints; the link itself lives in the keeper process (drivers/cflink.py)."""
+
     def __init__(self, uri: str, link_uri: str, runtime: Runtime, model: CrazyflieThrust,
                  timeout: float, extpose: bool = False, wait: float = 2.0) -> None:
         self.uri = uri
@@ -146,74 +132,69 @@ class CrazyflieDriver(DriverBase):
         self.timeout = timeout
         self.extpose = extpose
         self.wait = wait
-        self._port: _LinkPort | None = None
-        self._commander: Any = None
-        self._loc: Any = None
+        self._sock: socket.socket | None = None
+        self._keeper: subprocess.Popen | None = None
         self._tickers: list[Ticker] = []
+        self._status: KeeperStatus | None = None
         self._echoed = threading.Event()
-        self._rtts: deque[float] = deque(maxlen=RTT_SAMPLES)  # [s] recent echo round trips
-        self._rtt_s: float | None = None  # their median, kept by the receive thread
+        self._opened = threading.Event()
         self._link_error = ""
-        self._last_heard: float | None = None
-        self._last_sent = 0.0  # time.monotonic() of the last setpoint on the wire
-        self._last_cmd = (0.0, 0.0, 0.0, 0)  # (roll deg, pitch deg, yawrate deg/s, units)
         self._yaw: float | None = None
         self._stopped = False
-        self._stop_until = 0.0  # time.monotonic() until which the stop is repeated
         self._wire = threading.Lock()  # "stopped?" and the send that follows, as one step
         self.failsafe_reasons: list[EndReason] = []
         self.uri_mass: float | None = None  # [kg] the URI's mass=, checked by bind_mass
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
-        crtp = _init_cflib()
-        from cflib.crazyflie.commander import Commander
-        from cflib.crazyflie.localization import Localization
-        try:
-            link = crtp.get_link_driver(self.link_uri, None, self._on_link_error)
-        except Exception as err:  # cflib raises bare Exceptions (no dongle, link open)
-            raise LinkError(f"{self.uri}: connection failed: {err}") from None
-        if link is None:
-            raise LinkError(f"{self.uri}: cflib has no link driver for {self.link_uri!r}")
-        self._port = _LinkPort(link)
-        self._commander = Commander(self._port)
-        self._loc = Localization(self._port)
         self._stopped = False
-        self._start_threads()
-        self._ping()
+        self._start_keeper()
+        if not self._opened.wait(KEEPER_START_S) or self._link_error:
+            why = self._link_error or f"link keeper did not start within {KEEPER_START_S:g} s"
+            self._close_link()
+            raise LinkError(f"{self.uri}: connection failed: {why}")
         if not self._echoed.wait(self.wait) or self._link_error:
             why = self._link_error or f"no answer to a link echo within {self.wait:g} s"
             self._close_link()
             raise LinkError(f"{self.uri}: connection failed: {why}")
-        self._send_cmd((0.0, 0.0, 0.0, 0))  # thrust 0 unlocks the firmware's thrust lock
+        self._send(b"S" + cflink.CMD.pack(0.0, 0.0, 0.0, 0, 0))  # unlocks the thrust lock
 
     def send(self, setpoint: Setpoint) -> None:
-        if self._stopped or self._port is None:
+        if self._stopped or self._sock is None:
             return  # after a failsafe nothing may re-arm thrust
-        cmd = self.command(setpoint)
+        roll, pitch, yawrate, units = self.command(setpoint)
+        hold = self.model.units(setpoint.thrust * math.cos(setpoint.roll) * math.cos(setpoint.pitch))
         with self._wire:
             if not self._stopped:  # a failsafe from another thread may have come between
-                self._send_cmd(cmd)
+                self._send(b"S" + cflink.CMD.pack(roll, pitch, yawrate, units, hold))
 
     def failsafe(self, reason: EndReason) -> None:
         self.failsafe_reasons.append(reason)
         self._stop()
 
     def health(self) -> LinkHealth:
-        if self._port is None:
+        if self._sock is None:
             return LinkHealth(False, 0.0, "not connected")
-        age = 0.0 if self._last_heard is None else self.clock.now() - self._last_heard
+        st = self._status
+        if st is None or st.heard_age_s < 0:
+            age = 0.0
+        else:
+            age = st.heard_age_s + time.monotonic() - st.at
         if self._link_error:
             return LinkHealth(False, age, f"connection lost: {self._link_error}")
+        if st is not None and time.monotonic() - st.at > self.timeout:
+            return LinkHealth(False, age, "connection lost: link keeper silent for "
+                              f"{time.monotonic() - st.at:.3f} s")
         if age > self.timeout:
             return LinkHealth(False, age, f"connection lost: silent for {age:.3f} s")
-        return LinkHealth(True, age, rtt_s=self._rtt_s)
+        return LinkHealth(True, age, rtt_s=st.rtt_s if st else None)
 
     def close(self) -> None:
-        if self._port is None:
+        if self._sock is None:
             return
         if not self._stopped:
             self._stop()
+        self._send(b"C")
         self._close_link()
 
     def bind_mass(self, mass_kg: float) -> None:
@@ -241,87 +222,105 @@ class CrazyflieDriver(DriverBase):
 
     def observe_pose(self, pose: Pose) -> None:
         """The newest mocap pose: its yaw closes the yaw-rate loop; with extpose=1 it also
-        goes to the on-board estimator (cflib's send_extpose)."""
+        goes to the on-board estimator (cflib's send_extpose, in the keeper)."""
         if not pose.valid:
             return
         self._yaw = yaw_of(pose.q)
-        if self.extpose and self._loc is not None and not self._stopped:
-            self._loc.send_extpose(list(pose.p), list(pose.q))
+        if self.extpose and not self._stopped:
+            self._send(b"P" + cflink.POSE.pack(*pose.p, *pose.q))
 
-    # -- wire ------------------------------------------------------------------------
-    def _send_cmd(self, cmd: tuple[float, float, float, int]) -> None:
-        self._last_cmd = cmd
-        self._last_sent = time.monotonic()
-        self._commander.send_setpoint(*cmd)
+    # -- the keeper ------------------------------------------------------------------
+    def _start_keeper(self) -> None:
+        """`python -m perchd.drivers.cflink FD URI REPEAT_S` on one end of a socket pair; this very
+        perchd first on its path, so the keeper runs the same code."""
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        root = str(Path(perchd.__file__).resolve().parents[1])
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+            p for p in (root, os.environ.get("PYTHONPATH", "")) if p)}
+        try:
+            self._keeper = subprocess.Popen(
+                [sys.executable, "-m", "perchd.drivers.cflink", str(theirs.fileno()),
+                 self.link_uri, repr(FAILSAFE_REPEAT_S)], pass_fds=(theirs.fileno(),), env=env,
+                stdin=subprocess.DEVNULL)
+        finally:
+            theirs.close()
+        ours.settimeout(0.05)
+        self._sock = ours
+        self._echoed.clear()
+        self._opened.clear()
+        self._link_error = ""
+        self._status = None
+        # receive: recv blocks up to 50 ms, so a zero period is no busy loop
+        self._tickers = [Ticker(0.0, self._receive, "crazyflie-receive").start(),
+                         Ticker(PING_S, lambda: self._send(b"A"), "crazyflie-alive").start()]
+
+    def _send(self, msg: bytes) -> None:
+        sock = self._sock
+        if sock is None:
+            return
+        try:
+            sock.send(msg)
+        except OSError as err:
+            self._keeper_gone(f"send failed: {err}")
 
     def _stop(self) -> None:
-        with self._wire:  # no keep-alive setpoint can follow the stop
-            self._stop_until = time.monotonic() + FAILSAFE_REPEAT_S
+        with self._wire:  # no setpoint can follow the stop
             self._stopped = True
-            if self._commander is not None:
-                # twice: on udp a pending ICMP error from an earlier datagram eats one send
-                for _ in range(2):
-                    self._commander.send_stop_setpoint()
-
-    def _ping(self) -> None:
-        """A CRTP echo stamped with its send time: the echo's return gives the round trip."""
-        from cflib.crtp.crtpstack import CRTPPacket
-        if self._port is not None:
-            stamp = struct.pack("<d", time.monotonic())
-            self._port.send_packet(CRTPPacket(ECHO_HEADER, PING_TAG + stamp))
-
-    def _on_link_error(self, message: str) -> None:
-        """cflib's link error: connection_failed before the echo, connection_lost after."""
-        lines = [ln.strip() for ln in message.strip().splitlines() if ln.strip()]
-        self._link_error = ": ".join(lines[:2]) or "link error"
-
-    def _start_threads(self) -> None:
-        self._echoed.clear()
-        self._link_error = ""
-        self._rtts.clear()  # a new link's round trip, not the last one's
-        self._rtt_s = None
-        # receive: receive_packet blocks up to 50 ms, so a zero period is no busy loop
-        self._tickers = [Ticker(0.0, self._receive, "crazyflie-receive").start(),
-                         Ticker(PING_S, self._keepalive, "crazyflie-keepalive").start()]
+            self._send(b"X")
 
     def _receive(self) -> None:
-        link = self._port.link if self._port else None
-        pk = link.receive_packet(0.05) if link is not None else None
-        if pk is not None:
-            self._last_heard = self.clock.now()
-            if pk.header == ECHO_HEADER:
+        sock = self._sock
+        if sock is None:
+            return
+        try:
+            msg = sock.recv(512)
+        except TimeoutError:
+            return
+        except OSError as err:
+            msg = b""
+            if sock.fileno() < 0:
+                return  # closed by close()
+            self._keeper_gone(str(err))
+        if not msg:
+            self._keeper_gone("its socket closed")
+        elif msg[:1] == b"R":
+            self._opened.set()
+        elif msg[:1] == b"E":
+            self._link_error = msg[1:].decode(errors="replace")
+            self._opened.set()
+        elif msg[:1] == b"H":
+            age, rtt = cflink.STATUS.unpack_from(msg, 1)
+            error = msg[1 + cflink.STATUS.size:].decode(errors="replace")
+            self._status = KeeperStatus(time.monotonic(), age, rtt if rtt >= 0 else None, error)
+            if error:
+                self._link_error = error
+            if age >= 0:
                 self._echoed.set()
-                self._note_round_trip(bytes(pk.data))
 
-    def _note_round_trip(self, data: bytes) -> None:
-        if len(data) == len(PING_TAG) + 8 and data.startswith(PING_TAG):
-            (sent,) = struct.unpack_from("<d", data, len(PING_TAG))
-            self._rtts.append(time.monotonic() - sent)
-            self._rtt_s = sorted(self._rtts)[len(self._rtts) // 2]
-
-    def _keepalive(self) -> None:
-        """Ping, and never let KEEPALIVE_S pass without a setpoint: a stalled loop gets the
-        last thrust, levelled (a held tilt would keep accelerating the vehicle at the wall).
-        After a failsafe, repeat the stop (FAILSAFE_REPEAT_S) so a link back delivers it."""
-        self._ping()
-        with self._wire:
-            now = time.monotonic()
-            if self._commander is None:
-                return
-            if self._stopped:
-                if now < self._stop_until:
-                    self._commander.send_stop_setpoint()
-            elif now - self._last_sent >= KEEPALIVE_S:
-                self._send_cmd((0.0, 0.0, 0.0, self._last_cmd[3]))
+    def _keeper_gone(self, why: str) -> None:
+        """The keeper is the link: without it the link is lost, and named so."""
+        if not self._link_error:
+            code = self._keeper.poll() if self._keeper else None
+            self._link_error = (f"link keeper exited ({why}"
+                                + (f", exit code {code})" if code is not None else ")"))
+        self._opened.set()
+        time.sleep(0.05)  # the receive ticker would spin on a closed socket
 
     def _close_link(self) -> None:
         for ticker in self._tickers:
             ticker.stop()
-        port, self._port = self._port, None
-        if port is None or port.link is None:
-            return
-        with port.lock:
-            link, port.link = port.link, None
-        # cflib's udp receive thread blocks in recv for up to 1 s before it sees the stop
-        # flag; release the link in the background rather than stall the caller.
-        threading.Thread(target=link.close, name="crazyflie-close", daemon=True).start()
+        sock, self._sock = self._sock, None
+        if sock is not None:
+            sock.close()
+        keeper, self._keeper = self._keeper, None
+        if keeper is not None:  # reaped in the background: it exits after its stop
+            threading.Thread(target=_reap, args=(keeper,), name="crazyflie-reap",
+                             daemon=True).start()
+
+
+def _reap(proc: subprocess.Popen) -> None:
+    try:
+        proc.wait(cflink.DESCENT_S + 2.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()

@@ -23,6 +23,7 @@ import math
 import random
 import socket
 import threading
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -46,6 +47,10 @@ from perchd.sim.firmware.relay import ClientRelay
 from perchd.sim.world import Contact
 
 STEP_S = 0.001
+TRACK_EVERY = 10
+"""steps between samples of the summary's truth track (100 Hz)."""
+TRACK_MAX = 12000
+"""samples kept (the last 2 minutes): [monotonic s, true z m, any motor PWM > 0]."""
 """[s] physics step and IMU period: the firmware's controllers count IMU packets as ms."""
 CLIENT_PER_STEP = 2
 """cflib packets forwarded per step: with the IMU, pose and baro that is at most 5 per ms,
@@ -164,6 +169,7 @@ class Cf2Vehicle(FirmwareVehicle):
         self.launches: list[dict[str, Any]] = []
         self._rng = random.Random(params.seed)
         self._pwm = [0, 0, 0, 0]
+        self._track: deque[tuple[float, float, bool]] = deque(maxlen=TRACK_MAX)
         self._launch = _Launch()
         self._contact: Contact | None = None
         self._truth: Truth | None = None
@@ -245,6 +251,7 @@ class Cf2Vehicle(FirmwareVehicle):
             "client": vars(self.relay.counts).copy(),
             "contact": contact_json(self._contact, self._t0),
             "final": None if truth is None else {"p": list(truth.p), "v": list(truth.v)},
+            "track": [list(x) for x in list(self._track)],  # [t monotonic s, z m, motors on]
         }
 
     def close(self) -> None:
@@ -284,6 +291,8 @@ class Cf2Vehicle(FirmwareVehicle):
         if self._contact is None and self.params.surface is not None and not body.grounded:
             self._check_surface(t)
         self._truth = Truth(t, tuple(body.p), tuple(body.v), tuple(body.q), body.gyro())  # type: ignore[arg-type]
+        if k % TRACK_EVERY == 0:
+            self._track.append((round(t, 4), round(body.p[2], 4), any(self._pwm)))
         s.steps += 1
         s.late_max_s = max(s.late_max_s, late)
         s.late_over_1ms += late > 0.001

@@ -1,0 +1,265 @@
+"""The Crazyflie link keeper: a child process that owns the cflib link (docs/safety.md,
+"When the agent dies").
+
+The firmware holds the last thrust, levelled, for 2 s after the last setpoint
+(COMMANDER_WDT_TIMEOUT_SHUTDOWN): a dead agent mid-approach would climb and then drop.
+So the link lives in this process, and when the agent goes (EOF on the socket: the kernel
+closes it on SIGKILL; or no message for SILENT_S) it flies a bounded descent itself:
+level, thrust from the last vertical component down to DESCENT_FRACTION of it, for
+DESCENT_S, then the stop setpoint, then it closes the link and exits.
+
+Wire (a SOCK_SEQPACKET pair, one message per packet, little-endian):
+  driver -> keeper: b"S" <fffHH> roll deg, pitch deg, yaw rate deg/s (cflib conventions),
+                    thrust units, hold units (the thrust whose vertical part the last
+                    command had, i.e. the level thrust that holds height);
+                    b"P" <7f> extpose (x, y, z, qx, qy, qz, qw); b"A" alive; b"X" stop;
+                    b"C" close (the keeper exits).
+  keeper -> driver: b"R" link open; b"E" message: cflib could not open it; b"H" <dd> seconds since the vehicle was last heard
+                    (-1: never), echo round trip median (-1: none), then a UTF-8 link error
+                    ("" while the link is fine).
+
+Run as `python -m perchd.drivers.cflink FD LINK_URI REPEAT_S` by drivers/crazyflie.py.
+"""
+
+from __future__ import annotations
+
+import select
+import signal
+import socket
+import struct
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+CMD = struct.Struct("<fffHH")
+POSE = struct.Struct("<7f")
+STATUS = struct.Struct("<dd")
+
+PING_S = 0.02
+"""[s] period of CRTP link-echo pings and of status reports to the driver."""
+KEEPALIVE_S = 0.1
+"""[s] no setpoint this long: the hold thrust goes out levelled (the firmware levels at 0.5 s)."""
+SILENT_S = 0.25
+"""[s] no message from the driver (it sends one every PING_S) = the agent is hung: descend."""
+RAMP_S = 0.2
+"""[s] from the hold thrust to the descent thrust."""
+DESCENT_S = 1.0
+"""[s] of descent before the stop: at 0.85 g net down, ~0.7 m lower (docs/safety.md)."""
+DESCENT_FRACTION = 0.85
+"""descent thrust as a fraction of the hold thrust (units)."""
+FAILSAFE_REPEAT_S = 3.0
+"""[s] the stop is repeated with every ping this long: one sent into a dead link is lost."""
+PING_TAG = b"pd"
+RTT_SAMPLES = 10
+ECHO_HEADER = 0xFC
+"""CRTP port 15 (link control) channel 0 (echo) with cflib's reserved bits 0b11."""
+
+
+@dataclass(frozen=True)
+class Descent:
+    """The keeper's own flight after the agent is gone."""
+
+    t0: float  # [s] time.monotonic() when the agent was found gone
+    hold_units: int  # level thrust that held height at the last command
+
+    def thrust(self, now: float) -> int | None:
+        """Thrust units at `now`, None once the descent is over (send the stop)."""
+        t = now - self.t0
+        if t >= DESCENT_S or self.hold_units <= 0:
+            return None
+        low = DESCENT_FRACTION * self.hold_units
+        return int(self.hold_units - (self.hold_units - low) * min(1.0, t / RAMP_S))
+
+
+class _LinkPort:
+    """The slice of cflib's Crazyflie that Commander and Localization use."""
+
+    def __init__(self, link: Any) -> None:
+        self.link = link
+        self.lock = threading.Lock()
+
+    def send_packet(self, pk: Any) -> None:
+        with self.lock:
+            self.link.send_packet(pk)
+
+    def add_port_callback(self, port: int, cb: Any) -> None:
+        """Incoming packets are drained by the keeper itself; nothing dispatches them."""
+
+
+class Keeper:
+    def __init__(self, sock: socket.socket, link_uri: str, repeat_s: float) -> None:
+        self.sock = sock
+        self.link_uri = link_uri
+        self.repeat_s = repeat_s
+        self.error = ""
+        self.heard: float | None = None  # time.monotonic() the vehicle was last heard
+        self.rtts: deque[float] = deque(maxlen=RTT_SAMPLES)
+        self.last_cmd = (0.0, 0.0, 0.0, 0)
+        self.hold_units = 0
+        self.last_sent = 0.0
+        self.last_msg = time.monotonic()  # last message from the driver
+        self.stop_until: float | None = None  # set once stopped
+        self.descent: Descent | None = None
+        self.agent_gone = False
+        self.running = True
+        self.status_lock = threading.Lock()
+
+    # -- link --------------------------------------------------------------------------
+    def open(self) -> None:
+        import cflib.crtp
+        from cflib.crazyflie.commander import Commander
+        from cflib.crazyflie.localization import Localization
+        cflib.crtp.init_drivers()
+        link = cflib.crtp.get_link_driver(self.link_uri, None, self._on_link_error)
+        if link is None:
+            raise RuntimeError(f"cflib has no link driver for {self.link_uri!r}")
+        self.link = link
+        self.port = _LinkPort(link)
+        self.commander = Commander(self.port)
+        self.loc = Localization(self.port)
+
+    def _on_link_error(self, message: str) -> None:
+        lines = [ln.strip() for ln in message.strip().splitlines() if ln.strip()]
+        self.error = ": ".join(lines[:2]) or "link error"
+        self.report()  # at once: the supervisor reads health every tick
+
+    def _receive(self) -> None:
+        while self.running:
+            pk = self.link.receive_packet(0.05)
+            if pk is not None:
+                self.heard = time.monotonic()
+                data = bytes(pk.data)
+                if pk.header == ECHO_HEADER and len(data) == 10 and data.startswith(PING_TAG):
+                    self.rtts.append(time.monotonic() - struct.unpack_from("<d", data, 2)[0])
+
+    def ping(self) -> None:
+        from cflib.crtp.crtpstack import CRTPPacket
+        self.port.send_packet(CRTPPacket(ECHO_HEADER, PING_TAG + struct.pack("<d", time.monotonic())))
+
+    # -- to the driver -----------------------------------------------------------------
+    def report(self) -> None:
+        age = -1.0 if self.heard is None else time.monotonic() - self.heard
+        rtt = sorted(self.rtts)[len(self.rtts) // 2] if self.rtts else -1.0
+        with self.status_lock:
+            try:
+                self.sock.send(b"H" + STATUS.pack(age, rtt) + self.error.encode()[:400])
+            except OSError:
+                pass  # the agent is gone: the socket's EOF says so on the next read
+
+    # -- setpoints ---------------------------------------------------------------------
+    def send_cmd(self, cmd: tuple[float, float, float, int]) -> None:
+        self.last_cmd = cmd
+        self.last_sent = time.monotonic()
+        self.commander.send_setpoint(*cmd)
+
+    def stop(self) -> None:
+        if self.stop_until is None:
+            self.stop_until = time.monotonic() + self.repeat_s
+        for _ in range(2):  # on udp a pending ICMP error from an earlier datagram eats one
+            self.commander.send_stop_setpoint()
+
+    def on_message(self, msg: bytes) -> None:
+        self.last_msg = time.monotonic()
+        kind, body = msg[:1], msg[1:]
+        if kind == b"S" and self.stop_until is None and self.descent is None:
+            roll, pitch, yawrate, thrust, hold = CMD.unpack(body)
+            self.hold_units = hold
+            self.send_cmd((roll, pitch, yawrate, thrust))
+        elif kind == b"P" and self.stop_until is None:
+            vals = POSE.unpack(body)
+            self.loc.send_extpose(list(vals[:3]), list(vals[3:]))
+        elif kind == b"X":
+            self.stop()
+        elif kind == b"C":
+            if self.stop_until is None:
+                self.stop()
+            self.running = False
+
+    def agent_lost(self, now: float) -> None:
+        """EOF or silence: descend unless already stopped (then only the repeats remain)."""
+        self.agent_gone = True
+        if self.stop_until is None and self.descent is None:
+            self.descent = Descent(now, self.hold_units)
+
+    def tick(self, now: float) -> None:
+        """Every PING_S: ping, report, and keep the vehicle commanded."""
+        self.ping()
+        if not self.agent_gone:
+            self.report()
+            if now - self.last_msg > SILENT_S:
+                self.agent_lost(now)
+        if self.stop_until is not None:
+            if now < self.stop_until:
+                self.commander.send_stop_setpoint()
+            elif self.agent_gone:
+                self.running = False  # stopped, repeated, nobody left to tell
+        elif self.descent is not None:
+            thrust = self.descent.thrust(now)
+            if thrust is None:
+                self.stop()
+                self.running = False  # the stop went twice; the agent is gone
+            else:
+                self.send_cmd((0.0, 0.0, 0.0, thrust))
+        elif now - self.last_sent >= KEEPALIVE_S:
+            # levelled at the hold thrust: the tilted thrust, levelled, would climb
+            self.send_cmd((0.0, 0.0, 0.0, self.hold_units))
+
+    def read_driver(self, timeout: float) -> None:
+        if self.agent_gone:
+            time.sleep(max(0.0, timeout))
+            return
+        ready, _, _ = select.select([self.sock], [], [], max(0.0, timeout))
+        while ready:
+            try:
+                msg = self.sock.recv(64, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                return
+            except OSError:
+                msg = b""
+            if not msg:
+                self.agent_lost(time.monotonic())
+                return
+            self.on_message(msg)
+            if not self.running:
+                return
+
+    def run(self) -> None:
+        threading.Thread(target=self._receive, name="cflink-receive", daemon=True).start()
+        self.sock.send(b"R")
+        next_tick = time.monotonic()
+        while self.running:
+            self.read_driver(next_tick - time.monotonic())
+            now = time.monotonic()
+            if self.running and now >= next_tick:
+                self.tick(now)
+                next_tick = max(next_tick + PING_S, now)
+
+
+def main(argv: list[str]) -> int:
+    # the agent's Ctrl-C or a service stop reaches the whole group: the keeper outlives
+    # them by design and ends when the agent's socket closes
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    sock = socket.socket(fileno=int(argv[0]))
+    keeper = Keeper(sock, argv[1], float(argv[2]))
+    try:
+        keeper.open()
+    except Exception as err:  # cflib raises bare Exceptions (no dongle, link open)
+        sock.send(b"E" + str(err).encode()[:400])
+        return 1
+    try:
+        keeper.run()
+    finally:
+        keeper.running = False
+        # cflib's udp close waits up to 1 s for its receive thread; the stop is out already
+        closer = threading.Thread(target=keeper.link.close, daemon=True)
+        closer.start()
+        closer.join(0.3)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

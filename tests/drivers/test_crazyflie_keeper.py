@@ -1,0 +1,129 @@
+"""The Crazyflie link keeper (drivers/cflink.py): an agent that dies mid-approach gets a
+bounded descent and a stop from the keeper, over cflib's real udp:// link to the CRTP
+responder; a keeper that dies is a named lost link (docs/safety.md, "When the agent dies")."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+from crtp_responder import CrtpResponder
+from perchd.drivers import cflink
+from perchd.drivers.base import open_driver
+from perchd.drivers.thrust import CrazyflieThrust
+from ticks import level
+
+from perchd.core.runtime import Runtime
+
+pytest.importorskip("cflib")
+
+ROOT = Path(__file__).parents[2]
+HOVER_N = 0.030 * 9.81  # the default thrust model's vehicle
+PITCH, THRUST_N = 0.2, 1.15 * HOVER_N  # mid-approach: tilted, more than the weight
+AGENT = textwrap.dedent(f"""
+    import sys, time
+    from perchd.drivers.base import open_driver
+    from perchd.core.runtime import Runtime
+    from perchd.core.types import Phase, Setpoint
+    cf = open_driver(sys.argv[1], Runtime.real())
+    cf.connect()
+    print(cf._keeper.pid, flush=True)
+    k = 0
+    while True:  # 100 Hz, as the loop streams
+        cf.send(Setpoint(k * 0.01, 0.0, {PITCH}, 0.0, {THRUST_N}, k, Phase.STAGE1))
+        if k == 30:
+            print("streaming", flush=True)
+        k += 1
+        time.sleep(0.01)
+""")
+
+
+@pytest.fixture
+def responder():
+    r = CrtpResponder()
+    yield r
+    r.close()
+
+
+def start_agent(uri: str) -> tuple[subprocess.Popen, int]:
+    """A process that owns a driver and streams a tilted stage-1 setpoint; its keeper's pid."""
+    agent = subprocess.Popen([sys.executable, "-c", AGENT, uri], stdout=subprocess.PIPE,
+                             text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    keeper_pid = int(agent.stdout.readline())
+    assert agent.stdout.readline().strip() == "streaming"
+    return agent, keeper_pid
+
+
+def gone(pid: int) -> bool:
+    """Exited: no such process, or a zombie waiting for whoever inherited it."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+def check_descent_then_stop(responder: CrtpResponder, t_dead: float, keeper_pid: int) -> None:
+    hold = CrazyflieThrust().units(THRUST_N * math.cos(PITCH))
+    last = CrazyflieThrust().units(THRUST_N)
+    assert responder.wait_for(lambda: responder.stops(), timeout=cflink.DESCENT_S + 1.5)
+    stop_t = responder.stops()[0].t
+    after = [s for s in responder.setpoints() if t_dead < s.t < stop_t]
+    tail = [s for s in after if (s.roll_deg, s.wire_pitch_deg) == (0.0, 0.0)]
+    assert after and after[-1] in tail  # levelled, at the latest by the keeper's first tick
+    thrusts = [s.thrust for s in tail]
+    assert all(0 < t <= hold < last for t in thrusts)  # never the tilted thrust, level
+    assert thrusts == sorted(thrusts, reverse=True)  # decreasing ...
+    assert thrusts[-1] == int(cflink.DESCENT_FRACTION * hold)  # ... to below the hold
+    assert stop_t - t_dead <= cflink.DESCENT_S + 0.3  # motors stop in bounded time
+    assert not [s for s in responder.setpoints() if s.t > stop_t]  # nothing re-arms
+    deadline = time.monotonic() + 2.0
+    while not gone(keeper_pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert gone(keeper_pid)  # no orphan: it exits after the stop
+
+
+def test_sigkill_of_the_agent_gets_a_level_descent_then_the_stop(responder):
+    agent, keeper_pid = start_agent(responder.uri)
+    agent.kill()  # SIGKILL
+    t_dead = time.monotonic()
+    agent.wait()
+    check_descent_then_stop(responder, t_dead, keeper_pid)
+    print(f"\nstop {responder.stops()[0].t - t_dead:.3f} s after SIGKILL")
+
+
+def test_a_hung_agent_is_a_dead_agent_after_the_keepers_silence_limit(responder):
+    agent, keeper_pid = start_agent(responder.uri)
+    try:
+        agent.send_signal(signal.SIGSTOP)
+        t_hung = time.monotonic()
+        check_descent_then_stop(responder, t_hung, keeper_pid)
+        assert responder.stops()[0].t - t_hung >= cflink.SILENT_S + cflink.DESCENT_S - 0.05
+    finally:
+        agent.kill()
+        agent.wait()
+
+
+def test_a_dead_keeper_is_a_named_lost_link(responder):
+    with open_driver(responder.uri, Runtime.real()) as cf:
+        cf.send(level(HOVER_N))
+        assert cf.health().ok
+        os.kill(cf._keeper.pid, signal.SIGKILL)
+        assert responder.wait_for(lambda: not cf.health().ok)
+        assert "link keeper exited" in cf.health().detail
+
+
+def test_the_keeper_ignores_the_terminals_ctrl_c(responder):
+    """Ctrl-C reaches the whole process group: the agent's handler sends the failsafe
+    through the keeper, which must still be there."""
+    with open_driver(responder.uri, Runtime.real()) as cf:
+        time.sleep(0.5)  # its handlers are set before it reports the link open
+        os.kill(cf._keeper.pid, signal.SIGINT)
+        time.sleep(0.1)
+        assert cf.health().ok
