@@ -289,6 +289,7 @@ class MavlinkDriver(DriverBase):
         self.model: NormalisedThrust | None = None
         self.autopilot: int | None = None
         self._conn: Any = None
+        self._refused = ""  # why the vehicle refused a command, once it has
         self._lock = threading.Lock()
         self._tickers: list[Ticker] = []
         self._target = (0, 0)

@@ -159,6 +159,7 @@ class Daemon:
         self.stopping = False
         self.links: Links | None = None
         self.server: ControlServer | None = None
+        self.wake_fd = -1  # the self-pipe's write end, open while run() runs
 
     # --- the service loop ---------------------------------------------------------------------
     def run(self) -> int:
