@@ -27,18 +27,10 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-def test_a_second_natnet_server_on_the_port_is_refused():
-    uri = f"natnet://127.0.0.1:{free_udp_port()}"
-    first = open_pose_output(uri, ["cf1"], MonotonicClock())
-    try:
-        with pytest.raises(UriError, match="port is taken"):
-            open_pose_output(uri, ["cf1"], MonotonicClock())
-    finally:
-        first.close()
-
-
-def test_a_taken_zmq_pose_port_is_refused_as_bad_input():
-    uri = f"zmq://127.0.0.1:{free_tcp_port()}"
+@pytest.mark.parametrize("scheme,free_port", [("natnet", free_udp_port),
+                                              ("zmq", free_tcp_port)], ids=["natnet", "zmq"])
+def test_a_second_pose_output_on_a_taken_port_is_refused_as_bad_input(scheme, free_port):
+    uri = f"{scheme}://127.0.0.1:{free_port()}"
     first = open_pose_output(uri, ["cf1"], MonotonicClock())
     try:
         with pytest.raises(UriError, match="port is taken"):

@@ -9,7 +9,6 @@ another process, and must perch within the tolerances the in-process simulator m
 from __future__ import annotations
 
 import json
-import re
 import signal
 import subprocess
 import sys
@@ -18,6 +17,7 @@ from pathlib import Path
 
 import pytest
 import zmq
+from announced import start_announced
 from caseplans import PLANS, case1_ipts
 from perchd.drivers.base import open_driver
 
@@ -32,16 +32,8 @@ class SimProcess:
     """`perchd sim` in a child process; .mocap and .driver are the URIs it announced."""
 
     def __init__(self, *extra: str, pose_out: str = "natnet://127.0.0.1:0") -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "perchd", "sim", "--pose-out", pose_out,
-             "--setpoint-in", "zmq://127.0.0.1:0", "--json", *extra],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = self.proc.stderr.readline()
-        found = re.search(r"ready: mocap (\S+) driver (\S+)", line)
-        if found is None:
-            self.proc.kill()
-            raise AssertionError(f"perchd sim did not start: {line}{self.proc.stderr.read()}")
-        self.mocap, self.driver = found.groups()
+        self.proc, self.mocap, self.driver = start_announced(
+            "sim", "--pose-out", pose_out, "--setpoint-in", "zmq://127.0.0.1:0", "--json", *extra)
 
     def finish(self, timeout: float = 10.0) -> dict:
         """Its one JSON summary (after --exit-on-stop, or after a SIGTERM we send)."""

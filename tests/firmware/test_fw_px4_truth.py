@@ -11,13 +11,20 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
-
-from perchd.core.types import Phase, Setpoint
 from perchd.drivers.mavlink import ned_attitude
-from perchd.sim.firmware.px4 import (EARTH_RADIUS_M, Px4Params, Px4Vehicle, enu_from_geodetic,
-                                     enu_quat, surface_ahead, truth_from_hil)
-from perchd.sim.firmware.quadrotor import euler_zyx
+
 from perchd.core.errors import UriError
+from perchd.core.types import Phase, Setpoint
+from perchd.sim.firmware.px4 import (
+    EARTH_RADIUS_M,
+    Px4Params,
+    Px4Vehicle,
+    enu_from_geodetic,
+    enu_quat,
+    surface_ahead,
+    truth_from_hil,
+)
+from perchd.sim.firmware.quadrotor import euler_zyx
 
 ORIGIN = (47.397743, 8.545594, 489.4)  # SIH_LOC_LAT0/LON0/H0
 ROOT = Path(__file__).parents[2]

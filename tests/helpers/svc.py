@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from announced import start_announced
 
 PLANS = Path(__file__).resolve().parents[2] / "plans"
 PLAN = PLANS / "case1-ipts-n3.json"
@@ -120,16 +121,9 @@ class SimProcess:
     """`perchd sim` in its own process (real clock); .mocap and .driver URIs to fly it."""
 
     def __init__(self) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "perchd", "sim", "--pose-out", "natnet://127.0.0.1:0",
-             "--setpoint-in", "zmq://127.0.0.1:0", "--json"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = self.proc.stderr.readline()
-        found = re.search(r"ready: mocap (\S+) driver (\S+)", line)
-        if found is None:
-            self.proc.kill()
-            raise AssertionError(f"perchd sim did not start: {line}")
-        self.mocap, self.driver = found.groups()
+        self.proc, self.mocap, self.driver = start_announced(
+            "sim", "--pose-out", "natnet://127.0.0.1:0", "--setpoint-in", "zmq://127.0.0.1:0",
+            "--json")
 
     def summary(self) -> dict:
         self.proc.terminate()
