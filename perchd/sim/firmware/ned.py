@@ -1,5 +1,10 @@
-"""Autopilot frames to perchd's: NED world and FRD body (MAVLink's) to a Z-up world and an
-FLU body (docs/architecture.md, frames). Shared by the ArduPilot and PX4 harnesses."""
+"""Autopilot frames to perchd's and back: NED world and FRD body (MAVLink's) against a Z-up
+world and an FLU body (docs/architecture.md, frames). One rotation, used both ways: the
+ArduPilot and PX4 harnesses turn truth into mocap with it, the MAVLink driver turns mocap
+into the autopilot's vision input (drivers/mavvision.py).
+
+A Z-up world is placed on NED by yaw0 [rad], the NED heading (from north, clockwise) of
+world X: pi about X (NED -> NWU), then yaw0 about Z. NWU is yaw0 = 0, ENU yaw0 = pi/2."""
 
 from __future__ import annotations
 
@@ -9,11 +14,21 @@ from perchd.core.types import Quat, Vec3
 
 QuatWXYZ = tuple[float, float, float, float]
 
-_H = math.sqrt(0.5)
-WORLD_FROM_NED: dict[str, QuatWXYZ] = {"nwu": (0.0, 1.0, 0.0, 0.0), "enu": (0.0, _H, _H, 0.0)}
-"""(w, x, y, z): NWU is pi about X; ENU is pi about (1, 1, 0)/sqrt 2 (swap N/E, negate D)."""
+FRAME_YAW0: dict[str, float] = {"nwu": 0.0, "enu": math.pi / 2}
+"""[rad] the NED heading of world X in the named world frames."""
 FRD_FROM_FLU: QuatWXYZ = (0.0, 1.0, 0.0, 0.0)
 """perchd's body is FLU (Z up), the autopilots' FRD: pi about X."""
+
+
+def world_from_ned(yaw0: float) -> QuatWXYZ:
+    """(w, x, y, z) rotating NED vectors into the world whose X is at heading yaw0: the
+    product of yaw0 about Z and pi about X."""
+    return (0.0, math.cos(yaw0 / 2), math.sin(yaw0 / 2), 0.0)
+
+
+def yaw0_of(frame: str | float) -> float:
+    """[rad] a frame name ("nwu", "enu") or a heading yaw0 itself."""
+    return FRAME_YAW0[frame] if isinstance(frame, str) else float(frame)
 
 
 def quat_mul(a: QuatWXYZ, b: QuatWXYZ) -> QuatWXYZ:
@@ -24,16 +39,45 @@ def quat_mul(a: QuatWXYZ, b: QuatWXYZ) -> QuatWXYZ:
             aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
 
 
-def world_vec(ned: Vec3, frame: str) -> Vec3:
-    """A NED vector in the world frame `frame` ("nwu" or "enu")."""
-    n, e, d = ned
-    return (n, -e, -d) if frame == "nwu" else (e, n, -d)
+def conj(q: QuatWXYZ) -> QuatWXYZ:
+    return (q[0], -q[1], -q[2], -q[3])
 
 
-def world_quat(q_ned_wxyz: QuatWXYZ, frame: str) -> Quat:
+def rotate(q: QuatWXYZ, v: Vec3) -> Vec3:
+    """v rotated by the unit (w, x, y, z) quaternion q."""
+    _, x, y, z = quat_mul(quat_mul(q, (0.0, *v)), conj(q))
+    return (x, y, z)
+
+
+def world_vec(ned: Vec3, frame: str | float) -> Vec3:
+    """A NED vector in the world frame `frame` ("nwu", "enu" or yaw0 [rad])."""
+    return rotate(world_from_ned(yaw0_of(frame)), ned)
+
+
+def ned_vec(world: Vec3, frame: str | float) -> Vec3:
+    """A world vector in NED: world_vec's inverse."""
+    return rotate(conj(world_from_ned(yaw0_of(frame))), world)
+
+
+def _canonical(q: QuatWXYZ) -> QuatWXYZ:
+    """Normalised, w >= 0: one sign for one attitude (PX4 often sends -q)."""
+    n = math.sqrt(sum(c * c for c in q)) or 1.0
+    s = (1.0 if q[0] >= 0 else -1.0) / n
+    return (q[0] * s, q[1] * s, q[2] * s, q[3] * s)
+
+
+def world_quat(q_ned_wxyz: QuatWXYZ, frame: str | float) -> Quat:
     """An autopilot attitude (w, x, y, z; body FRD -> NED) as perchd's (x, y, z, w), body
-    FLU -> world, normalised and with w >= 0 (one sign for one attitude: PX4 often sends -q)."""
-    w, x, y, z = quat_mul(quat_mul(WORLD_FROM_NED[frame], tuple(q_ned_wxyz)), FRD_FROM_FLU)
-    n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
-    s = (1.0 if w >= 0 else -1.0) / n
-    return (x * s, y * s, z * s, w * s)
+    FLU -> world."""
+    q = quat_mul(quat_mul(world_from_ned(yaw0_of(frame)), tuple(q_ned_wxyz)), FRD_FROM_FLU)
+    w, x, y, z = _canonical(q)
+    return (x, y, z, w)
+
+
+def ned_quat(q_world_xyzw: Quat, frame: str | float) -> QuatWXYZ:
+    """perchd's attitude (x, y, z, w; body FLU -> world) as the autopilot's (w, x, y, z;
+    body FRD -> NED): world_quat's inverse."""
+    x, y, z, w = q_world_xyzw
+    q = quat_mul(quat_mul(conj(world_from_ned(yaw0_of(frame))), (w, x, y, z)), conj(FRD_FROM_FLU))
+    return _canonical(q)
+
