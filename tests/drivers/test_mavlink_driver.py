@@ -14,7 +14,6 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble
-from perchd.drivers.base import open_driver
 from pymavlink import mavutil
 from pymavlink.quaternion import Quaternion
 from ticks import level, ticks_until_lost
@@ -22,6 +21,7 @@ from ticks import level, ticks_until_lost
 from perchd.core.errors import ConfigError, LinkError, MissingExtraError, UriError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Pose, Setpoint
+from perchd.drivers.base import open_driver
 
 MASS = 0.5
 WEIGHT = MASS * 9.81

@@ -12,12 +12,12 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble
-from perchd.drivers.base import open_driver
-from perchd.drivers.mavlink import SPOOL_FRACTION
 from ticks import level
 
 from perchd.core.errors import LinkError
 from perchd.core.runtime import Runtime
+from perchd.drivers.base import open_driver
+from perchd.drivers.mavlink import SPOOL_FRACTION
 
 MASS = 0.5
 WEIGHT = MASS * 9.81

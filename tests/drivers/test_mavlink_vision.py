@@ -14,12 +14,12 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble
-from perchd.drivers.base import open_driver
-from perchd.sim.plant import quaternion
 
 from perchd.core.errors import ConfigError
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
+from perchd.drivers.base import open_driver
+from perchd.sim.plant import quaternion
 
 MASS = 0.5
 

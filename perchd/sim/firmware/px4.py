@@ -50,8 +50,11 @@ SIH_HOVER = SIH_MASS_KG * 9.81 / (4 * 5.0)
 SIH_T_MAX = 5 N each (the driver's hover=, instead of MPC_THR_HOVER's 0.5)."""
 OFFBOARD_PORT, DISPLAY_PORT = 14540, 19410
 """PX4 sends to these + instance: the offboard API link, SIH's display link (truth)."""
-SAFE_PARAMS = {"COM_OF_LOSS_T": "0.5", "COM_OBL_RC_ACT": "4", "SDLOG_BACKEND": "0"}
+SAFE_PARAMS = {"COM_OF_LOSS_T": "0.3", "COM_OBL_RC_ACT": "4", "SDLOG_BACKEND": "0"}
 """Set at boot (PX4_PARAM_*): perchd's failsafe values (docs/safety.md), and no .ulg logs."""
+VISION_PARAMS = {"EKF2_EV_CTRL": "11", "EKF2_HGT_REF": "3", "EKF2_GPS_CTRL": "0"}
+"""vision: EKF2 on the mocap perchd's driver forwards (position and yaw, vision height),
+GPS off (drivers/mavparams.py checks the first two)."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
 BOOT_TIMEOUT_S, TAKEOFF_TIMEOUT_S = 30.0, 40.0
 
@@ -63,8 +66,9 @@ class Px4Params:
     surface_ahead_m [m]: the surface is put this far ahead of the hover point along the
     heading (None: no surface); stock_params: leave PX4's failsafe defaults (to try the
     driver's refusal or ?configure=1); extra_params: more PX4 parameters set at boot, e.g.
-    (("SIH_KDV", "0.1"),) (SIH's linear drag, 1.0 N/(m/s) by default); log: PX4's console
-    output."""
+    (("SIH_KDV", "0.1"),) (SIH's linear drag, 1.0 N/(m/s) by default); vision: GPS off and
+    EKF2 on the mocap perchd's driver forwards (VISION_PARAMS; no take-off then: without
+    mocap it has no position); log: PX4's console output."""
 
     build: str
     instance: int = 0
@@ -73,6 +77,7 @@ class Px4Params:
     stock_params: bool = False
     extra_params: tuple[tuple[str, str], ...] = ()
     log: Path | None = None
+    vision: bool = False
 
 
 def enu_from_geodetic(lat_deg: float, lon_deg: float, alt_m: float,
@@ -168,7 +173,9 @@ class Px4Vehicle(FirmwareVehicle):
     def driver_uri(self) -> str:
         port = OFFBOARD_PORT + self.params.instance
         # yaw0=auto: SIH's EKF heading comes from its compass, degrees off the truth
-        return f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}&yaw0=auto"
+        vision = "" if self.params.vision else "&vision=0"  # else it flies on its GPS
+        return (f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}"
+                f"&yaw0=auto{vision}")
 
     def contact(self) -> Contact | None:
         return self._contact
@@ -195,6 +202,7 @@ class Px4Vehicle(FirmwareVehicle):
         """px4 through env(1) (it execs, so the pid is px4's): the simulator, the airframe
         and the parameters PX4's rcS applies after the airframe (PX4_PARAM_<NAME>)."""
         params = {"SDLOG_BACKEND": "0"} if self.params.stock_params else dict(SAFE_PARAMS)
+        params.update(VISION_PARAMS if self.params.vision else {})
         params.update(self.params.extra_params)
         env = ["PX4_SIMULATOR=sihsim", "PX4_SIM_MODEL=sihsim_quadx",
                *(f"PX4_PARAM_{k}={v}" for k, v in params.items())]
