@@ -57,18 +57,23 @@ import threading
 import time
 from typing import Any, Callable
 
-from perchd.drivers.base import DriverBase, agreed_mass
-from perchd.drivers.mavparams import ARDUPILOT, PX4, PX4_INT_PARAMS, check_params, rules_for
-from perchd.drivers.mavvision import timesync_reply, vision_estimate
-from perchd.drivers.thrust import NormalisedThrust
-from perchd.drivers.ticker import Ticker
-
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, split_query
+from perchd.drivers.base import DriverBase, agreed_mass
+from perchd.drivers.mavparams import (
+    ARDUPILOT,
+    PX4,
+    PX4_INT_PARAMS,
+    check_params,
+    rules_for,
+)
+from perchd.drivers.mavvision import timesync_reply, vision_estimate
+from perchd.drivers.thrust import NormalisedThrust
+from perchd.drivers.ticker import Ticker
 
 log = logging.getLogger("perchd.drivers.mavlink")
 
@@ -93,7 +98,10 @@ PX4_OFFBOARD = (6, 0)  # (main mode, sub mode)
 PX4_AUTO_LAND = (4, 6)
 HOVER_PARAM = {ARDUPILOT: "MOT_THST_HOVER", PX4: "MPC_THR_HOVER"}
 IGNORE_BODY_RATES = 0b0000_0111
-ATTITUDE_MSG_ID, ATTITUDE_TARGET_MSG_ID, EXTENDED_SYS_STATE_MSG_ID = 30, 83, 245
+ATTITUDE_MSG_ID, LOCAL_POSITION_NED_MSG_ID, ATTITUDE_TARGET_MSG_ID = 30, 32, 83
+EXTENDED_SYS_STATE_MSG_ID = 245
+EKF_POSITION_HZ = 10.0
+"""[Hz] LOCAL_POSITION_NED asked for: the autopilot's own estimate, to see it takes the mocap."""
 CMD_DO_SET_MODE, CMD_ARM, CMD_SET_MESSAGE_INTERVAL = 176, 400, 511
 MAV_RESULT_ACCEPTED, MAV_RESULT_IN_PROGRESS = 0, 5
 LANDED_ON_GROUND = 1  # MAV_LANDED_STATE
@@ -276,6 +284,8 @@ class MavlinkDriver(DriverBase):
         self.vision = vision
         self.vision_sent = 0  # VISION_POSITION_ESTIMATEs sent
         self._ap_thrust: float | None = None  # ATTITUDE_TARGET thrust the vehicle applies
+        self.ekf_position_ned: tuple[float, float, float] | None = None
+        """[m] the autopilot's own position estimate (LOCAL_POSITION_NED), newest."""
         self.model: NormalisedThrust | None = None
         self.autopilot: int | None = None
         self._conn: Any = None
@@ -406,6 +416,7 @@ class MavlinkDriver(DriverBase):
         self._command(CMD_SET_MESSAGE_INTERVAL, ATTITUDE_MSG_ID, 1e6 / self.stream_hz)
         self._command(CMD_SET_MESSAGE_INTERVAL, EXTENDED_SYS_STATE_MSG_ID, 1e5)  # landed state
         self._command(CMD_SET_MESSAGE_INTERVAL, ATTITUDE_TARGET_MSG_ID, 1e6 / self.stream_hz)
+        self._command(CMD_SET_MESSAGE_INTERVAL, LOCAL_POSITION_NED_MSG_ID, 1e6 / EKF_POSITION_HZ)
         if self.autopilot == ARDUPILOT:
             options = int(self._param("GUID_OPTIONS"))
             if not options & GUIDED_THRUST_BIT:
@@ -593,6 +604,8 @@ class MavlinkDriver(DriverBase):
             self._yaw_ned = float(msg.yaw)
         elif kind == "EXTENDED_SYS_STATE":
             self._landed_state = int(msg.landed_state)
+        elif kind == "LOCAL_POSITION_NED":
+            self.ekf_position_ned = (float(msg.x), float(msg.y), float(msg.z))
         elif kind == "ATTITUDE_TARGET":
             self._ap_thrust = float(msg.thrust)
         elif kind == "TIMESYNC" and msg.tc1 == 0:

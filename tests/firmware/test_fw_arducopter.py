@@ -217,3 +217,39 @@ def test_sigkill_of_perchd_fly_mid_approach_levels_within_1_s_and_lands_within_3
             "tilt_deg_after_kill": trace, "load": os.getloadavg()})
     assert level is not None and level < 1.0
     assert land is not None and land < 3.0
+
+
+def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
+    """GPS1_TYPE 0, VISO_TYPE 1, EK3_SRC1_POSXY/POSZ/YAW 6 (perchd sim firmware --vision):
+    the mocap flows from before connect (the EKF needs it for a heading), the driver arms
+    and the vehicle climbs; LOCAL_POSITION_NED is the pose in NED."""
+    import threading
+
+    from fwvision import PoseFeed, climb_and_compare
+    from perchd.drivers.base import open_driver
+
+    from perchd.core.runtime import Runtime
+    from perchd.sim.firmware.ardupilot import ArduPilotParams, ArduPilotVehicle
+    from perchd.sim.firmware.harness import ProcessGroup
+    with ProcessGroup() as procs:
+        v = ArduPilotVehicle(ArduPilotParams(ARDUCOPTER, instance=int(INSTANCE), vision=True,
+                                             log=tmp_path / "sitl.log"))
+        try:
+            v.start(procs, threading.Event())
+            runtime = Runtime.real()
+            drv = open_driver(with_param(v.driver_uri(), MASS), runtime)
+            feed = PoseFeed(v.truth, drv)
+            try:
+                drv.connect()
+                figures = climb_and_compare(v.truth, drv, 3.0, runtime.clock.now)
+            finally:
+                feed.stop()
+                drv.close()
+            texts = [t for _, t in v.state.texts if "EKF3 IMU0" in t]
+        finally:
+            v.close()
+    report({"test": "arducopter-vision", **figures, "ekf_texts": texts,
+            "load": os.getloadavg()})
+    assert any("using external nav data" in t for t in texts)
+    assert figures["climbed_m"] > 0.5
+    assert figures["max_error_m"] < 0.15

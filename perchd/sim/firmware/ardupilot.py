@@ -43,7 +43,11 @@ from perchd.sim.world import Contact
 
 DEG7_M = 0.011131884502145034
 """[m] per 1e-7 degree of latitude (ArduPilot's LOCATION_SCALING_FACTOR)."""
-SIM_STATE_ID, SYS_STATUS_ID = 108, 1
+SIM_STATE_ID, SYS_STATUS_ID, SYSTEM_TIME_ID = 108, 1, 2
+VISION_BOOT_S = 40.0
+"""[s] of simulated time after boot before a vision=True vehicle is ready: without GPS
+nothing else says when the inertial checks settle ("Accels inconsistent" for ~30 s), and
+the GPS start is ready at about this time too (docs/firmware.md)."""
 STATUS_HZ = 2.0
 """[Hz] SYS_STATUS (its pre-arm health bit): SITL streams nothing on a bare serial."""
 CMD_SET_MESSAGE_INTERVAL = 511
@@ -259,6 +263,7 @@ class LinkState:
     texts: list[tuple[float, str]] = field(default_factory=list)
     modes: list[tuple[float, str, bool]] = field(default_factory=list)
     sim_states: int = 0
+    boot_s: float = 0.0  # [s] the autopilot's time since boot (SYSTEM_TIME)
     first_sim_t: float | None = None
     last_sim_t: float | None = None
 
@@ -308,7 +313,10 @@ class ArduPilotVehicle(FirmwareVehicle):
                    ask=self._ask_truth)
         for name, value in self.params.params:
             self._set_param(name, value, deadline, cancel)
-        if not self.params.vision:  # with vision the EKF has no position before perchd's mocap
+        if self.params.vision:  # no position before perchd's mocap: no pre-arm pass either
+            self._wait(lambda: self.state.boot_s >= VISION_BOOT_S,
+                       f"{VISION_BOOT_S:g} s since boot", deadline, cancel)
+        else:
             self._wait(lambda: self.state.ekf_gps and self.state.prearm_ok,
                        "the EKF to use GPS and the pre-arm checks to pass", deadline, cancel)
         self._set_param("SIM_SPEEDUP", 1.0, deadline, cancel)
@@ -364,7 +372,8 @@ class ArduPilotVehicle(FirmwareVehicle):
             time.sleep(0.02)
 
     def _ask_truth(self) -> None:
-        for msg_id, hz in ((SIM_STATE_ID, self.params.truth_hz), (SYS_STATUS_ID, STATUS_HZ)):
+        for msg_id, hz in ((SIM_STATE_ID, self.params.truth_hz), (SYS_STATUS_ID, STATUS_HZ),
+                           (SYSTEM_TIME_ID, STATUS_HZ)):
             self._conn.mav.command_long_send(1, 1, CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
                                              1e6 / hz, 0, 0, 0, 0, 0)
 
@@ -395,6 +404,8 @@ class ArduPilotVehicle(FirmwareVehicle):
             if (msg.custom_mode, armed) != (s.mode, s.armed):
                 s.modes.append((now, COPTER_MODES.get(msg.custom_mode, str(msg.custom_mode)), armed))
             s.mode, s.armed = msg.custom_mode, armed
+        elif kind == "SYSTEM_TIME":
+            s.boot_s = msg.time_boot_ms * 1e-3
         elif kind == "SYS_STATUS":
             s.prearm_ok = bool(msg.onboard_control_sensors_health & PREARM_BIT)
         elif kind == "STATUSTEXT":

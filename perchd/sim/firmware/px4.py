@@ -52,9 +52,12 @@ OFFBOARD_PORT, DISPLAY_PORT = 14540, 19410
 """PX4 sends to these + instance: the offboard API link, SIH's display link (truth)."""
 SAFE_PARAMS = {"COM_OF_LOSS_T": "0.3", "COM_OBL_RC_ACT": "4", "SDLOG_BACKEND": "0"}
 """Set at boot (PX4_PARAM_*): perchd's failsafe values (docs/safety.md), and no .ulg logs."""
-VISION_PARAMS = {"EKF2_EV_CTRL": "11", "EKF2_HGT_REF": "3", "EKF2_GPS_CTRL": "0"}
+VISION_PARAMS = {"EKF2_EV_CTRL": "11", "EKF2_HGT_REF": "3", "EKF2_GPS_CTRL": "0",
+                 "EKF2_EVP_NOISE": "0.01", "EKF2_EVA_NOISE": "0.02", "EKF2_BARO_CTRL": "0"}
 """vision: EKF2 on the mocap perchd's driver forwards (position and yaw, vision height),
-GPS off (drivers/mavparams.py checks the first two)."""
+GPS off (drivers/mavparams.py checks the first two); the noise floors down to the mocap's
+(drivers/mavvision.py: EKF2 takes the larger of its floor, 0.1 m and 0.1 rad by default,
+and the covariance sent)."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
 BOOT_TIMEOUT_S, TAKEOFF_TIMEOUT_S = 30.0, 40.0
 
@@ -173,7 +176,8 @@ class Px4Vehicle(FirmwareVehicle):
     def driver_uri(self) -> str:
         port = OFFBOARD_PORT + self.params.instance
         # yaw0=auto: SIH's EKF heading comes from its compass, degrees off the truth
-        vision = "" if self.params.vision else "&vision=0"  # else it flies on its GPS
+        # vision: on the ground, nobody else arms it; else it flies on its GPS
+        vision = "&arm=1" if self.params.vision else "&vision=0"
         return (f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}"
                 f"&yaw0=auto{vision}")
 
