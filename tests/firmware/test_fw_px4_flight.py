@@ -31,6 +31,7 @@ from perchd.sim.firmware.harness import ProcessGroup, yaw_of
 from perchd.sim.firmware.px4 import SIH_MASS_KG, Px4Params, Px4Vehicle
 
 PX4 = os.environ.get("PERCHD_PX4", "")
+PX4_EXTRA = os.environ.get("PERCHD_PX4_EXTRA", "").split()
 INSTANCE = int(os.environ.get("PERCHD_FW_INSTANCE", os.environ.get("PERCHD_PX4_INSTANCE", "0")))
 pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
     not (PX4 and os.access(Path(PX4) / "bin" / "px4", os.X_OK)),
@@ -129,7 +130,7 @@ def hold_height(v: Px4Vehicle, drv, z_ref: float, yaw: float, seconds: float) ->
 
 def harness(tmp: Path, *extra: str) -> tuple[subprocess.Popen, str, str, list[str]]:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "sim", "firmware", "--px4", PX4, "--instance",
+        [sys.executable, "-m", "perchd", "sim", "firmware", "--px4", PX4, *PX4_EXTRA, "--instance",
          str(INSTANCE), "--ahead", str(AHEAD_M), "--px4-param", f"SIH_KDV={DRAG}",
          "--fw-log", str(tmp / "px4.log"), "--json", *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
@@ -248,7 +249,8 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
     Land holds the GPS estimate, which wanders by decimetres; with vision (GPS off, the
     driver's mocap in EKF2, a ground start) it holds the mocap position."""
     stock = boot == "stock-params+configure"
-    extra = ["--stock-params"] if stock else ["--vision"] if boot == "vision" else []
+    extra = (["--stock-params"] if stock else
+             ["--vision", "--ahead", "7.5"] if boot == "vision" else [])  # geofence: X >= -8 m
     proc, mocap, driver, surface = harness(tmp_path, *extra)
     driver += "&configure=1" if stock else ""
     watch = YawWatch(mocap)
@@ -256,8 +258,7 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
         fly = subprocess.Popen(fly_argv(tmp_path, mocap, driver, surface), env=ENV,
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         log = tmp_path / "flight.jsonl"
-        assert wait_for_phase(log, "approach", 60.0), "the flight never reached its approach"
-        time.sleep(KILL_AFTER_S)  # mid-approach
+        assert wait_for_speed(log, KILL_SPEED_MPS, 90.0), "the approach never got up to speed"
         fly.send_signal(signal.SIGKILL)
         killed = time.monotonic()
         fly.wait()
@@ -277,7 +278,9 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
     before = min(watch.positions, key=lambda s: abs(s[0] - (killed - 0.2)))
     speed = sum((at_kill[i] - before[1][i]) * n[i] for i in range(3)) / 0.2
     report({"test": "px4-sigkill", "boot": boot, "modes": modes, "further_toward_wall_m": further,
-            "speed_at_kill_mps": speed, "height_at_kill_m": at_kill[2], "final_height_m": after[-1][2],
+            "speed_at_kill_mps": speed,
+            "toward_wall_m_by_0_25_s": [round(d, 3) for t, d, _ in after][::25][:16],
+            "height_at_kill_m": at_kill[2], "final_height_m": after[-1][2],
             "load": os.getloadavg()})
     assert further <= 0.5
     assert "OFFBOARD" in modes
@@ -286,9 +289,20 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
     assert "AUTO.RTL" not in modes
 
 
-KILL_AFTER_S = 1.5
-"""[s] into the approach: ~0.8 m/s toward the wall, halfway to x0 (the approach accelerates
-at v0^2 / 2 (x0 - x) ~ 0.56 m/s^2 over its 5 m of run-up)."""
+KILL_SPEED_MPS = 0.5
+"""[m/s] mid-approach: killed once the flight log shows this speed toward the wall."""
+
+
+def wait_for_speed(log: Path, speed: float, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        lines = log.read_text().splitlines()[-3:] if log.exists() else []
+        for line in lines:
+            row = json.loads(line).get("row") if line.startswith('{"row"') else None
+            if row and row["phase"] == "approach" and row["xdot"] >= speed:
+                return True
+        time.sleep(0.02)
+    return False
 
 
 def wait_for_phase(log: Path, phase: str, timeout_s: float) -> bool:
