@@ -253,3 +253,25 @@ def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
     assert any("using external nav data" in t for t in texts)
     assert figures["climbed_m"] > 0.5
     assert figures["max_error_m"] < 0.15
+
+
+def test_the_readme_form_is_refused_before_arming(tmp_path):
+    """The driver URI as the README writes it (the harness's port, no arm=1, no mass, no
+    --config): copter.parm's EKF does not take external navigation, so the driver refuses
+    by name before any mode change; the vehicle never arms."""
+    proc, mocap, driver = start(tmp_path, "--stock-params")
+    try:
+        readme = driver.split("?")[0]
+        done = subprocess.run([sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver",
+                               readme, "--mocap", mocap], capture_output=True, text=True,
+                              timeout=60, env=ENV)
+        time.sleep(1.0)
+    finally:
+        sim = stop_harness(proc)
+    report({"test": "readme-form", "exit": done.returncode,
+            "stderr": done.stderr.strip().splitlines()[-1:], "modes": sim["modes"]})
+    assert done.returncode != 0
+    for name in ("GUID_TIMEOUT=3", "FS_GCS_ENABLE=0", "ATC_ANGLE_BOOST=1", "EK3_SRC1_POSXY=3"):
+        assert name in done.stderr
+    assert not any(m["armed"] for m in sim["modes"])
+    assert "GUIDED_NOGPS" not in [m["mode"] for m in sim["modes"]]

@@ -145,6 +145,7 @@ class Px4Vehicle(FirmwareVehicle):
         self._truth_acked = False  # PX4 took the 100 Hz truth rate (25 Hz before)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._proc: Any = None
 
     # -- FirmwareVehicle ---------------------------------------------------------------
     def start(self, procs: ProcessGroup, cancel: threading.Event) -> None:
@@ -210,7 +211,7 @@ class Px4Vehicle(FirmwareVehicle):
         params.update(self.params.extra_params)
         env = ["PX4_SIMULATOR=sihsim", "PX4_SIM_MODEL=sihsim_quadx",
                *(f"PX4_PARAM_{k}={v}" for k, v in params.items())]
-        procs.launch(["env", *env, str(self.binary), "-d", "-i", str(self.params.instance),
+        self._proc = procs.launch(["env", *env, str(self.binary), "-d", "-i", str(self.params.instance),
                       "-w", str(self.workdir), str(self.etc)], self.log)
 
     def _ask_truth(self) -> None:
@@ -241,6 +242,12 @@ class Px4Vehicle(FirmwareVehicle):
         while not done():
             if cancel.is_set():
                 raise Interrupted()
+            if self._proc is not None and self._proc.poll() is not None:
+                # e.g. another px4 holds this instance's lock: its ports would answer for it
+                raise LinkError(f"PX4 instance {self.params.instance} exited "
+                                f"({self._proc.returncode}) while waiting for {what} (is "
+                                f"another px4 running as instance {self.params.instance}? "
+                                f"log: {self.log})")
             now = time.monotonic()
             if now > deadline:
                 raise LinkError(f"PX4 instance {self.params.instance}: no {what} within "
