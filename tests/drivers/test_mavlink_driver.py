@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("pymavlink")
 
-from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble
+from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble, connected
 from pymavlink import mavutil
 from pymavlink.quaternion import Quaternion
 from ticks import level, ticks_until_lost
@@ -39,12 +39,6 @@ def px4():
     v = VehicleDouble(PX4)
     yield v
     v.close()
-
-
-def connected(vehicle, query=""):
-    drv = open_driver(f"{vehicle.uri}?mass={MASS}{query}", Runtime.real())
-    drv.connect()
-    return drv
 
 
 def test_ardupilot_is_put_in_guided_nogps_and_left_disarmed_unless_asked(ardupilot):
@@ -388,8 +382,17 @@ def test_sport_is_for_udpout_only(uri):
     (ARDUPILOT, {"GUID_TIMEOUT": 3.0, "FS_GCS_ENABLE": 1.0, "FS_GCS_TIMEOUT": 5.0},
      [r"GUID_TIMEOUT=3 \(wanted <= 0.5 s\)", r"FS_GCS_ENABLE=1 \(wanted 5 \(Land\)\)",
       r"FS_GCS_TIMEOUT=5 \(wanted <= 2 s\)"]),
+    # the EKF ignores the mocap (docs/firmware.md, "Mocap to the autopilot"), boosts thrust
+    (ARDUPILOT, {"VISO_TYPE": 0.0, "EK3_SRC1_POSXY": 3.0, "EK3_SRC1_POSZ": 1.0,
+                 "EK3_SRC1_YAW": 1.0},
+     [r"VISO_TYPE=0 \(wanted 1 \(MAVLink\)\)", r"EK3_SRC1_POSXY=3 \(wanted 6 \(ExternalNav\)\)",
+      r"EK3_SRC1_POSZ=1 \(wanted 6", r"EK3_SRC1_YAW=1 \(wanted 6"]),
+    (PX4, {"EKF2_EV_CTRL": 0.0, "EKF2_HGT_REF": 1.0},
+     [r"EKF2_EV_CTRL=0 \(wanted bits 0, 1 and 3 set", r"EKF2_HGT_REF=1 \(wanted 3 \(vision\)\)"]),
+    (PX4, {"EKF2_EV_CTRL": 3.0}, [r"EKF2_EV_CTRL=3 \(wanted"]),  # position but not yaw
+    (ARDUPILOT, {"ATC_ANGLE_BOOST": 1.0}, [r"ATC_ANGLE_BOOST=1 \(wanted 0"]),
 ])
-def test_unsafe_failsafe_parameters_are_refused_by_name_before_any_mode_change(
+def test_unsafe_autopilot_parameters_are_refused_by_name_before_any_mode_change(
         autopilot, params, named):
     v = VehicleDouble(autopilot, params={**SAFE_PARAMS[autopilot], **params})
     try:

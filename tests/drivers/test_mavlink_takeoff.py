@@ -11,23 +11,15 @@ import pytest
 
 pytest.importorskip("pymavlink")
 
-from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble
+from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble, connected
 from ticks import level
 
 from perchd.core.errors import LinkError
-from perchd.core.runtime import Runtime
-from perchd.drivers.base import open_driver
 from perchd.drivers.mavlink import SPOOL_FRACTION
 
 MASS = 0.5
 WEIGHT = MASS * 9.81
 HOVER = SAFE_PARAMS[ARDUPILOT]["MOT_THST_HOVER"]
-
-
-def connected(vehicle, query=""):
-    drv = open_driver(f"{vehicle.uri}?mass={MASS}{query}", Runtime.real())
-    drv.connect()
-    return drv
 
 
 def test_a_ground_start_returns_only_once_the_motors_apply_thrust():

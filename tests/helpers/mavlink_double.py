@@ -34,6 +34,9 @@ from dataclasses import dataclass
 from pymavlink import mavutil
 from ticks import wait_for
 
+from perchd.core.runtime import Runtime
+from perchd.drivers.base import open_driver
+
 ARDUPILOT, PX4 = 3, 12
 ACCEPTED, DENIED = 0, 2
 SAFE_PARAMS = {
@@ -47,6 +50,13 @@ SAFE_PARAMS = {
 """Parameters with perchd's values: failsafe (docs/safety.md), mocap to the EKF
 (docs/firmware.md)."""
 PX4_INTS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT", "EKF2_EV_CTRL", "EKF2_HGT_REF"}
+
+
+def connected(vehicle: "VehicleDouble", query: str = "", mass_kg: float = 0.5):
+    """perchd's MAVLink driver, connected to the double (query: more URI parameters)."""
+    drv = open_driver(f"{vehicle.uri}?mass={mass_kg}{query}", Runtime.real())
+    drv.connect()
+    return drv
 
 
 def bytewise(value: float) -> float:
