@@ -6,7 +6,7 @@ VISION_POSITION_ESTIMATE rather than ODOMETRY: ArduPilot takes ODOMETRY only in
 LOCAL_FRD/BODY_FRD and with a velocity perchd does not measure; both autopilots take
 VISION_POSITION_ESTIMATE as a NED position with Z-Y-X angles and a covariance.
 - Frame: the world (Z up) placed on NED by yaw0, the heading of world X
-  (perchd.sim.firmware.ned, the same rotation the harnesses use the other way).
+  (perchd.core.ned, the same rotation the harnesses use the other way).
 - Time: `usec` is the pose's measurement time on perchd's clock. ArduPilot fits any remote
   clock to its own (jitter correction); PX4 converts through TIMESYNC, which the driver
   answers on the same clock (timesync_reply), and stamps on receipt until that converged.
@@ -18,9 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from perchd.core.ned import euler_zyx, ned_quat, ned_vec
 from perchd.core.types import Pose, Vec3
-from perchd.sim.firmware.ned import ned_quat, ned_vec
-from perchd.sim.firmware.quadrotor import euler_zyx
 
 POS_STD_M = 0.01
 """[m] a mocap position's standard deviation (a rigid body in a tuned room: ~1 mm; kept

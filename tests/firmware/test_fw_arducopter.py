@@ -114,11 +114,11 @@ def pitch_lag(log: Path, truth: list[tuple[float, float, float, float, float]]) 
 
 
 def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_path):
-    from perchd.drivers.base import open_driver
     from pymavlink import mavutil  # noqa: F401 (the driver's dependency)
 
     from perchd.core.runtime import Runtime
     from perchd.core.types import Phase, Setpoint
+    from perchd.drivers.base import open_driver
     proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
@@ -226,9 +226,9 @@ def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
     import threading
 
     from fwvision import PoseFeed, climb_and_compare
-    from perchd.drivers.base import open_driver
 
     from perchd.core.runtime import Runtime
+    from perchd.drivers.base import open_driver
     from perchd.sim.firmware.ardupilot import ArduPilotParams, ArduPilotVehicle
     from perchd.sim.firmware.harness import ProcessGroup
     with ProcessGroup() as procs:

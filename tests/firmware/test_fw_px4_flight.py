@@ -23,10 +23,10 @@ import time
 from pathlib import Path
 
 import pytest
-from perchd.drivers.base import open_driver
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import Phase, Pose, Setpoint
+from perchd.drivers.base import open_driver
 from perchd.sim.firmware.harness import ProcessGroup, yaw_of
 from perchd.sim.firmware.px4 import SIH_MASS_KG, Px4Params, Px4Vehicle
 

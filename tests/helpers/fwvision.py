@@ -9,9 +9,9 @@ import threading
 import time
 from typing import Callable
 
+from perchd.core.ned import ned_vec
 from perchd.core.types import Phase, Pose, Setpoint
 from perchd.sim.firmware.harness import Truth, yaw_of
-from perchd.sim.firmware.ned import ned_vec
 
 G = 9.81
 

@@ -194,7 +194,7 @@ def test_command_line_takes_arducopter_defaults_and_frame(tmp_path):
 @pytest.mark.parametrize("yaw0", [0.0, math.pi / 2, 1.0, -2.5])
 def test_ned_undoes_the_world_rotation_at_any_yaw0(yaw0):
     """One rotation both ways: truth into the world (harnesses), mocap back to NED (driver)."""
-    from perchd.sim.firmware.ned import ned_quat, ned_vec
+    from perchd.core.ned import ned_quat, ned_vec
     from perchd.sim.plant import quaternion
     v = (0.3, -1.2, 2.0)
     assert world_vec(ned_vec(v, yaw0), yaw0) == pytest.approx(v, abs=1e-12)

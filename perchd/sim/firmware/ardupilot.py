@@ -29,6 +29,7 @@ from typing import Any, Callable
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
+from perchd.core.ned import world_quat, world_vec
 from perchd.core.types import Vec3
 from perchd.sim.firmware.harness import (
     FirmwareVehicle,
@@ -38,7 +39,6 @@ from perchd.sim.firmware.harness import (
     contact_json,
     default_log,
 )
-from perchd.sim.firmware.ned import world_quat, world_vec
 from perchd.sim.world import Contact
 
 DEG7_M = 0.011131884502145034
@@ -70,7 +70,7 @@ VISION_BOOT_PARAMS = (("VISO_TYPE", 1.0), ("GPS1_TYPE", 0.0), ("EK3_SRC1_POSXY",
 read at boot, as VISO_TYPE takes effect only then."""
 
 
-# -- truth conversion (pure; the frames are perchd.sim.firmware.ned) ---------------------
+# -- truth conversion (pure; the frames are perchd.core.ned) ---------------------
 @dataclass(frozen=True, slots=True)
 class GeoOrigin:
     """lat_e7, lon_e7 [1e-7 deg] and alt_m [m AMSL] of world position `start`."""

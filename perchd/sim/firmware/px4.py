@@ -27,6 +27,7 @@ from typing import Any
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.extras import require
+from perchd.core.ned import world_quat
 from perchd.core.types import Quat, Vec3
 from perchd.sim.firmware.cf2 import Surface
 from perchd.sim.firmware.harness import (
@@ -38,7 +39,6 @@ from perchd.sim.firmware.harness import (
     default_log,
     yaw_of,
 )
-from perchd.sim.firmware.ned import world_quat
 from perchd.sim.world import Contact
 
 EARTH_RADIUS_M = 6371000.0

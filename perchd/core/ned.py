@@ -1,7 +1,7 @@
 """Autopilot frames to perchd's and back: NED world and FRD body (MAVLink's) against a Z-up
 world and an FLU body (docs/architecture.md, frames). One rotation, used both ways: the
-ArduPilot and PX4 harnesses turn truth into mocap with it, the MAVLink driver turns mocap
-into the autopilot's vision input (drivers/mavvision.py).
+ArduPilot and PX4 harnesses (perchd/sim/firmware) turn truth into mocap with it, the
+MAVLink driver turns mocap into the autopilot's vision input (drivers/mavvision.py).
 
 A Z-up world is placed on NED by yaw0 [rad], the NED heading (from north, clockwise) of
 world X: pi about X (NED -> NWU), then yaw0 about Z. NWU is yaw0 = 0, ENU yaw0 = pi/2."""
@@ -81,3 +81,12 @@ def ned_quat(q_world_xyzw: Quat, frame: str | float) -> QuatWXYZ:
     q = quat_mul(quat_mul(conj(world_from_ned(yaw0_of(frame))), (w, x, y, z)), conj(FRD_FROM_FLU))
     return _canonical(q)
 
+
+
+def euler_zyx(q: Quat) -> Vec3:
+    """(roll, pitch, yaw) [rad] of an (x, y, z, w) quaternion, Z-Y-X order (docs/contracts.md §3)."""
+    x, y, z, w = q
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
