@@ -231,7 +231,7 @@ class TriggerConfig:
     library: str | None = None
     fallback: TriggerFallback = TriggerFallback.PLAN
     solve_max_s: float = 0.25
-    ahead_v_tol_mps: float = 0.02
+    ahead_v_tol_mps: float = 0.05
 
     def deadline_s(self, a_peak_mps2: float) -> float:
         """[s] longest wait for the trigger's replan, for a plan whose largest |acceleration|

@@ -27,12 +27,14 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from perchd.core.errors import PerchdError, PlanError
-from perchd.tau.limits import Limits
-from perchd.tau.plan import Peaks, Plan
-from perchd.tau.planfile import plan_from_json, plan_to_json
+
+# The worker imports the planner (numpy, scipy: seconds on a busy PC) only after it has
+# tied its life to the agent's (_die_with_parent).
+if TYPE_CHECKING:
+    from perchd.tau.plan import Plan
 
 START_TIMEOUT_S = 30.0
 """[s] a worker that has not answered its first line in this long is a failed start."""
@@ -56,6 +58,10 @@ class PlanReply:
 class Planner(Protocol):
     instant: bool
     """True when a reply is there by the next poll (a simulated clock): nothing to wait for."""
+
+    @property
+    def ready(self) -> bool:
+        """It can take requests now (a worker has loaded); never blocks."""
 
     def request(self, x0_m: float, v0_mps: float) -> int:
         """Ask for the plan from (x0_m, v0_mps); its id. A newer request supersedes it."""
@@ -86,6 +92,7 @@ class InlinePlanner:
     """The solve in the caller's thread; the reply is there at the next poll."""
 
     instant = True
+    ready = True
 
     def __init__(self, plan: Plan, library: Any = None) -> None:
         self.plan, self.library = plan, library
@@ -111,12 +118,15 @@ class InlinePlanner:
 
 
 def plan_to_wire(plan: Plan) -> dict:
+    from perchd.tau.planfile import plan_to_json
     return plan_to_json(plan)
 
 
 def plan_from_wire(doc: dict) -> Plan:
     """A plan the worker made, taken as sent: every float survives JSON exactly (repr), and
     re-deriving its figures (plan_from_json) would cost the loop milliseconds."""
+    from perchd.tau.limits import Limits
+    from perchd.tau.plan import Peaks, Plan
     lim = doc["limits"]
     stage1 = doc["stage1"]
     robust = doc.get("robust")
@@ -131,20 +141,22 @@ def plan_from_wire(doc: dict) -> Plan:
 class WorkerPlanner:
     """The real worker process. plan: the flight's plan (what retarget keeps); library: a
     plan library path or None; delay_s [s]: added to every solve (a slow-PC test seam);
-    instant: poll waits for the reply in hand (simulated clock)."""
+    instant: poll waits for the reply in hand (simulated clock). Starting it does not wait:
+    it loads (seconds on a busy PC) while the vehicle takes off and holds; `ready` says when
+    it has. A worker that died answers every request with why (never an exception in a tick)."""
 
     def __init__(self, plan: Plan, library: str | None = None, *, delay_s: float = 0.0,
                  instant: bool = False) -> None:
         self.instant = instant
         self._n = 0
         self._asked: int | None = None  # id of the newest request not yet answered
-        self._buf = b""
+        self._up = False  # its start line said it is ready
+        self._dead = ""  # why it can answer no more
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "perchd.flight.planner_worker"], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, close_fds=True)
-        os.set_blocking(self.proc.stdout.fileno(), False)
-        self._send({"plan": plan_to_wire(plan), "library": library, "delay_s": delay_s,
-                    "parent": os.getpid()})
+            [sys.executable, "-m", "perchd.flight.planner_worker", str(os.getpid())],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, close_fds=True)
+        self._lines = _Lines(self.proc.stdout.fileno())
+        self._send({"plan": plan_to_wire(plan), "library": library, "delay_s": delay_s})
 
     @property
     def pid(self) -> int:
@@ -154,13 +166,21 @@ class WorkerPlanner:
     def busy(self) -> bool:
         return self._asked is not None
 
+    @property
+    def ready(self) -> bool:
+        """It has loaded (or died: its requests are then answered at once with why). An
+        instant worker (simulated clock) is waited for: loading takes no simulated time."""
+        if not (self._up or self._dead):
+            self._next(START_TIMEOUT_S if self.instant else 0.0)
+        return self._up or bool(self._dead)
+
     def wait_ready(self, timeout_s: float = START_TIMEOUT_S) -> None:
-        """Block until the worker has loaded (before a flight that wants it warm)."""
-        line = self._line(timeout_s)
-        if line is None or not line.get("ready"):
-            self.close()
-            why = "no answer" if line is None else line.get("error", line)
-            raise PerchdError(f"planner worker did not start: {why}")
+        """Block until the worker has loaded; PerchdError if it cannot."""
+        deadline = time.monotonic() + timeout_s
+        while not self.ready and time.monotonic() < deadline:
+            self._next(max(0.0, deadline - time.monotonic()))
+        if self._dead or not self._up:
+            raise PerchdError(f"planner worker did not start: {self._dead or 'no answer'}")
 
     def request(self, x0_m: float, v0_mps: float) -> int:
         self._n += 1
@@ -170,17 +190,14 @@ class WorkerPlanner:
 
     def poll(self) -> PlanReply | None:
         while self._asked is not None:
-            try:
-                line = self._line(START_TIMEOUT_S if self.instant else 0.0)
-            except PerchdError as err:  # the worker died: an answer the trigger can name
-                line = {"id": self._asked, "error": str(err)}
-            if line is None:
-                if self.instant:
-                    line = {"id": self._asked, "error": "planner worker stopped answering"}
-                else:
+            line = None if self._dead else self._next(START_TIMEOUT_S if self.instant else 0.0)
+            if self._dead:
+                line = {"id": self._asked, "error": self._dead}
+            elif line is None:
+                if not self.instant:
                     return None
-            if line.get("ready") is False:  # it could not load the plan or the library
-                line = {"id": self._asked, "error": f"planner worker: {line['error']}"}
+                self._dead = "planner worker stopped answering"
+                continue
             if line.get("id") == self._asked:
                 self._asked = None
                 return _reply(line)
@@ -205,24 +222,22 @@ class WorkerPlanner:
             self.proc.stdin.write(json.dumps(doc).encode() + b"\n")
             self.proc.stdin.flush()
         except OSError as err:
-            raise PerchdError(f"planner worker gone: {err}") from None
+            self._dead = self._dead or f"planner worker gone: {err}"
 
-    def _line(self, timeout_s: float) -> dict | None:
-        """The next line from the worker, waiting up to timeout_s [s] (0: not at all)."""
-        deadline = time.monotonic() + timeout_s
-        while b"\n" not in self._buf:
-            left = max(0.0, deadline - time.monotonic())
-            ready, _, _ = select.select([self.proc.stdout], [], [], left)
-            chunk = os.read(self.proc.stdout.fileno(), 1 << 16) if ready else None
-            if chunk == b"":
-                raise PerchdError(f"planner worker exited ({self.proc.poll()})")
-            if chunk is None:
-                if left <= 0.0:
-                    return None
-                continue
-            self._buf += chunk
-        line, self._buf = self._buf.split(b"\n", 1)
-        return json.loads(line)
+    def _next(self, timeout_s: float) -> dict | None:
+        """The next reply line within timeout_s [s], or None; its start line is noted on the
+        way, and so is its death."""
+        while not self._dead:
+            try:
+                line = self._lines.line(timeout_s)
+            except EOFError:
+                self._dead = f"planner worker exited (status {self.proc.poll()})"
+                return None
+            if line is None or "ready" not in line:
+                return line
+            self._up = bool(line["ready"])
+            self._dead = "" if self._up else f"planner worker: {line.get('error')}"
+        return None
 
 
 def _reply(doc: dict) -> PlanReply:
@@ -249,14 +264,47 @@ def _emit(doc: dict) -> None:
     sys.stdout.flush()
 
 
-def main() -> int:
-    """The worker: one start line (plan, library, delay), then a reply per request line,
-    until its stdin closes."""
+class _Lines:
+    """JSON lines read from a pipe's descriptor, never more than is there."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd, self.buf = fd, b""
+
+    def line(self, timeout_s: float | None = None) -> dict | None:
+        """The next line, waiting up to timeout_s [s] (None: for ever; 0: not at all), None
+        if none came; EOFError once the other end has closed."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while b"\n" not in self.buf:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            if not select.select([self.fd], [], [], left)[0]:
+                return None
+            chunk = os.read(self.fd, 1 << 16)
+            if not chunk:
+                raise EOFError
+            self.buf += chunk
+        line, self.buf = self.buf.split(b"\n", 1)
+        return json.loads(line)
+
+    def newest(self) -> dict:
+        """The next line, skipping to the last one already sent: requests that queued up
+        while the worker solved are superseded (only the newest is of use to the trigger)."""
+        doc = self.line()
+        while (nxt := self.line(0.0)) is not None:
+            doc = nxt
+        return doc
+
+
+def main(argv: list[str]) -> int:
+    """The worker (argv: the agent's pid): one start line (plan, library, delay), then a
+    reply per request line, until its stdin closes."""
+    _die_with_parent(int(argv[0]))
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C is the agent's to handle
-    first = json.loads(sys.stdin.readline() or "null")
-    if first is None:
+    requests = _Lines(sys.stdin.fileno())
+    try:
+        first = requests.line()
+    except EOFError:
         return 0
-    _die_with_parent(first["parent"])
+    from perchd.tau.planfile import plan_from_json
     try:
         plan = plan_from_json(first["plan"])
         library = None
@@ -269,16 +317,18 @@ def main() -> int:
     solve(plan, plan.x0, plan.v0, library)  # warm: the first solve pays for imports
     _emit({"ready": True, "pid": os.getpid()})
     delay = float(first.get("delay_s", 0.0))
-    for line in sys.stdin:
-        req = json.loads(line)
+    while True:
+        try:
+            req = requests.newest()
+        except EOFError:  # the agent closed its end, or died
+            return 0
         out, why, took = solve(plan, req["x0"], req["v0"], library)
         if delay > 0.0:
             time.sleep(delay)
             took += delay
         _emit({"id": req["id"], "x0": req["x0"], "v0": req["v0"], "error": why,
                "solve_s": took, "plan": None if out is None else plan_to_wire(out)})
-    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(sys.argv[1:]))

@@ -186,10 +186,14 @@ class Supervisor:
         self.planner: Planner | None = planner
         if planner is None and cfg.trigger.policy in _RETARGETS:
             self.planner = InlinePlanner(plan, self._library)
-        self._ahead: Plan | None = None  # the newest plan made ahead for the trigger
-        self._ahead_asked_v: float | None = None  # [m/s] speed of the newest request ahead
+        # The newest plan made ahead for the trigger, and the speed [m/s] last asked for: a
+        # REPLAN flight's own plan is the one for (x0, v0) until the prediction drifts.
+        replan = cfg.trigger.policy is TriggerPolicy.REPLAN
+        self._ahead: Plan | None = plan if replan else None
+        self._ahead_asked_v: float | None = plan.v0 if replan else None
         self._v_err = 0.0  # [m/s] low-passed approach speed error (measured - profile)
         self._wait: ReplanWait | None = None
+        self._planner_waiting = False
         self._late_id: int | None = None  # a replan given up on, still solving (logged when in)
         self.hover = HoverLearner(cfg.hover, cfg.vehicle.hover_guess_n, cfg.vehicle.g)
         self.hover_learned_n: float | None = None  # [N] once the hold's estimate settled
@@ -335,7 +339,7 @@ class Supervisor:
             self._enter(Phase.HOLD, t)
         self._learn_hover(t, dt, st)
         if self.phase is Phase.HOLD and t - self._t_phase >= self.cfg.approach.hold_s \
-                and self._hover_ready(t, st):
+                and self._hover_ready(t, st) and self._planner_ready(t):
             self._begin_approach(t, st)
         if self.end is not None:
             return self._ended(t, st)
@@ -480,6 +484,18 @@ class Supervisor:
             "since_hold_s": t - self._t_phase}))
         return True
 
+    def _planner_ready(self, t: float) -> bool:
+        """The approach waits in the hold for the trigger's planner to have loaded (a worker
+        process takes seconds on a busy PC), or it could not plan ahead; the flight's
+        timeout bounds the wait."""
+        if self.planner is None or self.planner.ready:
+            return True
+        if not self._planner_waiting:
+            self._planner_waiting = True
+            self.events.append(LogEvent(t, "planner-wait", "waiting for the planner worker "
+                                        "to load before the approach"))
+        return False
+
     # --- the trigger and its plans (docs/architecture.md "Planning in flight") -------------
     def _approach_plans(self, t: float, dt: float, st: State) -> None:
         """Per approach tick: plan ahead, trigger at x0, or wait for the trigger's replan."""
@@ -492,7 +508,7 @@ class Supervisor:
 
     def _plan_ahead(self, dt: float, st: State) -> None:
         """Keep a plan ready for the predicted trigger state (x0, v0 + the approach's speed
-        error, low-passed): asked again only when the prediction drifts by more than
+        error, low-passed): asked again only when the prediction drifts by more than half
         ahead_v_tol_mps from the last one asked for. Needs a planner that takes time."""
         if self.planner is None or self.planner.instant:
             return
@@ -503,8 +519,10 @@ class Supervisor:
         self._v_err += (err - self._v_err) * min(1.0, dt / AHEAD_FILTER_S)
         v_pred = self.plan.v0 + self._v_err
         asked = self._ahead_asked_v
+        # Re-asked at half the tolerance the trigger accepts: the other half is for the
+        # drift between the newest plan and the trigger.
         if not self.planner.busy and (asked is None or abs(v_pred - asked) >
-                                      self.cfg.trigger.ahead_v_tol_mps):
+                                      0.5 * self.cfg.trigger.ahead_v_tol_mps):
             self._ahead_asked_v = v_pred
             self.planner.request(self.plan.x0, v_pred)
 
