@@ -2,6 +2,7 @@
 planner worker (docs/architecture.md "Planning in flight").
 
     python benchmarks/trigger.py [--flights N] [--hogs H] [--library] [--json]
+    python benchmarks/trigger.py --thread
 
 Each flight is a real-time perch of the simulated vehicle (sim:// on the real clock, in this
 process; 1 N per m/s and kg of drag and 20 ms command latency, so the approach ends short of
@@ -11,6 +12,9 @@ perchd did before the worker); "worker": the default, a planner worker process. 
 mode, without and with H CPU-bound processes beside the flight: ticks missed and the longest
 tick (compute) from 0.2 s before to 0.5 s after the trigger, the whole flight's overruns and
 missed deadlines, and how the trigger got its plan. The load average is printed with them.
+
+--thread: why a process and not a thread: a 100 Hz sleep loop's lateness alone, then with
+five cold solves in a thread of the same process (they hold the GIL most of the time).
 """
 
 from __future__ import annotations
@@ -22,6 +26,8 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 from pathlib import Path
 from typing import Iterator
 
@@ -30,7 +36,7 @@ from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
 from perchd.flight.planner_worker import InlinePlanner
 from perchd.logs.flightlog import read_log
 from perchd.sim.session import open_session
-from perchd.tau import load_plan
+from perchd.tau import load_plan, retarget
 from perchd.tau.library import load_library
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -90,13 +96,52 @@ def run(flights: int, n_hogs: int, library: bool) -> list[dict]:
     return out
 
 
+def lateness(period: float, stop: threading.Event | None, seconds: float = 2.0) -> list[float]:
+    """[s] how late each tick of a `period` sleep loop woke, until `stop` (or `seconds`)."""
+    late, t0, k = [], time.perf_counter(), 0
+    while (not stop.is_set()) if stop else time.perf_counter() - t0 < seconds:
+        k += 1
+        due = t0 + k * period
+        while (left := due - time.perf_counter()) > 0:
+            time.sleep(left)
+        late.append(time.perf_counter() - due)
+    return sorted(late)
+
+
+def thread_figure() -> None:
+    plan = load_plan(PLAN)
+    retarget(plan, -3.0, 1.45)  # imports and first-call costs out of the way
+    done = threading.Event()
+
+    def solve() -> None:
+        for v in (1.40, 1.42, 1.44, 1.46, 1.48):
+            retarget(plan, -3.0, v)
+        done.set()
+    alone = lateness(0.01, None)
+    worker = threading.Thread(target=solve)
+    worker.start()
+    shared = lateness(0.01, done)
+    worker.join()
+    for name, late in (("100 Hz loop alone", alone), ("with a solver thread", shared)):
+        n = len(late)
+        print(f"{name:<22} ticks {n:4d}  lateness median {1e3 * late[n // 2]:6.2f} ms  "
+              f"p99 {1e3 * late[int(0.99 * n)]:6.2f} ms  max {1e3 * late[-1]:6.2f} ms  "
+              f"later than a period: {sum(x > 0.01 for x in late)}")
+    print(f"load average {os.getloadavg()[0]:.2f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--flights", type=int, default=3, help="flights per mode and load (3)")
     ap.add_argument("--hogs", type=int, default=3, help="CPU-bound processes beside (3)")
     ap.add_argument("--library", action="store_true", help="replan from the plan library")
     ap.add_argument("--json", action="store_true", help="one JSON object per flight")
+    ap.add_argument("--thread", action="store_true",
+                    help="only the loop's lateness beside a solver thread in its process")
     args = ap.parse_args(argv)
+    if args.thread:
+        thread_figure()
+        return 0
     rows = run(args.flights, args.hogs, args.library)
     if args.json:
         for row in rows:

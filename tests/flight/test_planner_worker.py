@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from simflight import NOISY, PLANS, Sim
 from ticks import wait_for
 
 from perchd.core.clock import MonotonicClock
-from perchd.core.types import EndReason
+from perchd.core.types import EndReason, Phase, Setpoint
 from perchd.flight.config import (
     FlightConfig,
     TriggerConfig,
@@ -245,3 +246,76 @@ def test_the_worker_does_not_outlive_perchd_fly_killed_mid_flight(tmp_path, sig)
     finally:
         sim.kill()
         sim.communicate()
+
+
+# ------------------------------------------------------------- over MAVLink, PX4-like
+
+class MavlinkBridge:
+    """A PX4-like autopilot on loopback (the MAVLink double, pymavlink at both ends) whose
+    attitude targets fly the simulated vehicle: each new SET_ATTITUDE_TARGET is decoded
+    (roll, pitch; thrust through MPC_THR_HOVER, as tests/helpers/rigs.py does) and handed to
+    a SimWorld on the real clock, whose mocap the agent reads."""
+
+    def __init__(self, yaw_rad: float) -> None:
+        from mavlink_double import PX4, VehicleDouble
+        self.peer = VehicleDouble(PX4, airborne=True)
+        self.hover = self.peer.params["MPC_THR_HOVER"]
+        self.session = open_session("sim://", clock=MonotonicClock())
+        self.world = self.session.world
+        self.mass = self.world.params.plant.mass_kg
+        self.yaw = yaw_rad
+        self._seen = 0
+        self._on = True
+        self._thread = threading.Thread(target=self._relay, daemon=True)
+        self._thread.start()
+
+    def _relay(self) -> None:
+        from pymavlink.quaternion import Quaternion
+        while self._on:
+            targets = self.peer.targets
+            if len(targets) > self._seen:
+                self._seen = len(targets)
+                t = targets[-1]
+                roll, pitch, _ = Quaternion(list(t.q)).euler
+                thrust = t.thrust * self.mass * 9.81 / self.hover
+                self.world.command(Setpoint(time.monotonic(), roll, -pitch, self.yaw, thrust,
+                                            -1, Phase.HOLD))
+            time.sleep(0.001)
+
+    def close(self) -> None:
+        self._on = False
+        self._thread.join()
+        self.peer.close()
+        self.session.close()
+
+
+def test_over_mavlink_a_px4_like_vehicle_misses_no_tick_at_the_replan(tmp_path):
+    """`perchd fly --driver mavlink:...` with policy replan and a solve that cannot be in
+    by the deadline: the loop keeps its ticks at the trigger, over real MAVLink."""
+    from perchd.drivers.base import open_driver
+    from perchd.flight.frame import PerchFrame
+    from perchd.flight.run import fly
+    from perchd.mocap.base import open_source
+    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN, ahead_v_tol_mps=0.0))
+    frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
+    rig = MavlinkBridge(frame.yaw_facing)
+    try:
+        driver = open_driver(f"{rig.peer.uri}?mass={rig.mass}", rig.session.runtime)
+        driver.connect()
+        source = open_source("sim://", rig.session.runtime)
+        source.start()
+        slow = WorkerPlanner(PLAN, delay_s=SLOW_S)
+        try:
+            res = fly(PLAN, driver, source, rig.session.clock, tmp_path / "f.jsonl", cfg,
+                      planner=slow)
+        finally:
+            driver.close()
+            source.close()
+    finally:
+        rig.close()
+    log = read_log(res.log)
+    wait = next(e for e in log.events if e.kind == "trigger-wait")
+    fell = next(e for e in log.events if e.kind == "trigger-fallback")
+    assert res.outcome in (EndReason.CONTACT, EndReason.TRIGGER_REFUSED), res.detail
+    assert_no_tick_held_up(log, wait.t - 0.2, fell.t + 0.2, 1.0 / cfg.rate_hz)
+    assert not alive(slow.pid)
