@@ -11,7 +11,10 @@ End rules, checked in this order on every tick: operator abort, signal, stale mo
 link, geofence, tilt, speed limit, tau divergence, deadline overrun streak, timeout, contact,
 plan complete. The trigger itself may end the flight (TRIGGER_REFUSED): a plan is never
 flown from a state it was not made for, except within the configured tolerance (REFUSE
-policy) or after being retargeted to the measured state (ROBUST, REPLAN).
+policy) or after being retargeted to the measured state (ROBUST, REPLAN): by a planner
+that never blocks the tick, planned ahead during the approach, waited for no longer than a
+deadline and replaced by the configured fallback past it (docs/architecture.md "Planning in
+flight").
 """
 
 from __future__ import annotations

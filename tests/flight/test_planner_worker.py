@@ -72,18 +72,22 @@ def real_time_flight(tmp_path: Path, cfg: FlightConfig, planner=None, uri: str =
     return session, session.fly(PLAN, tmp_path / "f.jsonl", cfg, planner=planner, **kw)
 
 
+HELD_S = 0.05
+"""[s] a tick this long was held up: a solve in the tick takes 60 ms at the very least (a
+cold order-3 solve on an idle PC; a library replan beside busy programs: benchmarks/README.md)."""
+
+
 def assert_no_tick_held_up(log, t0: float, t1: float, period: float) -> None:
-    """Between t0 and t1 [s] no tick took a period, and every deadline skipped was skipped
-    because the tick after it woke late (this shared machine's scheduling: docs/safety.md's
-    loop rows), never because the tick before it was busy. A solve in the tick would be one
-    tick of 60 ms or more, and the ticks after it missed."""
-    later = [r for r in log.rows if r.t > t1][:1]  # a tick held up shows in the row after
+    """Between t0 and t1 [s] every tick ran, and none was held up. A deadline may still be
+    skipped here when this shared machine preempts the loop's process (a late wake-up, a
+    tick stretched past its period by the test's own threads: docs/safety.md's loop rows);
+    a solve in the tick would be one tick of HELD_S or more and the deadlines after it."""
+    later = [r for r in log.rows if r.t > t1][:1]  # a row carries the tick before it's time
     rows = [r for r in log.rows if t0 <= r.t <= t1] + later
     assert len(rows) > 0.5 * (t1 - t0) / period
-    assert max(r.compute_s for r in rows) < period
-    for before, after in zip(rows, rows[1:]):
-        if after.k != before.k + 1:
-            assert after.jitter_s >= period * (after.k - before.k - 1)
+    assert max(r.compute_s for r in rows) < HELD_S
+    skipped = sum(b.k - a.k - 1 for a, b in zip(rows, rows[1:]))
+    assert skipped * period < HELD_S
 
 
 # ------------------------------------------------------------------ real time: the deadline
@@ -319,3 +323,20 @@ def test_over_mavlink_a_px4_like_vehicle_misses_no_tick_at_the_replan(tmp_path):
     assert res.outcome in (EndReason.CONTACT, EndReason.TRIGGER_REFUSED), res.detail
     assert_no_tick_held_up(log, wait.t - 0.2, fell.t + 0.2, 1.0 / cfg.rate_hz)
     assert not alive(slow.pid)
+
+
+def test_the_trigger_keys_are_read_from_the_config_file_and_bad_ones_named():
+    from perchd.core.errors import ConfigError
+    from perchd.service.config import config_from_dict
+    doc = {"version": 1, "trigger": {"policy": "replan", "fallback": "refuse",
+                                     "solve_max_s": 0.05, "ahead_v_tol_mps": 0.03}}
+    tr = config_from_dict(doc).flight.trigger
+    assert (tr.fallback, tr.solve_max_s, tr.ahead_v_tol_mps) == (TriggerFallback.REFUSE, 0.05,
+                                                                 0.03)
+    a = PLAN.peaks.a
+    assert tr.deadline_s(a) == 0.05  # the cap, under v_tol_mps / a
+    assert TriggerConfig().deadline_s(a) == pytest.approx(min(0.10 / a, (2 * 0.05 / a) ** 0.5))
+    with pytest.raises(ConfigError, match=r"\[trigger\] fallback: expected 'plan' or 'refuse'"):
+        config_from_dict({"version": 1, "trigger": {"fallback": "fly"}})
+    with pytest.raises(ConfigError, match=r"trigger.solve_max_s = -1 is below 0"):
+        config_from_dict({"version": 1, "trigger": {"solve_max_s": -1}})
