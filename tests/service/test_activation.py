@@ -7,17 +7,10 @@ import signal
 import socket
 
 import pytest
-from svc import NotifyListener, Serve, ctl
+from svc import Serve, ctl
 
 from perchd.core.errors import ConfigError
 from perchd.service.activation import activated_socket
-
-
-@pytest.fixture
-def notify(tmp_path):
-    n = NotifyListener(tmp_path / "notify")
-    yield n
-    n.close()
 
 
 def listening_unix(path) -> socket.socket:

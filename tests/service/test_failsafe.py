@@ -117,10 +117,10 @@ def test_crazyflie_whose_keeper_still_holds_the_link_is_left_to_it(responder):
     def alive() -> None:  # the driver's alive message; without it the keeper lands at once
         while not agent.wait(0.02):
             ours.send(b"A")
+    threading.Thread(target=alive, daemon=True).start()  # from the start, as the driver's
     try:
         ours.settimeout(15)
         assert ours.recv(64)[:1] == b"R"  # the keeper has the link open
-        threading.Thread(target=alive, daemon=True).start()
         done = failsafe("--driver", responder.uri)
         stops = len(responder.stops())
         assert keeper.poll() is None  # it held the link throughout

@@ -10,13 +10,6 @@ from svc import PLAN, NotifyListener, Serve, ctl
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture
-def notify(tmp_path):
-    n = NotifyListener(tmp_path / "notify")
-    yield n
-    n.close()
-
-
 def monotonic_usec() -> int:
     return time.clock_gettime_ns(time.CLOCK_MONOTONIC) // 1000
 
