@@ -83,7 +83,7 @@ def ctl(sock: Path, *args: str) -> dict:
 
 
 ACTIVATE = ("import os, sys; os.dup2(int(sys.argv[1]), 3); "
-            "os.environ['LISTEN_PID'] = str(os.getpid()); os.execv(sys.argv[2], sys.argv[2:])")
+            "os.environ['LISTEN_PID'] = str(os.getpid()); os.execvp(sys.argv[2], sys.argv[2:])")
 """What systemd does between fork and exec for socket activation: the socket at fd 3 and
 LISTEN_PID set to the pid that exec keeps (sd_listen_fds(3))."""
 
