@@ -1,6 +1,9 @@
-"""`perchd failsafe [--config perchd.toml] [--driver URI] [--timeout S]`: make the
-service's vehicle safe once `perchd serve` has stopped or died (the units' ExecStopPost=).
-One line on what it did; exit 0 when done or when there was nothing to do (docs/safety.md)."""
+"""`perchd failsafe`: make the service's vehicle safe after `perchd serve` stopped or died.
+
+`perchd failsafe [--config perchd.toml] [--driver URI] [--timeout S]`, the units'
+ExecStopPost=. One line on what it did; exit 0 when done, when there was nothing to do, or
+after a clean stop ($SERVICE_RESULT=success); 1 when the vehicle was out of reach
+(docs/safety.md, "When the service stops or dies")."""
 
 from __future__ import annotations
 
