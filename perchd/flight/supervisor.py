@@ -37,6 +37,7 @@ from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner
 from perchd.flight.planner_worker import InlinePlanner, Planner, PlanReply
 from perchd.flight.planrefs import PlanSampler
+from perchd.flight.takeoff import TakeoffProfile
 from perchd.logs.flightlog import LogEvent
 from perchd.tau.library import load_library
 from perchd.tau.plan import Plan
@@ -181,6 +182,7 @@ class Supervisor:
         self._hold_x: AxisController | None = None  # the X position loop of the hold
         self._t_moving = 0.0  # [s] when the approach began moving the vehicle
         self._z_ref = 0.0
+        self._takeoff: TakeoffProfile | None = None  # the TAKEOFF phase's height reference
         self._a_app = 0.0
         self._x: float | None = None  # [m] measured X of the tick in hand
         self._sampler = PlanSampler(plan)
@@ -338,7 +340,7 @@ class Supervisor:
     def _fly(self, t: float, dt: float, st: State) -> TickReport:
         if self.phase is Phase.IDLE:
             self._start(t, st)
-        if self.phase is Phase.TAKEOFF and st.z >= self._z_ref - 0.05:
+        if self.phase is Phase.TAKEOFF and self._takeoff.done and st.z >= self._z_ref - 0.05:
             self._enter(Phase.HOLD, t)
         self._learn_hover(t, dt, st)
         if self.phase is Phase.HOLD and t - self._t_phase >= self.cfg.approach.hold_s \
@@ -373,13 +375,14 @@ class Supervisor:
             ux = self._approach_accel(st, dt)
         else:
             ux = self._hold_x.step(self._hold[0], st.x, st.xdot, dt, self.ctl.saturated)
-            if self.phase is Phase.TAKEOFF:
-                vz_ref = self.cfg.approach.takeoff_speed_mps
-        z_ref = self._z_ref
+        z_ref, az_ref = self._z_ref, 0.0
         if self.phase is Phase.TAKEOFF:
-            z_ref = min(self._z_ref, self._hold[2] + vz_ref * (t - self._t_phase))
+            ref = self._takeoff.step(dt, st.z)
+            z_ref, vz_ref, az_ref = ref.z, ref.vz, ref.az
         uy, uz = self.ctl.lateral(st, self._hold[1], z_ref, dt, vz_ref)
-        u = (ux, uy, uz)
+        if self.phase is Phase.TAKEOFF and not self._takeoff.lifted:
+            self.ctl.z.pid.integral = 0.0  # the ground carries the deficit: nothing to learn
+        u = (ux, uy, uz + az_ref)
         sp = self.ctl.setpoint(u, t, st.pose_seq, self.phase)
         return TickReport(self.phase, sp, None, False, refs, u, e)
 
@@ -401,6 +404,8 @@ class Supervisor:
         height = self.frame.point[2] + start_world[2]
         climb = self.cfg.approach.takeoff_height_m - height
         self._z_ref = st.z + climb if climb > 0.1 else st.z
+        if climb > 0.1:  # perchd/flight/takeoff.py: held until off the ground, never ahead
+            self._takeoff = TakeoffProfile(st.z, self._z_ref, self.cfg.approach.takeoff_speed_mps)
         self._enter(Phase.TAKEOFF if climb > 0.1 else Phase.HOLD, t, "", x=st.x, y=st.y, z=st.z)
 
     def _begin_approach(self, t: float, st: State) -> None:

@@ -4,7 +4,10 @@ The onboard attitude controller is modelled as a first-order response of roll, p
 to their setpoints (time constant attitude_tau_s), the motors as a first-order lag of the
 collective thrust (motor_tau_s) clamped to 0..thrust_max_n, and the radio as a pure delay
 (latency_s) before a setpoint reaches the vehicle. Translational dynamics are rigid-body with
-optional linear drag. The floor (world z = 0) stops a falling vehicle. Pure Python floats:
+optional linear drag. The floor (world z = 0) stops a falling vehicle; with stick_s > 0 it
+also holds a vehicle standing on it until its thrust has lifted for that long (an
+autopilot's land detector and motor spool-up: ArduCopter SITL sits ~0.7 s at 1.1 x its
+hover thrust, then surges). Pure Python floats:
 a 1 ms step costs a few microseconds, so simulated seconds take milliseconds.
 """
 
@@ -24,7 +27,8 @@ class PlantParams:
     """mass_kg [kg] (30 g Crazyflie 2.0 with markers); thrust_max_n [N] collective (four CF2.0
     motors give about 0.6 N); attitude_tau_s, motor_tau_s [s] first-order time constants;
     latency_s [s] command delay; drag_per_s [1/s] linear drag coefficient; g [m/s^2];
-    step_s [s] integration step."""
+    step_s [s] integration step; stick_s [s] on the floor, how long the thrust must lift
+    (exceed the weight) before the vehicle leaves it (0: at once)."""
 
     mass_kg: float = CRAZYFLIE_MASS_KG
     thrust_max_n: float = 0.60
@@ -34,6 +38,7 @@ class PlantParams:
     drag_per_s: float = 0.0
     g: float = G_M_S2
     step_s: float = 0.001
+    stick_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,6 +78,7 @@ class Plant:
         self.applied: Setpoint | None = None
         self._queue: deque[tuple[float, Setpoint]] = deque()
         self.frozen = False
+        self._lifting_s = 0.0  # [s] the thrust has lifted while on the floor (stick_s)
 
     def command(self, sp: Setpoint, now: float) -> None:
         """The setpoint reaches the vehicle latency_s after `now`."""
@@ -116,9 +122,18 @@ class Plant:
         f = self.thrust / prm.mass_kg
         acc = [f * bz[0] - prm.drag_per_s * self.v[0], f * bz[1] - prm.drag_per_s * self.v[1],
                f * bz[2] - prm.g - prm.drag_per_s * self.v[2]]
+        if self._stuck(acc[2], dt):
+            return
         for i in range(3):
             self.v[i] += acc[i] * dt
             self.p[i] += self.v[i] * dt
         if self.p[2] <= 0.0 and self.v[2] <= 0.0:  # on the floor
             self.p[2] = 0.0
             self.v = [0.0, 0.0, 0.0]
+
+    def _stuck(self, az: float, dt: float) -> bool:
+        """On the floor, held there until an upward az [m/s^2] has lasted stick_s."""
+        if self.params.stick_s <= 0.0 or self.p[2] > 0.0:
+            return False
+        self._lifting_s = self._lifting_s + dt if az > 0.0 else 0.0
+        return self._lifting_s < self.params.stick_s
