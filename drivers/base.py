@@ -1,20 +1,43 @@
-"""The Driver protocol, its context-manager base, and the explicit registry of URI schemes."""
+"""The Driver protocol, its context-manager base, and the explicit registry of URI schemes.
+
+A driver takes a vehicle in two steps (docs/architecture.md "Connect and engage"): connect()
+opens the link and checks the vehicle, and may refuse it, before anything moves; engage()
+takes control for one flight, and is called by the flight (flight/run.py) once poses flow.
+A service connects at start-up and engages per flight, so an idle service leaves the
+vehicle as it found it.
+"""
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Callable, Protocol
 
 from perchd.core.errors import ConfigError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Registry
 
+PoseFeed = Callable[[], "Pose | None"]
+"""The flight's newest pose (PoseSource.latest), read by a driver while engage() waits."""
+
+
+def no_poses() -> None:
+    """A PoseFeed with nothing to give (a driver engaged outside a flight)."""
+
 
 class Driver(Protocol):
     uri: str
 
     def connect(self) -> None:
-        """Open the link and make the vehicle ready for setpoints; raises LinkError."""
+        """Open the link, identify the vehicle and check its set-up; raises LinkError, or
+        ConfigError for a vehicle set up unsafely. Changes nothing on the vehicle: no mode,
+        no arming, no setpoint."""
+
+    def engage(self, poses: PoseFeed = no_poses) -> None:
+        """Take control for one flight: whatever the vehicle needs before the loop's first
+        setpoint (an autopilot's offboard mode, arming, spool-up). While it waits it forwards
+        each new pose from `poses` through observe_pose (an autopilot's EKF may need mocap
+        before it arms). Called once per flight, so a flight after a failsafe takes the
+        vehicle anew; raises LinkError when the vehicle will not be taken."""
 
     def send(self, setpoint: Setpoint) -> None:
         """Hand one SI setpoint to the vehicle (never blocks for long)."""
@@ -47,11 +70,17 @@ class DriverBase:
     """Context-manager plumbing shared by the drivers: `with open_driver(...) as d:`."""
 
     def __enter__(self):
+        """Connected and engaged: ready to fly setpoints."""
         self.connect()
+        self.engage()
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def engage(self, poses: PoseFeed = no_poses) -> None:
+        """Links whose connect already hands the vehicle its setpoints (sim://, zmq://, the
+        Crazyflie) have nothing more to take."""
 
     def observe_pose(self, pose: Pose) -> None:
         """Most links have no use for the pose."""

@@ -26,14 +26,20 @@ first partner (PX4) answers only that one: give it a fixed one with `sport=` (or
 - vision=0: do not forward mocap to the autopilot nor check its external-navigation setup
   (a vehicle that has its own position source, e.g. GPS outdoors or in SITL).
 
-Parameters (drivers/mavparams.py) are read at connect: a vehicle that would keep flying a
-dead agent's setpoint, or fly home (docs/safety.md, "Autopilot failsafe parameters"), whose
-attitude controller boosts thrust with tilt again (ArduPilot ATC_ANGLE_BOOST), or whose EKF
-does not take the mocap (docs/firmware.md, "Mocap to the autopilot") is refused by name.
+connect() changes nothing on the vehicle: it hears its heartbeat, asks for the messages the
+driver reads and checks its parameters (drivers/mavparams.py): a vehicle that would keep
+flying a dead agent's setpoint, or fly home (docs/safety.md, "Autopilot failsafe
+parameters"), whose attitude controller boosts thrust with tilt again (ArduPilot
+ATC_ANGLE_BOOST), or whose EKF does not take the mocap (docs/firmware.md, "Mocap to the
+autopilot") is refused by name there. engage(), once per flight, takes it: level at its
+heading, the offboard mode, arming (arm=1), the spool-up; the flight's poses go to the EKF
+meanwhile. Until then perchd's heartbeat is all the vehicle hears, and a failsafe before
+it commands nothing (the vehicle is not perchd's to land).
 Each pose the flight uses goes to the autopilot as VISION_POSITION_ESTIMATE
-(drivers/mavvision.py), so its own failsafe can hold or land in place.
+(drivers/mavvision.py), so its own failsafe can hold or land in place; an EKF on mocap alone
+refuses to arm until it has some, so engage() asks again every ARM_RETRY_S within `wait`.
 ArduCopter armed on the ground is held at a fraction of the hover thrust until its motors
-have spooled up (ATTITUDE_TARGET shows the thrust applied); connect() returns then.
+have spooled up (ATTITUDE_TARGET shows the thrust applied); engage() returns then.
 Taking over a vehicle in the air (armed, not landed) streams level at its current heading
 with the hover thrust, never zero thrust, and flies as soon as the mode switch is
 acknowledged (COMMAND_ACK ACCEPTED), not at the next 1 Hz heartbeat.
@@ -63,7 +69,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, split_query
-from perchd.drivers.base import DriverBase, agreed_mass
+from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
 from perchd.drivers.mavparams import (
     ARDUPILOT,
     PX4,
@@ -112,6 +118,9 @@ SPOOL_FRACTION = 0.25
 below lift-off) until ATTITUDE_TARGET shows the thrust applied, i.e. the motors have spooled
 up (MOT_SAFE_TIME + MOT_SPOOL_TIME, ~1.5 s) and it left its landed state. Before that it
 flies thrust 0 whatever is sent, and a take-off ramp started meanwhile winds up."""
+ARM_RETRY_S = 0.5
+"""[s] an arming refused while mocap flows to an EKF that needs it is asked again this often
+(ArduPilot on ExternalNav alone has no position or heading until the poses come)."""
 MODE_CONFIRM_S = 1.5
 """[s] after an acknowledged mode switch a heartbeat still showing the old mode is one sent
 before the switch (heartbeats come at 1 Hz); past this the vehicle really is elsewhere."""
@@ -315,6 +324,9 @@ class MavlinkDriver(DriverBase):
         self._armed_at_land = False
         self.failsafe_reasons: list[EndReason] = []
         self._airborne_before_arm = False
+        self._engaged = False  # the offboard mode has been asked for: the vehicle is ours
+        self._poses: PoseFeed = no_poses  # engage()'s pose feed, read while it waits
+        self._pumped_seq: int | None = None  # the newest pose engage() forwarded
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -326,7 +338,7 @@ class MavlinkDriver(DriverBase):
             bind_source_port(self._conn, self.sport, self.uri)
         if self.device.startswith("udpout:"):
             watch_refusals(self._conn, self._on_refused)
-        self._stopped = False
+        self._stopped = self._engaged = False
         self._tickers = [Ticker(0.0, self._receive, "mavlink-receive").start(),
                          Ticker(KEEPALIVE_S / 2, self._keepalive, "mavlink-keepalive").start()]
         try:
@@ -334,6 +346,25 @@ class MavlinkDriver(DriverBase):
         except BaseException:
             self._release()
             raise
+
+    def engage(self, poses: PoseFeed = no_poses) -> None:
+        """Take the vehicle for one flight: level at its heading, the offboard mode, arming
+        (arm=1) and, on the ground, the spool-up; each new pose from `poses` goes to the EKF
+        while it waits. A failsafe's LAND still repeating is called off: a new flight was
+        asked for."""
+        if self._conn is None or self.model is None:
+            raise LinkError(f"{self.uri}: engage() before connect()")
+        self._poses, self._stopped, self._land_until = poses, False, 0.0
+        try:
+            self._prestream()
+            self._engaged = True
+            self._switch_mode()
+            if self.arm:
+                self._arm()
+                if self.autopilot == ARDUPILOT and not self._airborne_before_arm:
+                    self._spool_up()
+        finally:
+            self._poses = no_poses
 
     def send(self, setpoint: Setpoint) -> None:
         if self._stopped or self._conn is None or self.model is None:
@@ -392,7 +423,7 @@ class MavlinkDriver(DriverBase):
     def close(self) -> None:
         if self._conn is None:
             return
-        if not self._stopped and self._flight_mode is not None:
+        if not self._stopped and self._engaged:
             self._land()
         self._release()
 
@@ -432,12 +463,6 @@ class MavlinkDriver(DriverBase):
             self.model = NormalisedThrust(self.mass_kg, hover)
         except ValueError as err:
             raise ConfigError(f"{self.uri}: {err}") from None
-        self._prestream()
-        self._switch_mode()
-        if self.arm:
-            self._arm()
-            if self.autopilot == ARDUPILOT and not self._airborne_before_arm:
-                self._spool_up()
 
     def _prestream(self) -> None:
         """Level at the vehicle's current heading until the loop runs: in the air with the
@@ -452,7 +477,7 @@ class MavlinkDriver(DriverBase):
                  math.degrees(self._level_yaw), thrust)
         self._send_target(level_ned(self._level_yaw), thrust)
         if self.autopilot == PX4:
-            time.sleep(PX4_PRESTREAM_S)  # the keep-alive streams meanwhile
+            self._pause(PX4_PRESTREAM_S)  # the keep-alive streams meanwhile
 
     def _airborne(self) -> bool:
         """Armed and not known to be on the ground (EXTENDED_SYS_STATE, when it streams)."""
@@ -484,12 +509,23 @@ class MavlinkDriver(DriverBase):
         return self._mode_seen or time.monotonic() - self._switched_at > MODE_CONFIRM_S
 
     def _arm(self) -> None:
-        self._acks.pop(CMD_ARM, None)
-        self._command(CMD_ARM, 1)
-        self._await(lambda: self._armed or self._acks.get(CMD_ARM, 0) not in (0, 5), "arming")
-        if not self._armed:
-            raise LinkError(f"{self.uri}: the vehicle refused to arm "
-                            f"(MAV_RESULT {self._acks.get(CMD_ARM)})")
+        """Arm; with vision on, a refusal is asked again every ARM_RETRY_S until `wait` has
+        passed, while the poses flow (an EKF on mocap alone cannot arm before it has them)."""
+        deadline = time.monotonic() + self.wait
+        while True:
+            self._acks.pop(CMD_ARM, None)
+            self._command(CMD_ARM, 1)
+            self._await(lambda: self._armed or self._acks.get(CMD_ARM, 0) not in (0, 5),
+                        "arming")
+            if self._armed:
+                return
+            if not self.vision or time.monotonic() + ARM_RETRY_S > deadline:
+                break
+            self._pause(ARM_RETRY_S)
+        fed = f" for {self.wait:g} s while {self.vision_sent} poses went to its EKF" \
+            if self.vision else ""
+        raise LinkError(f"{self.uri}: the vehicle refused to arm "
+                        f"(MAV_RESULT {self._acks.get(CMD_ARM)}){fed}")
 
     def _spool_up(self) -> None:
         """Hold the vehicle on the ground at a fraction of the hover thrust until it applies
@@ -518,7 +554,22 @@ class MavlinkDriver(DriverBase):
             if time.monotonic() > deadline:
                 hint = f": {causes}" if causes else ""
                 raise LinkError(f"{self.uri}: waited {self.wait:g} s for {what} in vain{hint}")
+            self._pump()
             time.sleep(0.005)
+
+    def _pause(self, seconds: float) -> None:
+        """Wait `seconds`, forwarding engage()'s poses meanwhile."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self._pump()
+            time.sleep(0.005)
+
+    def _pump(self) -> None:
+        """While engage() waits: each new pose of the flight to the EKF, as the loop will."""
+        pose = self._poses()
+        if pose is not None and pose.seq != self._pumped_seq:
+            self._pumped_seq = pose.seq
+            self.observe_pose(pose)
 
     def _param(self, name: str) -> float:
         """Read one parameter, asking again every 0.5 s (PARAM_REQUEST_READ can be lost)."""
@@ -567,9 +618,10 @@ class MavlinkDriver(DriverBase):
 
     def _land(self) -> None:
         """Stop streaming and hand the vehicle to the autopilot's own landing mode; the
-        keep-alive repeats the command until the vehicle shows it took it."""
+        keep-alive repeats the command until the vehicle shows it took it. A vehicle never
+        engaged is not perchd's: nothing is commanded."""
         self._stopped = True
-        if self._conn is None or self.autopilot is None:
+        if self._conn is None or self.autopilot is None or not self._engaged:
             return
         self._armed_at_land = self._armed
         self._land_until = time.monotonic() + FAILSAFE_REPEAT_S

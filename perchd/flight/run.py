@@ -1,9 +1,11 @@
 """One flight: source -> estimator -> supervisor/controller -> driver, on the fixed-rate loop.
 
 `fly` opens nothing: the caller (perchd fly, the daemon, a test) opens and connects the
-driver and starts the pose source, and closes them afterwards. `fly` writes the flight log as
-it goes and returns a FlightResult. Any end other than contact, and any exception, ends in
-driver.failsafe(reason) with the log closed; an exception is re-raised after that.
+driver and starts the pose source, and closes them afterwards. `fly` engages the driver
+(Driver.engage: the vehicle is taken only when a flight starts, docs/architecture.md
+"Connect and engage"), writes the flight log as it goes and returns a FlightResult. Any end
+other than contact, and any exception, ends in driver.failsafe(reason) with the log closed;
+an exception is re-raised after that (a vehicle that will not be taken: LOST_LINK).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from pathlib import Path
 from typing import Any, Callable, Protocol
 
 from perchd.core.clock import Clock, MonotonicClock
-from perchd.core.errors import ConfigError
+from perchd.core.errors import ConfigError, LinkError
 from perchd.core.types import EndReason, Phase, State
 from perchd.drivers.base import Driver
 from perchd.flight.config import FlightConfig, TriggerPolicy
@@ -261,9 +263,11 @@ def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, head
                                                "mocap_body": getattr(source, "body", ""),
                                                **(header or {})})
     try:
+        engage(driver, source)
         run.loop.run(run.tick)
     except BaseException as err:
-        reason = EndReason.SIGNAL if isinstance(err, KeyboardInterrupt) else EndReason.SOFTWARE_ERROR
+        reason = EndReason.SIGNAL if isinstance(err, KeyboardInterrupt) else \
+            EndReason.LOST_LINK if isinstance(err, LinkError) else EndReason.SOFTWARE_ERROR
         try:
             run.failsafe(reason)
         finally:
@@ -273,6 +277,15 @@ def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, head
     log.close({"outcome": result.outcome.name, "detail": result.detail,
                "summary": result.to_json()})
     return result
+
+
+def engage(driver: Driver, source: PoseSource) -> None:
+    """Take the vehicle for this flight, handing the driver the pose source to forward
+    from while it waits (an autopilot's EKF may need mocap before it arms). Drivers written
+    before Driver.engage have none; their connect was the take-over."""
+    take = getattr(driver, "engage", None)
+    if take is not None:
+        take(source.latest)
 
 
 def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult:

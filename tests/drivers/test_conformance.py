@@ -31,6 +31,7 @@ def rig(request):
 def driver(rig):
     d = open_driver(rig.uri, rig.runtime())
     d.connect()
+    d.engage()  # as a flight does (flight/run.py)
     yield d
     d.close()
 
@@ -45,6 +46,19 @@ def test_opening_a_driver_does_not_connect_it(rig):
     health = d.health()
     assert isinstance(health, LinkHealth) and not health.ok
     d.close()  # closing what never connected is harmless
+
+
+def test_connecting_commands_nothing_and_a_failsafe_before_engage_neither(rig):
+    """connect() checks the vehicle; only engage() takes it (drivers/base.py)."""
+    d = open_driver(rig.uri, rig.runtime())
+    d.connect()
+    try:
+        assert d.health().ok
+        d.failsafe(EndReason.OPERATOR_ABORT)
+        _wait(lambda: False, 0.3)
+        assert rig.commanded() is None
+    finally:
+        d.close()
 
 
 def test_a_connected_driver_is_healthy_and_carries_an_si_setpoint(rig, driver):

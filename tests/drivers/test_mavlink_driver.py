@@ -73,7 +73,7 @@ def test_arming_happens_on_request_and_a_refusal_is_named():
     stubborn = VehicleDouble(ARDUPILOT, refuse_arm=True)
     try:
         with pytest.raises(LinkError, match="refused to arm"):
-            connected(stubborn, "&arm=1")
+            connected(stubborn, "&arm=1&wait=1")  # asked again within the wait (vision on)
     finally:
         stubborn.close()
 

@@ -16,7 +16,9 @@ It behaves like the slice of ArduPilot or PX4 the driver talks to:
 - SET_ATTITUDE_TARGET recorded with its arrival time; ATTITUDE_TARGET (83) streamed when
   asked, its thrust the one applied: 0 until spool_s after the first positive thrust once
   armed on the ground (ArduCopter's MOT_SAFE_TIME + MOT_SPOOL_TIME), then the last target's;
-- VISION_POSITION_ESTIMATE recorded with its arrival time;
+- VISION_POSITION_ESTIMATE recorded with its arrival time; vision_to_arm=N: arming is refused
+  (MAV_RESULT_FAILED) until N of them have arrived, as ArduCopter on ExternalNav alone has no
+  position or heading before the mocap flows;
 - mavlink2=True: speaks MAVLink 2 (pymavlink's peer switches to it on the first frame);
 - timesync=True: TIMESYNC requests (tc1 = 0) every 0.1 s, as PX4 sends them; the answers
   recorded.
@@ -38,7 +40,7 @@ from perchd.core.runtime import Runtime
 from perchd.drivers.base import open_driver
 
 ARDUPILOT, PX4 = 3, 12
-ACCEPTED, DENIED = 0, 2
+ACCEPTED, DENIED, FAILED = 0, 2, 4
 SAFE_PARAMS = {
     ARDUPILOT: {"GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.35, "GUID_TIMEOUT": 0.5,
                 "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 2.0, "ATC_ANGLE_BOOST": 0.0,
@@ -52,10 +54,18 @@ SAFE_PARAMS = {
 PX4_INTS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT", "EKF2_EV_CTRL", "EKF2_HGT_REF"}
 
 
-def connected(vehicle: "VehicleDouble", query: str = "", mass_kg: float = 0.5):
-    """perchd's MAVLink driver, connected to the double (query: more URI parameters)."""
+def connected(vehicle: "VehicleDouble", query: str = "", mass_kg: float = 0.5,
+              engage: bool = True):
+    """perchd's MAVLink driver, connected to the double (query: more URI parameters) and,
+    unless engage=False, engaged as a flight engages it (no poses)."""
     drv = open_driver(f"{vehicle.uri}?mass={mass_kg}{query}", Runtime.real())
     drv.connect()
+    if engage:
+        try:
+            drv.engage()
+        except BaseException:
+            drv.close()
+            raise
     return drv
 
 
@@ -81,10 +91,12 @@ class VehicleDouble:
                  refuse_arm: bool = False, *, airborne: bool = False, yaw_deg: float = 0.0,
                  prompt: bool = True, heartbeat_s: float = 1.0,
                  lock_partner: bool = False, spool_s: float = 0.0,
-                 timesync: bool = False, mavlink2: bool = False) -> None:
+                 timesync: bool = False, mavlink2: bool = False,
+                 vision_to_arm: int = 0) -> None:
         self.autopilot = autopilot
         self.params = dict(SAFE_PARAMS[autopilot]) if params is None else params
         self.refuse_arm = refuse_arm
+        self.vision_to_arm = vision_to_arm
         self.prompt, self.heartbeat_s = prompt, heartbeat_s
         self.yaw = math.radians(yaw_deg)  # [rad] NED heading
         self.landed_state = 2 if airborne else 1  # MAV_LANDED_STATE_IN_AIR / ON_GROUND
@@ -219,6 +231,8 @@ class VehicleDouble:
         elif command == 400:
             if self.refuse_arm:
                 return DENIED
+            if p[0] == 1 and len(self.visions) < self.vision_to_arm:
+                return FAILED  # pre-arm: the EKF has no position yet
             self.armed = p[0] == 1
         elif command == 511 and int(p[0]) == 30:
             self.attitude_interval = p[1] / 1e6 if p[1] > 0 else None

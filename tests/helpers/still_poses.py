@@ -1,0 +1,36 @@
+"""A vehicle standing still, as mocap: a ZMQ pose publisher (docs/contracts.md §3) sending
+one body's pose at 100 Hz on the monotonic clock, with 0.5 mm of noise (a real tracker is
+never bit-still), until close()."""
+
+from __future__ import annotations
+
+import random
+import threading
+import time
+
+from perchd.core.types import Pose
+from perchd.mocap.zmq import ZmqPosePublisher
+
+
+class StillPoses:
+    def __init__(self, p: tuple[float, float, float] = (-4.5, 0.0, 1.0), body: str = "cf1",
+                 rate_hz: float = 100.0) -> None:
+        self.pub = ZmqPosePublisher("tcp://127.0.0.1:0")
+        self.uri = self.pub.uri(body)
+        self.p, self.body, self.period = p, body, 1.0 / rate_hz
+        self.sent = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="still-poses", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        rng = random.Random(0)
+        while not self._stop.wait(self.period):
+            self.sent += 1
+            p = tuple(c + rng.gauss(0.0, 0.0005) for c in self.p)
+            self.pub.publish(Pose(self.body, self.sent, time.monotonic(), p, (0.0, 0.0, 0.0, 1.0)))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=1.0)
+        self.pub.close()
