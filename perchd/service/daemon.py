@@ -3,7 +3,11 @@
 One thread runs the service loop: select() on the control socket, its clients and a
 self-pipe that signals (signal.set_wakeup_fd) and the flight thread write to. A flight runs
 in its own thread through perchd.flight.run.fly, so abort and status stay answerable while it
-flies. systemd hears READY=1 once mocap and driver are connected, WATCHDOG=1 from the
+flies. The links are connected at start-up, which changes nothing on the vehicle; each
+flight engages the driver (Driver.engage, in flight.run.fly), so an idle or restarted service
+leaves the vehicle in the mode it found it, e.g. the LAND a failsafe commanded
+(docs/safety.md "When a flight takes the vehicle"). systemd hears READY=1 once mocap and
+driver are connected, WATCHDOG=1 from the
 flight's own tick callback while flying and from the service loop while idle and the link is
 healthy (a stalled loop stops the pings and gets restarted), STATUS= with the phase, and
 STOPPING=1 on the way out. SIGTERM/SIGINT abort a flight with the driver's failsafe (end
@@ -25,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from perchd.core.clock import MonotonicClock
-from perchd.core.errors import ConfigError, PerchdError, PlanError
+from perchd.core.errors import ConfigError, LinkError, PerchdError, PlanError
 from perchd.core.runtime import Runtime
 from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
@@ -135,7 +139,8 @@ class FlightJob(threading.Thread):
             if res.hover_n is not None:
                 store.remember(key, res.hover_n, flight)
         except BaseException as err:  # fly has already sent the failsafe and closed the log
-            self.result = {"outcome": EndReason.SOFTWARE_ERROR.name, "log": str(self.log),
+            why = EndReason.LOST_LINK if isinstance(err, LinkError) else EndReason.SOFTWARE_ERROR
+            self.result = {"outcome": why.name, "log": str(self.log),
                            "detail": f"{type(err).__name__}: {err}"}
         finally:
             os.write(self.wake_fd, FLIGHT_DONE)
@@ -341,7 +346,8 @@ class Daemon:
         if self.job is not None:
             self.job.abort.request(EndReason.OPERATOR_ABORT)
             return {"ok": True, "flying": True, "aborting": True, "log": str(self.job.log)}
-        self.links.driver.failsafe(EndReason.OPERATOR_ABORT)  # idle: make sure it is safe
+        # idle: make sure it is safe (a vehicle no flight has engaged is left alone)
+        self.links.driver.failsafe(EndReason.OPERATOR_ABORT)
         return {"ok": True, "flying": False, "failsafe_sent": True}
 
     def cmd_status(self, req: dict[str, Any]) -> dict[str, Any]:

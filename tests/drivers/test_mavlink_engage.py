@@ -5,17 +5,24 @@ the flight's poses, so an EKF on mocap alone can arm."""
 
 from __future__ import annotations
 
+import json
+import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import pytest
 
 pytest.importorskip("pymavlink")
 
 from mavlink_double import ARDUPILOT, PX4, VehicleDouble, connected
+from still_poses import StillPoses
 
 from perchd.core.errors import LinkError
 from perchd.core.types import EndReason, Pose
 
+PLAN = Path(__file__).resolve().parents[2] / "plans" / "case1-ipts-n3.json"
 GUIDED_NOGPS, LAND = 20, 9
 PX4_OFFBOARD = 6 << 16
 
@@ -111,3 +118,30 @@ def test_without_vision_a_refusal_is_not_asked_again():
         drv.close()
     finally:
         v.close()
+
+
+def test_perchd_fly_arms_an_ekf_on_mocap_alone_from_the_ground(tmp_path):
+    """`perchd fly` from the ground with arm=1, the vehicle's EKF on mocap alone: its engage
+    forwards the poses until the vehicle arms (before: connect armed before the loop handed
+    the driver a pose, and the vehicle refused)."""
+    v = VehicleDouble(ARDUPILOT, vision_to_arm=20)
+    poses = StillPoses((-4.5, 0.0, 0.0))
+    try:
+        fly = subprocess.Popen(
+            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", f"{v.uri}?arm=1",
+             "--mocap", poses.uri, "--log", str(tmp_path / "f.jsonl"), "--json"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            armed = v.wait_for(lambda: v.armed or fly.poll() is not None, timeout=20.0)
+            time.sleep(0.5)  # a few ticks of the flight
+        finally:
+            fly.send_signal(signal.SIGTERM)
+            out, err = fly.communicate(timeout=20)
+    finally:
+        poses.close()
+        v.close()
+    assert armed and v.armed, err
+    arms = [t for t, c, p in v.commands if c == 400 and p[0] == 1]
+    assert len(arms) >= 2  # refused while the EKF had no mocap, then taken
+    assert json.loads(out)["outcome"] == "SIGNAL"
+    assert v.targets and v.modes[0][1] == GUIDED_NOGPS

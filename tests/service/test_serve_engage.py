@@ -1,0 +1,92 @@
+"""`perchd serve` with a MAVLink vehicle (the double, pymavlink at both ends on loopback;
+mocap a ZMQ publisher of a vehicle standing still): the service connects at start-up and
+changes nothing on the vehicle; only a flight engages it (docs/safety.md "When a flight
+takes the vehicle"). A vehicle the failsafe put in LAND stays there, across a restart."""
+
+import signal
+import time
+
+import pytest
+
+pytest.importorskip("pymavlink")
+
+from mavlink_double import ARDUPILOT, VehicleDouble
+from still_poses import StillPoses
+from svc import PLAN, Serve, ctl
+
+LOITER, GUIDED_NOGPS, LAND = 5, 20, 9
+
+
+@pytest.fixture
+def vehicle():
+    v = VehicleDouble(ARDUPILOT, airborne=True)
+    v.switch_mode_by_pilot(LOITER)  # the pilot's, until perchd flies it
+    yield v
+    v.close()
+
+
+@pytest.fixture
+def poses():
+    p = StillPoses((-4.5, 0.0, 1.0))
+    yield p
+    p.close()
+
+
+def taken(v: VehicleDouble, since: float = 0.0) -> list:
+    """Everything that would move the vehicle: mode and arming commands, attitude targets."""
+    return [c for t, c, _ in v.commands if c in (176, 400) and t > since] + \
+        [x for x in v.targets if x.t > since]
+
+
+def serve(tmp_path, notify, v: VehicleDouble, poses: StillPoses) -> Serve:
+    s = Serve(tmp_path, notify, "--driver", v.uri, "--mocap", poses.uri)
+    notify.wait_for("READY=1", 20.0)
+    return s
+
+
+def test_an_idle_service_sends_no_mode_change_and_no_attitude_target(tmp_path, notify,
+                                                                      vehicle, poses):
+    s = serve(tmp_path, notify, vehicle, poses)
+    try:
+        vehicle.wait_for(lambda: False, timeout=1.5)
+        assert ctl(s.sock, "status")["link_ok"] is True
+        assert vehicle.gcs_heartbeats  # connected: it hears perchd
+        assert taken(vehicle) == [] and vehicle.custom_mode == LOITER
+    finally:
+        s.proc.send_signal(signal.SIGTERM)
+        s.stop()
+        s.kill()
+    assert taken(vehicle) == [] and vehicle.custom_mode == LOITER  # stopping idle: nothing
+
+
+def test_a_flight_engages_and_after_its_failsafe_land_stays_across_a_restart(
+        tmp_path, notify, vehicle, poses):
+    s = serve(tmp_path, notify, vehicle, poses)
+    try:
+        assert ctl(s.sock, "fly", str(PLAN))["ok"]
+        assert vehicle.wait_for(lambda: vehicle.custom_mode == GUIDED_NOGPS and vehicle.targets)
+        s.wait_phase({"hold", "approach"})
+        assert ctl(s.sock, "abort")["aborting"]
+        assert vehicle.wait_for(lambda: vehicle.custom_mode == LAND)
+        deadline = time.monotonic() + 5
+        while ctl(s.sock, "status")["state"] == "flying" and time.monotonic() < deadline:
+            time.sleep(0.05)
+        landed = time.monotonic()
+        vehicle.wait_for(lambda: False, timeout=1.0)
+        assert taken(vehicle, landed) == [] and vehicle.custom_mode == LAND  # idle again
+        s.proc.kill()  # a crash: Restart=on-failure starts it again
+        s.proc.communicate()
+    finally:
+        s.kill()
+    restarted = time.monotonic()
+    notify.messages.clear()
+    again = serve(tmp_path, notify, vehicle, poses)
+    try:
+        vehicle.wait_for(lambda: False, timeout=1.5)
+        assert ctl(again.sock, "status")["link_ok"] is True
+        assert taken(vehicle, restarted) == [] and vehicle.custom_mode == LAND
+    finally:
+        again.proc.send_signal(signal.SIGTERM)
+        again.stop()
+        again.kill()
+    assert vehicle.custom_mode == LAND
