@@ -142,35 +142,57 @@ def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_pat
     assert z1 - z0 > 0.5
 
 
-def test_the_agent_perches_on_arducopter_sitl(tmp_path):
-    """From the ground (arm=1): the take-off overshoots the hold height by no more than
-    0.1 m (the driver returns once ArduCopter's motors have spooled up)."""
+def perch_from_the_ground(tmp: Path, test: str, *harness: str) -> tuple[dict, dict, float]:
+    """`perchd fly` (arm=1) against a fresh harness: its --json, the harness summary and the
+    take-off's overshoot [m]; the figures reported."""
     plan = json.loads(PLAN.read_text())
-    proc, mocap, driver = start(tmp_path)
+    proc, mocap, driver = start(tmp, *harness)
     rec = Recorder(mocap)
     try:
-        done = subprocess.run(fly_argv(tmp_path, mocap, driver), capture_output=True,
-                              text=True, timeout=120, env=ENV)
+        done = subprocess.run(fly_argv(tmp, mocap, driver), capture_output=True,
+                              text=True, timeout=180, env=ENV)
         time.sleep(1.0)
     finally:
         rec.close()
         sim = stop_harness(proc)
     assert done.stdout, done.stderr
     fly = json.loads(done.stdout)
-    report({"test": "perch", "outcome": fly["outcome"], "detail": fly.get("detail"),
+    over = takeoff_overshoot(tmp / "flight.jsonl", rec.samples)
+    report({"test": test, "outcome": fly["outcome"], "detail": fly.get("detail"),
             "contact_speed": fly["contact_speed"],
             "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
             "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
-            "trigger": fly["trigger"], "pitch_lag_s": pitch_lag(tmp_path / "flight.jsonl", rec.samples),
-            "takeoff_overshoot_m": takeoff_overshoot(tmp_path / "flight.jsonl", rec.samples),
-            "modes": sim["modes"], "load": os.getloadavg()})
+            "trigger": fly["trigger"], "pitch_lag_s": pitch_lag(tmp / "flight.jsonl", rec.samples),
+            "takeoff_overshoot_m": over, "modes": sim["modes"], "load": os.getloadavg()})
+    return fly, sim, over
+
+
+def assert_perched(fly: dict, sim: dict) -> None:
+    plan = json.loads(PLAN.read_text())
     lo, hi = plan["limits"]["v_contact"]
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
     assert lo - 0.15 <= sim["contact"]["speed"] <= hi + 0.15
     assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.15)
-    # measured 0.22 m (main: leapt 0.79 m); the 0.1 m target is not met: docs/firmware.md
-    assert takeoff_overshoot(tmp_path / "flight.jsonl", rec.samples) <= 0.3
+
+
+def test_the_agent_perches_on_arducopter_sitl(tmp_path):
+    """From the ground (arm=1): the take-off overshoots the hold height by no more than
+    0.1 m (the driver's engage returns once ArduCopter's motors have spooled up; the
+    take-off's reference waits for lift-off: perchd/flight/takeoff.py)."""
+    fly, sim, over = perch_from_the_ground(tmp_path, "perch")
+    assert_perched(fly, sim)
+    assert over <= 0.1  # before perchd/flight/takeoff.py: 0.22-0.24 m
+
+
+def test_a_ground_start_on_mocap_alone_arms_and_perches_through_perchd_fly(tmp_path):
+    """--vision: GPS off, EKF3 on perchd's mocap alone, which cannot arm before the mocap
+    flows. `perchd fly` with arm=1 and no pose fed before it connects: the flight's engage
+    forwards the poses until ArduCopter arms (before: "the vehicle refused to arm")."""
+    fly, sim, over = perch_from_the_ground(tmp_path, "vision-perch", "--vision")
+    assert any(m["armed"] for m in sim["modes"])
+    assert_perched(fly, sim)
+    assert over <= 0.1
 
 
 def takeoff_overshoot(log: Path, truth: list[tuple[float, float, float, float, float]]) -> float:
@@ -221,8 +243,8 @@ def test_sigkill_of_perchd_fly_mid_approach_levels_within_1_s_and_lands_within_3
 
 def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
     """GPS1_TYPE 0, VISO_TYPE 1, EK3_SRC1_POSXY/POSZ/YAW 6 (perchd sim firmware --vision):
-    the mocap flows from before connect (the EKF needs it for a heading), the driver arms
-    and the vehicle climbs; LOCAL_POSITION_NED is the pose in NED."""
+    the mocap flows (the EKF needs it for a heading), the driver engages and arms, and the
+    vehicle climbs; LOCAL_POSITION_NED is the pose in NED."""
     import threading
 
     from fwvision import PoseFeed, climb_and_compare
@@ -241,6 +263,7 @@ def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
             feed = PoseFeed(v.truth, drv)
             try:
                 drv.connect()
+                drv.engage()  # the feed's poses arm it
                 figures = climb_and_compare(v.truth, drv, 3.0, runtime.clock.now)
             finally:
                 feed.stop()
