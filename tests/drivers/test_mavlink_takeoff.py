@@ -1,6 +1,6 @@
 """Ground take-off and the set-up target over real MAVLink (pymavlink at both ends, loopback):
 ArduCopter armed on the ground applies no thrust until its motors have spooled up, so the
-driver's connect() returns only once it does; until the loop's first setpoint the vehicle
+driver's engage() (connected() engages) returns only once it does; until the loop's first setpoint the vehicle
 gets a target that neither drops it (in the air) nor lifts it (on the ground)."""
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def test_a_ground_start_returns_only_once_the_motors_apply_thrust():
         v.close()
 
 
-def test_motors_that_never_spool_up_fail_the_connect_by_name():
+def test_motors_that_never_spool_up_fail_the_engage_by_name():
     v = VehicleDouble(ARDUPILOT, spool_s=60.0)
     try:
         with pytest.raises(LinkError, match="spool up"):
