@@ -9,7 +9,13 @@ from caseplans import case1
 
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig
-from perchd.flight.takeoff import LEAD_M, LIFTOFF_M, TakeoffProfile
+from perchd.flight.takeoff import (
+    GROUND_WAIT_S,
+    LEAD_M,
+    LEAD_MAX_M,
+    LIFTOFF_M,
+    TakeoffProfile,
+)
 from perchd.sim.plant import PlantParams
 from perchd.sim.session import open_session
 from perchd.sim.world import WorldParams
@@ -53,11 +59,25 @@ def test_while_stuck_the_thrust_asked_for_does_not_grow(tmp_path):
     assert max(stuck) - min(stuck) < 1e-3 * max(stuck)
 
 
+def test_a_vehicle_heavier_than_its_guess_still_leaves_the_ground(tmp_path):
+    """20 % heavier than the flight config says: the LEAD_M push alone cannot lift it, the
+    lead grows after GROUND_WAIT_S (before: it left at once, and overshot by 0.35 m)."""
+    res, heights, _ = ground_flight(tmp_path, 0.0, "sim://?start=-4.5,0,0&mass=0.036")
+    assert res.outcome is EndReason.CONTACT, res.detail
+    assert overshoot(heights) <= 0.15
+
+
 def test_the_profile_waits_for_lift_off_then_climbs_to_rest_at_the_hold_height():
     prof = TakeoffProfile(0.0, 1.0, 0.5)
-    for _ in range(200):  # stuck for 2 s: the reference does not move
+    for k in range(500):  # stuck for 5 s: still, then a slowly growing push, bounded
         ref = prof.step(0.01, 0.0)
-        assert (ref.z, ref.vz, ref.az) == (LEAD_M, 0.0, 0.0) and not prof.lifted
+        assert ref.vz == 0.0 and ref.az == 0.0 and not prof.lifted
+        if (k + 1) * 0.01 <= GROUND_WAIT_S:
+            assert ref.z == pytest.approx(LEAD_M)
+        assert LEAD_M <= ref.z <= LEAD_MAX_M
+    prof = TakeoffProfile(0.0, 1.0, 0.5)
+    for _ in range(100):  # 1 s on the ground: as ArduCopter SITL's land detector holds it
+        prof.step(0.01, 0.0)
     z, t, top = LIFTOFF_M, 0.0, 0.0
     while not prof.done and t < 10.0:  # a vehicle that follows 0.05 m behind
         ref = prof.step(0.01, z)
