@@ -29,7 +29,8 @@ from perchd.tau.plan import Plan
 @dataclass
 class Session:
     """A connected driver and a started pose source on one runtime; `world` is the
-    simulated truth (None for a real vehicle)."""
+    simulated truth (None for a real vehicle). Connected, not engaged: each flight engages
+    the driver (flight.run.fly, docs/architecture.md "Connect and engage")."""
 
     runtime: Runtime
     world: SimWorld | None
@@ -77,6 +78,7 @@ def open_links(driver_uri: str, mocap_uri: str, surface: SurfaceConfig | None = 
 
 def _connect(runtime: Runtime, world: SimWorld | None, driver_uri: str,
              mocap_uri: str, mass_kg: float | None = None) -> Session:
+    """Open and connect: the vehicle is checked (a refusal comes here), not taken."""
     driver = open_driver(driver_uri, runtime)
     if mass_kg is not None:
         driver.bind_mass(mass_kg)
