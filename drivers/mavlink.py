@@ -325,6 +325,7 @@ class MavlinkDriver(DriverBase):
         self.failsafe_reasons: list[EndReason] = []
         self._airborne_before_arm = False
         self._engaged = False  # the offboard mode has been asked for: the vehicle is ours
+        self._engaging = False  # engage() is under way: a failsafe meanwhile ends it
         self._poses: PoseFeed = no_poses  # engage()'s pose feed, read while it waits
         self._pumped_seq: int | None = None  # the newest pose engage() forwarded
 
@@ -355,6 +356,7 @@ class MavlinkDriver(DriverBase):
         if self._conn is None or self.model is None:
             raise LinkError(f"{self.uri}: engage() before connect()")
         self._poses, self._stopped, self._land_until = poses, False, 0.0
+        self._engaging = True
         try:
             self._prestream()
             self._engaged = True
@@ -364,7 +366,7 @@ class MavlinkDriver(DriverBase):
                 if self.autopilot == ARDUPILOT and not self._airborne_before_arm:
                     self._spool_up()
         finally:
-            self._poses = no_poses
+            self._poses, self._engaging = no_poses, False
 
     def send(self, setpoint: Setpoint) -> None:
         if self._stopped or self._conn is None or self.model is None:
@@ -565,7 +567,11 @@ class MavlinkDriver(DriverBase):
             time.sleep(0.005)
 
     def _pump(self) -> None:
-        """While engage() waits: each new pose of the flight to the EKF, as the loop will."""
+        """While engage() waits: each new pose of the flight to the EKF, as the loop will;
+        a failsafe from another thread meanwhile (a service stopping) ends the engage, or
+        it would take the vehicle back out of the LAND just commanded."""
+        if self._engaging and self._stopped:
+            raise LinkError(f"{self.uri}: failsafe while engaging; the vehicle was not taken")
         pose = self._poses()
         if pose is not None and pose.seq != self._pumped_seq:
             self._pumped_seq = pose.seq

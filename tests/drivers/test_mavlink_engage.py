@@ -9,6 +9,7 @@ import json
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -145,3 +146,24 @@ def test_perchd_fly_arms_an_ekf_on_mocap_alone_from_the_ground(tmp_path):
     assert len(arms) >= 2  # refused while the EKF had no mocap, then taken
     assert json.loads(out)["outcome"] == "SIGNAL"
     assert v.targets and v.modes[0][1] == GUIDED_NOGPS
+
+
+def test_a_failsafe_from_another_thread_while_engaging_wins():
+    """A stopping service sends the failsafe from its own thread when the flight's does not
+    end in time: the engage under way must not take the vehicle back out of LAND."""
+    v = VehicleDouble(ARDUPILOT, vision_to_arm=10 ** 6)  # it never arms
+    try:
+        drv = connected(v, "&arm=1&wait=3", engage=False)
+        timer = threading.Timer(0.5, drv.failsafe, args=(EndReason.SIGNAL,))
+        timer.start()
+        with pytest.raises(LinkError, match="failsafe while engaging"):
+            drv.engage(Poses())
+        timer.join()
+        assert v.wait_for(lambda: v.custom_mode == LAND)
+        stopped = time.monotonic()
+        v.wait_for(lambda: False, timeout=0.6)
+        assert [c for t, c, _ in v.commands if c == 400 and t > stopped + 0.05] == []
+        assert v.custom_mode == LAND
+        drv.close()
+    finally:
+        v.close()

@@ -87,6 +87,7 @@ def test_taking_over_px4_in_the_air_loses_no_more_than_10_cm(tmp_path):
             drv = open_driver(v.driver_uri(), Runtime.real())
             try:
                 drv.connect()
+                drv.engage()  # the take-over: connect alone changes nothing
                 t_switch, z_switch = time.monotonic(), v.truth().p[2]
                 hold_height(v, drv, z_switch, yaw0, 3.0)
             finally:

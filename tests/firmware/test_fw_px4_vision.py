@@ -39,6 +39,7 @@ def test_px4s_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
             feed = PoseFeed(v.truth, drv)
             try:
                 drv.connect()
+                drv.engage()  # mode and arming: connect alone changes nothing
                 figures = climb_and_compare(v.truth, drv, SIH_MASS_KG, runtime.clock.now)
             finally:
                 feed.stop()
