@@ -24,9 +24,10 @@ from typing import Any
 from perchd.core.errors import ConfigError, PlanError
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint, State
 from perchd.flight.config import FlightConfig, PostContact, TriggerPolicy
-from perchd.flight.control import AxisController, Controller
+from perchd.flight.control import AxisController, Controller, FeedForward
 from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner
+from perchd.flight.lagid import LagFit, LagIdentifier
 from perchd.flight.planrefs import PlanSampler
 from perchd.logs.flightlog import LogEvent
 from perchd.tau import retarget
@@ -158,6 +159,10 @@ class Supervisor:
         self.hover_learned_n: float | None = None  # [N] once the hold's estimate settled
         self._hover_waiting = False
         self._v_int = 0.0  # [m/s] integral of the approach's speed error
+        self.lagid = LagIdentifier(cfg.lag_id)
+        self.ff = FeedForward(cfg.tau_gains.ff_lead_s)
+        self.lag_fit: LagFit | None = None  # once identified (at the first stage-1 refs)
+        self._t_refit = -math.inf  # [s] the approach's last refit
 
     # --- helpers ----------------------------------------------------------------------------
     def _enter(self, phase: Phase, t: float, detail: str = "", **values: float) -> None:
@@ -335,6 +340,7 @@ class Supervisor:
         uy, uz = self.ctl.lateral(st, self._hold[1], z_ref, dt, vz_ref)
         u = (ux, uy, uz)
         sp = self.ctl.setpoint(u, t, st.pose_seq, self.phase)
+        self._observe_response(t, st)
         return TickReport(self.phase, sp, None, False, refs, u, e)
 
     @property
@@ -370,15 +376,16 @@ class Supervisor:
         self._enter(Phase.APPROACH, t, "", accel=need)
 
     def _approach_accel(self, st: State, dt: float) -> float:
-        """Feed-forward + PI on the speed profile to (x0, v0); the integral takes up drag
-        and attitude lag (ApproachConfig.ki_v), frozen while the mapping saturates."""
+        """Feed-forward (with the drag identified so far) + PI on the speed profile to
+        (x0, v0); the integral takes up what the feed-forward misses (ApproachConfig.ki_v),
+        frozen while the mapping saturates."""
         a, v0 = self.cfg.approach, self.plan.v0
         v_ref = math.sqrt(max(0.0, v0 * v0 - 2.0 * self._a_app * (self.plan.x0 - st.x)))
         err = v_ref - st.xdot
         if not self.ctl.saturated and a.ki_v > 0.0:
             bound = a.i_limit_mps2 / a.ki_v
             self._v_int = min(max(self._v_int + err * dt, -bound), bound)
-        return self._a_app + a.kv * err + a.ki_v * self._v_int
+        return self.ff.accel(self._a_app, v_ref) + a.kv * err + a.ki_v * self._v_int
 
     # --- the hover thrust (flight/hover.py) -------------------------------------------------
     def _learn_hover(self, t: float, dt: float, st: State) -> None:
@@ -484,20 +491,51 @@ class Supervisor:
         return self._refs_memo[1]
 
     def _compute_refs(self, t: float) -> Refs:
-        plan = self.plan
+        if self.lag_fit is None and self.cfg.tau_gains.identify:
+            self._identify(t)
+        plan, ff = self.plan, self.ff
         s = min(max(t - self.trigger.t, 0.0), plan.duration)
         here = self._sampler.at(s)
         if self.t_stage2 is None:
             tau_ref = here.tau_ref
-            ahead = self._sampler.at(min(s + self.cfg.tau_gains.ff_lead_s, plan.duration))
-            a = ahead.a if ahead.stage == 1 else 0.0
+            ahead = self._sampler.at(min(s + ff.lead_s, plan.duration))
+            a = ff.accel(ahead.a if ahead.stage == 1 else 0.0, ahead.v)
         elif self.cfg.tau_gains.stage2_hold_speed and self._x is not None:
             tau_ref = min(self._x, 0.0) / self.v_hold
-            a = 0.0
+            a = ff.accel(0.0, self.v_hold)
         else:
             tau_ref = self._tau_s + (t - self.t_stage2)
-            a = 0.0
+            a = ff.accel(0.0, float(plan.v_contact))
         return Refs(tau_ref, here.x, here.v, a)
+
+    def _observe_response(self, t: float, st: State) -> None:
+        """Record the hold's and the approach's ticks for the lag identification, and refit
+        every LagIdGains.refit_s of the approach so its own feed-forward meets the drag."""
+        if not self.cfg.tau_gains.identify or self.phase not in (Phase.HOLD, Phase.APPROACH):
+            return
+        self.lagid.record(t, self.ctl.last_ux_sent, st.x, st.xdot)
+        if self.phase is Phase.APPROACH and t - self._t_refit >= self.cfg.lag_id.refit_s:
+            self._t_refit = t
+            model = self.lagid.fit().model
+            if model is not None:
+                self.ff = FeedForward(model.lag_s, model.drag_per_s)
+
+    def _identify(self, t: float) -> None:
+        """Fit the lag and drag of the hold and approach just flown (flight/lagid.py) and
+        feed them forward from the trigger on; a refused fit keeps the configured lead."""
+        self.lag_fit = fit = self.lagid.fit()
+        m = fit.model
+        if m is None:
+            self.events.append(LogEvent(t, "lag-unidentified", (
+                f"{fit.why}: flying the configured lead {self.ff.lead_s:g} s and no drag term"),
+                {"lead_s": self.ff.lead_s}))
+            return
+        self.ff = FeedForward(m.lag_s, m.drag_per_s)
+        self.events.append(LogEvent(t, "lag-identified", (
+            f"lag {m.lag_s:.3f} s, drag {m.drag_per_s:.3f} 1/s"), {
+                "lag_s": m.lag_s, "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
+                "rms_mps": m.rms_mps, "samples": m.samples,
+                "speed_span_mps": m.speed_span_mps}))
 
 
 def _open_library(path: str | None, plan: Plan) -> Any:
