@@ -32,14 +32,16 @@ class Attitude:
 class FeedForward:
     """What the tau controller feeds forward besides its PID: the plan's acceleration lead_s
     [s] early (the vehicle answers that late), plus drag_per_s [1/s] times the plan's speed
-    then (the drag the vehicle will meet). flight/lagid.py identifies both in flight."""
+    then (the drag the vehicle will meet), minus bias_mps2 [m/s^2] (a constant push along
+    X). flight/lagid.py identifies all three in flight."""
 
     lead_s: float
     drag_per_s: float = 0.0
+    bias_mps2: float = 0.0
 
     def accel(self, a_plan: float, v_plan: float) -> float:
         """[m/s^2] the feed-forward for the plan's a_plan [m/s^2], v_plan [m/s] lead_s ahead."""
-        return a_plan + self.drag_per_s * v_plan
+        return a_plan + self.drag_per_s * v_plan - self.bias_mps2
 
 
 def tau_error(tau_ref: float, tau: float | None) -> float:

@@ -93,6 +93,26 @@ class LagIdentifier:
             return LagFit(None, f"the fit's residual {rms:.3f} m/s exceeds {c.rms_max_mps:g} m/s")
         return LagFit(model)
 
+    def predict(self, t: float, x: float, xdot: float, lag_s: float, drag_per_s: float,
+                bias_mps2: float) -> tuple[float, float]:
+        """(X [m], Xdot [m/s]) lag_s after t, from the state measured at t and the commands
+        recorded in the last lag_s, which the vehicle has yet to answer: what a command sent
+        now acts on (a Smith predictor)."""
+        dv = dx = 0.0
+        rows = self._rows
+        for i in range(len(rows) - 1, -1, -1):
+            t_k, u_k = rows[i][0], rows[i][1]
+            if t_k < t - lag_s or t_k >= t:
+                if t_k < t - lag_s:
+                    break
+                continue
+            held = (rows[i + 1][0] if i + 1 < len(rows) else t) - t_k
+            dv += u_k * held
+            dx += u_k * held * (t - t_k - 0.5 * held)
+        push = bias_mps2 - drag_per_s * xdot
+        v_next = xdot + dv + push * lag_s
+        return x + xdot * lag_s + dx + 0.5 * push * lag_s * lag_s, v_next
+
 
 def _shifted_integrals(t: np.ndarray, u: np.ndarray, lags: np.ndarray) -> np.ndarray:
     """U(t - lag) for each lag (rows): the integral of the zero-order-held command from t[0],

@@ -16,6 +16,7 @@ policy) or after being retargeted to the measured state (ROBUST, REPLAN).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 from dataclasses import dataclass
@@ -40,6 +41,8 @@ are a stuck tracker re-sending its last position with fresh stamps, not a vehicl
 alone moves a real measurement; a commanded vehicle moves a noiseless simulated one within
 its command latency and attitude response, well under this)."""
 _MOVING = (Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
+_OBSERVED = (Phase.HOLD, Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
+"""The phases whose ticks the lag identification records (flight/lagid.py)."""
 
 
 class FlightAbort:
@@ -325,7 +328,8 @@ class Supervisor:
                 ux = 0.0  # terminal: constant speed (see TauGains.terminal_s)
             else:
                 hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
-                ux = self.ctl.tau.step(st, refs.tau_ref, refs.a, dt, self.ctl.saturated,
+                seen, aim = self._lag_view(t, st, refs)
+                ux = self.ctl.tau.step(seen, aim.tau_ref, aim.a, dt, self.ctl.saturated,
                                        schedule=not hold)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
@@ -493,32 +497,55 @@ class Supervisor:
     def _compute_refs(self, t: float) -> Refs:
         if self.lag_fit is None and self.cfg.tau_gains.identify:
             self._identify(t)
+        return self._refs_at(t, self._x, self.ff.lead_s)
+
+    def _refs_at(self, t: float, x: float | None, lead_s: float) -> Refs:
+        """The references at time t [s] for the vehicle at X = x [m], with the feed-forward
+        taken lead_s [s] ahead."""
         plan, ff = self.plan, self.ff
         s = min(max(t - self.trigger.t, 0.0), plan.duration)
         here = self._sampler.at(s)
         if self.t_stage2 is None:
             tau_ref = here.tau_ref
-            ahead = self._sampler.at(min(s + ff.lead_s, plan.duration))
+            ahead = self._sampler.at(min(s + lead_s, plan.duration)) if lead_s else here
             a = ff.accel(ahead.a if ahead.stage == 1 else 0.0, ahead.v)
-        elif self.cfg.tau_gains.stage2_hold_speed and self._x is not None:
-            tau_ref = min(self._x, 0.0) / self.v_hold
+        elif self.cfg.tau_gains.stage2_hold_speed and x is not None:
+            tau_ref = min(x, 0.0) / self.v_hold
             a = ff.accel(0.0, self.v_hold)
         else:
             tau_ref = self._tau_s + (t - self.t_stage2)
             a = ff.accel(0.0, float(plan.v_contact))
         return Refs(tau_ref, here.x, here.v, a)
 
+    def _lag_view(self, t: float, st: State, refs: Refs) -> tuple[State, Refs]:
+        """What the tau controller acts on: once a lag is identified, the state predicted
+        that lag ahead from the commands still in flight (LagIdentifier.predict) and the
+        references then, so the feedback, like the feed-forward, acts where the command
+        will land (docs/errata.md §10); otherwise the measured state and refs."""
+        if self.lag_fit is None or self.lag_fit.model is None or not self.cfg.tau_gains.predict:
+            return st, refs
+        ff = self.ff
+        x, v = self.lagid.predict(t, st.x, st.xdot, ff.lead_s, ff.drag_per_s, ff.bias_mps2)
+        # Predicted at or past the surface: tau = X/Xdot from just before it, so that the
+        # stage-2 error stays 1 - Xdot/V_c instead of tau's sign flipping.
+        x = min(x, -1e-3)
+        tau = x / v if v > self.cfg.estimator.min_speed_mps else None
+        seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
+        return seen, self._refs_at(t + ff.lead_s, x, 0.0)
+
     def _observe_response(self, t: float, st: State) -> None:
-        """Record the hold's and the approach's ticks for the lag identification, and refit
-        every LagIdGains.refit_s of the approach so its own feed-forward meets the drag."""
-        if not self.cfg.tau_gains.identify or self.phase not in (Phase.HOLD, Phase.APPROACH):
+        """Record the ticks for the lag identification (the stages' commands feed its
+        prediction), and refit every LagIdGains.refit_s of the approach so the approach's
+        own feed-forward meets the drag."""
+        if not self.cfg.tau_gains.identify or self.phase not in _OBSERVED:
             return
         self.lagid.record(t, self.ctl.last_ux_sent, st.x, st.xdot)
-        if self.phase is Phase.APPROACH and t - self._t_refit >= self.cfg.lag_id.refit_s:
-            self._t_refit = t
-            model = self.lagid.fit().model
-            if model is not None:
-                self.ff = FeedForward(model.lag_s, model.drag_per_s)
+        if self.phase is not Phase.APPROACH or t - self._t_refit < self.cfg.lag_id.refit_s:
+            return
+        self._t_refit = t
+        model = self.lagid.fit().model
+        if model is not None:
+            self.ff = FeedForward(model.lag_s, model.drag_per_s, model.bias_mps2)
 
     def _identify(self, t: float) -> None:
         """Fit the lag and drag of the hold and approach just flown (flight/lagid.py) and
@@ -530,7 +557,7 @@ class Supervisor:
                 f"{fit.why}: flying the configured lead {self.ff.lead_s:g} s and no drag term"),
                 {"lead_s": self.ff.lead_s}))
             return
-        self.ff = FeedForward(m.lag_s, m.drag_per_s)
+        self.ff = FeedForward(m.lag_s, m.drag_per_s, m.bias_mps2)
         self.events.append(LogEvent(t, "lag-identified", (
             f"lag {m.lag_s:.3f} s, drag {m.drag_per_s:.3f} 1/s"), {
                 "lag_s": m.lag_s, "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
