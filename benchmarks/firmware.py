@@ -119,11 +119,12 @@ def lag_event(log: Path) -> dict:
     return {}
 
 
-def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path) -> dict:
+def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
+                 config_add: str = "") -> dict:
     proc, mocap, driver, surface = start_harness(fw, binary, noise, seed, tmp)
     config: list[str] = []
-    if fw.config is not None:
-        (tmp / "flight.toml").write_text(fw.config)
+    if fw.config is not None or config_add:
+        (tmp / "flight.toml").write_text((fw.config or "version = 1\n") + config_add)
         config = ["--config", str(tmp / "flight.toml")]
     try:
         done = subprocess.run(
@@ -216,6 +217,9 @@ def main() -> int:
     ap.add_argument("--only", nargs="*", choices=[f.name for f in FIRMWARES],
                     help="these firmwares only")
     ap.add_argument("--keep", metavar="DIR", help="keep each flight's logs under DIR")
+    ap.add_argument("--config-add", default="", metavar="TOML",
+                    help="TOML tables appended to every firmware flight's config, e.g. "
+                         "'[tau_gains]\\npredict = false' (the sim:// flights keep the default)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     args = ap.parse_args()
     if args.flights < 1 or not 0.0 <= args.noise <= 0.1:
@@ -237,7 +241,8 @@ def main() -> int:
         for i in range(args.flights):
             tmp = root / fw.name / str(i)
             tmp.mkdir(parents=True, exist_ok=True)
-            runs["firmware"].append(fly_firmware(fw, binary, args.noise, i, tmp))
+            runs["firmware"].append(fly_firmware(fw, binary, args.noise, i, tmp,
+                                                 args.config_add.replace("\\n", "\n") + "\n"))
             runs["sim"].append(fly_sim(args.noise, i, tmp))
             if not args.json:
                 f = runs["firmware"][-1]

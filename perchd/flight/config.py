@@ -110,8 +110,9 @@ class TauGains:
     identify: identify the vehicle's lag and drag along the approach (flight/lagid.py,
         LagIdGains) and feed forward the plan's acceleration that lag early plus the
         identified drag times the plan's speed (docs/errata.md §10).
-    predict: with a lag identified, the tau PID acts on the state predicted that lag ahead
-        from the commands still in flight, against the references then (a Smith predictor,
+    predict: with a lag identified beyond ff_lead_s (the response these gains were made
+        for), the tau PID acts on the state predicted the excess ahead from the commands
+        still in flight, against the references then (a Smith predictor,
         LagIdentifier.predict); off: on the measured state.
     terminal_s: [s] in stage 2, once tau_ref is within this of 0 the tau feedback holds its
         last output and the speed is left alone: e = 1 - tau_ref/tau divides two vanishing

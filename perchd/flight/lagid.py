@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -52,6 +53,15 @@ class LagFit:
 
     model: LagModel | None
     why: str = ""
+
+
+class Response(Protocol):
+    """What a prediction needs of the response: lag_s [s], drag_per_s [1/s], bias_mps2
+    [m/s^2] (a LagModel, or the feed-forward built from one)."""
+
+    lag_s: float
+    drag_per_s: float
+    bias_mps2: float
 
 
 class LagIdentifier:
@@ -93,25 +103,26 @@ class LagIdentifier:
             return LagFit(None, f"the fit's residual {rms:.3f} m/s exceeds {c.rms_max_mps:g} m/s")
         return LagFit(model)
 
-    def predict(self, t: float, x: float, xdot: float, lag_s: float, drag_per_s: float,
-                bias_mps2: float) -> tuple[float, float]:
-        """(X [m], Xdot [m/s]) lag_s after t, from the state measured at t and the commands
-        recorded in the last lag_s, which the vehicle has yet to answer: what a command sent
-        now acts on (a Smith predictor)."""
+    def predict(self, t: float, x: float, xdot: float, model: "Response",
+                horizon_s: float) -> tuple[float, float]:
+        """(X [m], Xdot [m/s]) horizon_s (<= the lag) after t, from the state measured at t
+        and the commands recorded that the vehicle answers within the horizon: those sent
+        between lag and lag - horizon_s ago (a Smith predictor)."""
+        lag = model.lag_s
         dv = dx = 0.0
         rows = self._rows
         for i in range(len(rows) - 1, -1, -1):
             t_k, u_k = rows[i][0], rows[i][1]
-            if t_k < t - lag_s or t_k >= t:
-                if t_k < t - lag_s:
-                    break
+            if t_k < t - lag:
+                break
+            if t_k >= t - lag + horizon_s:
                 continue
-            held = (rows[i + 1][0] if i + 1 < len(rows) else t) - t_k
+            held = min(rows[i + 1][0] if i + 1 < len(rows) else t, t - lag + horizon_s) - t_k
             dv += u_k * held
-            dx += u_k * held * (t - t_k - 0.5 * held)
-        push = bias_mps2 - drag_per_s * xdot
-        v_next = xdot + dv + push * lag_s
-        return x + xdot * lag_s + dx + 0.5 * push * lag_s * lag_s, v_next
+            dx += u_k * held * (t + horizon_s - (t_k + lag + 0.5 * held))
+        push = model.bias_mps2 - model.drag_per_s * xdot
+        return (x + xdot * horizon_s + dx + 0.5 * push * horizon_s ** 2,
+                xdot + dv + push * horizon_s)
 
 
 def _shifted_integrals(t: np.ndarray, u: np.ndarray, lags: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ from perchd.flight.config import FlightConfig, PostContact, TriggerPolicy
 from perchd.flight.control import AxisController, Controller, FeedForward
 from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner
-from perchd.flight.lagid import LagFit, LagIdentifier
+from perchd.flight.lagid import LagFit, LagIdentifier, LagModel
 from perchd.flight.planrefs import PlanSampler
 from perchd.logs.flightlog import LogEvent
 from perchd.tau import retarget
@@ -165,6 +165,7 @@ class Supervisor:
         self.lagid = LagIdentifier(cfg.lag_id)
         self.ff = FeedForward(cfg.tau_gains.ff_lead_s)
         self.lag_fit: LagFit | None = None  # once identified (at the first stage-1 refs)
+        self.response: LagModel | None = None  # the latest accepted fit
         self._t_refit = -math.inf  # [s] the approach's last refit
 
     # --- helpers ----------------------------------------------------------------------------
@@ -333,7 +334,7 @@ class Supervisor:
                                        schedule=not hold)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
-            ux = self._approach_accel(st, dt)
+            ux = self._approach_accel(t, st, dt)
         else:
             ux = self._hold_x.step(self._hold[0], st.x, st.xdot, dt, self.ctl.saturated)
             if self.phase is Phase.TAKEOFF:
@@ -379,13 +380,14 @@ class Supervisor:
         self._a_app, self._t_moving, self._v_int = need, t, 0.0
         self._enter(Phase.APPROACH, t, "", accel=need)
 
-    def _approach_accel(self, st: State, dt: float) -> float:
+    def _approach_accel(self, t: float, st: State, dt: float) -> float:
         """Feed-forward (with the drag identified so far) + PI on the speed profile to
         (x0, v0); the integral takes up what the feed-forward misses (ApproachConfig.ki_v),
         frozen while the mapping saturates."""
         a, v0 = self.cfg.approach, self.plan.v0
-        v_ref = math.sqrt(max(0.0, v0 * v0 - 2.0 * self._a_app * (self.plan.x0 - st.x)))
-        err = v_ref - st.xdot
+        x, v, _ = self._predicted(t, st)
+        v_ref = math.sqrt(max(0.0, v0 * v0 - 2.0 * self._a_app * (self.plan.x0 - x)))
+        err = v_ref - v
         if not self.ctl.saturated and a.ki_v > 0.0:
             bound = a.i_limit_mps2 / a.ki_v
             self._v_int = min(max(self._v_int + err * dt, -bound), bound)
@@ -517,21 +519,31 @@ class Supervisor:
             a = ff.accel(0.0, float(plan.v_contact))
         return Refs(tau_ref, here.x, here.v, a)
 
+    def _predicted(self, t: float, st: State) -> tuple[float, float, float]:
+        """(X [m], Xdot [m/s], horizon [s]): the controllers' gains are made for a vehicle
+        that answers within the configured ff_lead_s (the paper's Crazyflie); of a lag
+        identified beyond that, they see the state predicted that much ahead from the
+        commands still in flight (LagIdentifier.predict), so the feedback, like the
+        feed-forward, acts where its command lands (docs/errata.md §10). Horizon 0: the
+        measured state."""
+        m = self.response
+        horizon = m.lag_s - self.cfg.tau_gains.ff_lead_s if m is not None else 0.0
+        if horizon <= 0.0 or not self.cfg.tau_gains.predict:
+            return st.x, st.xdot, 0.0
+        x, v = self.lagid.predict(t, st.x, st.xdot, m, horizon)
+        return x, v, horizon
+
     def _lag_view(self, t: float, st: State, refs: Refs) -> tuple[State, Refs]:
-        """What the tau controller acts on: once a lag is identified, the state predicted
-        that lag ahead from the commands still in flight (LagIdentifier.predict) and the
-        references then, so the feedback, like the feed-forward, acts where the command
-        will land (docs/errata.md §10); otherwise the measured state and refs."""
-        if self.lag_fit is None or self.lag_fit.model is None or not self.cfg.tau_gains.predict:
+        """The state and references the tau controller acts on (_predicted)."""
+        x, v, horizon = self._predicted(t, st)
+        if horizon == 0.0:
             return st, refs
-        ff = self.ff
-        x, v = self.lagid.predict(t, st.x, st.xdot, ff.lead_s, ff.drag_per_s, ff.bias_mps2)
         # Predicted at or past the surface: tau = X/Xdot from just before it, so that the
         # stage-2 error stays 1 - Xdot/V_c instead of tau's sign flipping.
         x = min(x, -1e-3)
         tau = x / v if v > self.cfg.estimator.min_speed_mps else None
         seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
-        return seen, self._refs_at(t + ff.lead_s, x, 0.0)
+        return seen, self._refs_at(t + horizon, x, self.ff.lead_s - horizon)
 
     def _observe_response(self, t: float, st: State) -> None:
         """Record the ticks for the lag identification (the stages' commands feed its
@@ -545,14 +557,16 @@ class Supervisor:
         self._t_refit = t
         model = self.lagid.fit().model
         if model is not None:
+            self.response = model
             self.ff = FeedForward(model.lag_s, model.drag_per_s, model.bias_mps2)
 
     def _identify(self, t: float) -> None:
         """Fit the lag and drag of the hold and approach just flown (flight/lagid.py) and
         feed them forward from the trigger on; a refused fit keeps the configured lead."""
         self.lag_fit = fit = self.lagid.fit()
-        m = fit.model
+        self.response = m = fit.model
         if m is None:
+            self.ff = FeedForward(self.cfg.tau_gains.ff_lead_s)
             self.events.append(LogEvent(t, "lag-unidentified", (
                 f"{fit.why}: flying the configured lead {self.ff.lead_s:g} s and no drag term"),
                 {"lead_s": self.ff.lead_s}))

@@ -8,7 +8,7 @@ import random
 import pytest
 
 from perchd.flight.config import LagIdGains
-from perchd.flight.lagid import LagIdentifier
+from perchd.flight.lagid import LagIdentifier, LagModel
 
 DT = 0.01
 
@@ -80,12 +80,16 @@ def test_an_absurd_drag_is_refused():
 
 def test_the_prediction_adds_the_commands_still_in_flight():
     """A step of 1 m/s^2 sent 0.1 s ago reaches a vehicle with a 0.2 s lag 0.1 s from now:
-    0.2 s later the speed has gained 0.1 m/s and X 0.1^2 / 2 m beyond coasting."""
+    0.2 s later the speed has gained 0.1 m/s and X 0.1^2 / 2 m beyond coasting; 0.1 s
+    later nothing yet."""
     ident = LagIdentifier(LagIdGains())
     for k in range(100):
         ident.record(k * DT, 1.0 if k >= 90 else 0.0, 0.0, 0.0)
-    x, v = ident.predict(1.0, -1.0, 1.0, 0.2, 0.0, 0.0)
+    late = LagModel(0.2, 0.0, 0.0, 0.0, 0, 0.0)
+    x, v = ident.predict(1.0, -1.0, 1.0, late, 0.2)
     assert v == pytest.approx(1.1, abs=1e-9)
     assert x == pytest.approx(-1.0 + 0.2 + 0.005, abs=1e-9)
-    x, v = ident.predict(1.0, -1.0, 1.0, 0.2, 0.5, 0.0)  # drag takes 0.5 * 1 m/s for 0.2 s
-    assert v == pytest.approx(1.1 - 0.1, abs=1e-9)
+    x, v = ident.predict(1.0, -1.0, 1.0, late, 0.1)
+    assert (x, v) == pytest.approx((-0.9, 1.0), abs=1e-9)
+    dragged = LagModel(0.2, 0.5, 0.0, 0.0, 0, 0.0)  # drag takes 0.5 * 1 m/s for 0.2 s
+    assert ident.predict(1.0, -1.0, 1.0, dragged, 0.2)[1] == pytest.approx(1.0, abs=1e-9)
