@@ -123,7 +123,7 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
                  config_add: str = "") -> dict:
     proc, mocap, driver, surface = start_harness(fw, binary, noise, seed, tmp)
     config: list[str] = []
-    if fw.config is not None or config_add:
+    if fw.config is not None or config_add.strip():
         (tmp / "flight.toml").write_text((fw.config or "version = 1\n") + config_add)
         config = ["--config", str(tmp / "flight.toml")]
     try:
