@@ -25,8 +25,6 @@ import argparse
 import json
 import math
 import os
-import re
-import signal
 import statistics
 import subprocess
 import sys
@@ -70,7 +68,7 @@ FIRMWARES = (
     Firmware("arducopter", "PERCHD_ARDUCOPTER", "--arducopter",
              config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text(),
              keep=("arm",), add=("configure=1",)),
-    Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "8"), config=PX4_CONFIG,
+    Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5"), config=PX4_CONFIG,
              keep=("yaw0",)),
 )
 
@@ -82,30 +80,20 @@ def driver_uri(ready: str, fw: Firmware) -> str:
     return base + ("?" + "&".join(kept) if kept else "")
 
 
-def start_harness(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path):
+def start_harness(fw: Firmware, binary: str, noise: float, tmp: Path):
     """`perchd sim firmware`: its process, mocap URI, driver URI and surface options."""
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "sim", "firmware", fw.flag, binary, *fw.extra,
-         "--noise", str(noise), "--fw-log", str(tmp / "fw.log"), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    surface: list[str] = []
-    for line in proc.stderr:
-        if (found := re.search(r"surface (\S+ \S+ \S+) normal (\S+ \S+ \S+)", line)):
-            surface = ["--surface", *found.group(1).split(), "--normal", *found.group(2).split()]
-        if (found := re.search(r"ready: mocap (\S+) driver (\S+)", line)):
-            return proc, found.group(1), driver_uri(found.group(2), fw), surface
-    proc.kill()
-    raise RuntimeError(f"perchd sim firmware {fw.flag} did not start: {proc.stderr.read()}")
+    sys.path.insert(0, str(ROOT / "tests" / "helpers"))
+    from fwharness import start_placed
+    proc, mocap, driver, surface = start_placed(
+        fw.flag, binary, *fw.extra, "--noise", str(noise), "--fw-log", str(tmp / "fw.log"),
+        env=ENV)
+    return proc, mocap, driver_uri(driver, fw), surface
 
 
 def stop_harness(proc: subprocess.Popen) -> dict:
-    proc.send_signal(signal.SIGTERM)
-    try:
-        out, _ = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    return json.loads(out) if out.strip() else {}
+    sys.path.insert(0, str(ROOT / "tests" / "helpers"))
+    from fwharness import stop_harness as stop
+    return stop(proc, 30.0)
 
 
 def lag_event(log: Path) -> dict:
@@ -121,7 +109,7 @@ def lag_event(log: Path) -> dict:
 
 def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
                  config_add: str = "") -> dict:
-    proc, mocap, driver, surface = start_harness(fw, binary, noise, seed, tmp)
+    proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
     config: list[str] = []
     if fw.config is not None or config_add.strip():
         (tmp / "flight.toml").write_text((fw.config or "version = 1\n") + config_add)

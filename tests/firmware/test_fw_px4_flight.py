@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -20,6 +19,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fwharness import start_placed
 from perchd.drivers.base import open_driver
 
 from perchd.core.runtime import Runtime
@@ -125,19 +125,9 @@ def hold_height(v: Px4Vehicle, drv, z_ref: float, yaw: float, seconds: float) ->
 # -- whole perches through the CLI ------------------------------------------------------------
 
 def harness(tmp: Path, *extra: str) -> tuple[subprocess.Popen, str, str, list[str]]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "sim", "firmware", "--px4", PX4, "--px4-instance",
-         str(INSTANCE), "--ahead", str(AHEAD_M), "--px4-param", f"SIH_KDV={DRAG}",
-         "--fw-log", str(tmp / "px4.log"), "--json", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    surface: list[str] = []
-    for line in proc.stderr:
-        if (found := re.search(r"px4: surface (\S+ \S+ \S+) normal (\S+ \S+ \S+)", line)):
-            surface = ["--surface", *found.group(1).split(), "--normal", *found.group(2).split()]
-        if (found := re.search(r"ready: mocap (\S+) driver (\S+)", line)):
-            return proc, found.group(1), found.group(2), surface
-    proc.kill()
-    raise AssertionError(f"perchd sim firmware --px4 did not start: {proc.stderr.read()}")
+    return start_placed("--px4", PX4, "--px4-instance", str(INSTANCE), "--ahead",
+                        str(AHEAD_M), "--px4-param", f"SIH_KDV={DRAG}", "--fw-log",
+                        str(tmp / "px4.log"), *extra, env=ENV)
 
 
 def fly_argv(tmp: Path, mocap: str, driver: str, surface: list[str]) -> list[str]:

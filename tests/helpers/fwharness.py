@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
+import sys
 
 from announced import start_announced
 
@@ -12,6 +14,25 @@ from announced import start_announced
 def start_harness(*args: str, env: dict | None = None) -> tuple[subprocess.Popen, str, str]:
     """Start `perchd sim firmware ARGS --json`; its process and the announced URIs."""
     return start_announced("sim", "firmware", *args, "--json", env=env)
+
+
+def start_placed(*args: str, env: dict | None = None
+                 ) -> tuple[subprocess.Popen, str, str, list[str]]:
+    """`perchd sim firmware ARGS --json` for a vehicle whose harness places the surface
+    itself (PX4: ahead along its heading, said on stderr before the ready line): its
+    process, mocap and driver URIs, and the `--surface ... --normal ...` options for
+    `perchd fly` (none when the harness said nothing)."""
+    proc = subprocess.Popen([sys.executable, "-m", "perchd", "sim", "firmware", *args, "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    surface: list[str] = []
+    for line in proc.stderr:
+        if (found := re.search(r"surface (\S+ \S+ \S+) normal (\S+ \S+ \S+)", line)):
+            surface = ["--surface", *found.group(1).split(), "--normal", *found.group(2).split()]
+        if (found := re.search(r"ready: mocap (\S+) driver (\S+)", line)):
+            return proc, found.group(1), found.group(2), surface
+    proc.kill()
+    raise RuntimeError(f"perchd sim firmware {' '.join(args[:2])} did not start: "
+                       f"{proc.stderr.read()}")
 
 
 def stop_harness(proc: subprocess.Popen, timeout_s: float = 20.0) -> dict:
