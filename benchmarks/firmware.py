@@ -33,18 +33,22 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "helpers"))  # the firmware tests' harness helpers
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+STALE = """[safety]
+stale_timeout_s = 0.25
+"""
+"""The stale-mocap limit as tests/firmware/test_fw_px4_flight.py has it: beside a firmware
+and its harness on two shared cores `perchd fly` is descheduled for tens of milliseconds,
+past the default three mocap periods (30 ms at 100 Hz)."""
 PX4_CONFIG = """version = 1
 [vehicle]
 mass_kg = 1.0
 thrust_min_n = 2.0
 thrust_max_n = 18.0
-[safety]
-stale_timeout_s = 0.25
-"""
-"""SIH's quadrotor (1 kg, 4 x 5 N); the stale limit as tests/firmware/test_fw_px4_flight.py
-has it (perchd fly is descheduled tens of ms at a time beside px4 on two cores)."""
+""" + STALE
+"""SIH's quadrotor (1 kg, 4 x 5 N)."""
 
 
 @dataclass(frozen=True)
@@ -64,9 +68,10 @@ class Firmware:
 
 
 FIRMWARES = (
-    Firmware("cf2", "PERCHD_CF2", "--cf2", ("--link", "udp://127.0.0.1:0")),
+    Firmware("cf2", "PERCHD_CF2", "--cf2", ("--link", "udp://127.0.0.1:0"),
+             config="version = 1\n" + STALE),
     Firmware("arducopter", "PERCHD_ARDUCOPTER", "--arducopter",
-             config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text(),
+             config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text() + STALE,
              keep=("arm",), add=("configure=1",)),
     Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5"), config=PX4_CONFIG,
              keep=("yaw0",)),
@@ -82,7 +87,6 @@ def driver_uri(ready: str, fw: Firmware) -> str:
 
 def start_harness(fw: Firmware, binary: str, noise: float, tmp: Path):
     """`perchd sim firmware`: its process, mocap URI, driver URI and surface options."""
-    sys.path.insert(0, str(ROOT / "tests" / "helpers"))
     from fwharness import start_placed
     proc, mocap, driver, surface = start_placed(
         fw.flag, binary, *fw.extra, "--noise", str(noise), "--fw-log", str(tmp / "fw.log"),
@@ -91,20 +95,13 @@ def start_harness(fw: Firmware, binary: str, noise: float, tmp: Path):
 
 
 def stop_harness(proc: subprocess.Popen) -> dict:
-    sys.path.insert(0, str(ROOT / "tests" / "helpers"))
     from fwharness import stop_harness as stop
     return stop(proc, 30.0)
 
 
 def lag_event(log: Path) -> dict:
-    """The flight's lag-identified (or -unidentified) event values, {} without one."""
-    if not log.exists():
-        return {}
-    for line in log.read_text().splitlines():
-        if '"kind":"lag-' in line:
-            ev = json.loads(line)["event"]
-            return {"kind": ev["kind"], **ev["values"]}
-    return {}
+    from fwharness import lag_event as event
+    return event(log)
 
 
 def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
@@ -139,7 +136,6 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
 def fly_sim(noise: float, seed: int, tmp: Path) -> dict:
     """The same flight in perchd's own simulator (its Crazyflie, the default flight config),
     in process on a simulated clock."""
-    sys.path.insert(0, str(ROOT / "tests" / "helpers"))
     from simflight import Sim
 
     from perchd.tau.planfile import load_plan

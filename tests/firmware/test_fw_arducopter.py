@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from fwharness import start_harness, stop_harness
+from fwharness import lag_event, start_harness, stop_harness
 
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
 pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
@@ -142,8 +142,10 @@ def test_the_agent_perches_on_arducopter_sitl(tmp_path):
     proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
-        done = subprocess.run(fly_argv(tmp_path, mocap, driver), capture_output=True,
-                              text=True, timeout=120, env=ENV)
+        # configure=1: the harness leaves copter.parm's failsafe values, which the driver
+        # refuses (docs/safety.md)
+        done = subprocess.run(fly_argv(tmp_path, mocap, with_param(driver, "configure=1")),
+                              capture_output=True, text=True, timeout=120, env=ENV)
         time.sleep(1.0)
     finally:
         rec.close()
@@ -155,12 +157,15 @@ def test_the_agent_perches_on_arducopter_sitl(tmp_path):
             "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
             "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
             "trigger": fly["trigger"], "pitch_lag_s": pitch_lag(tmp_path / "flight.jsonl", rec.samples),
-            "modes": sim["modes"]})
+            "lag": lag_event(tmp_path / "flight.jsonl"), "modes": sim["modes"]})
     lo, hi = plan["limits"]["v_contact"]
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
-    assert lo - 0.15 <= sim["contact"]["speed"] <= hi + 0.15
-    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.15)
+    # measured over 10 flights (docs/firmware.md): contact 0.965-1.014 m/s, perch time
+    # within 0.65 %, with the ~0.3 s lag identified; +4.9-6.6 % and 0.88-0.97 m/s without
+    assert lo <= sim["contact"]["speed"] <= hi + 0.03
+    assert sim["contact"]["speed"] == pytest.approx(plan["v_contact"], abs=0.05)
+    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.02)
 
 
 def test_sigkill_of_perchd_fly_mid_approach_leaves_the_vehicle_level(tmp_path):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 from cf2rig import CF2, needs_cf2
-from fwharness import start_harness, stop_harness
+from fwharness import lag_event, start_harness, stop_harness
 from perchd.drivers.thrust import CrazyflieThrust
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
@@ -33,14 +33,6 @@ default thrust model, which the flight flies in when no hover= calibrates it."""
 def harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
     return start_harness("--cf2", CF2, "--link", "udp://127.0.0.1:0", "--noise", "0.001",
                          "--fw-log", str(tmp / "cf2.log"), env=ENV)
-
-
-def lag_event(log: Path) -> dict:
-    """The values of the flight's lag-identified event ({} if it logged none)."""
-    for line in log.read_text().splitlines():
-        if '"kind":"lag-identified"' in line:
-            return json.loads(line)["event"]["values"]
-    return {}
 
 
 @pytest.mark.parametrize("flight", [1, 2, 3])

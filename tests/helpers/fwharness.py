@@ -7,6 +7,7 @@ import re
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 from announced import start_announced
 
@@ -33,6 +34,18 @@ def start_placed(*args: str, env: dict | None = None
     proc.kill()
     raise RuntimeError(f"perchd sim firmware {' '.join(args[:2])} did not start: "
                        f"{proc.stderr.read()}")
+
+
+def lag_event(log: Path) -> dict:
+    """The flight's lag-identified (or -unidentified) event from its log as {"kind": ...,
+    **values} (docs/contracts.md, flight log); {} without one."""
+    if not log.exists():
+        return {}
+    for line in log.read_text().splitlines():
+        if '"kind":"lag-' in line:
+            ev = json.loads(line)["event"]
+            return {"kind": ev["kind"], **ev["values"]}
+    return {}
 
 
 def stop_harness(proc: subprocess.Popen, timeout_s: float = 20.0) -> dict:
