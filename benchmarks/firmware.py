@@ -10,7 +10,8 @@ and `perchd fly` with the harness's mocap and driver URIs, no mass or hover in t
 flight config names the vehicle, the hold learns its hover thrust). Printed per firmware:
 flights perched / flown, the true contact speed (median, min, max) against the plan's,
 perch time (median, % error against the plan), the true heading's largest departure from
-the start heading over each whole run, the speed at the trigger against the plan's v0, the
+the start heading (PX4: the harness's, at take-over; else the first of the flight) between the
+flight's first and last control tick, the speed at the trigger against the plan's v0, the
 lag and drag the flight identified (flight/lagid.py); beside it the same N flights in
 perchd's simulator (sim:// with the same mocap noise, seeds 0..N-1: its Crazyflie plant and
 the default flight config).
@@ -111,6 +112,8 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
     if fw.config is not None or config_add.strip():
         (tmp / "flight.toml").write_text((fw.config or "version = 1\n") + config_add)
         config = ["--config", str(tmp / "flight.toml")]
+    from fwharness import YawWatch, flight_window, heading_error
+    watch = YawWatch(mocap)
     try:
         done = subprocess.run(
             [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
@@ -118,18 +121,19 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
              "--state", str(tmp / "vehicles.json"), "--json"],
             capture_output=True, text=True, timeout=180, env=ENV)
     finally:
+        watch.close()
         sim = stop_harness(proc)
     fly = json.loads(done.stdout) if done.stdout.strip() else {
         "outcome": "NO_RESULT", "detail": done.stderr.strip()[-300:]}
-    heading = sim.get("start_heading_rad") or 0.0
-    yaws = sim.get("yaw_range_rad") or []
+    yaws = watch.between(*flight_window(tmp / "flight.jsonl"))
+    heading = sim.get("start_heading_rad")
+    heading = yaws[0] if heading is None and yaws else heading or 0.0
     return {
         "outcome": fly["outcome"], "detail": fly.get("detail"),
         "contact_speed": (sim.get("contact") or {}).get("speed"),
         "agent_contact_speed": fly.get("contact_speed"), "perch_time": fly.get("perch_time"),
         "trigger_v": (fly.get("trigger") or {}).get("v"),
-        "yaw_dev_deg": max((abs(math.degrees(math.remainder(y - heading, math.tau)))
-                            for y in yaws), default=None),
+        "yaw_dev_deg": math.degrees(heading_error(yaws, heading)) if yaws else None,
         "lag": lag_event(tmp / "flight.jsonl")}
 
 

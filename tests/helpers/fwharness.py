@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 from announced import start_announced
@@ -57,3 +59,47 @@ def stop_harness(proc: subprocess.Popen, timeout_s: float = 20.0) -> dict:
         if proc.poll() is None:
             proc.kill()
     return json.loads(out)
+
+
+class YawWatch:
+    """The mocap's true yaw [rad] by pose time, collected while `perchd fly` runs."""
+
+    def __init__(self, mocap: str) -> None:
+        from perchd.core.runtime import Runtime
+        from perchd.mocap.base import open_source
+        self.src = open_source(mocap, Runtime.real())
+        self.src.start()
+        self.samples: list[tuple[float, float]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        from perchd.sim.firmware.harness import yaw_of
+        seq = 0
+        while not self._stop.is_set():
+            pose = self.src.wait(seq, 0.2)
+            if pose is not None:
+                seq = pose.seq
+                self.samples.append((pose.t, yaw_of(pose.q)))
+
+    def between(self, t0: float, t1: float) -> list[float]:
+        return [y for t, y in self.samples if t0 <= t <= t1]
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=1.0)
+        self.src.close()
+
+
+def flight_window(log: Path) -> tuple[float, float]:
+    """[s] monotonic times of the flight's first and last control ticks (perchd fly's clock);
+    an empty window when the flight ticked none."""
+    ticks = [json.loads(line)["row"]["t"] for line in log.read_text().splitlines()
+             if line.startswith('{"row"')] if log.exists() else []
+    return (ticks[0], ticks[-1]) if ticks else (0.0, -1.0)
+
+
+def heading_error(yaws: list[float], heading: float) -> float:
+    """[rad] largest |yaw - heading|."""
+    return max(abs(math.remainder(y - heading, math.tau)) for y in yaws)
