@@ -56,33 +56,29 @@ thrust_max_n = 18.0
 class Firmware:
     """name; env: the variable naming the binary; flag: `perchd sim firmware`'s option for it;
     extra: more harness options; config: the flight config (TOML text, None: the default
-    Crazyflie); keep: the driver URI options kept from the harness's ready line; add: more
-    driver URI options."""
+    Crazyflie)."""
 
     name: str
     env: str
     flag: str
     extra: tuple[str, ...] = ()
     config: str | None = None
-    keep: tuple[str, ...] = ()
-    add: tuple[str, ...] = ()
 
 
 FIRMWARES = (
     Firmware("cf2", "PERCHD_CF2", "--cf2", ("--link", "udp://127.0.0.1:0"),
              config="version = 1\n" + STALE),
     Firmware("arducopter", "PERCHD_ARDUCOPTER", "--arducopter",
-             config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text() + STALE,
-             keep=("arm",), add=("configure=1",)),
-    Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5"), config=PX4_CONFIG,
-             keep=("yaw0",)),
+             config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text() + STALE),
+    Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5"), config=PX4_CONFIG),
 )
 
 
-def driver_uri(ready: str, fw: Firmware) -> str:
-    """The ready line's driver URI without mass= or hover= (the flight learns them)."""
+def driver_uri(ready: str) -> str:
+    """The ready line's driver URI without mass= or hover= (the flight config names the
+    vehicle, the hold learns its hover thrust)."""
     base, _, query = ready.partition("?")
-    kept = [kv for kv in query.split("&") if kv and kv.split("=")[0] in fw.keep] + list(fw.add)
+    kept = [kv for kv in query.split("&") if kv and kv.split("=")[0] not in ("mass", "hover")]
     return base + ("?" + "&".join(kept) if kept else "")
 
 
@@ -92,7 +88,7 @@ def start_harness(fw: Firmware, binary: str, noise: float, tmp: Path):
     proc, mocap, driver, surface = start_placed(
         fw.flag, binary, *fw.extra, "--noise", str(noise), "--fw-log", str(tmp / "fw.log"),
         env=ENV)
-    return proc, mocap, driver_uri(driver, fw), surface
+    return proc, mocap, driver_uri(driver), surface
 
 
 def stop_harness(proc: subprocess.Popen) -> dict:

@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 from announced import start_announced
@@ -70,6 +71,7 @@ class YawWatch:
         self.src = open_source(mocap, Runtime.real())
         self.src.start()
         self.samples: list[tuple[float, float]] = []
+        self.positions: list[tuple[float, tuple[float, float, float]]] = []  # (t, p)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -82,6 +84,7 @@ class YawWatch:
             if pose is not None:
                 seq = pose.seq
                 self.samples.append((pose.t, yaw_of(pose.q)))
+                self.positions.append((time.monotonic(), pose.p))
 
     def between(self, t0: float, t1: float) -> list[float]:
         return [y for t, y in self.samples if t0 <= t <= t1]
