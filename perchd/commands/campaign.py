@@ -24,6 +24,7 @@ from typing import Any, TextIO
 
 from perchd.commands.fly import load_config
 from perchd.core.errors import ConfigError
+from perchd.core.interrupts import exit_code
 from perchd.core.safefile import OutputError, check_output
 from perchd.flight.config import TriggerPolicy
 from perchd.sim import campaign as cp
@@ -193,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
     rows: list[Any] = []
     t0 = time.monotonic()
     stopped = None
-    with open_table(table, args.force) as writer, on_signals() as signals:
+    with open_table(table, args.force) as writer, on_signals():
         def finished(row: Any) -> None:
             rows.append(row)
             writer.write(row)  # as it finishes: an interrupted campaign keeps it
@@ -233,7 +234,7 @@ class Stopped(BaseException):
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
         self.name = signal.Signals(signum).name
-        self.exit_code = 128 + signum
+        self.exit_code = exit_code(signum)
 
 
 @contextlib.contextmanager

@@ -9,7 +9,8 @@ The hover thrust the hold learns is kept per vehicle (the driver URI) in --state
 $XDG_STATE_HOME/perchd/vehicles.json, flight/vehiclestate.py) and is the next flight's guess.
 
 While flying, a one-line status on stderr (phase, X, Xdot, tau vs tau_ref); afterwards a
-summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise.
+summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise;
+SIGINT or SIGTERM end the flight (SIGNAL, with the failsafe) and exit 130 or 143 (docs/contracts.md §6).
 With `--driver sim:// --mocap sim://` the flight is simulated on a simulated clock.
 """
 
@@ -19,7 +20,6 @@ import argparse
 import dataclasses
 import json
 import math
-import signal
 import sys
 import time
 from pathlib import Path
@@ -28,6 +28,7 @@ from perchd.commands.argcheck import numbers_as_values, within
 from perchd.commands.log import write_file
 from perchd.core.errors import ConfigError, PerchdError
 from perchd.core.extras import require
+from perchd.core.interrupts import catching
 from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
@@ -192,17 +193,14 @@ def run(args: argparse.Namespace) -> int:
         args.log = str(mcap.with_suffix(".jsonl"))
     log = log_path(args, plan.strategy)
     abort = FlightAbort()
-    handlers = {s: signal.signal(s, lambda *_: abort.request(EndReason.SIGNAL))
-                for s in (signal.SIGINT, signal.SIGTERM)}
     status = StatusLine()
-    try:
-        links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
-        res = links.fly(plan, log, cfg, abort, status,
-                        header={"plan_file": str(args.plan), "mocap": args.mocap})
-    finally:
-        status.close()
-        for s, h in handlers.items():
-            signal.signal(s, h)
+    with catching(lambda: abort.request(EndReason.SIGNAL)) as caught:
+        try:
+            links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
+            res = links.fly(plan, log, cfg, abort, status,
+                            header={"plan_file": str(args.plan), "mocap": args.mocap})
+        finally:
+            status.close()
     if res.hover_n is not None:
         store.remember(args.driver, res.hover_n, cfg)
     out = res.to_json()
@@ -210,7 +208,8 @@ def run(args: argparse.Namespace) -> int:
         out["mcap"] = str(mcap)
     text = summary_text(res) + (f"\nmcap: {mcap}" if "mcap" in out else "")
     print(json.dumps(out) if args.json else text)
-    return 0 if res.outcome is EndReason.CONTACT else 1
+    caught.say("fly", f"the flight ended {res.outcome.name}; log {log}")
+    return caught.exit_code(0 if res.outcome is EndReason.CONTACT else 1)
 
 
 def _warn(line: str) -> None:
