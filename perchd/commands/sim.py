@@ -42,7 +42,8 @@ from perchd.commands.fly import MAX_COORD_M, check_geometry
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.interrupts import catching
-from perchd.mocap.outputs import open_pose_output, port_error
+from perchd.core.netbind import port_error
+from perchd.mocap.outputs import open_pose_output
 from perchd.sim.plant import PlantParams
 from perchd.sim.receiver import Counts, SetpointInbox
 from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams

@@ -27,6 +27,8 @@ from perchd.core.errors import ConfigError, LinkError
 
 MAX_LINE = 65536
 """[bytes] a longer request line is refused and the client dropped."""
+UNIX_PATH_MAX = 107
+"""[bytes] longest AF_UNIX socket path Linux binds (sun_path is 108 bytes with its NUL)."""
 MAX_CLIENTS = 32
 """Connections served at once; more are refused (select() and the fd table stay bounded)."""
 
@@ -86,6 +88,7 @@ class ControlServer:
         self.peers = peers or PeerPolicy.owner()
         self.on_refuse = on_refuse
         self.refused = 0
+        _check_length(self.path)
         _remove_stale(self.path)
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
         old = os.umask(0o777 & ~mode)  # never world-accessible, not even between bind and chmod
@@ -184,6 +187,14 @@ class ControlServer:
     def _drop(self, fd: int) -> None:
         conn, _ = self.clients.pop(fd)
         conn.close()
+
+
+def _check_length(path: Path) -> None:
+    """bind() of a longer path fails with no errno text ("cannot listen: None"): say why."""
+    size = len(os.fsencode(path))
+    if size > UNIX_PATH_MAX:
+        raise ConfigError(f"--socket {path}: path too long ({size} bytes; an AF_UNIX socket "
+                          f"path has at most {UNIX_PATH_MAX}); choose a shorter one")
 
 
 def _remove_stale(path: Path) -> None:
