@@ -1,5 +1,6 @@
 """`perchd plan library`: precompute minimum-time IPTS plans over a grid of trigger states
-into one file, so a flight can replan at its trigger within one control tick.
+into one file, so a flight can replan at its trigger within one control tick. On a terminal,
+stderr shows the nodes planned so far (docs/contracts.md §2); elsewhere nothing.
 
     perchd plan library --x0 -3.5 -2.5 --v0 1.2 1.8 --nodes 11 13 --tau-s -0.5 \\
         --v-contact 0.7 1.0 --v-max 2.5 --a-max 1.4 --order 3 --out L.json
@@ -8,11 +9,11 @@ into one file, so a flight can replan at its trigger within one control tick.
 from __future__ import annotations
 
 import json
-import sys
 import time
 from pathlib import Path
 
 from perchd.commands.argcheck import numbers_as_values
+from perchd.commands.progress import Progress
 from perchd.core.safefile import check_output, write_text
 from perchd.tau.library import build_library, library_text
 
@@ -45,8 +46,13 @@ def run(a) -> int:
 
     check_output(a.out, "--out", a.force)  # before minutes of planning
     start = time.perf_counter()
-    lib = build_library(tuple(a.x0), tuple(a.v0), tuple(a.nodes), a.tau_s, tuple(a.v_contact),
-                        a.v_max, a.a_max, a.order, progress=None if a.json else _progress)
+    progress = Progress(a.nodes[0] * a.nodes[1], "nodes", "plan library", lines=False)
+    try:
+        lib = build_library(tuple(a.x0), tuple(a.v0), tuple(a.nodes), a.tau_s,
+                            tuple(a.v_contact), a.v_max, a.a_max, a.order,
+                            progress=progress.at)
+    finally:
+        progress.close()
     write_text(Path(a.out), library_text(lib), "--out", a.force)
     plans = sum(node is not None for row in lib.nodes for node in row)
     out = {"library": a.out, "nodes": len(lib.x0s) * len(lib.v0s), "plans": plans,
@@ -54,12 +60,7 @@ def run(a) -> int:
     if a.json:
         print(json.dumps(out))
     else:
-        print(f"\n{out['library']}: {plans} of {out['nodes']} nodes have a plan "
+        print(f"{out['library']}: {plans} of {out['nodes']} nodes have a plan "
               f"(built in {out['build_s']:.1f} s)")
     return 0  # nodes without a plan are reported; replans near them fall back on neighbours
 
-
-def _progress(done: int, total: int) -> None:
-    if sys.stderr.isatty():
-        sys.stderr.write(f"\rplanning node {done}/{total}")
-        sys.stderr.flush()
