@@ -4,6 +4,7 @@
 
 `--log F.mcap` writes the flight log beside it as F.jsonl while flying and, when the flight
 ends, F.mcap from it (`perchd log export`, needs perchd[mcap]); docs/contracts.md §5.
+`--foxglove [HOST:]PORT` serves the same channels live (perchd.logs.foxglove, perchd[foxglove]).
 
 The hover thrust the hold learns is kept per vehicle (the driver URI) in --state (default
 $XDG_STATE_HOME/perchd/vehicles.json, flight/vehiclestate.py) and is the next flight's guess.
@@ -36,6 +37,7 @@ from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
 from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.logs.flightlog import read_log
+from perchd.logs.foxglove import LiveView, parse_address
 from perchd.service.config import load_flight_config
 from perchd.sim.session import open_links
 from perchd.tau import load_plan
@@ -72,6 +74,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--state", help="per-vehicle memory of learned hover thrusts (JSON; default "
                                    "$XDG_STATE_HOME/perchd/vehicles.json, i.e. "
                                    "~/.local/state/perchd/vehicles.json)")
+    p.add_argument("--foxglove", metavar="[HOST:]PORT",
+                   help="serve the flight live over the Foxglove WebSocket protocol (the MCAP "
+                        "export's channels, docs/contracts.md §5) on HOST (default 127.0.0.1), "
+                        "PORT 0 for any free one; needs perchd[foxglove]")
     p.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
     p.set_defaults(run=run)
 
@@ -174,6 +180,17 @@ def mcap_path(args: argparse.Namespace) -> Path | None:
     return check_output(args.log, "--log", args.force, inputs=(args.plan,))
 
 
+def live_view(address: str | None, log: Path):
+    """The --foxglove server, following `log` once it is written (perchd.logs.foxglove);
+    bound and announced on stderr before anything flies. None without --foxglove."""
+    if address is None:
+        return None
+    view = LiveView(parse_address(address))
+    view.follow(log)
+    _warn(f"foxglove: serving {view.url}")
+    return view
+
+
 def write_mcap(log: Path, out: Path, force: bool) -> bool:
     """The flown log exported to `out`; a failure is a warning: the flight and its JSONL stand."""
     try:
@@ -192,6 +209,7 @@ def run(args: argparse.Namespace) -> int:
     if mcap is not None:
         args.log = str(mcap.with_suffix(".jsonl"))
     log = log_path(args, plan.strategy)
+    view = live_view(args.foxglove, log)
     abort = FlightAbort()
     status = StatusLine()
     with catching(lambda: abort.request(EndReason.SIGNAL)) as caught:
@@ -201,6 +219,8 @@ def run(args: argparse.Namespace) -> int:
                             header={"plan_file": str(args.plan), "mocap": args.mocap})
         finally:
             status.close()
+            if view is not None:
+                view.close()
     if res.hover_n is not None:
         store.remember(args.driver, res.hover_n, cfg)
     out = res.to_json()
