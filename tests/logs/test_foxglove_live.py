@@ -5,11 +5,9 @@ receives is, message for message, the flight log's MCAP export (docs/contracts.m
 from __future__ import annotations
 
 import json
-import re
-import struct
+import socket
 import subprocess
 import sys
-import time
 
 import pytest
 from svc import PLAN, SimProcess
@@ -18,45 +16,10 @@ from perchd.logs.flightlog import read_log
 from perchd.logs.mcapexport import FLIGHT, ROW_STREAMS, messages, payload_bytes, schemas
 
 pytest.importorskip("foxglove")
-ws_client = pytest.importorskip("websockets.sync.client")
+pytest.importorskip("websockets")
+from foxglove_client import serving_url, watch  # noqa: E402 - needs websockets
 
-SUBPROTOCOL = "foxglove.sdk.v1"
-MESSAGE_DATA = 0x01  # binary opcode: uint32 subscription id, uint64 log time [ns], payload
 LOOP = next(s.topic for s in ROW_STREAMS if s.topic.endswith("/loop"))
-
-
-def serving_url(proc: subprocess.Popen) -> str:
-    for line in proc.stderr:
-        found = re.search(r"foxglove: serving (ws://\S+)", line)
-        if found:
-            return found.group(1)
-    raise AssertionError(f"perchd fly never served: {proc.wait()}")
-
-
-def subscribe_all(ws) -> dict[int, dict]:
-    """Read serverInfo and advertise; subscribe to every channel: {subscription id: channel}."""
-    channels: list[dict] = []
-    while not channels:
-        op = json.loads(ws.recv(timeout=5))
-        assert op["op"] in ("serverInfo", "advertise", "status"), op
-        channels = op.get("channels", []) if op["op"] == "advertise" else []
-    subs = {n: ch for n, ch in enumerate(channels, start=1)}
-    ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-        {"id": n, "channelId": ch["id"]} for n, ch in subs.items()]}))
-    return subs
-
-
-def receive(ws, subs: dict[int, dict]) -> list[tuple[str, int, dict]]:
-    """(topic, log time [ns], payload) of every message until the server closes."""
-    got = []
-    while True:
-        try:
-            data = ws.recv(timeout=30)
-        except Exception:  # noqa: BLE001 - closed by the server at the flight's end
-            return got
-        if isinstance(data, bytes) and data[0] == MESSAGE_DATA:
-            sub, log_time = struct.unpack_from("<IQ", data, 1)
-            got.append((subs[sub]["topic"], log_time, json.loads(data[13:])))
 
 
 @pytest.fixture
@@ -73,11 +36,7 @@ def test_a_client_subscribed_during_the_flight_receives_the_flight_log_s_values(
          sim.mocap, "--log", str(log), "--json", "--foxglove", "127.0.0.1:0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        url = serving_url(fly)
-        with ws_client.connect(url, subprotocols=[SUBPROTOCOL], open_timeout=5) as ws:
-            subs = subscribe_all(ws)
-            subscribed = time.monotonic()
-            got = receive(ws, subs)
+        subs, got = watch(serving_url(fly))
         out, _ = fly.communicate(timeout=30)
     finally:
         if fly.poll() is None:
@@ -97,7 +56,7 @@ def test_a_client_subscribed_during_the_flight_receives_the_flight_log_s_values(
     assert set(live) == set(export)
     rows_seen = [p["k"] for _, p in live[LOOP]]
     assert rows_seen == [r.k for r in flown.rows if r.k >= rows_seen[0]]  # none lost from then
-    assert len(rows_seen) > 0.5 * len(flown.rows), (len(rows_seen), time.monotonic() - subscribed)
+    assert len(rows_seen) > 0.5 * len(flown.rows)
     for topic, received in live.items():
         if topic != FLIGHT:  # from the subscription on, each one the export's, in order
             assert received == export[topic][-len(received):], topic
@@ -116,4 +75,25 @@ def test_without_the_extra_the_flag_is_one_line_naming_it(tmp_path):
     assert done.returncode == 2
     assert done.stderr.strip() == ("perchd fly: foxglove is not installed: "
                                    "pip install 'perchd[foxglove]'")
+    assert not (tmp_path / "f.jsonl").exists()
+
+
+@pytest.mark.parametrize("address, message", [
+    ("taken", "port is taken"),
+    ("localhost:http", "expected [HOST:]PORT"),
+    ("70000", "expected [HOST:]PORT"),
+])
+def test_a_taken_port_or_a_bad_address_is_refused_before_anything_flies(address, message,
+                                                                         tmp_path):
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen(1)
+        if address == "taken":
+            address = f"127.0.0.1:{holder.getsockname()[1]}"
+        done = subprocess.run(
+            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", "sim://", "--mocap",
+             "sim://", "--log", str(tmp_path / "f.jsonl"), "--foxglove", address],
+            capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and message in done.stderr and address in done.stderr
     assert not (tmp_path / "f.jsonl").exists()
