@@ -37,7 +37,7 @@ from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
 from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.logs.flightlog import read_log
-from perchd.logs.foxglove import LiveView, parse_address
+from perchd.logs.foxglove import ViewProcess, parse_address
 from perchd.service.config import load_flight_config
 from perchd.sim.session import open_links
 from perchd.tau import load_plan
@@ -181,12 +181,12 @@ def mcap_path(args: argparse.Namespace) -> Path | None:
 
 
 def live_view(address: str | None, log: Path):
-    """The --foxglove server, following `log` once it is written (perchd.logs.foxglove);
-    bound and announced on stderr before anything flies. None without --foxglove."""
+    """The --foxglove server, a process following `log` once it is written
+    (perchd.logs.foxglove); bound and announced on stderr before anything flies. None
+    without --foxglove."""
     if address is None:
         return None
-    view = LiveView(parse_address(address))
-    view.follow(log)
+    view = ViewProcess(parse_address(address), log)
     _warn(f"foxglove: serving {view.url}")
     return view
 

@@ -2,9 +2,11 @@
 
 The channels, schemas and messages are the MCAP export's (perchd.logs.mcapexport,
 docs/contracts.md §5): /perchd/estimate, reference, setpoint, loop, phase, events and flight.
-They are read back from the flight log as the writer flushes it, by a thread of their own,
-so the control loop does no more than it does without a view: it writes its log, and the
-view follows the file. A client that subscribes late sees the flight from then on; the
+They are read back from the flight log as the writer flushes it, by a process of its own
+(ViewProcess, at a lower CPU priority), so the control loop does no more than it does
+without a view: it writes its log, and the view follows the file. In the flying process a
+thread would share its interpreter lock, and its wake-ups wait for it (measured:
+benchmarks/README.md). A client that subscribes late sees the flight from then on; the
 /perchd/flight message is sent when the first row is written (header, `complete` false) and
 again when the end is (with `end`, `complete` true), both stamped, as in MCAP, with the first
 row's time.
@@ -16,13 +18,16 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import subprocess
+import sys
 import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from perchd.core.errors import UriError
+from perchd.core.errors import LinkError, PerchdError, UriError
 from perchd.core.extras import require
 from perchd.core.netbind import port_error
 from perchd.logs.flightlog import SCHEMA, LogEvent, LogRow
@@ -124,6 +129,7 @@ class Replay:
     """Log lines (header, rows, events, end) turned into the export's messages, in order."""
 
     def __init__(self) -> None:
+        self.ended = False  # the log's end line has been turned into messages
         self.header: dict[str, Any] | None = None
         self.phase: str | None = None
         self.t0: float | None = None  # [s] the first row's: /perchd/flight's time, as in MCAP
@@ -136,8 +142,10 @@ class Replay:
             return self._row(LogRow(**obj["row"]))
         if "event" in obj:
             return [event_message(LogEvent(**obj["event"]))]
-        if "end" in obj and self.header is not None and self.t0 is not None:
-            return [flight_message(self.header, obj["end"], self.t0)]
+        if "end" in obj:
+            self.ended = True
+            if self.header is not None and self.t0 is not None:
+                return [flight_message(self.header, obj["end"], self.t0)]
         return []
 
     def _row(self, row: LogRow) -> list[Message]:
@@ -177,7 +185,7 @@ class LiveView:
     def _run(self, follower: LogFollower) -> None:
         replay = Replay()
         try:
-            while True:
+            while not replay.ended:
                 stopping = self._stop.is_set()  # read before the last poll: nothing is lost
                 for obj in follower.poll():
                     for m in replay.messages(obj):
@@ -189,11 +197,82 @@ class LiveView:
         finally:
             follower.close()
 
+    def stop(self) -> None:
+        """Stop following once what the log holds now is published."""
+        self._stop.set()
+
+    def wait(self) -> None:
+        """Until the log has ended (or close() was asked for) and all of it is published."""
+        if self._thread is not None:
+            self._thread.join()
+
     def close(self) -> None:
         """Publish what the log still holds, then stop serving."""
-        self._stop.set()
+        self.stop()
         if self._thread is not None:
             self._thread.join()
             time.sleep(CLOSE_GRACE_S)
         self.channels.close()
         self.server.stop()
+
+
+VIEW_NICE = 10
+"""The view process's niceness: the flying process comes first when the CPUs are busy."""
+VIEW_STOP_S = 5.0
+"""[s] longest wait for the view process to publish the rest of the log and stop."""
+
+
+class ViewProcess:
+    """A LiveView in a child process (`python -m perchd.logs.foxglove HOST PORT LOG`): bound,
+    or its one-line refusal raised here, before the flight starts. Closing its stdin, or this
+    process dying, tells it to publish what the log still holds and stop."""
+
+    def __init__(self, address: Address, log: str | os.PathLike) -> None:
+        require("foxglove", "foxglove")  # here: the missing extra is one line, at once
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", __name__, address.host, str(address.port), str(log)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        line = self.proc.stdout.readline()
+        said = json.loads(line) if line.startswith("{") else {
+            "error": f"the view process ended at start (exit {self.proc.wait()})", "exit_code": 1}
+        if "error" in said:
+            self.proc.wait()
+            raise (UriError if said["exit_code"] == 2 else LinkError)(said["error"])
+        self.url = said["url"]
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        try:
+            self.proc.wait(VIEW_STOP_S)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def main(argv: list[str]) -> int:
+    """The view process: serve, say where (one JSON line on stdout), follow LOG to its end
+    or until stdin closes. Ctrl-C reaches the whole process group: the flight's own end
+    stops this process, not the signal."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.nice(VIEW_NICE)
+    host, port, log = argv
+    try:
+        view = LiveView(Address(host, int(port)))
+    except PerchdError as err:
+        print(json.dumps({"error": str(err), "exit_code": err.exit_code}), flush=True)
+        return err.exit_code
+    print(json.dumps({"url": view.url}), flush=True)
+    view.follow(log)
+    threading.Thread(target=_stop_at_eof, args=(view,), daemon=True).start()
+    view.wait()
+    view.close()
+    return 0
+
+
+def _stop_at_eof(view: LiveView) -> None:
+    sys.stdin.read()  # returns when the flying process closes the pipe, or dies
+    view.stop()
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
