@@ -5,9 +5,13 @@ receives is, message for message, the flight log's MCAP export (docs/contracts.m
 from __future__ import annotations
 
 import json
+import os
+import signal
 import socket
 import subprocess
 import sys
+import threading
+import time
 
 import pytest
 from svc import PLAN, SimProcess
@@ -97,3 +101,28 @@ def test_a_taken_port_or_a_bad_address_is_refused_before_anything_flies(address,
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and message in done.stderr and address in done.stderr
     assert not (tmp_path / "f.jsonl").exists()
+
+
+def test_ctrl_c_to_the_process_group_still_publishes_the_flight_s_end(sim, tmp_path):
+    """Ctrl-C reaches the view's process too: it ignores it and publishes the SIGNAL end."""
+    fly = subprocess.Popen(
+        [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", sim.driver, "--mocap",
+         sim.mocap, "--log", str(tmp_path / "f.jsonl"), "--json", "--foxglove", "127.0.0.1:0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    watched: list = []
+    try:
+        url = serving_url(fly)
+        client = threading.Thread(target=lambda: watched.extend(watch(url)), daemon=True)
+        client.start()
+        time.sleep(1.5)  # holding or approaching
+        os.killpg(fly.pid, signal.SIGINT)
+        out, _ = fly.communicate(timeout=30)
+        client.join(10)
+    finally:
+        if fly.poll() is None:
+            os.killpg(fly.pid, signal.SIGKILL)
+            fly.communicate()
+    assert fly.returncode == 130 and json.loads(out)["outcome"] == "SIGNAL"
+    _, got = watched
+    final = [p for topic, _, p in got if topic == FLIGHT][-1]
+    assert final["complete"] is True and final["end"]["outcome"] == "SIGNAL"
