@@ -19,12 +19,12 @@ import pytest
 import zmq
 from announced import start_announced
 from caseplans import PLANS, case1_ipts
-from perchd.drivers.base import open_driver
 
 import perchd.flight.run as flight
 from perchd.core.clock import ManualClock
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
+from perchd.drivers.base import open_driver
 from perchd.mocap.base import open_source
 
 
