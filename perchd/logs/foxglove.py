@@ -171,7 +171,6 @@ class LiveView:
             raise port_error(f"--foxglove {address.host}:{address.port}", err) from None
         self.url = f"ws://{address.host}:{self.server.port}"
         self.channels = Channels(foxglove, self.context)
-        self.published = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -190,7 +189,6 @@ class LiveView:
                 for obj in follower.poll():
                     for m in replay.messages(obj):
                         self.channels.publish(m)
-                        self.published += 1
                 if stopping:
                     return
                 self._stop.wait(POLL_S)
