@@ -269,7 +269,8 @@ class Supervisor:
         if cond.overrun_streak >= s.overrun_streak:
             return EndReason.DEADLINE_OVERRUN, f"{cond.overrun_streak} deadlines missed in a row"
         if t - self.t_start > s.timeout_s:
-            return EndReason.TIMEOUT, f"{t - self.t_start:.1f} s > {s.timeout_s:g} s"
+            return EndReason.TIMEOUT, (f"flying {t - self.t_start:.3f} s, longer than "
+                                       f"[safety] timeout_s = {s.timeout_s:g} s")
         if state is not None and self._contact(t, state):
             return EndReason.CONTACT, f"at {self.contact.speed:.3f} m/s"
         since = None if self.trigger is None else t - self.trigger.t
