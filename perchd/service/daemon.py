@@ -11,9 +11,11 @@ driver are connected, WATCHDOG=1 from the
 flight's own tick callback while flying and from the service loop while idle and the link is
 healthy (a stalled loop stops the pings and gets restarted), STATUS= with the phase, and
 STOPPING=1 on the way out. SIGTERM/SIGINT abort a flight with the driver's failsafe (end
-reason SIGNAL), wait for its log to close, and exit 0; SIGHUP reloads the config between
-flights (RELOADING=1 at once, READY=1 when done: Type=notify-reload). The control socket
-is bound here, or taken from systemd's socket activation (perchd.service.activation).
+reason SIGNAL) and wait for its log to close; SIGTERM is a service's stop request (systemctl
+stop), so it exits 0, while SIGINT (Ctrl-C) exits 130 like every command (docs/contracts.md
+§6). SIGHUP reloads the config between flights (RELOADING=1 at once, READY=1 when done:
+Type=notify-reload). The control socket is bound here, or taken from systemd's socket
+activation (perchd.service.activation).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from typing import Any
 
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import ConfigError, LinkError, PerchdError, PlanError
+from perchd.core.interrupts import exit_code
 from perchd.core.runtime import Runtime
 from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
@@ -164,6 +167,7 @@ class Daemon:
         self.flights = 0
         self.reload_pending = False
         self.stopping = False
+        self.stop_signal: int | None = None
         self.links: Links | None = None
         self.server: ControlServer | None = None
         self.wake_fd = -1  # the self-pipe's write end, open while run() runs
@@ -189,7 +193,7 @@ class Daemon:
             os.close(rfd)
             os.close(wfd)
         say("stopped")
-        return 0
+        return stop_exit_code(self.stop_signal)
 
     def _start(self) -> None:
         svc = self.config.service
@@ -221,6 +225,7 @@ class Daemon:
             if byte in (signal.SIGTERM, signal.SIGINT):
                 say(f"{signal.Signals(byte).name}: stopping")
                 self.stopping = True
+                self.stop_signal = self.stop_signal or byte
                 if self.job is not None:
                     self.job.abort.request(EndReason.SIGNAL)
             elif byte == signal.SIGHUP:
@@ -372,6 +377,12 @@ class Daemon:
             n += 1
             path = base / f"{stem}-{n}.jsonl"
         return path
+
+
+def stop_exit_code(signum: int | None) -> int:
+    """0 for SIGTERM, a service's normal stop (systemd counts a non-zero exit as a failure
+    unless the unit says otherwise); 130 for SIGINT, as any command (docs/contracts.md §6)."""
+    return 0 if signum in (None, signal.SIGTERM) else exit_code(signum)
 
 
 def apply_overrides(config: Config, overrides: dict[str, str],

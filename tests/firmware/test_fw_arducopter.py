@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from fwharness import start_harness, stop_harness
+from fwharness import lag_event, start_harness, stop_harness
 
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
 INSTANCE = os.environ.get("PERCHD_FW_INSTANCE", "0")
@@ -163,7 +163,8 @@ def perch_from_the_ground(tmp: Path, test: str, *harness: str) -> tuple[dict, di
             "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
             "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
             "trigger": fly["trigger"], "pitch_lag_s": pitch_lag(tmp / "flight.jsonl", rec.samples),
-            "takeoff_overshoot_m": over, "modes": sim["modes"], "load": os.getloadavg()})
+            "takeoff_overshoot_m": over, "lag": lag_event(tmp / "flight.jsonl"),
+            "modes": sim["modes"], "load": os.getloadavg()})
     return fly, sim, over
 
 
@@ -172,8 +173,12 @@ def assert_perched(fly: dict, sim: dict) -> None:
     lo, hi = plan["limits"]["v_contact"]
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
-    assert lo - 0.15 <= sim["contact"]["speed"] <= hi + 0.15
-    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.15)
+    # measured over 10 flights (docs/firmware.md, "Lag and drag"): contact 0.947-1.007 m/s,
+    # perch time within 0.65 % but for one flight triggered 0.16 m/s fast (+4.7 %), the
+    # ~0.3 s lag identified; +4.9-6.6 % and 0.88-0.97 m/s without
+    assert lo <= sim["contact"]["speed"] <= hi + 0.03
+    assert sim["contact"]["speed"] == pytest.approx(plan["v_contact"], abs=0.06)
+    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.05)
 
 
 def test_the_agent_perches_on_arducopter_sitl(tmp_path):
