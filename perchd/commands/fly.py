@@ -26,6 +26,7 @@ from pathlib import Path
 
 from perchd.commands.argcheck import numbers_as_values, within
 from perchd.commands.log import write_file
+from perchd.core import realtime
 from perchd.core.errors import ConfigError, PerchdError
 from perchd.core.extras import require
 from perchd.core.safefile import check_output
@@ -71,6 +72,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--state", help="per-vehicle memory of learned hover thrusts (JSON; default "
                                    "$XDG_STATE_HOME/perchd/vehicles.json, i.e. "
                                    "~/.local/state/perchd/vehicles.json)")
+    p.add_argument("--realtime", nargs="?", type=int, const=realtime.DEFAULT_PRIORITY,
+                   default=0, metavar="PRIO",
+                   help="run the agent under SCHED_FIFO at priority PRIO (1..99, default "
+                        f"{realtime.DEFAULT_PRIORITY}) with its memory locked; refused in one "
+                        "line, nothing flown, if the system does not permit it "
+                        "(CAP_SYS_NICE or ulimit -r; docs/safety.md)")
+    p.add_argument("--cpu", type=int, default=-1, metavar="N",
+                   help="with --realtime: pin the agent to CPU N")
     p.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
     p.set_defaults(run=run)
 
@@ -191,6 +200,8 @@ def run(args: argparse.Namespace) -> int:
     if mcap is not None:
         args.log = str(mcap.with_suffix(".jsonl"))
     log = log_path(args, plan.strategy)
+    rt = realtime_config(args)
+    realtime.apply(rt)  # before the links start their threads: they inherit it
     abort = FlightAbort()
     handlers = {s: signal.signal(s, lambda *_: abort.request(EndReason.SIGNAL))
                 for s in (signal.SIGINT, signal.SIGTERM)}
@@ -198,7 +209,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
         res = links.fly(plan, log, cfg, abort, status,
-                        header={"plan_file": str(args.plan), "mocap": args.mocap})
+                        header={"plan_file": str(args.plan), "mocap": args.mocap,
+                                "scheduling": rt.describe()})
     finally:
         status.close()
         for s, h in handlers.items():
@@ -211,6 +223,13 @@ def run(args: argparse.Namespace) -> int:
     text = summary_text(res) + (f"\nmcap: {mcap}" if "mcap" in out else "")
     print(json.dumps(out) if args.json else text)
     return 0 if res.outcome is EndReason.CONTACT else 1
+
+
+def realtime_config(args: argparse.Namespace) -> realtime.RealtimeConfig:
+    """--realtime and --cpu as a RealtimeConfig (ConfigError for values out of range)."""
+    if args.cpu >= 0 and not args.realtime:
+        raise ConfigError(f"--cpu {args.cpu}: only with --realtime")
+    return realtime.RealtimeConfig(args.realtime, args.cpu)
 
 
 def _warn(line: str) -> None:
