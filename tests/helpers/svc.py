@@ -86,11 +86,12 @@ class Serve:
     """`perchd serve` under a test notify socket; .sock is its control socket."""
 
     def __init__(self, tmp: Path, notify: NotifyListener, *extra: str, tables: str = "",
-                 **service: str) -> None:
+                 prefix: tuple[str, ...] = (), **service: str) -> None:
+        """prefix: a command the service runs under (prlimit, setpriv)."""
         self.config = write_config(tmp, tables, **service)
         self.sock = tmp / "control.sock"
         env = {**os.environ, "NOTIFY_SOCKET": notify.address, "WATCHDOG_USEC": "2000000"}
-        self.proc = subprocess.Popen([sys.executable, "-m", "perchd", "serve", "--config",
+        self.proc = subprocess.Popen([*prefix, sys.executable, "-m", "perchd", "serve", "--config",
                                       str(self.config), *extra], env=env,
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
