@@ -44,6 +44,14 @@ EPILOG = f"""URI query parameters, KEY [unit] (default); any other key is refuse
 (docs/contracts.md §7), e.g. sim://?latency=0.02&noise=0.001:
 {params_help()}
 
+The loop: by default each mocap frame releases a tick (`[flight] sync = "mocap"`, rate_hz
+= the mocap rate), so a setpoint follows its pose by the compute time only; with no frame for
+1.5 periods it ticks anyway (stale mocap still ends the flight; the Crazyflie and MAVLink
+drivers repeat the last setpoint themselves after 100 ms). `sync = "fixed"` ticks at
+rate_hz whatever the frames do (a pose then waits up to a period): for a link whose firmware
+wants a steady setpoint rate, or a mocap much faster than the link should be commanded.
+--realtime[=PRIO] runs the agent under SCHED_FIFO (needs CAP_SYS_NICE or ulimit -r PRIO).
+
 sim:// flies on a simulated clock, faster than real time. In real time: run
 `perchd sim --pose-out natnet://127.0.0.1:0 --setpoint-in zmq://127.0.0.1:0` and fly
 against the URIs it prints, or use sim:// links under `perchd serve`."""

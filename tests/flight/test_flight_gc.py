@@ -47,7 +47,7 @@ def test_a_simulated_flight_sees_no_collection_between_its_first_and_last_tick(t
 
 
 def test_the_collector_stays_off_until_the_last_of_two_loops_ends():
-    inner_done, outer_may_end = threading.Event(), threading.Event()
+    inner_done = threading.Event()
 
     def inner():
         FixedRateLoop(ManualClock(0.0), 100.0).run(lambda k, t: k < 10)
