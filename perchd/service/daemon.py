@@ -37,8 +37,8 @@ from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
 from perchd.drivers.base import Driver
 from perchd.flight.config import SurfaceConfig
-from perchd.flight.vehiclestate import VehicleStore
 from perchd.flight.run import FlightAbort, fly
+from perchd.flight.vehiclestate import VehicleStore
 from perchd.mocap.base import PoseSource
 from perchd.service.config import (
     VERSION,
