@@ -23,6 +23,7 @@ The load average before and after is printed: figures from a busy machine say so
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -33,7 +34,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from perchd.core.clock import MonotonicClock
 from perchd.core.runtime import Runtime
@@ -327,13 +328,20 @@ def _weighted_cpu(loops: list[dict]) -> float:
     return sum(lp["cpu_fraction"] * lp["wall_s"] for lp in loops) / wall if wall else 0.0
 
 
-def measure(seconds: float, realtime: int = 0) -> dict[str, Any]:
+@contextlib.contextmanager
+def bench_plan() -> Iterator[tuple[Plan, Path, Path]]:
+    """The paper's case-1 IPTS order-3 plan, its file, and a scratch folder for the flights."""
     case = CASES[0]
     plan = plan_ipts(case.x0, case.v0, case.tau_s, case.v_contact, case.v_max, case.a_max, 3)
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         plan_file = tmp / "case1-ipts-n3.json"
         save_plan(plan, plan_file)
+        yield plan, plan_file, tmp
+
+
+def measure(seconds: float, realtime: int = 0) -> dict[str, Any]:
+    with bench_plan() as (plan, plan_file, tmp):
         load = os.getloadavg()[0]
         return {"seconds": seconds, "load_before": load,
                 "agent_compute_hot": hot_compute(plan),
@@ -357,17 +365,14 @@ def load_figures(plan: Plan, plan_file: Path, seconds: float, tmp: Path,
 
 def measure_under_load(seconds: float, hogs: int, realtime: int = 0) -> dict[str, Any]:
     """load_figures without load, then with `hogs` CPU-bound processes beside them."""
-    case = CASES[0]
-    plan = plan_ipts(case.x0, case.v0, case.tau_s, case.v_contact, case.v_max, case.a_max, 3)
-    with tempfile.TemporaryDirectory() as tmp_name:
-        tmp = Path(tmp_name)
-        plan_file = tmp / "case1-ipts-n3.json"
-        save_plan(plan, plan_file)
+    with bench_plan() as (plan, plan_file, tmp):
         out: dict[str, Any] = {"seconds": seconds, "hogs": hogs, "realtime": realtime,
                                "load_before": os.getloadavg()[0]}
-        out["idle"] = load_figures(plan, plan_file, seconds, tmp, realtime)
+        for name in ("idle", "loaded"):  # each run's flight logs in a folder of its own
+            (tmp / name).mkdir()
+        out["idle"] = load_figures(plan, plan_file, seconds, tmp / "idle", realtime)
         with cpu_hogs(hogs):
-            out["loaded"] = load_figures(plan, plan_file, seconds, tmp, realtime)
+            out["loaded"] = load_figures(plan, plan_file, seconds, tmp / "loaded", realtime)
             out["load_during"] = os.getloadavg()[0]
         return out
 

@@ -98,3 +98,18 @@ def test_a_load_out_of_range_is_one_line_and_exit_2(args):
     bench = perchd_bench(*args)
     _, err = bench.communicate(timeout=60)
     assert bench.returncode == 2 and err.count("\n") == 1 and "--load" in err
+
+
+@pytest.mark.slow
+def test_loop_load_json_flies_both_halves_and_counts_overruns_at_100_and_500_hz():
+    bench = perchd_bench("loop", "--seconds", "0.5", "--load", "1", "--json")
+    out, err = bench.communicate(timeout=180)
+    assert bench.returncode == 0, err
+    fig = json.loads(out)
+    assert fig["hogs"] == 1 and fig["realtime"] == 0
+    for half in ("idle", "loaded"):
+        f = fig[half]
+        assert (f["fixed_100hz"]["rate_hz"], f["fixed_500hz"]["rate_hz"]) == (100.0, 500.0)
+        assert f["zmq_mocap"]["outcomes"] and set(f["zmq_mocap"]["outcomes"]) <= {"SIGNAL",
+                                                                                   "CONTACT"}
+        assert f["zmq_mocap"]["setpoints_matched"] >= 25
