@@ -293,6 +293,9 @@ def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path,
 
 def echo(mocap_uri: str, driver_uri: str) -> None:
     """Send each pose's seq straight back as a hover setpoint until SIGINT (no agent work)."""
+    # A shell's background job starts with SIGINT ignored, and Python then leaves it so:
+    # the rig's SIGINT would never end the echo.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     rt = Runtime.real()
     source, driver = open_source(mocap_uri, rt), open_driver(driver_uri, rt)
     hover = VehicleConfig().mass_kg * VehicleConfig().g
