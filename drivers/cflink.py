@@ -239,10 +239,10 @@ class Keeper:
 
 
 def main(argv: list[str]) -> int:
-    # the agent's Ctrl-C or a service stop reaches the whole group: the keeper outlives
-    # them by design and ends when the agent's socket closes
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    # the agent's Ctrl-C, a service stop and systemd's watchdog signal reach the whole
+    # group: the keeper outlives them by design and ends when the agent's socket closes
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT):
+        signal.signal(sig, signal.SIG_IGN)
     sock = socket.socket(fileno=int(argv[0]))
     keeper = Keeper(sock, argv[1], float(argv[2]))
     try:

@@ -21,11 +21,19 @@ first partner (PX4) answers only that one: give it a fixed one with `sport=` (or
   mocap yaw, low-passed over YAW0_TRACK_S), for an autopilot whose heading comes from its
   compass and drifts off the mocap's (PX4 SIH: `perchd sim firmware --px4`, degrees per
   second in hover). Tracking the offset closes the heading loop on the mocap.
-- configure=1: set the failsafe parameters below to perchd's values (PARAM_SET, read
-  back, logged) instead of refusing to fly.
+- configure=1: set the parameters below to perchd's values (PARAM_SET, read back, logged)
+  instead of refusing to fly.
+- vision=0: do not forward mocap to the autopilot nor check its external-navigation setup
+  (a vehicle that has its own position source, e.g. GPS outdoors or in SITL).
 
-Failsafe parameters (docs/safety.md, "Autopilot failsafe parameters") are read at connect:
-a vehicle that would keep flying a dead agent's setpoint, or fly home, is refused by name.
+Parameters (drivers/mavparams.py) are read at connect: a vehicle that would keep flying a
+dead agent's setpoint, or fly home (docs/safety.md, "Autopilot failsafe parameters"), whose
+attitude controller boosts thrust with tilt again (ArduPilot ATC_ANGLE_BOOST), or whose EKF
+does not take the mocap (docs/firmware.md, "Mocap to the autopilot") is refused by name.
+Each pose the flight uses goes to the autopilot as VISION_POSITION_ESTIMATE
+(drivers/mavvision.py), so its own failsafe can hold or land in place.
+ArduCopter armed on the ground is held at a fraction of the hover thrust until its motors
+have spooled up (ATTITUDE_TARGET shows the thrust applied); connect() returns then.
 Taking over a vehicle in the air (armed, not landed) streams level at its current heading
 with the hover thrust, never zero thrust, and flies as soon as the mode switch is
 acknowledged (COMMAND_ACK ACCEPTED), not at the next 1 Hz heartbeat.
@@ -47,12 +55,7 @@ import socket
 import struct
 import threading
 import time
-from dataclasses import dataclass
 from typing import Any, Callable
-
-from perchd.drivers.base import DriverBase, agreed_mass
-from perchd.drivers.thrust import NormalisedThrust
-from perchd.drivers.ticker import Ticker
 
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
@@ -60,6 +63,17 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, split_query
+from perchd.drivers.base import DriverBase, agreed_mass
+from perchd.drivers.mavparams import (
+    ARDUPILOT,
+    PX4,
+    PX4_INT_PARAMS,
+    check_params,
+    rules_for,
+)
+from perchd.drivers.mavvision import timesync_reply, vision_estimate
+from perchd.drivers.thrust import NormalisedThrust
+from perchd.drivers.ticker import Ticker
 
 log = logging.getLogger("perchd.drivers.mavlink")
 
@@ -79,21 +93,28 @@ vehicle, so it is worth landing it well after its own watchdog has acted."""
 GUIDED_THRUST_BIT = 8
 """ArduPilot GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET thrust is thrust, not climb rate."""
 
-ARDUPILOT, PX4 = 3, 12  # MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4
 ARDUPILOT_GUIDED_NOGPS, ARDUPILOT_LAND = 20, 9
 PX4_OFFBOARD = (6, 0)  # (main mode, sub mode)
 PX4_AUTO_LAND = (4, 6)
 HOVER_PARAM = {ARDUPILOT: "MOT_THST_HOVER", PX4: "MPC_THR_HOVER"}
 IGNORE_BODY_RATES = 0b0000_0111
-ATTITUDE_MSG_ID, EXTENDED_SYS_STATE_MSG_ID = 30, 245
+ATTITUDE_MSG_ID, LOCAL_POSITION_NED_MSG_ID, ATTITUDE_TARGET_MSG_ID = 30, 32, 83
+EXTENDED_SYS_STATE_MSG_ID = 245
+STATUS_HZ = 10.0
+"""[Hz] LOCAL_POSITION_NED (the autopilot's own estimate: does it take the mocap?) and
+ATTITUDE_TARGET (the thrust it applies: spooled up?) asked for: a spool-up seen 0.1 s late
+costs nothing, and every message parsed is Python time beside the control loop."""
 CMD_DO_SET_MODE, CMD_ARM, CMD_SET_MESSAGE_INTERVAL = 176, 400, 511
 MAV_RESULT_ACCEPTED, MAV_RESULT_IN_PROGRESS = 0, 5
 LANDED_ON_GROUND = 1  # MAV_LANDED_STATE
+SPOOL_FRACTION = 0.25
+"""ArduCopter on the ground: after arming, level at this fraction of the hover thrust (well
+below lift-off) until ATTITUDE_TARGET shows the thrust applied, i.e. the motors have spooled
+up (MOT_SAFE_TIME + MOT_SPOOL_TIME, ~1.5 s) and it left its landed state. Before that it
+flies thrust 0 whatever is sent, and a take-off ramp started meanwhile winds up."""
 MODE_CONFIRM_S = 1.5
 """[s] after an acknowledged mode switch a heartbeat still showing the old mode is one sent
 before the switch (heartbeats come at 1 Hz); past this the vehicle really is elsewhere."""
-PX4_INT_PARAMS = {"COM_OBL_RC_ACT"}
-"""PX4 sends and takes integer parameters bytewise in PARAM_VALUE's float field."""
 YAW0_TRACK_S = 0.5
 """[s] time constant of yaw0=auto's offset tracking: slower than one mocap frame's jitter,
 faster than a compass heading drifts (PX4 SIH: ~3 deg/s)."""
@@ -104,31 +125,6 @@ NO_HEARTBEAT_CAUSES = (
     f"{PX4_OFFBOARD_PORT}+N); a PX4 that already heard a udpout: link from another source "
     "port answers only that one (restart it, use udpin:, or keep one port with ?sport=); "
     "ArduPilot SITL: mavlink:tcp:127.0.0.1:5760 or its --out udp port with udpin:")
-
-
-@dataclass(frozen=True, slots=True)
-class FailsafeRule:
-    """One autopilot parameter that decides what the vehicle does once perchd is gone.
-    ok(value) says whether `value` is safe; `wanted` names the safe values for the user;
-    `configure` is what ?configure=1 sets (docs/safety.md, "Autopilot failsafe parameters")."""
-
-    name: str
-    ok: Callable[[float], bool]
-    wanted: str
-    configure: float
-
-
-FAILSAFE_RULES: dict[int, tuple[FailsafeRule, ...]] = {
-    PX4: (
-        FailsafeRule("COM_OF_LOSS_T", lambda v: 0.0 < v <= 0.5, "<= 0.5 s", 0.5),
-        FailsafeRule("COM_OBL_RC_ACT", lambda v: int(v) in (4, 5), "4 (Land) or 5 (Hold)", 4),
-    ),
-    ARDUPILOT: (
-        FailsafeRule("GUID_TIMEOUT", lambda v: 0.0 < v <= 0.5, "<= 0.5 s", 0.5),
-        FailsafeRule("FS_GCS_ENABLE", lambda v: int(v) == 5, "5 (Land)", 5),
-        FailsafeRule("FS_GCS_TIMEOUT", lambda v: 0.0 < v <= 2.0, "<= 2 s", 2.0),
-    ),
-}
 
 
 def _check_network_port(raw: str, device: str) -> None:
@@ -159,7 +155,8 @@ def open_mavlink(uri: Uri, runtime: Runtime) -> "MavlinkDriver":
         wait=float_param(opts, "wait", 5.0, 0.1, 60.0, " s"),
         yaw0=heading_offset(opts),
         configure=bool_param(opts, "configure"),
-        sport=source_port(opts, device))
+        sport=source_port(opts, device),
+        vision=bool_param(opts, "vision", True))
 
 
 def heading_offset(opts: Uri) -> float | None:
@@ -270,7 +267,7 @@ class MavlinkDriver(DriverBase):
     def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float | None,
                  hover: float | None, arm: bool, timeout: float, stream_hz: float,
                  wait: float, yaw0: float | None = 0.0, configure: bool = False,
-                 sport: int | None = None) -> None:
+                 sport: int | None = None, vision: bool = True) -> None:
         self.uri = uri
         self.device = device
         self.clock = runtime.clock
@@ -286,6 +283,11 @@ class MavlinkDriver(DriverBase):
         self._yaw0_t: float | None = None  # [s] pose time of the last yaw0=auto update
         self.configure = configure
         self.sport = sport
+        self.vision = vision
+        self.vision_sent = 0  # VISION_POSITION_ESTIMATEs sent
+        self._ap_thrust: float | None = None  # ATTITUDE_TARGET thrust the vehicle applies
+        self.ekf_position_ned: tuple[float, float, float] | None = None
+        """[m] the autopilot's own position estimate (LOCAL_POSITION_NED), newest."""
         self.model: NormalisedThrust | None = None
         self.autopilot: int | None = None
         self._conn: Any = None
@@ -312,6 +314,7 @@ class MavlinkDriver(DriverBase):
         self._land_sent = 0.0
         self._armed_at_land = False
         self.failsafe_reasons: list[EndReason] = []
+        self._airborne_before_arm = False
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -341,9 +344,21 @@ class MavlinkDriver(DriverBase):
         self._send_target(ned_attitude(setpoint, self.yaw0), self.model.fraction(setpoint.thrust))
 
     def observe_pose(self, pose: Any) -> None:
+        """Each pose goes to the autopilot's EKF (drivers/mavvision.py) unless vision=0."""
+        if not getattr(pose, "valid", True) or self._conn is None:
+            return
+        self._track_yaw0(pose)
+        if self.vision and self.yaw0 is not None:
+            v = vision_estimate(pose, self.yaw0)
+            with self._lock:
+                self._conn.mav.vision_position_estimate_send(v.usec, *v.ned, *v.rpy,
+                                                             v.covariance)
+            self.vision_sent += 1
+
+    def _track_yaw0(self, pose: Any) -> None:
         """yaw0=auto: each pose with the autopilot's newest heading measures the offset
         between its heading and the mocap's; yaw0 follows it through a first-order lag."""
-        if not self._yaw0_auto or self._yaw_ned is None or not getattr(pose, "valid", True):
+        if not self._yaw0_auto or self._yaw_ned is None:
             return
         measured = self._yaw_ned + pose_yaw(pose.q)
         if self.yaw0 is None or self._yaw0_t is None:
@@ -402,13 +417,16 @@ class MavlinkDriver(DriverBase):
             raise LinkError(f"{self.uri}: autopilot type {self.autopilot} is neither ArduPilot nor PX4")
         self._command(CMD_SET_MESSAGE_INTERVAL, ATTITUDE_MSG_ID, 1e6 / self.stream_hz)
         self._command(CMD_SET_MESSAGE_INTERVAL, EXTENDED_SYS_STATE_MSG_ID, 1e5)  # landed state
+        for msg_id in (ATTITUDE_TARGET_MSG_ID, LOCAL_POSITION_NED_MSG_ID):
+            self._command(CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / STATUS_HZ)
         if self.autopilot == ARDUPILOT:
             options = int(self._param("GUID_OPTIONS"))
             if not options & GUIDED_THRUST_BIT:
                 raise ConfigError(
                     f"{self.uri}: GUID_OPTIONS={options} lacks bit 3 (thrust as thrust); "
                     f"set GUID_OPTIONS={options | GUIDED_THRUST_BIT} on the vehicle")
-        self._check_failsafe_params()
+        check_params(self.uri, rules_for(self.autopilot, self.vision), self._param,
+                     self._write_param, self.configure)
         hover = self.hover if self.hover is not None else self._param(HOVER_PARAM[self.autopilot])
         try:
             self.model = NormalisedThrust(self.mass_kg, hover)
@@ -418,6 +436,8 @@ class MavlinkDriver(DriverBase):
         self._switch_mode()
         if self.arm:
             self._arm()
+            if self.autopilot == ARDUPILOT and not self._airborne_before_arm:
+                self._spool_up()
 
     def _prestream(self) -> None:
         """Level at the vehicle's current heading until the loop runs: in the air with the
@@ -425,7 +445,7 @@ class MavlinkDriver(DriverBase):
         ground with none. PX4 wants > 1 s of setpoints before OFFBOARD."""
         self._await(lambda: self._yaw_ned is not None, "the vehicle's attitude (ATTITUDE)")
         self._level_yaw = self._yaw_ned
-        airborne = self._airborne()
+        airborne = self._airborne_before_arm = self._airborne()
         thrust = self.model.hover_fraction if airborne else 0.0
         log.info("%s: taking over %s, streaming level at heading %.1f deg, thrust %.3f",
                  self.uri, "in the air" if airborne else "on the ground",
@@ -471,30 +491,26 @@ class MavlinkDriver(DriverBase):
             raise LinkError(f"{self.uri}: the vehicle refused to arm "
                             f"(MAV_RESULT {self._acks.get(CMD_ARM)})")
 
-    def _check_failsafe_params(self) -> None:
-        """Refuse a vehicle whose own failsafe would fly a dead agent's setpoint or fly it
-        home; with ?configure=1 set perchd's values instead (docs/safety.md)."""
-        rules = FAILSAFE_RULES[self.autopilot]
-        bad = [(r, self._param(r.name)) for r in rules if not r.ok(self._param(r.name))]
-        if bad and not self.configure:
-            named = "; ".join(f"{r.name}={v:g} (wanted {r.wanted})" for r, v in bad)
-            raise ConfigError(f"{self.uri}: unsafe failsafe parameters: {named}; set them on "
-                              f"the vehicle or add configure=1 to the driver URI")
-        for rule, value in bad:
-            self._set_param(rule, value)
+    def _spool_up(self) -> None:
+        """Hold the vehicle on the ground at a fraction of the hover thrust until it applies
+        it (ATTITUDE_TARGET thrust > 0): only then does the loop's take-off start, so the
+        ramp and the height integral do not wind up against motors still spooling."""
+        thrust = SPOOL_FRACTION * self.model.hover_fraction
+        self._ap_thrust = None
+        self._send_target(level_ned(self._level_yaw or 0.0), thrust)
+        self._await(lambda: (self._ap_thrust or 0.0) > 0.0,
+                    "the motors to spool up (ATTITUDE_TARGET thrust above 0)")
+        log.info("%s: spooled up (ATTITUDE_TARGET thrust %.3f)", self.uri, self._ap_thrust)
 
-    def _set_param(self, rule: FailsafeRule, old: float) -> None:
-        is_int = self.autopilot == PX4 and rule.name in PX4_INT_PARAMS
-        wire = px4_param_float(int(rule.configure)) if is_int else float(rule.configure)
+    def _write_param(self, name: str, value: float) -> float:
+        """PARAM_SET, then the value read back."""
+        is_int = self.autopilot == PX4 and name in PX4_INT_PARAMS
+        wire = px4_param_float(int(value)) if is_int else float(value)
         kind = 6 if is_int else 9  # MAV_PARAM_TYPE_INT32 / REAL32
-        self._params.pop(rule.name, None)
+        self._params.pop(name, None)
         with self._lock:
-            self._conn.mav.param_set_send(*self._target, rule.name.encode(), wire, kind)
-        new = self._param(rule.name)
-        if not rule.ok(new):
-            raise ConfigError(f"{self.uri}: set {rule.name}={rule.configure:g} but the vehicle "
-                              f"reads back {new:g} (wanted {rule.wanted})")
-        log.warning("%s: set %s from %g to %g (configure=1)", self.uri, rule.name, old, new)
+            self._conn.mav.param_set_send(*self._target, name.encode(), wire, kind)
+        return self._param(name)
 
     def _await(self, done: Callable[[], bool], what: str, causes: str = "") -> None:
         deadline = time.monotonic() + self.wait
@@ -590,6 +606,13 @@ class MavlinkDriver(DriverBase):
             self._yaw_ned = float(msg.yaw)
         elif kind == "EXTENDED_SYS_STATE":
             self._landed_state = int(msg.landed_state)
+        elif kind == "LOCAL_POSITION_NED":
+            self.ekf_position_ned = (float(msg.x), float(msg.y), float(msg.z))
+        elif kind == "ATTITUDE_TARGET":
+            self._ap_thrust = float(msg.thrust)
+        elif kind == "TIMESYNC" and msg.tc1 == 0:
+            with self._lock:
+                conn.mav.timesync_send(*timesync_reply(msg.ts1, self.clock.now()))
 
     def _param_value(self, msg: Any) -> float:
         """PX4 carries integer parameters bytewise; ArduPilot casts them to float."""

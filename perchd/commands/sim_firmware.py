@@ -1,7 +1,8 @@
 """`perchd sim firmware`: a vehicle's real flight firmware in the loop (docs/firmware.md).
 
-    perchd sim firmware --arducopter PATH [--defaults FILE] [--frame nwu|enu] [--pose-out ...]
-    perchd sim firmware --px4 BUILD_DIR [--px4-instance N] [--px4-stock-params]
+    perchd sim firmware --arducopter PATH [--instance N] [--stock-params] [--vision]
+                        [--defaults FILE] [--frame nwu|enu] [--pose-out ...]
+    perchd sim firmware --px4 BUILD_DIR [--instance N] [--stock-params] [--vision]
                         [--px4-param NAME=VALUE ...] [--ahead M] [--pose-out ...]
     perchd sim firmware --cf2 PATH [--pose-out zmq://127.0.0.1:0 | natnet://127.0.0.1[:PORT]]
                         [--link udp://127.0.0.1:19850] [--fw-port PORT] [--body cf1]
@@ -31,7 +32,11 @@ from typing import Any
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import UriError
 from perchd.mocap.outputs import open_pose_output
-from perchd.sim.firmware.ardupilot import ArduPilotParams, ArduPilotVehicle
+from perchd.sim.firmware.ardupilot import (
+    DEFAULT_PARAMS,
+    ArduPilotParams,
+    ArduPilotVehicle,
+)
 from perchd.sim.firmware.cf2 import Cf2Params, Cf2Vehicle, SensorNoise, Surface
 from perchd.sim.firmware.harness import (
     Interrupted,
@@ -56,10 +61,16 @@ def register_under(sim_parser: argparse.ArgumentParser) -> None:
                        help="ArduCopter's SITL binary (docs/firmware.md, ArduPilot)")
     which.add_argument("--px4", metavar="BUILD_DIR",
                        help="a PX4 SITL build folder with bin/px4 and etc/ (docs/firmware.md)")
-    p.add_argument("--px4-instance", type=int, default=0,
-                   help="PX4 instance N: ports 14540+N, 19410+N, MAV_SYS_ID N+1 (default 0)")
-    p.add_argument("--px4-stock-params", action="store_true",
-                   help="leave PX4's failsafe defaults (perchd's driver then refuses them)")
+    p.add_argument("--instance", "--px4-instance", dest="instance", type=int, default=0,
+                   help="SITL instance N, so several run side by side: PX4 ports 14540+N, "
+                        "19410+N, MAV_SYS_ID N+1; ArduCopter -I N (ports +10 N) (default 0)")
+    p.add_argument("--stock-params", "--px4-stock-params", dest="stock_params",
+                   action="store_true", help="leave the autopilot's failsafe and angle-boost "
+                   "defaults (perchd's driver then refuses them, or sets them with configure=1)")
+    p.add_argument("--vision", action="store_true",
+                   help="ArduCopter, PX4: GPS off, the EKF on the mocap perchd's driver "
+                        "forwards (docs/firmware.md, \"Mocap to the autopilot\"); the vehicle "
+                        "waits on the ground")
     p.add_argument("--px4-param", action="append", default=[], metavar="NAME=VALUE",
                    help="PX4: a parameter set at boot (repeatable), e.g. SIH_KDV=0.1")
     p.add_argument("--ahead", type=float, default=4.5,
@@ -117,8 +128,10 @@ wait a whole default interval behind another thread's Python code."""
 
 
 def arducopter_params(args: argparse.Namespace) -> ArduPilotParams:
+    params = DEFAULT_PARAMS[:1] if args.stock_params else DEFAULT_PARAMS
     return ArduPilotParams(binary=args.arducopter, defaults=args.defaults, start=tuple(args.start),
-                           frame=args.frame,
+                           frame=args.frame, instance=args.instance, vision=args.vision,
+                           params=params,
                            surface=(tuple(args.surface), tuple(args.normal)),
                            truth_hz=max(args.mocap_rate, 50.0),
                            log=Path(args.fw_log) if args.fw_log else None)
@@ -127,9 +140,10 @@ def arducopter_params(args: argparse.Namespace) -> ArduPilotParams:
 def px4_params(args: argparse.Namespace) -> Px4Params:
     if not 0.5 <= args.ahead <= 50.0:
         raise UriError(f"--ahead {args.ahead:g} m is outside 0.5..50 m")
-    return Px4Params(args.px4, instance=args.px4_instance, surface_ahead_m=args.ahead,
-                     stock_params=args.px4_stock_params,
-                     extra_params=tuple(px4_param(a) for a in args.px4_param),
+    extra = tuple(px4_param(a) for a in args.px4_param)
+    return Px4Params(args.px4, instance=args.instance, surface_ahead_m=args.ahead,
+                     stock_params=args.stock_params, vision=args.vision,
+                     takeoff=not args.vision, extra_params=extra,
                      log=Path(args.fw_log) if args.fw_log else None)
 
 

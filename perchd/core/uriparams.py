@@ -80,8 +80,9 @@ PARAMS: dict[tuple[str, str], tuple[tuple[str, str, str, str], ...]] = {
         ("stream", "Hz", "50", "ATTITUDE stream rate asked for, 1..500"),
         ("wait", "s", "5", "connect() waits this long for each answer, 0.1..60"),
         ("yaw0", "deg", "0", "autopilot heading of world X, or auto (measured from the poses)"),
-        ("configure", "", "0", "1: set the autopilot's failsafe parameters (docs/safety.md)"),
-        ("sport", "", "any", "fixed local UDP source port of a udpout: link")),
+        ("configure", "", "0", "1: set the autopilot's parameters perchd needs (docs/safety.md)"),
+        ("sport", "", "any", "fixed local UDP source port of a udpout: link"),
+        ("vision", "", "1", "0: neither forward mocap to the autopilot nor check its EKF set-up")),
     ("driver", "zmq"): (
         ("vehicle", "", "cf1", "vehicle name in setpoints"),
         ("bind", "", "0", "1: bind instead of connect"),

@@ -195,17 +195,51 @@ class TriggerPolicy(enum.Enum):
     REFUSE = "refuse"
 
 
+class TriggerFallback(enum.Enum):
+    """What the trigger does when its replan is not in by the deadline (or failed).
+
+    PLAN: fly the nearest plan made before the trigger (the one planned ahead, or the
+        flight's own) if the measured trigger state is within x_tol_m/v_tol_mps of it, as
+        REFUSE would, else end TRIGGER_REFUSED.  REFUSE: end TRIGGER_REFUSED.
+    """
+
+    PLAN = "plan"
+    REFUSE = "refuse"
+
+
 @dataclass(frozen=True)
 class TriggerConfig:
     """policy: see TriggerPolicy.  x_tol_m [m], v_tol_mps [m/s]: largest |measured - plan|
-    of x0 and v0 flown without a new plan under REFUSE.  library: a plan library file
-    (`perchd plan library`) for the plan's order and limits: REPLAN then warm-starts from it
-    (~2 ms) instead of a cold global solve (~60 ms at order 3, ~0.5 s at 7: many ticks)."""
+    of x0 and v0 flown without a new plan (REFUSE, and the PLAN fallback).  library: a plan
+    library file (`perchd plan library`) for the plan's order and limits: REPLAN then
+    warm-starts from it (~2 ms) instead of a cold global solve (~60 ms at order 3, ~0.5 s
+    at 7).
+
+    ROBUST and REPLAN never solve on the loop thread in real time (docs/architecture.md,
+    "Planning in flight"): a worker process plans ahead during the approach for the
+    predicted trigger state, and the trigger flies that plan when the measured speed is
+    within ahead_v_tol_mps [m/s] of the speed it was made for. Otherwise the trigger asks
+    for a plan from the measured state and holds that speed until it comes, for at most
+    min(solve_max_s [s], v_tol_mps / the plan's peak deceleration, sqrt(2 x_tol_m / that
+    deceleration)): the time after which the held speed, or the distance flown, is further
+    from the plan waited for than the tolerance. Past it (or if it fails): `fallback`.
+    """
 
     policy: TriggerPolicy = TriggerPolicy.REFUSE
     x_tol_m: float = 0.05
     v_tol_mps: float = 0.10
     library: str | None = None
+    fallback: TriggerFallback = TriggerFallback.PLAN
+    solve_max_s: float = 0.25
+    ahead_v_tol_mps: float = 0.05
+
+    def deadline_s(self, a_peak_mps2: float) -> float:
+        """[s] longest wait for the trigger's replan, for a plan whose largest |acceleration|
+        is a_peak_mps2 [m/s^2] (see the class docstring)."""
+        if a_peak_mps2 <= 0.0:
+            return self.solve_max_s
+        return min(self.solve_max_s, self.v_tol_mps / a_peak_mps2,
+                   math.sqrt(2.0 * self.x_tol_m / a_peak_mps2))
 
 
 class LoopSync(enum.Enum):
@@ -341,6 +375,8 @@ def validate(cfg: FlightConfig) -> None:
         ("vehicle.hover_thrust_n", cfg.vehicle.hover_guess_n, 1e-6, cfg.vehicle.thrust_max_n),
         ("hover.tau_s", cfg.hover.tau_s, 0.01, 5.0),
         ("hover.timeout_s", cfg.hover.timeout_s, 0.5, 60.0),
+        ("trigger.solve_max_s", cfg.trigger.solve_max_s, 0.0, 5.0),
+        ("trigger.ahead_v_tol_mps", cfg.trigger.ahead_v_tol_mps, 0.0, 1.0),
     ]
     for name, value, lo, hi in checks:
         if not lo <= value <= hi:

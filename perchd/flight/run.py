@@ -14,14 +14,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Protocol
 
-from perchd.core.clock import Clock
+from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import ConfigError
 from perchd.core.types import EndReason, Phase, State
 from perchd.drivers.base import Driver
-from perchd.flight.config import FlightConfig
+from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
 from perchd.flight.loop import LoopSummary, make_loop
+from perchd.flight.planner_worker import Planner, WorkerPlanner
 from perchd.flight.supervisor import (
     Conditions,
     FlightAbort,
@@ -120,10 +121,11 @@ class _Run:
 
     def __init__(self, plan: Plan, driver: Driver, source: PoseSource, clock: Clock,
                  cfg: FlightConfig, abort: FlightAbort,
-                 on_tick: Callable[[TickStatus], None] | None) -> None:
+                 on_tick: Callable[[TickStatus], None] | None,
+                 planner: Planner | None = None) -> None:
         self.frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
         self.est = Estimator(cfg.estimator, self.frame)
-        self.sup = Supervisor(plan, cfg, self.frame)
+        self.sup = Supervisor(plan, cfg, self.frame, planner)
         self.loop = make_loop(cfg.sync.value, clock, cfg.rate_hz, source)
         self.clock = clock
         self.driver, self.source = driver, source
@@ -216,20 +218,43 @@ def bind_vehicle(driver: Driver, cfg: FlightConfig) -> FlightConfig:
     return dataclasses.replace(cfg, vehicle=dataclasses.replace(v, thrust_max_n=ceiling))
 
 
+def needs_worker(cfg: FlightConfig, clock: Clock) -> bool:
+    """The trigger solves in a worker process: its policy retargets and the clock is real
+    (on a simulated clock a solve in the tick takes no simulated time, and is reproducible;
+    docs/architecture.md "Planning in flight")."""
+    return cfg.trigger.policy in (TriggerPolicy.REPLAN, TriggerPolicy.ROBUST) \
+        and isinstance(clock, MonotonicClock)
+
+
 def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: str | Path,
         cfg: FlightConfig = FlightConfig(), abort: FlightAbort | None = None,
         on_tick: Callable[[TickStatus], None] | None = None,
         world: GroundTruth | None = None,
-        header: dict[str, Any] | None = None) -> FlightResult:
+        header: dict[str, Any] | None = None,
+        planner: Planner | None = None) -> FlightResult:
     """Fly `plan` (a perchd.tau.Plan) with a connected driver and a started pose source.
 
     clock: the loop's clock (the Runtime's). abort: the external hook (see FlightAbort).
     on_tick: called after every tick with a TickStatus (live display). world: the SimWorld
     when simulated, for the true contact figures. header: extra header fields for the log.
+    planner: the trigger's planner (flight/planner_worker.py), owned and closed here; None:
+    a worker process when needs_worker(), else the supervisor solves in the tick.
     """
     abort = abort or FlightAbort()
     cfg = bind_vehicle(driver, cfg)  # before the log: a refused vehicle never flies
-    run = _Run(plan, driver, source, clock, cfg, abort, on_tick)  # may refuse: no log yet
+    if planner is None and needs_worker(cfg, clock):
+        planner = WorkerPlanner(plan, cfg.trigger.library)  # loads while the vehicle holds
+    try:
+        return _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world,
+                    header, planner)
+    finally:
+        if planner is not None:
+            planner.close()  # every way out: the worker never outlives its flight
+
+
+def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, header,
+         planner) -> FlightResult:
+    run = _Run(plan, driver, source, clock, cfg, abort, on_tick, planner)  # may refuse
     log = run.log = FlightLogWriter(log_path, {"plan": plan_summary(plan),
                                                "config": jsonable(cfg),
                                                "driver": getattr(driver, "uri", ""),

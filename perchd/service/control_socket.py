@@ -78,26 +78,22 @@ def _groups_of(peer: Peer) -> set[int]:
 
 
 class ControlServer:
+    """Binds `path` itself, or serves `listening`, a socket systemd bound and passed
+    (perchd.service.activation): then the file is systemd's, left in place on close()."""
+
     def __init__(self, path: str | os.PathLike, dispatch: Dispatch, mode: int = 0o660,
                  peers: PeerPolicy | None = None,
-                 on_refuse: Callable[[str], None] | None = None) -> None:
-        self.path = Path(path)
+                 on_refuse: Callable[[str], None] | None = None,
+                 listening: socket.socket | None = None) -> None:
         self.dispatch = dispatch
         self.peers = peers or PeerPolicy.owner()
         self.on_refuse = on_refuse
         self.refused = 0
-        _remove_stale(self.path)
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
-        old = os.umask(0o777 & ~mode)  # never world-accessible, not even between bind and chmod
-        try:
-            self.sock.bind(str(self.path))
-        except OSError as err:
-            self.sock.close()
-            raise ConfigError(f"--socket {self.path}: cannot listen: {err.strerror}") from None
-        finally:
-            os.umask(old)
-        os.chmod(self.path, mode)
-        self.sock.listen(8)
+        self.activated = listening is not None
+        if listening is None:
+            self.path, self.sock = Path(path), _bind(Path(path), mode)
+        else:
+            self.path, self.sock = Path(listening.getsockname()), listening
         self.sock.setblocking(False)
         self.clients: dict[int, tuple[socket.socket, bytearray]] = {}
 
@@ -148,6 +144,8 @@ class ControlServer:
         for fd in list(self.clients):
             self._drop(fd)
         self.sock.close()
+        if self.activated:
+            return  # systemd's socket: it keeps listening for the next start
         try:
             self.path.unlink()
         except FileNotFoundError:
@@ -184,6 +182,23 @@ class ControlServer:
     def _drop(self, fd: int) -> None:
         conn, _ = self.clients.pop(fd)
         conn.close()
+
+
+def _bind(path: Path, mode: int) -> socket.socket:
+    """A listening AF_UNIX stream socket at `path`, created with `mode`."""
+    _remove_stale(path)
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+    old = os.umask(0o777 & ~mode)  # never world-accessible, not even between bind and chmod
+    try:
+        sock.bind(str(path))
+    except OSError as err:
+        sock.close()
+        raise ConfigError(f"--socket {path}: cannot listen: {err.strerror}") from None
+    finally:
+        os.umask(old)
+    os.chmod(path, mode)
+    sock.listen(8)
+    return sock
 
 
 def _remove_stale(path: Path) -> None:

@@ -8,7 +8,8 @@ flight's own tick callback while flying and from the service loop while idle and
 healthy (a stalled loop stops the pings and gets restarted), STATUS= with the phase, and
 STOPPING=1 on the way out. SIGTERM/SIGINT abort a flight with the driver's failsafe (end
 reason SIGNAL), wait for its log to close, and exit 0; SIGHUP reloads the config between
-flights.
+flights (RELOADING=1 at once, READY=1 when done: Type=notify-reload). The control socket
+is bound here, or taken from systemd's socket activation (perchd.service.activation).
 
 With [service] realtime the whole process (the flight thread, the links' threads) runs
 under SCHED_FIFO from start-up (core/realtime.py); refused, one line says what is missing
@@ -40,6 +41,7 @@ from perchd.flight.config import SurfaceConfig
 from perchd.flight.run import FlightAbort, fly
 from perchd.flight.vehiclestate import VehicleStore
 from perchd.mocap.base import PoseSource
+from perchd.service.activation import activated_socket
 from perchd.service.config import (
     VERSION,
     Config,
@@ -196,14 +198,17 @@ class Daemon:
         svc = self.config.service
         check_dirs(svc)  # before READY=1: a service that cannot log a flight is not ready
         self.server = ControlServer(svc.socket, self.dispatch, peers=svc.peer_policy(),
-                                    on_refuse=lambda why: say(f"control socket: refused {why}"))
+                                    on_refuse=lambda why: say(f"control socket: refused {why}"),
+                                    listening=activated_socket())
+        if self.server.activated and str(self.server.path) != svc.socket:
+            say(f"control socket {self.server.path} from systemd (not {svc.socket})")
         self._realtime(svc.realtime)  # before the links start their threads: they inherit it
         self.notifier.status(f"{svc.vehicle}: connecting {svc.mocap_uri()} and {svc.driver}")
         self.links = Links(svc, self.config.flight.surface, self.config.flight.vehicle.mass_kg)
         realtime.settle_heap()
         self.notifier.ready(f"{svc.vehicle}: idle")
         say(f"ready: vehicle {svc.vehicle}, driver {svc.driver}, mocap {svc.mocap_uri()}, "
-            f"socket {svc.socket}")
+            f"socket {self.server.path}" + (" (from systemd)" if self.server.activated else ""))
 
     def _realtime(self, cfg: realtime.RealtimeConfig) -> None:
         try:
@@ -234,7 +239,7 @@ class Daemon:
                 if self.job is not None:
                     self.job.abort.request(EndReason.SIGNAL)
             elif byte == signal.SIGHUP:
-                self.reload_pending = True
+                self._reload_requested()
         if self.reload_pending and self.job is None:
             self.reload()
 
@@ -266,11 +271,31 @@ class Daemon:
             self.server.close()
 
     # --- configuration ------------------------------------------------------------------------
+    def _reload_requested(self) -> None:
+        """SIGHUP: RELOADING=1 at once (systemd waits for it); the reload itself runs now, or
+        once the flight ends: a flight flies the config it started with (systemd/README.md)."""
+        if self.reload_pending:
+            return  # one reload covers every SIGHUP before it
+        self.reload_pending = True
+        deferred = self.job is not None
+        self.notifier.reloading(f"{self.config.service.vehicle}: "
+                                + ("flying, reload after the flight" if deferred else "reloading"))
+        if deferred:
+            say("SIGHUP: reload deferred until the flight ends")
+
     def reload(self) -> None:
+        """Reload the config, then READY=1 whatever came of it: systemd's reload is over, and
+        the service runs on (a refused config leaves the old one, said in STATUS and a line)."""
         self.reload_pending = False
+        status = self._reload()
+        self.notifier.ready(status)
+
+    def _reload(self) -> str:
+        """The reload proper; the STATUS text it leaves."""
+        idle = f"{self.config.service.vehicle}: idle"
         if not self.config_path:
             say("SIGHUP: no --config to reload")
-            return
+            return f"{idle}, no --config to reload"
         try:
             new = apply_overrides(load_config(self.config_path), self.overrides)
             check_dirs(new.service)
@@ -285,12 +310,11 @@ class Daemon:
                 self.links = links
         except PerchdError as err:
             say(f"SIGHUP: config not reloaded, keeping the old one: {err}")
-            self.notifier.status(f"{self.config.service.vehicle}: idle, reload failed: {err}")
-            return
+            return f"{idle}, reload failed: {err}"
         self.config = new
         self.server.peers = peers
         say(f"SIGHUP: reloaded {self.config_path}")
-        self.notifier.status(f"{new.service.vehicle}: idle, config reloaded")
+        return f"{new.service.vehicle}: idle, config reloaded"
 
     def _restart_only(self, new: Config, key: str) -> Config:
         """`new` with [service] `key` kept as it is: it changes only on restart."""

@@ -13,7 +13,8 @@ import time
 
 
 class Notifier:
-    """ready(), status(text), stopping(), watchdog() (rate-limited to half the period)."""
+    """ready(), reloading(), status(text), stopping(), watchdog() (rate-limited to a
+    quarter of the period)."""
 
     def __init__(self, environ: dict[str, str] | None = None) -> None:
         env = os.environ if environ is None else environ
@@ -45,6 +46,14 @@ class Notifier:
 
     def status(self, text: str) -> bool:
         return self.send(f"STATUS={text}")
+
+    def reloading(self, status: str = "") -> bool:
+        """RELOADING=1 with MONOTONIC_USEC (CLOCK_MONOTONIC in microseconds) in one datagram:
+        Type=notify-reload matches it against the SIGHUP it sent (sd_notify(3)). ready()
+        ends the reload."""
+        usec = time.clock_gettime_ns(time.CLOCK_MONOTONIC) // 1000
+        return self.send("RELOADING=1", f"MONOTONIC_USEC={usec}",
+                         *([f"STATUS={status}"] if status else []))
 
     def stopping(self) -> bool:
         return self.send("STOPPING=1")

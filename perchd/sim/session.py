@@ -19,6 +19,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.uri import parse_uri
 from perchd.drivers.base import Driver, open_driver
 from perchd.flight.config import FlightConfig, SurfaceConfig
+from perchd.flight.planner_worker import Planner
 from perchd.flight.run import FlightAbort, FlightResult, TickStatus, fly
 from perchd.mocap.base import PoseSource, open_source
 from perchd.sim.world import SimWorld, WorldParams, world_params_from_uri
@@ -42,11 +43,11 @@ class Session:
     def fly(self, plan: Plan, log_path: str | Path, cfg: FlightConfig = FlightConfig(),
             abort: FlightAbort | None = None,
             on_tick: Callable[[TickStatus], None] | None = None,
-            header: dict | None = None) -> FlightResult:
-        """One flight on this vehicle, then its links closed."""
+            header: dict | None = None, planner: Planner | None = None) -> FlightResult:
+        """One flight on this vehicle, then its links closed (planner: see flight.run.fly)."""
         try:
             return fly(plan, self.driver, self.source, self.clock, log_path, cfg, abort,
-                       on_tick, world=self.world, header=header)
+                       on_tick, world=self.world, header=header, planner=planner)
         finally:
             self.close()
 

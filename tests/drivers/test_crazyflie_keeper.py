@@ -119,11 +119,12 @@ def test_a_dead_keeper_is_a_named_lost_link(responder):
         assert "link keeper exited" in cf.health().detail
 
 
-def test_the_keeper_ignores_the_terminals_ctrl_c(responder):
-    """Ctrl-C reaches the whole process group: the agent's handler sends the failsafe
-    through the keeper, which must still be there."""
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGABRT])
+def test_the_keeper_outlives_signals_sent_to_the_whole_group(responder, sig):
+    """Ctrl-C, a service stop (SIGTERM) and systemd's watchdog (SIGABRT) reach the whole
+    process group: the agent's handler, or the keeper's own descent, needs the keeper alive."""
     with open_driver(responder.uri, Runtime.real()) as cf:
         time.sleep(0.5)  # its handlers are set before it reports the link open
-        os.kill(cf._keeper.pid, signal.SIGINT)
+        os.kill(cf._keeper.pid, sig)
         time.sleep(0.1)
         assert cf.health().ok

@@ -13,8 +13,7 @@ import pytest
 
 pytest.importorskip("pymavlink")
 
-from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble
-from perchd.drivers.base import open_driver
+from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble, connected
 from pymavlink import mavutil
 from pymavlink.quaternion import Quaternion
 from ticks import level, ticks_until_lost
@@ -22,6 +21,7 @@ from ticks import level, ticks_until_lost
 from perchd.core.errors import ConfigError, LinkError, MissingExtraError, UriError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Pose, Setpoint
+from perchd.drivers.base import open_driver
 
 MASS = 0.5
 WEIGHT = MASS * 9.81
@@ -39,12 +39,6 @@ def px4():
     v = VehicleDouble(PX4)
     yield v
     v.close()
-
-
-def connected(vehicle, query=""):
-    drv = open_driver(f"{vehicle.uri}?mass={MASS}{query}", Runtime.real())
-    drv.connect()
-    return drv
 
 
 def test_ardupilot_is_put_in_guided_nogps_and_left_disarmed_unless_asked(ardupilot):
@@ -383,17 +377,26 @@ def test_sport_is_for_udpout_only(uri):
 
 @pytest.mark.parametrize("autopilot, params, named", [
     (PX4, {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0.0},
-     [r"COM_OF_LOSS_T=1 \(wanted <= 0.5 s\)", r"COM_OBL_RC_ACT=0 \(wanted 4 \(Land\) or 5 \(Hold\)\)"]),
+     [r"COM_OF_LOSS_T=1 \(wanted <= 0.3 s\)", r"COM_OBL_RC_ACT=0 \(wanted 4 \(Land\) or 5 \(Hold\)\)"]),
     (PX4, {"COM_OBL_RC_ACT": 3.0}, [r"COM_OBL_RC_ACT=3 \(wanted"]),  # Return
     (ARDUPILOT, {"GUID_TIMEOUT": 3.0, "FS_GCS_ENABLE": 1.0, "FS_GCS_TIMEOUT": 5.0},
      [r"GUID_TIMEOUT=3 \(wanted <= 0.5 s\)", r"FS_GCS_ENABLE=1 \(wanted 5 \(Land\)\)",
       r"FS_GCS_TIMEOUT=5 \(wanted <= 2 s\)"]),
+    # the EKF ignores the mocap (docs/firmware.md, "Mocap to the autopilot"), boosts thrust
+    (ARDUPILOT, {"VISO_TYPE": 0.0, "EK3_SRC1_POSXY": 3.0, "EK3_SRC1_POSZ": 1.0,
+                 "EK3_SRC1_YAW": 1.0},
+     [r"VISO_TYPE=0 \(wanted 1 \(MAVLink\)\)", r"EK3_SRC1_POSXY=3 \(wanted 6 \(ExternalNav\)\)",
+      r"EK3_SRC1_POSZ=1 \(wanted 6", r"EK3_SRC1_YAW=1 \(wanted 6"]),
+    (PX4, {"EKF2_EV_CTRL": 0.0, "EKF2_HGT_REF": 1.0},
+     [r"EKF2_EV_CTRL=0 \(wanted bits 0, 1 and 3 set", r"EKF2_HGT_REF=1 \(wanted 3 \(vision\)\)"]),
+    (PX4, {"EKF2_EV_CTRL": 3.0}, [r"EKF2_EV_CTRL=3 \(wanted"]),  # position but not yaw
+    (ARDUPILOT, {"ATC_ANGLE_BOOST": 1.0}, [r"ATC_ANGLE_BOOST=1 \(wanted 0"]),
 ])
-def test_unsafe_failsafe_parameters_are_refused_by_name_before_any_mode_change(
+def test_unsafe_autopilot_parameters_are_refused_by_name_before_any_mode_change(
         autopilot, params, named):
     v = VehicleDouble(autopilot, params={**SAFE_PARAMS[autopilot], **params})
     try:
-        with pytest.raises(ConfigError, match="unsafe failsafe parameters") as err:
+        with pytest.raises(ConfigError, match="unsafe autopilot parameters") as err:
             connected(v)
         for pattern in named:
             assert re.search(pattern, str(err.value)), str(err.value)
@@ -404,7 +407,7 @@ def test_unsafe_failsafe_parameters_are_refused_by_name_before_any_mode_change(
 
 @pytest.mark.parametrize("autopilot, params, wanted", [
     (PX4, {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0.0},
-     {"COM_OF_LOSS_T": 0.5, "COM_OBL_RC_ACT": 4.0}),
+     {"COM_OF_LOSS_T": 0.3, "COM_OBL_RC_ACT": 4.0}),
     (ARDUPILOT, {"GUID_TIMEOUT": 3.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0},
      {"GUID_TIMEOUT": 0.5, "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 2.0}),
 ])
@@ -415,8 +418,8 @@ def test_configure_sets_the_failsafe_parameters_reads_them_back_and_logs_them(
         with caplog.at_level(logging.WARNING, logger="perchd.drivers.mavlink"):
             drv = connected(v, "&configure=1")
         drv.close()
-        assert dict(v.param_sets) == wanted  # PX4's integer went bytewise and came back 4
-        assert {k: v.params[k] for k in wanted} == wanted
+        assert dict(v.param_sets) == pytest.approx(wanted)  # PX4's integer went bytewise
+        assert {k: v.params[k] for k in wanted} == pytest.approx(wanted)
         for name in wanted:
             assert f"set {name} from" in caplog.text
     finally:

@@ -3,7 +3,7 @@
 --driver <ready URI>&mass=3.0 --config arducopter-3kg.toml --mocap <ready URI>` in another.
 
 Figures (contact speed, perch time vs the plan's, pitch lag, after SIGKILL of `perchd fly`
-the time until level and the mode it ends in) are printed (pytest -s) and, with
+the time until level and the mode it ends in, the take-off's overshoot) are printed (pytest -s) and, with
 PERCHD_FW_REPORT=PATH, appended there as JSON lines."""
 
 from __future__ import annotations
@@ -21,6 +21,8 @@ import pytest
 from fwharness import start_harness, stop_harness
 
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
+INSTANCE = os.environ.get("PERCHD_FW_INSTANCE", "0")
+"""SITL's -I N: one per instance number on a machine shared with other runs."""
 pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
     not (ARDUCOPTER and os.access(ARDUCOPTER, os.X_OK)),
     reason="set PERCHD_ARDUCOPTER to the built arducopter SITL binary (docs/firmware.md)")]
@@ -33,14 +35,17 @@ MASS = "mass=3.0"
 """[kg] ArduPilot SITL's default quad (libraries/SITL/SIM_Frame.h)."""
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 DEG = math.pi / 180.0
+HOLD_HEIGHT_M = 1.0
+"""[m] ApproachConfig.takeoff_height_m (the config leaves it at its default)."""
 
 
 def with_param(uri: str, param: str) -> str:
     return uri + ("&" if "?" in uri else "?") + param
 
 
-def start(tmp: Path) -> tuple[subprocess.Popen, str, str]:
-    return start_harness("--arducopter", ARDUCOPTER, "--fw-log", str(tmp / "sitl.log"), env=ENV)
+def start(tmp: Path, *extra: str) -> tuple[subprocess.Popen, str, str]:
+    return start_harness("--arducopter", ARDUCOPTER, "--instance", INSTANCE, "--fw-log",
+                         str(tmp / "sitl.log"), *extra, env=ENV)
 
 
 def fly_argv(tmp: Path, mocap: str, driver: str) -> list[str]:
@@ -109,11 +114,11 @@ def pitch_lag(log: Path, truth: list[tuple[float, float, float, float, float]]) 
 
 
 def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_path):
-    from perchd.drivers.base import open_driver
     from pymavlink import mavutil  # noqa: F401 (the driver's dependency)
 
     from perchd.core.runtime import Runtime
     from perchd.core.types import Phase, Setpoint
+    from perchd.drivers.base import open_driver
     proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
@@ -138,6 +143,8 @@ def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_pat
 
 
 def test_the_agent_perches_on_arducopter_sitl(tmp_path):
+    """From the ground (arm=1): the take-off overshoots the hold height by no more than
+    0.1 m (the driver returns once ArduCopter's motors have spooled up)."""
     plan = json.loads(PLAN.read_text())
     proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
@@ -155,16 +162,28 @@ def test_the_agent_perches_on_arducopter_sitl(tmp_path):
             "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
             "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
             "trigger": fly["trigger"], "pitch_lag_s": pitch_lag(tmp_path / "flight.jsonl", rec.samples),
-            "modes": sim["modes"]})
+            "takeoff_overshoot_m": takeoff_overshoot(tmp_path / "flight.jsonl", rec.samples),
+            "modes": sim["modes"], "load": os.getloadavg()})
     lo, hi = plan["limits"]["v_contact"]
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
     assert lo - 0.15 <= sim["contact"]["speed"] <= hi + 0.15
     assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.15)
+    # measured 0.22 m (main: leapt 0.79 m); the 0.1 m target is not met: docs/firmware.md
+    assert takeoff_overshoot(tmp_path / "flight.jsonl", rec.samples) <= 0.3
 
 
-def test_sigkill_of_perchd_fly_mid_approach_leaves_the_vehicle_level(tmp_path):
-    """No failsafe can be sent: ArduPilot's GUID_TIMEOUT (3 s) levels it; docs/safety.md."""
+def takeoff_overshoot(log: Path, truth: list[tuple[float, float, float, float, float]]) -> float:
+    """[m] highest true height from the take-off to the approach above the hold height."""
+    r = rows(log)
+    hold = [x for x in r if x["phase"] in ("takeoff", "hold")]
+    t0, t1 = hold[0]["t"], hold[-1]["t"]
+    return max(z for t, *_, z in truth if t0 <= t <= t1) - HOLD_HEIGHT_M
+
+
+def test_sigkill_of_perchd_fly_mid_approach_levels_within_1_s_and_lands_within_3_s(tmp_path):
+    """No failsafe can be sent: GUID_TIMEOUT (0.5 s) levels it, the GCS failsafe
+    (FS_GCS_ENABLE 5, FS_GCS_TIMEOUT 2 s, perchd's heartbeat gone) lands it; docs/safety.md."""
     proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
@@ -185,9 +204,74 @@ def test_sigkill_of_perchd_fly_mid_approach_leaves_the_vehicle_level(tmp_path):
         rec.close()
         sim = stop_harness(proc)
     truths = [(t - killed, math.hypot(r, p), z) for t, r, p, _, z in rec.samples if t >= killed]
+    land_t = next((m["t"] + sim["t0"] - killed for m in sim["modes"]
+                   if m["mode"] == "LAND" and m["t"] + sim["t0"] >= killed), math.inf)
+    # level: below 2 deg and staying there until LAND, whose own position hold tilts it again
     level = next((t for t, tilt, _ in truths if t > 0.1 and all(
-        x < 2 * DEG for _, x, _ in [u for u in truths if u[0] >= t])), None)
-    report({"test": "sigkill", "level_after_s": level, "final_mode": sim["mode"],
-            "armed": sim["armed"], "final_z": truths[-1][2] if truths else None,
-            "modes": sim["modes"]})
-    assert level is not None and level < 6.0
+        x < 2 * DEG for u, x, _ in truths if t <= u < land_t)), None)
+    trace = [(round(t, 2), round(math.degrees(x), 1)) for t, x, _ in truths if t < 4.0][::10]
+    land = None if land_t == math.inf else land_t
+    report({"test": "sigkill", "level_after_s": level, "land_after_s": land,
+            "final_mode": sim["mode"], "armed": sim["armed"],
+            "final_z": truths[-1][2] if truths else None, "modes": sim["modes"],
+            "tilt_deg_after_kill": trace, "load": os.getloadavg()})
+    assert level is not None and level < 1.0
+    assert land is not None and land < 3.0
+
+
+def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
+    """GPS1_TYPE 0, VISO_TYPE 1, EK3_SRC1_POSXY/POSZ/YAW 6 (perchd sim firmware --vision):
+    the mocap flows from before connect (the EKF needs it for a heading), the driver arms
+    and the vehicle climbs; LOCAL_POSITION_NED is the pose in NED."""
+    import threading
+
+    from fwvision import PoseFeed, climb_and_compare
+
+    from perchd.core.runtime import Runtime
+    from perchd.drivers.base import open_driver
+    from perchd.sim.firmware.ardupilot import ArduPilotParams, ArduPilotVehicle
+    from perchd.sim.firmware.harness import ProcessGroup
+    with ProcessGroup() as procs:
+        v = ArduPilotVehicle(ArduPilotParams(ARDUCOPTER, instance=int(INSTANCE), vision=True,
+                                             log=tmp_path / "sitl.log"))
+        try:
+            v.start(procs, threading.Event())
+            runtime = Runtime.real()
+            drv = open_driver(with_param(v.driver_uri(), MASS), runtime)
+            feed = PoseFeed(v.truth, drv)
+            try:
+                drv.connect()
+                figures = climb_and_compare(v.truth, drv, 3.0, runtime.clock.now)
+            finally:
+                feed.stop()
+                drv.close()
+            texts = [t for _, t in v.state.texts if "EKF3 IMU0" in t]
+        finally:
+            v.close()
+    report({"test": "arducopter-vision", **figures, "ekf_texts": texts,
+            "load": os.getloadavg()})
+    assert any("using external nav data" in t for t in texts)
+    assert figures["climbed_m"] > 0.5
+    assert figures["max_error_m"] < 0.15
+
+
+def test_the_readme_form_is_refused_before_arming(tmp_path):
+    """The driver URI as the README writes it (the harness's port, no arm=1, no mass, no
+    --config): copter.parm's EKF does not take external navigation, so the driver refuses
+    by name before any mode change; the vehicle never arms."""
+    proc, mocap, driver = start(tmp_path, "--stock-params")
+    try:
+        readme = driver.split("?")[0]
+        done = subprocess.run([sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver",
+                               readme, "--mocap", mocap], capture_output=True, text=True,
+                              timeout=60, env=ENV)
+        time.sleep(1.0)
+    finally:
+        sim = stop_harness(proc)
+    report({"test": "readme-form", "exit": done.returncode,
+            "stderr": done.stderr.strip().splitlines()[-1:], "modes": sim["modes"]})
+    assert done.returncode != 0
+    for name in ("GUID_TIMEOUT=3", "FS_GCS_ENABLE=0", "ATC_ANGLE_BOOST=1", "EK3_SRC1_POSXY=3"):
+        assert name in done.stderr
+    assert not any(m["armed"] for m in sim["modes"])
+    assert "GUIDED_NOGPS" not in [m["mode"] for m in sim["modes"]]

@@ -13,7 +13,13 @@ It behaves like the slice of ArduPilot or PX4 the driver talks to:
   targets have streamed for more than 1 s and the last is under 0.5 s old;
 - COMMAND_LONG COMPONENT_ARM_DISARM (400), SET_MESSAGE_INTERVAL (511) for ATTITUDE and
   EXTENDED_SYS_STATE, acknowledged; those are then streamed at the asked rate;
-- SET_ATTITUDE_TARGET recorded with its arrival time.
+- SET_ATTITUDE_TARGET recorded with its arrival time; ATTITUDE_TARGET (83) streamed when
+  asked, its thrust the one applied: 0 until spool_s after the first positive thrust once
+  armed on the ground (ArduCopter's MOT_SAFE_TIME + MOT_SPOOL_TIME), then the last target's;
+- VISION_POSITION_ESTIMATE recorded with its arrival time;
+- mavlink2=True: speaks MAVLink 2 (pymavlink's peer switches to it on the first frame);
+- timesync=True: TIMESYNC requests (tc1 = 0) every 0.1 s, as PX4 sends them; the answers
+  recorded.
 mute() stops all sending (a hung autopilot), unmute() resumes it; die() closes the socket.
 """
 
@@ -28,15 +34,29 @@ from dataclasses import dataclass
 from pymavlink import mavutil
 from ticks import wait_for
 
+from perchd.core.runtime import Runtime
+from perchd.drivers.base import open_driver
+
 ARDUPILOT, PX4 = 3, 12
 ACCEPTED, DENIED = 0, 2
 SAFE_PARAMS = {
     ARDUPILOT: {"GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.35, "GUID_TIMEOUT": 0.5,
-                "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 2.0},
-    PX4: {"MPC_THR_HOVER": 0.42, "COM_OF_LOSS_T": 0.5, "COM_OBL_RC_ACT": 4.0},
+                "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 2.0, "ATC_ANGLE_BOOST": 0.0,
+                "VISO_TYPE": 1.0, "EK3_SRC1_POSXY": 6.0, "EK3_SRC1_POSZ": 6.0,
+                "EK3_SRC1_YAW": 6.0},
+    PX4: {"MPC_THR_HOVER": 0.42, "COM_OF_LOSS_T": 0.3, "COM_OBL_RC_ACT": 4.0,
+          "EKF2_EV_CTRL": 11.0, "EKF2_HGT_REF": 3.0},
 }
-"""Parameters with perchd's failsafe values (docs/safety.md)."""
-PX4_INTS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT"}
+"""Parameters with perchd's values: failsafe (docs/safety.md), mocap to the EKF
+(docs/firmware.md)."""
+PX4_INTS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT", "EKF2_EV_CTRL", "EKF2_HGT_REF"}
+
+
+def connected(vehicle: "VehicleDouble", query: str = "", mass_kg: float = 0.5):
+    """perchd's MAVLink driver, connected to the double (query: more URI parameters)."""
+    drv = open_driver(f"{vehicle.uri}?mass={mass_kg}{query}", Runtime.real())
+    drv.connect()
+    return drv
 
 
 def bytewise(value: float) -> float:
@@ -60,7 +80,8 @@ class VehicleDouble:
     def __init__(self, autopilot: int = ARDUPILOT, params: dict[str, float] | None = None,
                  refuse_arm: bool = False, *, airborne: bool = False, yaw_deg: float = 0.0,
                  prompt: bool = True, heartbeat_s: float = 1.0,
-                 lock_partner: bool = False) -> None:
+                 lock_partner: bool = False, spool_s: float = 0.0,
+                 timesync: bool = False, mavlink2: bool = False) -> None:
         self.autopilot = autopilot
         self.params = dict(SAFE_PARAMS[autopilot]) if params is None else params
         self.refuse_arm = refuse_arm
@@ -70,6 +91,8 @@ class VehicleDouble:
         self.partner = None  # lock_partner: the first address heard
         self.conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=1,
                                                source_component=1)
+        if mavlink2:  # as ArduPilot and PX4 speak; the driver follows (extension fields)
+            self.conn.auto_mavlink_version(b"\xfd")
         self.port = self.conn.port.getsockname()[1]
         self.uri = f"mavlink:udpout:127.0.0.1:{self.port}"
         self.custom_mode = 0 if autopilot == ARDUPILOT else (3 << 16)  # STABILIZE / POSCTL
@@ -82,6 +105,12 @@ class VehicleDouble:
         if lock_partner:
             self._lock_partner()
         self.targets: list[Target] = []
+        self.visions: list[tuple[float, object]] = []  # (arrival, the message)
+        self.timesync_replies: list[tuple[float, int, int]] = []  # (arrival, tc1, ts1)
+        self.spool_s, self.timesync = spool_s, timesync
+        self._spool_start: float | None = 0.0 if airborne else None
+        self.target_interval: float | None = None
+        self._next_target = self._next_timesync = 0.0
         self.commands: list[tuple[float, int, tuple[float, ...]]] = []
         self.modes: list[tuple[float, int]] = []
         self.gcs_heartbeats: list[float] = []
@@ -109,6 +138,13 @@ class VehicleDouble:
                 self._next_attitude = now + self.attitude_interval
                 self._send(lambda m: m.attitude_send(int(now * 1000) & 0xFFFFFFFF, 0, 0,
                                                      self.yaw, 0, 0, 0))
+            if self.target_interval and now >= self._next_target:
+                self._next_target = now + self.target_interval
+                applied = self.applied_thrust(now)
+                self._send(lambda m: m.attitude_target_send(0, 0, [1, 0, 0, 0], 0, 0, 0, applied))
+            if self.timesync and now >= self._next_timesync:
+                self._next_timesync = now + 0.1
+                self._send(lambda m: m.timesync_send(0, int(now * 1e9)))
             if self.sys_state_interval and now >= self._next_sys_state:
                 self._next_sys_state = now + self.sys_state_interval
                 self._send(lambda m: m.extended_sys_state_send(0, self.landed_state))
@@ -156,6 +192,12 @@ class VehicleDouble:
         elif kind == "SET_ATTITUDE_TARGET":
             self.targets.append(Target(now, tuple(msg.q), msg.thrust, msg.type_mask,
                                        (msg.target_system, msg.target_component)))
+            if self.armed and msg.thrust > 0 and self._spool_start is None:
+                self._spool_start = now
+        elif kind == "VISION_POSITION_ESTIMATE":
+            self.visions.append((now, msg))
+        elif kind == "TIMESYNC" and msg.tc1 != 0:
+            self.timesync_replies.append((now, msg.tc1, msg.ts1))
         elif kind == "COMMAND_LONG":
             params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
             self.commands.append((now, msg.command, params))
@@ -180,11 +222,20 @@ class VehicleDouble:
             self.armed = p[0] == 1
         elif command == 511 and int(p[0]) == 30:
             self.attitude_interval = p[1] / 1e6 if p[1] > 0 else None
+        elif command == 511 and int(p[0]) == 83:
+            self.target_interval = p[1] / 1e6 if p[1] > 0 else None
         elif command == 511 and int(p[0]) == 245:
             self.sys_state_interval = p[1] / 1e6 if p[1] > 0 else None
         if self.prompt:
             self._heartbeat()
         return ACCEPTED
+
+    def applied_thrust(self, now: float) -> float:
+        """The thrust the motors give: none before they have spooled up."""
+        start = self._spool_start
+        if not self.armed or start is None or now - start < self.spool_s or not self.targets:
+            return 0.0
+        return self.targets[-1].thrust
 
     def _offboard_ready(self, now: float) -> bool:
         return bool(self.targets) and now - self.targets[0].t > 1.0 and now - self.targets[-1].t < 0.5

@@ -82,18 +82,32 @@ def ctl(sock: Path, *args: str) -> dict:
     return json.loads(done.stdout)
 
 
+ACTIVATE = ("import os, sys; os.dup2(int(sys.argv[1]), 3); "
+            "os.environ['LISTEN_PID'] = str(os.getpid()); os.execvp(sys.argv[2], sys.argv[2:])")
+"""What systemd does between fork and exec for socket activation: the socket at fd 3 and
+LISTEN_PID set to the pid that exec keeps (sd_listen_fds(3))."""
+
+
 class Serve:
-    """`perchd serve` under a test notify socket; .sock is its control socket."""
+    """`perchd serve` under a test notify socket; .sock is its control socket. With
+    `listen`, started as systemd's socket activation starts it: that socket at fd 3."""
 
     def __init__(self, tmp: Path, notify: NotifyListener, *extra: str, tables: str = "",
-                 prefix: tuple[str, ...] = (), **service: str) -> None:
+                 listen: socket.socket | None = None, prefix: tuple[str, ...] = (),
+                 **service: str) -> None:
         """prefix: a command the service runs under (prlimit, setpriv)."""
         self.config = write_config(tmp, tables, **service)
         self.sock = tmp / "control.sock"
         env = {**os.environ, "NOTIFY_SOCKET": notify.address, "WATCHDOG_USEC": "2000000"}
-        self.proc = subprocess.Popen([*prefix, sys.executable, "-m", "perchd", "serve", "--config",
-                                      str(self.config), *extra], env=env,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        cmd = [*prefix, sys.executable, "-m", "perchd", "serve", "--config", str(self.config),
+               *extra]
+        fds: tuple[int, ...] = ()
+        if listen is not None:
+            fds = (listen.fileno(),)
+            cmd = [sys.executable, "-c", ACTIVATE, str(listen.fileno()), *cmd]
+            env.update(LISTEN_FDS="1", LISTEN_FDNAMES="control")
+        self.proc = subprocess.Popen(cmd, env=env, pass_fds=fds, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True)
 
     def wait_phase(self, phases: set[str], timeout: float = 10.0) -> dict:
         deadline = time.monotonic() + timeout

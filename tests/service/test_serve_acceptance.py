@@ -13,18 +13,11 @@ import sys
 import time
 
 import pytest
-from svc import PLAN, NotifyListener, Serve, SimProcess, ctl
+from svc import PLAN, Serve, SimProcess, ctl
 
 from perchd.logs.flightlog import read_log
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture
-def notify(tmp_path):
-    n = NotifyListener(tmp_path / "notify")
-    yield n
-    n.close()
 
 
 @pytest.fixture

@@ -89,13 +89,6 @@ class Pings:
         return [b - a for a, b in zip(ts, ts[1:])]
 
 
-@pytest.fixture
-def notify(tmp_path):
-    n = NotifyListener(tmp_path / "notify")
-    yield n
-    n.close()
-
-
 def phase_after(serve: Serve, pings: Pings, phases: set[str], timeout: float) -> dict:
     """Poll the status (collecting pings meanwhile) until the flight is in one of `phases`."""
     deadline = time.monotonic() + timeout

@@ -11,10 +11,23 @@ import pytest
 
 from perchd.commands.sim_firmware import arducopter_params, register_under
 from perchd.core.errors import UriError
-from perchd.sim.firmware.ardupilot import (DEG7_M, ArduPilotParams, GeoOrigin, SimState,
-                                           TruthFilter, crossing, driver_uri_for,
-                                           find_defaults, in_dir, ned_offset, sitl_argv,
-                                           world_quat, world_vec)
+from perchd.sim.firmware.ardupilot import (
+    DEG7_M,
+    VISION_BOOT_PARAMS,
+    ArduPilotParams,
+    GeoOrigin,
+    SimState,
+    TruthFilter,
+    boot_parm,
+    crossing,
+    driver_uri_for,
+    find_defaults,
+    in_dir,
+    ned_offset,
+    sitl_argv,
+    world_quat,
+    world_vec,
+)
 from perchd.sim.firmware.harness import Truth
 from perchd.sim.firmware.quadrotor import euler_zyx
 
@@ -43,7 +56,7 @@ def test_north_east_down_offsets_from_the_origin():
 
 @pytest.mark.parametrize("frame, expect", [("nwu", (1.0, -2.0, -3.0)), ("enu", (2.0, 1.0, -3.0))])
 def test_vectors_rotate_into_a_z_up_world(frame, expect):
-    assert world_vec((1.0, 2.0, 3.0), frame) == expect
+    assert world_vec((1.0, 2.0, 3.0), frame) == pytest.approx(expect, abs=1e-12)
 
 
 @pytest.mark.parametrize("roll, pitch, yaw", [(0.2, 0.0, 0.0), (0.0, 0.3, 0.0),
@@ -109,19 +122,40 @@ def test_crossing_the_virtual_surface_is_a_contact_with_the_normal_speed():
 
 def test_sitl_runs_on_loopback_udp_only_in_its_own_directory(tmp_path):
     p = ArduPilotParams("/fw/arducopter", boot_speedup=10.0)
-    argv = sitl_argv(p, tmp_path / "copter.parm", 40001, 40002)
+    argv = sitl_argv(p, str(tmp_path / "copter.parm"), 40001, 40002)
     assert argv[:2] == ["/fw/arducopter", "--model"]
     assert argv[argv.index("--serial0") + 1] == "udpclient:127.0.0.1:40001"
     assert argv[argv.index("--serial1") + 1] == "udpclient:127.0.0.1:40002"
     assert argv[argv.index("--serial2") + 1] == "none:"  # no TCP listener on 0.0.0.0
     assert "-w" in argv and argv[argv.index("--defaults") + 1] == str(tmp_path / "copter.parm")
     assert argv[argv.index("--home") + 1] == "-35.3632610,149.1652300,584,0"
-    assert argv[argv.index("--speedup") + 1] == "10"
+    assert argv[argv.index("--speedup") + 1] == "10" and "-I0" in argv
     assert in_dir(tmp_path, argv)[:3] == ["env", "-C", str(tmp_path)]
 
 
 def test_driver_uri_listens_where_serial1_sends_and_arms():
-    assert driver_uri_for(40002) == "mavlink:udpin:127.0.0.1:40002?arm=1"
+    # with GPS the SITL vehicle has its own position: no mocap to its EKF
+    assert driver_uri_for(40002) == "mavlink:udpin:127.0.0.1:40002?arm=1&vision=0"
+    assert driver_uri_for(40002, vision=True) == "mavlink:udpin:127.0.0.1:40002?arm=1"
+
+
+def test_instance_vision_and_stock_params_reach_sitl(tmp_path):
+    top = argparse.ArgumentParser()
+    register_under(top.add_subparsers().add_parser("sim"))
+    args = top.parse_args(["sim", "firmware", "--arducopter", "/fw/arducopter", "--instance",
+                           "1", "--vision"])
+    p = arducopter_params(args)
+    assert "-I1" in sitl_argv(p, "a.parm,b.parm", 1, 2) and p.vision
+    assert dict(p.params)["ATC_ANGLE_BOOST"] == 0.0 and dict(p.params)["FS_GCS_ENABLE"] == 5.0
+    stock = arducopter_params(top.parse_args(["sim", "firmware", "--arducopter", "x",
+                                              "--stock-params"]))
+    assert stock.params == (("GUID_OPTIONS", 8.0),)
+    parm = boot_parm(tmp_path, VISION_BOOT_PARAMS).read_text()
+    assert "VISO_TYPE 1\n" in parm and "GPS1_TYPE 0\n" in parm and "EK3_SRC1_YAW 6\n" in parm
+    px4 = top.parse_args(["sim", "firmware", "--px4", "/b", "--px4-instance", "2"])
+    assert px4.instance == 2  # the old spelling is the same option
+    with pytest.raises(UriError, match="instance 10"):
+        ArduPilotParams("/fw/arducopter", instance=10)
 
 
 def test_defaults_are_found_in_the_binary_s_source_tree(tmp_path):
@@ -155,3 +189,14 @@ def test_command_line_takes_arducopter_defaults_and_frame(tmp_path):
     assert p.start == (-4.5, 0.0, 0.0) and p.surface == ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
     with pytest.raises(SystemExit):  # one firmware at a time
         top.parse_args(["sim", "firmware", "--arducopter", "a", "--cf2", "b"])
+
+
+@pytest.mark.parametrize("yaw0", [0.0, math.pi / 2, 1.0, -2.5])
+def test_ned_undoes_the_world_rotation_at_any_yaw0(yaw0):
+    """One rotation both ways: truth into the world (harnesses), mocap back to NED (driver)."""
+    from perchd.core.ned import ned_quat, ned_vec
+    from perchd.sim.plant import quaternion
+    v = (0.3, -1.2, 2.0)
+    assert world_vec(ned_vec(v, yaw0), yaw0) == pytest.approx(v, abs=1e-12)
+    q = quaternion(0.1, -0.2, 0.7)
+    assert world_quat(ned_quat(q, yaw0), yaw0) == pytest.approx(q, abs=1e-12)

@@ -29,6 +29,7 @@ from typing import Any, Callable
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
+from perchd.core.ned import world_quat, world_vec
 from perchd.core.types import Vec3
 from perchd.sim.firmware.harness import (
     FirmwareVehicle,
@@ -38,12 +39,15 @@ from perchd.sim.firmware.harness import (
     contact_json,
     default_log,
 )
-from perchd.sim.firmware.ned import world_quat, world_vec
 from perchd.sim.world import Contact
 
 DEG7_M = 0.011131884502145034
 """[m] per 1e-7 degree of latitude (ArduPilot's LOCATION_SCALING_FACTOR)."""
-SIM_STATE_ID, SYS_STATUS_ID = 108, 1
+SIM_STATE_ID, SYS_STATUS_ID, SYSTEM_TIME_ID = 108, 1, 2
+VISION_BOOT_S = 40.0
+"""[s] of simulated time after boot before a vision=True vehicle is ready: without GPS
+nothing else says when the inertial checks settle ("Accels inconsistent" for ~30 s), and
+the GPS start is ready at about this time too (docs/firmware.md)."""
 STATUS_HZ = 2.0
 """[Hz] SYS_STATUS (its pre-arm health bit): SITL streams nothing on a bare serial."""
 CMD_SET_MESSAGE_INTERVAL = 511
@@ -54,12 +58,19 @@ EKF_GPS_TEXT = "is using GPS"
 FRAMES = ("nwu", "enu")
 COPTER_MODES = {0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER",
                 6: "RTL", 9: "LAND", 17: "BRAKE", 20: "GUIDED_NOGPS"}
-DEFAULT_PARAMS = (("GUID_OPTIONS", 8.0),)
-"""GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET thrust is thrust, not a climb rate; perchd's
-driver flies newtons and refuses without it (drivers/mavlink.py)."""
+DEFAULT_PARAMS = (("GUID_OPTIONS", 8.0), ("GUID_TIMEOUT", 0.5), ("FS_GCS_ENABLE", 5.0),
+                  ("FS_GCS_TIMEOUT", 2.0), ("ATC_ANGLE_BOOST", 0.0))
+"""What perchd's driver checks (drivers/mavparams.py): GUID_OPTIONS bit 3 (thrust is thrust,
+not a climb rate), the failsafe that levels and lands a dead agent's vehicle (docs/safety.md),
+no second tilt compensation. stock_params leaves all but GUID_OPTIONS at copter.parm's."""
+VISION_BOOT_PARAMS = (("VISO_TYPE", 1.0), ("GPS1_TYPE", 0.0), ("EK3_SRC1_POSXY", 6.0),
+                      ("EK3_SRC1_VELXY", 0.0), ("EK3_SRC1_POSZ", 6.0), ("EK3_SRC1_VELZ", 0.0),
+                      ("EK3_SRC1_YAW", 6.0))
+"""vision=True: no GPS, the EKF on perchd's mocap (drivers/mavvision.py); in a defaults file
+read at boot, as VISO_TYPE takes effect only then."""
 
 
-# -- truth conversion (pure; the frames are perchd.sim.firmware.ned) ---------------------
+# -- truth conversion (pure; the frames are perchd.core.ned) ---------------------
 @dataclass(frozen=True, slots=True)
 class GeoOrigin:
     """lat_e7, lon_e7 [1e-7 deg] and alt_m [m AMSL] of world position `start`."""
@@ -148,7 +159,10 @@ class ArduPilotParams:
     the virtual surface whose crossing is recorded as contact (SITL has no wall);
     truth_hz [Hz] SIM_STATE rate asked for; boot_speedup: SIM_SPEEDUP until ready;
     ready_timeout_s [s] wall; params: (NAME, value) set once booted; workdir: SITL's cwd
-    (None: a fresh temporary one, removed on close); log: its stdout."""
+    (None: a fresh temporary one, removed on close); log: its stdout; instance: SITL's -I N
+    (its own ports move by 10 N; the harness's links are free ports anyway); vision: GPS off
+    and the EKF on the mocap the driver forwards (VISION_BOOT_PARAMS), ready without a
+    position (arming then waits for perchd's mocap), the driver URI without vision=0."""
 
     binary: str
     defaults: str | None = None
@@ -163,8 +177,12 @@ class ArduPilotParams:
     params: tuple[tuple[str, float], ...] = DEFAULT_PARAMS
     workdir: str | None = None
     log: Path | None = None
+    instance: int = 0
+    vision: bool = False
 
     def __post_init__(self) -> None:
+        if not 0 <= self.instance <= 9:
+            raise UriError(f"ArduPilot instance {self.instance} is outside 0..9")
         if self.frame not in FRAMES:
             raise UriError(f"frame {self.frame!r} is not one of {', '.join(FRAMES)}")
         if not 1.0 <= self.truth_hz <= 400.0:
@@ -192,11 +210,12 @@ def free_udp_port() -> int:
         return s.getsockname()[1]
 
 
-def sitl_argv(p: ArduPilotParams, defaults: Path, harness_port: int,
+def sitl_argv(p: ArduPilotParams, defaults: str, harness_port: int,
               driver_port: int) -> list[str]:
-    """SITL's command line: loopback UDP serials only (docs/firmware.md)."""
-    return [p.binary, "--model", p.model, "--speedup", f"{p.boot_speedup:g}", "-I0", "-w",
-            "--defaults", str(defaults), "--home", p.home.arg(),
+    """SITL's command line: loopback UDP serials only (docs/firmware.md); defaults: one
+    .parm file or several, comma-separated."""
+    return [p.binary, "--model", p.model, "--speedup", f"{p.boot_speedup:g}",
+            f"-I{p.instance}", "-w", "--defaults", defaults, "--home", p.home.arg(),
             "--serial0", f"udpclient:127.0.0.1:{harness_port}",
             "--serial1", f"udpclient:127.0.0.1:{driver_port}",
             "--serial2", "none:",  # else SERIAL2 listens on TCP 0.0.0.0:5763
@@ -208,9 +227,17 @@ def in_dir(workdir: Path, argv: list[str]) -> list[str]:
     return ["env", "-C", str(workdir), *argv]
 
 
-def driver_uri_for(port: int) -> str:
-    """perchd's driver listens where SERIAL1 sends; arm=1: nobody else arms it."""
-    return f"mavlink:udpin:127.0.0.1:{port}?arm=1"
+def driver_uri_for(port: int, vision: bool = False) -> str:
+    """perchd's driver listens where SERIAL1 sends; arm=1: nobody else arms it; vision=0
+    unless the EKF is set up for mocap (with GPS it flies on its own position)."""
+    return f"mavlink:udpin:127.0.0.1:{port}?arm=1" + ("" if vision else "&vision=0")
+
+
+def boot_parm(workdir: Path, params: tuple[tuple[str, float], ...]) -> Path:
+    """A defaults file SITL reads after copter.parm (later files win)."""
+    path = workdir / "perchd-boot.parm"
+    path.write_text("".join(f"{name} {value:g}\n" for name, value in params))
+    return path
 
 
 def crossing(surface: tuple[Vec3, Vec3], before: Truth, now: Truth) -> Contact | None:
@@ -236,6 +263,7 @@ class LinkState:
     texts: list[tuple[float, str]] = field(default_factory=list)
     modes: list[tuple[float, str, bool]] = field(default_factory=list)
     sim_states: int = 0
+    boot_s: float = 0.0  # [s] the autopilot's time since boot (SYSTEM_TIME)
     first_sim_t: float | None = None
     last_sim_t: float | None = None
 
@@ -275,15 +303,22 @@ class ArduPilotVehicle(FirmwareVehicle):
 
     # -- FirmwareVehicle ----------------------------------------------------------------
     def start(self, procs: ProcessGroup, cancel: threading.Event) -> None:
-        argv = sitl_argv(self.params, self.defaults, self.harness_port, self.driver_port)
+        defaults = str(self.defaults)
+        if self.params.vision:
+            defaults += "," + str(boot_parm(self.workdir, VISION_BOOT_PARAMS))
+        argv = sitl_argv(self.params, defaults, self.harness_port, self.driver_port)
         self.proc = procs.launch(in_dir(self.workdir, argv), self.log)
         deadline = time.monotonic() + self.params.ready_timeout_s
         self._wait(lambda: self.state.sim_states > 0, "SIM_STATE", deadline, cancel,
                    ask=self._ask_truth)
         for name, value in self.params.params:
             self._set_param(name, value, deadline, cancel)
-        self._wait(lambda: self.state.ekf_gps and self.state.prearm_ok,
-                   "the EKF to use GPS and the pre-arm checks to pass", deadline, cancel)
+        if self.params.vision:  # no position before perchd's mocap: no pre-arm pass either
+            self._wait(lambda: self.state.boot_s >= VISION_BOOT_S,
+                       f"{VISION_BOOT_S:g} s since boot", deadline, cancel)
+        else:
+            self._wait(lambda: self.state.ekf_gps and self.state.prearm_ok,
+                       "the EKF to use GPS and the pre-arm checks to pass", deadline, cancel)
         self._set_param("SIM_SPEEDUP", 1.0, deadline, cancel)
         self._ask_truth()  # the rate is per wall second: ask again at speed-up 1
         self.state.sim_states, self.state.first_sim_t = 0, None  # the summary's rate: at 1x
@@ -292,7 +327,7 @@ class ArduPilotVehicle(FirmwareVehicle):
         return self._truth
 
     def driver_uri(self) -> str:
-        return driver_uri_for(self.driver_port)
+        return driver_uri_for(self.driver_port, self.params.vision)
 
     def contact(self) -> Contact | None:
         return self._contact
@@ -307,6 +342,7 @@ class ArduPilotVehicle(FirmwareVehicle):
                 "armed": s.armed,
                 "modes": [{"t": t - self._t0, "mode": m, "armed": a} for t, m, a in s.modes],
                 "texts": [{"t": t - self._t0, "text": x} for t, x in s.texts[-40:]],
+                "t0": self._t0,  # [s] the harness clock (monotonic) the t above count from
                 "workdir": str(self.workdir), "log": str(self.log),
                 "defaults": str(self.defaults)}
 
@@ -336,7 +372,8 @@ class ArduPilotVehicle(FirmwareVehicle):
             time.sleep(0.02)
 
     def _ask_truth(self) -> None:
-        for msg_id, hz in ((SIM_STATE_ID, self.params.truth_hz), (SYS_STATUS_ID, STATUS_HZ)):
+        for msg_id, hz in ((SIM_STATE_ID, self.params.truth_hz), (SYS_STATUS_ID, STATUS_HZ),
+                           (SYSTEM_TIME_ID, STATUS_HZ)):
             self._conn.mav.command_long_send(1, 1, CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
                                              1e6 / hz, 0, 0, 0, 0, 0)
 
@@ -367,6 +404,8 @@ class ArduPilotVehicle(FirmwareVehicle):
             if (msg.custom_mode, armed) != (s.mode, s.armed):
                 s.modes.append((now, COPTER_MODES.get(msg.custom_mode, str(msg.custom_mode)), armed))
             s.mode, s.armed = msg.custom_mode, armed
+        elif kind == "SYSTEM_TIME":
+            s.boot_s = msg.time_boot_ms * 1e-3
         elif kind == "SYS_STATUS":
             s.prearm_ok = bool(msg.onboard_control_sensors_health & PREARM_BIT)
         elif kind == "STATUSTEXT":

@@ -27,6 +27,7 @@ from typing import Any
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.extras import require
+from perchd.core.ned import world_quat
 from perchd.core.types import Quat, Vec3
 from perchd.sim.firmware.cf2 import Surface
 from perchd.sim.firmware.harness import (
@@ -38,7 +39,6 @@ from perchd.sim.firmware.harness import (
     default_log,
     yaw_of,
 )
-from perchd.sim.firmware.ned import world_quat
 from perchd.sim.world import Contact
 
 EARTH_RADIUS_M = 6371000.0
@@ -50,8 +50,14 @@ SIH_HOVER = SIH_MASS_KG * 9.81 / (4 * 5.0)
 SIH_T_MAX = 5 N each (the driver's hover=, instead of MPC_THR_HOVER's 0.5)."""
 OFFBOARD_PORT, DISPLAY_PORT = 14540, 19410
 """PX4 sends to these + instance: the offboard API link, SIH's display link (truth)."""
-SAFE_PARAMS = {"COM_OF_LOSS_T": "0.5", "COM_OBL_RC_ACT": "4", "SDLOG_BACKEND": "0"}
+SAFE_PARAMS = {"COM_OF_LOSS_T": "0.3", "COM_OBL_RC_ACT": "4", "SDLOG_BACKEND": "0"}
 """Set at boot (PX4_PARAM_*): perchd's failsafe values (docs/safety.md), and no .ulg logs."""
+VISION_PARAMS = {"EKF2_EV_CTRL": "11", "EKF2_HGT_REF": "3", "EKF2_GPS_CTRL": "0",
+                 "EKF2_EVP_NOISE": "0.01", "EKF2_EVA_NOISE": "0.02", "EKF2_BARO_CTRL": "0"}
+"""vision: EKF2 on the mocap perchd's driver forwards (position and yaw, vision height),
+GPS off (drivers/mavparams.py checks the first two); the noise floors down to the mocap's
+(drivers/mavvision.py: EKF2 takes the larger of its floor, 0.1 m and 0.1 rad by default,
+and the covariance sent)."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
 BOOT_TIMEOUT_S, TAKEOFF_TIMEOUT_S = 30.0, 40.0
 
@@ -63,8 +69,9 @@ class Px4Params:
     surface_ahead_m [m]: the surface is put this far ahead of the hover point along the
     heading (None: no surface); stock_params: leave PX4's failsafe defaults (to try the
     driver's refusal or ?configure=1); extra_params: more PX4 parameters set at boot, e.g.
-    (("SIH_KDV", "0.1"),) (SIH's linear drag, 1.0 N/(m/s) by default); log: PX4's console
-    output."""
+    (("SIH_KDV", "0.1"),) (SIH's linear drag, 1.0 N/(m/s) by default); vision: GPS off and
+    EKF2 on the mocap perchd's driver forwards (VISION_PARAMS; no take-off then: without
+    mocap it has no position); log: PX4's console output."""
 
     build: str
     instance: int = 0
@@ -73,6 +80,7 @@ class Px4Params:
     stock_params: bool = False
     extra_params: tuple[tuple[str, str], ...] = ()
     log: Path | None = None
+    vision: bool = False
 
 
 def enu_from_geodetic(lat_deg: float, lon_deg: float, alt_m: float,
@@ -137,6 +145,7 @@ class Px4Vehicle(FirmwareVehicle):
         self._truth_acked = False  # PX4 took the 100 Hz truth rate (25 Hz before)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._proc: Any = None
 
     # -- FirmwareVehicle ---------------------------------------------------------------
     def start(self, procs: ProcessGroup, cancel: threading.Event) -> None:
@@ -168,7 +177,10 @@ class Px4Vehicle(FirmwareVehicle):
     def driver_uri(self) -> str:
         port = OFFBOARD_PORT + self.params.instance
         # yaw0=auto: SIH's EKF heading comes from its compass, degrees off the truth
-        return f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}&yaw0=auto"
+        # vision: on the ground, nobody else arms it; else it flies on its GPS
+        vision = "&arm=1" if self.params.vision else "&vision=0"
+        return (f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}"
+                f"&yaw0=auto{vision}")
 
     def contact(self) -> Contact | None:
         return self._contact
@@ -195,10 +207,11 @@ class Px4Vehicle(FirmwareVehicle):
         """px4 through env(1) (it execs, so the pid is px4's): the simulator, the airframe
         and the parameters PX4's rcS applies after the airframe (PX4_PARAM_<NAME>)."""
         params = {"SDLOG_BACKEND": "0"} if self.params.stock_params else dict(SAFE_PARAMS)
+        params.update(VISION_PARAMS if self.params.vision else {})
         params.update(self.params.extra_params)
         env = ["PX4_SIMULATOR=sihsim", "PX4_SIM_MODEL=sihsim_quadx",
                *(f"PX4_PARAM_{k}={v}" for k, v in params.items())]
-        procs.launch(["env", *env, str(self.binary), "-d", "-i", str(self.params.instance),
+        self._proc = procs.launch(["env", *env, str(self.binary), "-d", "-i", str(self.params.instance),
                       "-w", str(self.workdir), str(self.etc)], self.log)
 
     def _ask_truth(self) -> None:
@@ -229,6 +242,12 @@ class Px4Vehicle(FirmwareVehicle):
         while not done():
             if cancel.is_set():
                 raise Interrupted()
+            if self._proc is not None and self._proc.poll() is not None:
+                # e.g. another px4 holds this instance's lock: its ports would answer for it
+                raise LinkError(f"PX4 instance {self.params.instance} exited "
+                                f"({self._proc.returncode}) while waiting for {what} (is "
+                                f"another px4 running as instance {self.params.instance}? "
+                                f"log: {self.log})")
             now = time.monotonic()
             if now > deadline:
                 raise LinkError(f"PX4 instance {self.params.instance}: no {what} within "

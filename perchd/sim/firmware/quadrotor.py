@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from perchd.core.ned import euler_zyx  # noqa: F401  (re-exported: tests and the harness use it here)
 from perchd.core.types import Quat, Vec3
 
 
@@ -186,12 +187,3 @@ class Quadrotor:
     def state(self) -> BodyState:
         return BodyState(tuple(self.p), tuple(self.v), tuple(self.q), tuple(self.w),  # type: ignore[arg-type]
                          tuple(self.rotor), self.grounded, self.perched)  # type: ignore[arg-type]
-
-
-def euler_zyx(q: Quat) -> Vec3:
-    """(roll, pitch, yaw) [rad] of an (x, y, z, w) quaternion, Z-Y-X order (docs/contracts.md §3)."""
-    x, y, z, w = q
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
