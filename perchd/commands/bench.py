@@ -35,7 +35,7 @@ def register(sub) -> None:
                    help="warm replans from each plan library (the first 10 also cold-solved) "
                         "(default: 200)")
     p.add_argument("--json", action="store_true", help="print one JSON list")
-    add_load(p)
+    add_load(p, "the solves (as a flight's planner worker runs under fly --realtime)")
     p.set_defaults(run=run_planner)
     lp = bench_sub.add_parser("loop", help="control loop: 500 Hz jitter, agent compute, "
                                             "pose-to-setpoint latency over ZMQ, CPU")
@@ -43,20 +43,21 @@ def register(sub) -> None:
                     help="[s] length of the 500 Hz run and of each ZMQ mode (default 5; "
                          "60 for the issue's overrun figure)")
     lp.add_argument("--json", action="store_true", help="print one JSON object")
-    add_load(lp)
-    lp.add_argument("--realtime", nargs="?", type=int, const=realtime.DEFAULT_PRIORITY,
-                    default=0, metavar="PRIO",
-                    help="run the loops, the rig and the agent (perchd fly --realtime) under "
-                         f"SCHED_FIFO at PRIO (default {realtime.DEFAULT_PRIORITY}); the load "
-                         "processes stay at the normal policy")
+    add_load(lp, "the loops, the rig and the agent (perchd fly --realtime)")
     lp.set_defaults(run=run_loop)
 
 
-def add_load(parser) -> None:
+def add_load(parser, what: str) -> None:
+    """--load N and --realtime[=PRIO] (for `what`)."""
     parser.add_argument("--load", type=int, default=0, metavar="N",
                         help="measure without load, then again with N CPU-bound processes "
                              "running beside (stopped at the end, Ctrl-C included), and print "
                              "the two side by side")
+    parser.add_argument("--realtime", nargs="?", type=int, const=realtime.DEFAULT_PRIORITY,
+                        default=0, metavar="PRIO",
+                        help=f"run {what} under SCHED_FIFO at PRIO (default "
+                             f"{realtime.DEFAULT_PRIORITY}); the load processes stay at the "
+                             "normal policy")
 
 
 def check_load(n: int) -> None:
@@ -137,6 +138,7 @@ def _libraries():
 
 def run_planner(args) -> int:
     check_load(args.load)
+    realtime.apply(realtime.RealtimeConfig(args.realtime))
     if args.load:
         return planner_under_load(args)
     rows = planner_rows(args.orders, args.repeat)
@@ -168,12 +170,14 @@ def planner_under_load(args) -> int:
     rows = [{**a, "loaded_median_ms": b["median_ms"], "loaded_p99_ms": b["p99_ms"],
              "ratio_loaded": b["median_ms"] / a["median_ms"]} for a, b in zip(idle, busy)]
     if args.json:
-        print(json.dumps({"hogs": args.load, "load_before": load_before,
+        print(json.dumps({"hogs": args.load, "realtime": args.realtime,
+                          "load_before": load_before,
                           "load_during": load_during, "rows": rows}))
         return 0
     print(f"{args.load} CPU-bound processes beside the loaded run; {os.cpu_count()} cores; load "
           f"average {load_before:.2f} before, {load_during:.2f} loaded; BLAS threads "
-          f"{os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}")
+          f"{os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}; --realtime: "
+          f"{realtime.RealtimeConfig(args.realtime).describe()}")
     print(f"{'case':6} {'n':>2} {'solve':5} {'median ms':>10} {'loaded ms':>10} {'x idle':>7}"
           f"   (target for cold solves: x idle <= 3)")
     for r in rows:

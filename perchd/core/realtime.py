@@ -176,6 +176,22 @@ def _cpu_list(cpus: set[int]) -> str:
     return ",".join(str(c) for c in sorted(cpus))
 
 
+def below_loop(pid: int) -> None:
+    """Put child `pid` (the trigger's planner worker) just below this thread's real-time
+    priority: it inherited the loop's SCHED_FIFO priority, and at an equal priority a
+    CPU-bound solve would hold its CPU until it finished while the loop waited. One below,
+    it still runs before every normal program; at priority 1 it goes back to the normal
+    scheduler. Nothing changes when this process is not real-time."""
+    if not sys.platform.startswith("linux") or os.sched_getscheduler(0) != os.SCHED_FIFO:
+        return
+    priority = os.sched_getparam(0).sched_priority
+    policy = os.SCHED_FIFO if priority > 1 else os.SCHED_OTHER
+    try:
+        os.sched_setscheduler(pid, policy, os.sched_param(priority - 1 if priority > 1 else 0))
+    except (ProcessLookupError, PermissionError):  # gone already; lowering is always allowed
+        pass
+
+
 def settle_heap() -> None:
     """Between flights: collect every cycle, then freeze what survives (gc.freeze) so later
     collections never scan the long-lived objects again (modules, the open links)."""

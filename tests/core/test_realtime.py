@@ -70,3 +70,21 @@ def test_off_by_default_and_priorities_outside_1_to_99_refused():
     for bad in ({"priority": -1}, {"priority": 100}, {"cpu": -2}):
         with pytest.raises(ConfigError):
             RealtimeConfig(**bad)
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="granted only with CAP_SYS_NICE (root here)")
+@pytest.mark.parametrize("prio, policy, child_prio", [(50, "FIFO", 49), (1, "OTHER", 0)])
+def test_a_child_such_as_the_planner_worker_runs_just_below_the_loop(prio, policy, child_prio):
+    """At the loop's own priority a CPU-bound solve would hold its CPU while the loop waits."""
+    code = f"""
+import json, os, subprocess, sys
+from perchd.core.realtime import RealtimeConfig, apply, below_loop
+apply(RealtimeConfig({prio}, lock_memory=False))
+child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(5)"])
+below_loop(child.pid)
+print(json.dumps([os.sched_getscheduler(child.pid), os.sched_getparam(child.pid).sched_priority]))
+child.kill()
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert json.loads(out.stdout) == [getattr(os, f"SCHED_{policy}"), child_prio]
