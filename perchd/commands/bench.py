@@ -37,7 +37,8 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON list")
     add_load(p, "the solves (as a flight's planner worker runs under fly --realtime)")
     p.set_defaults(run=run_planner)
-    lp = bench_sub.add_parser("loop", help="control loop: 500 Hz jitter, agent compute, "
+    lp = bench_sub.add_parser("loop", help="control loop: 500 Hz jitter, overruns per minute "
+                                            "at 100 and 500 Hz, agent compute, "
                                             "pose-to-setpoint latency over ZMQ, CPU")
     lp.add_argument("--seconds", type=float, default=5.0,
                     help="[s] length of the 500 Hz run and of each ZMQ mode (default 5; "
