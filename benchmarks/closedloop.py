@@ -30,13 +30,13 @@ LINKS = {"nominal": "sim://?seed={seed}", "latency20ms+noise1mm": "sim://?latenc
 
 
 def case1(strategy: str):
-    sys.path.insert(0, str(ROOT / "tests" / "closedloop"))
+    sys.path.insert(0, str(ROOT / "tests" / "helpers"))
     from simflight import case1 as plan_for
     return plan_for(strategy)
 
 
 def fly_once(plan, uri: str, log: Path):
-    sys.path.insert(0, str(ROOT / "tests" / "closedloop"))
+    sys.path.insert(0, str(ROOT / "tests" / "helpers"))
     from simflight import Sim
     w0 = time.perf_counter()
     res = Sim(uri).fly(plan, log)

@@ -16,14 +16,14 @@ import time
 from typing import Any
 
 import zmq
-from perchd.drivers.base import DriverBase
 
 from perchd.core.errors import LinkError, UriError
-from perchd.core.netbind import check_bind
+from perchd.core.netbind import check_bind, port_error
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param
+from perchd.drivers.base import DriverBase
 
 SETPOINT, STOP = b"setpoint", b"stop"
 
@@ -103,6 +103,8 @@ class ZmqSetpointDriver(DriverBase):
             (sock.bind if self.bind else sock.connect)(self.endpoint)
         except zmq.ZMQError as err:
             sock.close(0)
+            if self.bind:  # a taken port is bad input (exit 2), as for every listener
+                raise port_error(self.uri, err) from None
             raise LinkError(f"{self.uri}: cannot open {self.endpoint}: {err}") from None
         self._sock, self._stopped, self._subscribers = sock, False, 0
         deadline = time.monotonic() + self.wait

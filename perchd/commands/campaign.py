@@ -17,13 +17,14 @@ import json
 import signal
 import sys
 import time
-from collections import Counter
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 from perchd.commands.fly import load_config
+from perchd.commands.progress import Progress
 from perchd.core.errors import ConfigError
+from perchd.core.interrupts import exit_code
 from perchd.core.safefile import OutputError, check_output
 from perchd.flight.config import TriggerPolicy
 from perchd.sim import campaign as cp
@@ -84,41 +85,6 @@ def check_mode(args: argparse.Namespace) -> None:
     if not args.pose_out or not args.setpoint_in:
         raise ConfigError("--pose-out and --setpoint-in are required (or --campaign P.json "
                           "for simulated flights in this process)")
-
-
-class Progress:
-    """Flights done on `stream`: a bar rewritten in place on a terminal, else a line at every
-    tenth of the campaign (and at its end)."""
-
-    WIDTH = 30
-
-    def __init__(self, total: int, stream: TextIO | None = None) -> None:
-        self.stream = sys.stderr if stream is None else stream
-        self.tty = self.stream.isatty()
-        self.total, self.done = total, 0
-        self.outcomes: Counter[str] = Counter()
-        self.t0 = time.monotonic()
-        self._step = max(1, total // 10)
-
-    def __call__(self, row: Any) -> None:
-        self.done += 1
-        self.outcomes[row.outcome] += 1
-        if self.tty:
-            fill = self.WIDTH * self.done // self.total
-            self.stream.write(f"\r[{'#' * fill}{'.' * (self.WIDTH - fill)}] {self.line()}\x1b[K")
-        elif self.done % self._step == 0 or self.done == self.total:
-            self.stream.write(f"perchd sim: {self.line()}\n")
-        self.stream.flush()
-
-    def line(self) -> str:
-        counts = ", ".join(f"{k} {v}" for k, v in self.outcomes.most_common())
-        return (f"{self.done}/{self.total} flights ({counts}) "
-                f"{time.monotonic() - self.t0:.1f} s")
-
-    def close(self) -> None:
-        if self.tty and self.done:
-            self.stream.write("\n")
-            self.stream.flush()
 
 
 def _stat(s: Any, fmt: str, scale: float = 1.0) -> str:
@@ -189,15 +155,15 @@ def run(args: argparse.Namespace) -> int:
     plan, cfg, spread, specs = build(args)
     table = table_path(args)
     check_log_dir(args.logs, [s.index for s in specs], args.force)
-    progress = Progress(len(specs))
+    progress = Progress(len(specs), "flights", "sim")
     rows: list[Any] = []
     t0 = time.monotonic()
     stopped = None
-    with open_table(table, args.force) as writer, on_signals() as signals:
+    with open_table(table, args.force) as writer, on_signals():
         def finished(row: Any) -> None:
             rows.append(row)
             writer.write(row)  # as it finishes: an interrupted campaign keeps it
-            progress(row)
+            progress(row.outcome)
         try:
             cp.run_campaign(plan, cfg, spread, specs, args.jobs, args.logs, finished)
         except Stopped as stop:
@@ -233,7 +199,7 @@ class Stopped(BaseException):
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
         self.name = signal.Signals(signum).name
-        self.exit_code = 128 + signum
+        self.exit_code = exit_code(signum)
 
 
 @contextlib.contextmanager

@@ -4,12 +4,14 @@
 
 `--log F.mcap` writes the flight log beside it as F.jsonl while flying and, when the flight
 ends, F.mcap from it (`perchd log export`, needs perchd[mcap]); docs/contracts.md §5.
+`--foxglove [HOST:]PORT` serves the same channels live (perchd.logs.foxglove, perchd[foxglove]).
 
 The hover thrust the hold learns is kept per vehicle (the driver URI) in --state (default
 $XDG_STATE_HOME/perchd/vehicles.json, flight/vehiclestate.py) and is the next flight's guess.
 
 While flying, a one-line status on stderr (phase, X, Xdot, tau vs tau_ref); afterwards a
-summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise.
+summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise;
+SIGINT or SIGTERM end the flight (SIGNAL, with the failsafe) and exit 130 or 143 (docs/contracts.md §6).
 With `--driver sim:// --mocap sim://` the flight is simulated on a simulated clock.
 """
 
@@ -19,7 +21,6 @@ import argparse
 import dataclasses
 import json
 import math
-import signal
 import sys
 import time
 from pathlib import Path
@@ -29,6 +30,7 @@ from perchd.commands.log import write_file
 from perchd.core import realtime
 from perchd.core.errors import ConfigError, PerchdError
 from perchd.core.extras import require
+from perchd.core.interrupts import catching
 from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
@@ -36,6 +38,7 @@ from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
 from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.logs.flightlog import read_log
+from perchd.logs.foxglove import ViewProcess, parse_address
 from perchd.service.config import load_flight_config
 from perchd.sim.session import open_links
 from perchd.tau import load_plan
@@ -88,6 +91,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(CAP_SYS_NICE or ulimit -r; docs/safety.md)")
     p.add_argument("--cpu", type=int, default=-1, metavar="N",
                    help="with --realtime: pin the agent to CPU N")
+    p.add_argument("--foxglove", metavar="[HOST:]PORT",
+                   help="serve the flight live over the Foxglove WebSocket protocol (the MCAP "
+                        "export's channels, docs/contracts.md §5) on HOST (default 127.0.0.1), "
+                        "PORT 0 for any free one; needs perchd[foxglove]")
     p.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
     p.set_defaults(run=run)
 
@@ -190,6 +197,17 @@ def mcap_path(args: argparse.Namespace) -> Path | None:
     return check_output(args.log, "--log", args.force, inputs=(args.plan,))
 
 
+def live_view(address: str | None, log: Path):
+    """The --foxglove server, a process following `log` once it is written
+    (perchd.logs.foxglove); bound and announced on stderr before anything flies. None
+    without --foxglove."""
+    if address is None:
+        return None
+    view = ViewProcess(parse_address(address), log)
+    _warn(f"foxglove: serving {view.url}")
+    return view
+
+
 def write_mcap(log: Path, out: Path, force: bool) -> bool:
     """The flown log exported to `out`; a failure is a warning: the flight and its JSONL stand."""
     try:
@@ -209,20 +227,20 @@ def run(args: argparse.Namespace) -> int:
         args.log = str(mcap.with_suffix(".jsonl"))
     log = log_path(args, plan.strategy)
     rt = realtime_config(args)
-    realtime.apply(rt)  # before the links start their threads: they inherit it
+    realtime.apply(rt)  # before the links and the view start their threads: they inherit it
+    view = live_view(args.foxglove, log)
     abort = FlightAbort()
-    handlers = {s: signal.signal(s, lambda *_: abort.request(EndReason.SIGNAL))
-                for s in (signal.SIGINT, signal.SIGTERM)}
     status = StatusLine()
-    try:
-        links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
-        res = links.fly(plan, log, cfg, abort, status,
-                        header={"plan_file": str(args.plan), "mocap": args.mocap,
-                                "scheduling": rt.describe()})
-    finally:
-        status.close()
-        for s, h in handlers.items():
-            signal.signal(s, h)
+    with catching(lambda: abort.request(EndReason.SIGNAL)) as caught:
+        try:
+            links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
+            res = links.fly(plan, log, cfg, abort, status,
+                            header={"plan_file": str(args.plan), "mocap": args.mocap,
+                                    "scheduling": rt.describe()})
+        finally:
+            status.close()
+            if view is not None:
+                view.close()
     if res.hover_n is not None:
         store.remember(args.driver, res.hover_n, cfg)
     out = res.to_json()
@@ -230,7 +248,8 @@ def run(args: argparse.Namespace) -> int:
         out["mcap"] = str(mcap)
     text = summary_text(res) + (f"\nmcap: {mcap}" if "mcap" in out else "")
     print(json.dumps(out) if args.json else text)
-    return 0 if res.outcome is EndReason.CONTACT else 1
+    caught.say("fly", f"the flight ended {res.outcome.name}; log {log}")
+    return caught.exit_code(0 if res.outcome is EndReason.CONTACT else 1)
 
 
 def realtime_config(args: argparse.Namespace) -> realtime.RealtimeConfig:

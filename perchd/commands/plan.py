@@ -9,15 +9,17 @@ from pathlib import Path
 
 import numpy as np
 
+from perchd.commands.argcheck import numbers_as_values, within
+from perchd.commands.plan_library import check_library
 from perchd.commands.plan_library import register as register_library
 from perchd.commands.plan_robust import register as register_robust
-from perchd.logs.planplot import plot_plan
-from perchd.commands.argcheck import numbers_as_values, within
 from perchd.core.errors import PlanError
-from perchd.core.safefile import OutputError, check_output, write_text
+from perchd.core.safefile import OutputError, check_output, read_regular, write_text
+from perchd.logs.planplot import plot_plan
 from perchd.tau import load_plan, plan_ctds, plan_ctdts, plan_ipts, report
-from perchd.tau.planfile import plan_text
 from perchd.tau.ipts import MAX_ORDER, UNBOUNDED
+from perchd.tau.library import SCHEMA as LIBRARY_SCHEMA
+from perchd.tau.planfile import plan_text
 
 
 def register(sub) -> None:
@@ -30,8 +32,8 @@ def register(sub) -> None:
     register_robust(plan_sub)
 
     register_library(plan_sub)
-    check = plan_sub.add_parser("check", help="re-derive and verify a plan file")
-    check.add_argument("file")
+    check = plan_sub.add_parser("check", help="re-derive and verify a plan file or plan library")
+    check.add_argument("file", help="a plan (perchd.plan/1) or a plan library (perchd.planlib/1)")
     check.add_argument("--json", action="store_true", help="print one JSON object")
     check.add_argument("--plot", metavar="FILE.png",
                        help="draw X, V, A and tau against time into this new image "
@@ -149,13 +151,27 @@ def _emit(args, plan) -> int:
 
 
 def run_check(args) -> int:
-
+    """A plan file verified (docs/contracts.md §1), or a plan library, every node of it."""
+    text = read_regular(args.file, "", PlanError)
+    if _schema(text) == LIBRARY_SCHEMA:
+        if args.plot:
+            raise PlanError(f"--plot {args.plot}: draws one plan; {args.file} is a plan library")
+        return check_library(args.file, text, args.json)
     if args.plot:
         check_output(args.plot, "--plot", args.force, inputs=(args.file,))
-    plan = load_plan(args.file)
+    plan = load_plan(args.file, text)
     if args.plot:
         draw(plot_plan, plan, args.plot, "--plot")
     return _emit(argparse.Namespace(out=None, json=args.json), plan)
+
+
+def _schema(text: str) -> object:
+    """The document's "schema" (None when it is not a JSON object: the loader says why)."""
+    try:
+        doc = json.loads(text)
+    except (ValueError, RecursionError):
+        return None
+    return doc.get("schema") if isinstance(doc, dict) else None
 
 
 def draw(plotter, data, out, flag: str) -> None:

@@ -5,7 +5,8 @@ Three modes, by what --x0/--v0 give:
   --x0 X --v0 V           a nominal state: the largest certified box holding it
   (neither)               the largest certified box in --search-x0/--search-v0
 The plan file is an IPTS plan (docs/contracts.md §1) for the nominal state (the box centre unless
-given) with "robust": {"x0": [lo, hi], "v0": [lo, hi]} and a "certificate" record.
+given) with "robust": {"x0": [lo, hi], "v0": [lo, hi]} and a "certificate" record. On a
+terminal, stderr shows the search's generations so far; elsewhere nothing.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import json
 from pathlib import Path
 
 from perchd.commands.argcheck import numbers_as_values
+from perchd.commands.progress import Progress
 from perchd.core.errors import PlanError
 from perchd.core.safefile import check_output, write_text
 from perchd.tau.certify import Box
@@ -88,16 +90,20 @@ def run(args) -> int:
         raise PlanError("--x0 and --v0 go together: both boxes (LO HI) or both nominal values")
     v_search = tuple(args.search_v0) if args.search_v0 else (0.2, args.v_max)
     s_search = tuple(sorted(-x for x in args.search_x0))
-    if x0 is not None and len(x0) == 2:
-        result, nominal = fastest_k(args.order, Box(x0, v0), lim, seed=args.seed,
-                                    maxiter=args.maxiter), None
-        mode = "box"
-    else:
-        nominal = None if x0 is None else (x0[0], v0[0])
-        dom = SearchDomain(s_search, v_search, contains=nominal)
-        result = largest_box(args.order, lim, dom, seed=args.seed, maxiter=args.maxiter,
-                             start=_start(args.start, lim))
-        mode = "grow" if nominal else "largest"
+    progress = Progress(args.maxiter, "generations", "plan robust", lines=False)
+    try:
+        if x0 is not None and len(x0) == 2:
+            result, nominal = fastest_k(args.order, Box(x0, v0), lim, seed=args.seed,
+                                        maxiter=args.maxiter, progress=progress.at), None
+            mode = "box"
+        else:
+            nominal = None if x0 is None else (x0[0], v0[0])
+            dom = SearchDomain(s_search, v_search, contains=nominal)
+            result = largest_box(args.order, lim, dom, seed=args.seed, maxiter=args.maxiter,
+                                 start=_start(args.start, lim), progress=progress.at)
+            mode = "grow" if nominal else "largest"
+    finally:
+        progress.close()
 
     plan = certified_plan(result, lim, nominal)
     write_text(Path(args.out), plan_text(plan), "--out", args.force)

@@ -18,7 +18,8 @@ killed mid-flight leaves a vehicle that comes down, as a real one would.
 Port 0 picks a free port. Once serving, one line on stderr says where:
     perchd sim: ready: mocap <URI for perchd fly --mocap> driver <URI for --driver>
 On exit (SIGINT/SIGTERM, --duration, or --exit-on-stop) a summary: text, or with --json
-exactly one JSON object on stdout (contact time [s] and speed [m/s], counts).
+exactly one JSON object on stdout (contact time [s] and speed [m/s], counts). Exit 0 after
+--duration or --exit-on-stop, 130 / 143 after SIGINT / SIGTERM (docs/contracts.md §6).
 
 `perchd sim --campaign P.json ...` flies many simulated flights in this process instead
 (no sockets; see perchd.commands.campaign): --pose-out and --setpoint-in are then not wanted.
@@ -28,28 +29,25 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import threading
 import time
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from perchd.commands import campaign as campaign_cli
 from perchd.commands import sim_firmware
 from perchd.commands.argcheck import numbers_as_values, within
-from perchd.commands.fly import MAX_COORD_M, check_geometry
 from perchd.commands.campaign import add_arguments
+from perchd.commands.fly import MAX_COORD_M, check_geometry
 from perchd.core.clock import MonotonicClock
-from perchd.core.errors import UriError
-from perchd.core.errors import LinkError
-from perchd.mocap.outputs import open_pose_output, port_error
+from perchd.core.errors import LinkError, UriError
+from perchd.core.interrupts import catching
+from perchd.core.netbind import port_error
+from perchd.mocap.outputs import open_pose_output
 from perchd.sim.plant import PlantParams
 from perchd.sim.receiver import Counts, SetpointInbox
 from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
-
-if TYPE_CHECKING:
-    from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
 
 STOP_GRACE_S = 0.5
 """[s] --exit-on-stop keeps serving this long after a stop (the agent's last messages)."""
@@ -151,17 +149,16 @@ def run(args: argparse.Namespace) -> int:
         output.close()
         raise
     done = threading.Event()
-    previous = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     mocap_uri = output.uri(args.body)
-    print(f"perchd sim: ready: mocap {mocap_uri} driver {inbox.uri}", file=sys.stderr, flush=True)
     until = None if args.duration is None else time.monotonic() + args.duration
-    try:
-        serve(world, output, counts, done, until, args.exit_on_stop)
-    finally:
-        inbox.close()
-        output.close()
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+    with catching(done.set) as caught:  # before "ready": a signal from then on is caught
+        print(f"perchd sim: ready: mocap {mocap_uri} driver {inbox.uri}", file=sys.stderr,
+              flush=True)
+        try:
+            serve(world, output, counts, done, until, args.exit_on_stop)
+        finally:
+            inbox.close()
+            output.close()
     result = summary(world, counts, mocap_uri, inbox.uri, inbox.watchdog)
     if args.json:
         print(json.dumps(result))
@@ -171,4 +168,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"{contact}; {counts.setpoints} setpoints, {counts.stops} stops, "
               f"{counts.rejected} rejected, {counts.poses} poses; watchdog: "
               f"{len(inbox.watchdog.levels)} levels, {len(inbox.watchdog.cuts)} cuts")
-    return 0
+    caught.say("sim", "stopped serving; the summary covers the run so far")
+    return caught.exit_code(0)

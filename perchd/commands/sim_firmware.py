@@ -15,14 +15,14 @@ waits until it has calibrated, then prints one line on stderr, as `perchd sim` d
     perchd sim: ready: mocap <URI for perchd fly --mocap> driver <URI for --driver>
 and publishes the vehicle's true pose as mocap until SIGINT/SIGTERM or --duration. Then it
 stops every process it started and prints a summary (text, or with --json one JSON object
-on stdout: contact time [s] and speed [m/s], the IMU rate achieved, the launches).
+on stdout: contact time [s] and speed [m/s], the IMU rate achieved, the launches), and
+exits 0 after --duration, 130 / 143 after SIGINT / SIGTERM (docs/contracts.md §6).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import threading
 import time
@@ -31,6 +31,7 @@ from typing import Any
 
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import UriError
+from perchd.core.interrupts import catching
 from perchd.mocap.outputs import open_pose_output
 from perchd.sim.firmware.ardupilot import (
     DEFAULT_PARAMS,
@@ -171,30 +172,28 @@ def run(args: argparse.Namespace) -> int:
     sys.setswitchinterval(GIL_SWITCH_S)
     clock = MonotonicClock()
     done = threading.Event()
-    previous = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        with ProcessGroup() as procs:
-            vehicle = open_vehicle(args, clock)
-            try:
-                output = open_pose_output(args.pose_out, [mocap.body], clock)
+    with catching(done.set) as caught:
+        try:
+            with ProcessGroup() as procs:
+                vehicle = open_vehicle(args, clock)
                 try:
-                    result = serve(vehicle, procs, output, mocap, done, args.duration)
+                    output = open_pose_output(args.pose_out, [mocap.body], clock)
+                    try:
+                        result = serve(vehicle, procs, output, mocap, done, args.duration)
+                    finally:
+                        output.close()
                 finally:
-                    output.close()
-            finally:
-                vehicle.close()
-    except Interrupted:
-        print("perchd sim: interrupted before the firmware was ready", file=sys.stderr)
-        return 130
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+                    vehicle.close()
+        except Interrupted:
+            caught.say("sim", "stopped before the firmware was ready")
+            return caught.exit_code(130)
     if args.json:
         print(json.dumps(result))
     else:
         text = arducopter_text if args.arducopter else px4_text if args.px4 else summary_text
         print(text(result))
-    return 0
+    caught.say("sim", "stopped every process it started; the summary covers the run so far")
+    return caught.exit_code(0)
 
 
 def serve(vehicle: Any, procs: ProcessGroup, output: Any, mocap: MocapParams,

@@ -105,6 +105,15 @@ class TauGains:
         acceleration only after the command latency, the attitude response and the motor lag
         (about 0.1 s on a Crazyflie over Crazyradio), so the plan's acceleration is asked for
         that much early; most visibly, the stage-1 braking is released before the switch.
+        With `identify` on, the lead flown is the lag identified in the hold and approach
+        and this value is the fallback when the identification refuses.
+    identify: identify the vehicle's lag and drag along the approach (flight/lagid.py,
+        LagIdGains) and feed forward the plan's acceleration that lag early plus the
+        identified drag times the plan's speed (docs/errata.md §10).
+    predict: with a lag identified beyond ff_lead_s (the response these gains were made
+        for), the tau PID acts on the state predicted the excess ahead from the commands
+        still in flight, against the references then (a Smith predictor,
+        LagIdentifier.predict); off: on the measured state.
     terminal_s: [s] in stage 2, once tau_ref is within this of 0 the tau feedback holds its
         last output and the speed is left alone: e = 1 - tau_ref/tau divides two vanishing
         numbers there, so millimetre noise becomes metres per second squared of command,
@@ -132,6 +141,31 @@ class TauGains:
     terminal_s: float = 0.15
     stage2_hold_speed: bool = True
     v_contact_margin_mps: float = 0.015
+    identify: bool = True
+    predict: bool = True
+
+
+@dataclass(frozen=True)
+class LagIdGains:
+    """The identification of lag and drag (flight/lagid.py) and its bounds.
+
+    window_s: [s] the last this many seconds of the hold and the approach are fitted.
+    refit_s: [s] period of the refits during the approach (its own feed-forward uses
+        the drag found so far); the fit at the trigger is the one logged and flown.
+    lag_max_s, lag_step_s: [s] the lags tried (0..lag_max_s); a best lag at the bound is
+        refused (the vehicle is slower than any lag tried).
+    drag_max_per_s: [1/s] an identified drag above this is refused.
+    speed_span_min_mps: [m/s] the fitted ticks must cover this speed range (the approach).
+    rms_max_mps: [m/s] a fit with a larger residual is refused.
+    """
+
+    window_s: float = 8.0
+    refit_s: float = 0.25
+    lag_max_s: float = 0.5
+    lag_step_s: float = 0.02
+    drag_max_per_s: float = 2.0
+    speed_span_min_mps: float = 0.5
+    rms_max_mps: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -346,6 +380,7 @@ class FlightConfig:
     vehicle: VehicleConfig = VehicleConfig()
     hover: HoverConfig = HoverConfig()
     tau_gains: TauGains = TauGains()
+    lag_id: LagIdGains = LagIdGains()
     lateral: LateralGains = LateralGains()
     approach: ApproachConfig = ApproachConfig()
     trigger: TriggerConfig = TriggerConfig()

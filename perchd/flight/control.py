@@ -28,6 +28,22 @@ class Attitude:
     saturated: bool
 
 
+@dataclass(frozen=True, slots=True)
+class FeedForward:
+    """What the tau controller feeds forward besides its PID: the plan's acceleration lead_s
+    [s] early (the vehicle answers that late), plus drag_per_s [1/s] times the plan's speed
+    then (the drag the vehicle will meet), minus bias_mps2 [m/s^2] (a constant push along
+    X). flight/lagid.py identifies all three in flight."""
+
+    lead_s: float
+    drag_per_s: float = 0.0
+    bias_mps2: float = 0.0
+
+    def accel(self, a_plan: float, v_plan: float) -> float:
+        """[m/s^2] the feed-forward for the plan's a_plan [m/s^2], v_plan [m/s] lead_s ahead."""
+        return a_plan + self.drag_per_s * v_plan - self.bias_mps2
+
+
 def tau_error(tau_ref: float, tau: float | None) -> float:
     """e = 1 - tau_ref/tau (eq. 17). tau None (Xdot ~ 0) is the limit tau -> -inf: e = 1."""
     if tau is None or tau >= 0.0:
@@ -126,7 +142,8 @@ class Controller:
     phase learns it: flight/hover.py). The mapping scales accelerations by hover_n / g, the
     vehicle's mass as the thrust path sees it, so a wrong mass or thrust calibration is
     corrected for feed-forward and gains alike. last_thrust_z [N]: the vertical component
-    of the last setpoint's thrust.
+    of the last setpoint's thrust. last_ux_sent [m/s^2]: the acceleration along X the last
+    setpoint commands after the saturations.
     """
 
     def __init__(self, cfg: FlightConfig, frame: PerchFrame) -> None:
@@ -139,6 +156,7 @@ class Controller:
         self.last_u: Vec3 = (0.0, 0.0, 0.0)
         self.hover_n = cfg.vehicle.hover_guess_n
         self.last_thrust_z: float | None = None
+        self.last_ux_sent = 0.0
         self._yaw = frame.yaw_facing
 
     def lateral(self, state: State, y_ref: float, z_ref: float, dt: float,
@@ -154,5 +172,9 @@ class Controller:
                            self.cfg.tilt_limit_rad, v.thrust_min_n, v.thrust_max_n)
         self.saturated = att.saturated
         self.last_u = u
-        self.last_thrust_z = att.thrust * body_z(att.roll, att.pitch, att.yaw)[2]
+        bz = body_z(att.roll, att.pitch, att.yaw)
+        self.last_thrust_z = att.thrust * bz[2]
+        # The acceleration along X this setpoint asks for once flown, saturations included:
+        # what the lag identification (flight/lagid.py) compares the response with.
+        self.last_ux_sent = self.frame.rotate_in(bz)[0] * att.thrust * v.g / self.hover_n
         return Setpoint(t, att.roll, att.pitch, att.yaw, att.thrust, pose_seq, phase)

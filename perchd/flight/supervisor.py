@@ -19,6 +19,7 @@ flight").
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 from dataclasses import dataclass
@@ -32,9 +33,10 @@ from perchd.flight.config import (
     TriggerFallback,
     TriggerPolicy,
 )
-from perchd.flight.control import AxisController, Controller
+from perchd.flight.control import AxisController, Controller, FeedForward
 from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner
+from perchd.flight.lagid import LagFit, LagIdentifier, LagModel
 from perchd.flight.planner_worker import InlinePlanner, Planner, PlanReply
 from perchd.flight.planrefs import PlanSampler
 from perchd.logs.flightlog import LogEvent
@@ -47,6 +49,8 @@ are a stuck tracker re-sending its last position with fresh stamps, not a vehicl
 alone moves a real measurement; a commanded vehicle moves a noiseless simulated one within
 its command latency and attitude response, well under this)."""
 _MOVING = (Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
+_OBSERVED = (Phase.HOLD, Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
+"""The phases whose ticks the lag identification records (flight/lagid.py)."""
 
 
 class FlightAbort:
@@ -202,6 +206,11 @@ class Supervisor:
         self.hover_learned_n: float | None = None  # [N] once the hold's estimate settled
         self._hover_waiting = False
         self._v_int = 0.0  # [m/s] integral of the approach's speed error
+        self.lagid = LagIdentifier(cfg.lag_id)
+        self.ff = FeedForward(cfg.tau_gains.ff_lead_s)
+        self.lag_fit: LagFit | None = None  # once identified (at the first stage-1 refs)
+        self.response: LagModel | None = None  # the latest accepted fit
+        self._t_refit = -math.inf  # [s] the approach's last refit
 
     # --- helpers ----------------------------------------------------------------------------
     def _enter(self, phase: Phase, t: float, detail: str = "", **values: float) -> None:
@@ -260,7 +269,8 @@ class Supervisor:
         if cond.overrun_streak >= s.overrun_streak:
             return EndReason.DEADLINE_OVERRUN, f"{cond.overrun_streak} deadlines missed in a row"
         if t - self.t_start > s.timeout_s:
-            return EndReason.TIMEOUT, f"{t - self.t_start:.1f} s > {s.timeout_s:g} s"
+            return EndReason.TIMEOUT, (f"flying {t - self.t_start:.3f} s, longer than "
+                                       f"[safety] timeout_s = {s.timeout_s:g} s")
         if state is not None and self._contact(t, state):
             return EndReason.CONTACT, f"at {self.contact.speed:.3f} m/s"
         since = None if self.trigger is None else t - self.trigger.t
@@ -366,11 +376,12 @@ class Supervisor:
                 ux = 0.0  # terminal: constant speed (see TauGains.terminal_s)
             else:
                 hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
-                ux = self.ctl.tau.step(st, refs.tau_ref, refs.a, dt, self.ctl.saturated,
+                seen, aim = self._lag_view(t, st, refs)
+                ux = self.ctl.tau.step(seen, aim.tau_ref, aim.a, dt, self.ctl.saturated,
                                        schedule=not hold)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
-            ux = self._approach_accel(st, dt)
+            ux = self._approach_accel(t, st, dt)
         else:
             ux = self._hold_x.step(self._hold[0], st.x, st.xdot, dt, self.ctl.saturated)
             if self.phase is Phase.TAKEOFF:
@@ -381,6 +392,7 @@ class Supervisor:
         uy, uz = self.ctl.lateral(st, self._hold[1], z_ref, dt, vz_ref)
         u = (ux, uy, uz)
         sp = self.ctl.setpoint(u, t, st.pose_seq, self.phase)
+        self._observe_response(t, st)
         return TickReport(self.phase, sp, None, False, refs, u, e)
 
     @property
@@ -415,15 +427,18 @@ class Supervisor:
         self._a_app, self._t_moving, self._v_int = need, t, 0.0
         self._enter(Phase.APPROACH, t, "", accel=need)
 
-    def _approach_accel(self, st: State, dt: float) -> float:
-        """Feed-forward + PI on the speed profile to (x0, v0); the integral takes up drag
-        and attitude lag (ApproachConfig.ki_v), frozen while the mapping saturates."""
+    def _approach_accel(self, t: float, st: State, dt: float) -> float:
+        """Feed-forward (with the drag identified so far) + PI on the speed profile to
+        (x0, v0); the integral takes up what the feed-forward misses (ApproachConfig.ki_v),
+        frozen while the mapping saturates."""
         a = self.cfg.approach
-        err = self._v_ref(st.x) - st.xdot
+        x, v, _ = self._predicted(t, st)
+        v_ref = self._v_ref(x)
+        err = v_ref - v
         if not self.ctl.saturated and a.ki_v > 0.0:
             bound = a.i_limit_mps2 / a.ki_v
             self._v_int = min(max(self._v_int + err * dt, -bound), bound)
-        return self._a_app + a.kv * err + a.ki_v * self._v_int
+        return self.ff.accel(self._a_app, v_ref) + a.kv * err + a.ki_v * self._v_int
 
     def _v_ref(self, x: float) -> float:
         """[m/s] the approach's speed reference at X = x: the profile to (x0, v0), or, while a
@@ -665,20 +680,86 @@ class Supervisor:
         return self._refs_memo[1]
 
     def _compute_refs(self, t: float) -> Refs:
-        plan = self.plan
+        if self.lag_fit is None and self.cfg.tau_gains.identify:
+            self._identify(t)
+        return self._refs_at(t, self._x, self.ff.lead_s)
+
+    def _refs_at(self, t: float, x: float | None, lead_s: float) -> Refs:
+        """The references at time t [s] for the vehicle at X = x [m], with the feed-forward
+        taken lead_s [s] ahead."""
+        plan, ff = self.plan, self.ff
         s = min(max(t - self.trigger.t, 0.0), plan.duration)
         here = self._sampler.at(s)
         if self.t_stage2 is None:
             tau_ref = here.tau_ref
-            ahead = self._sampler.at(min(s + self.cfg.tau_gains.ff_lead_s, plan.duration))
-            a = ahead.a if ahead.stage == 1 else 0.0
-        elif self.cfg.tau_gains.stage2_hold_speed and self._x is not None:
-            tau_ref = min(self._x, 0.0) / self.v_hold
-            a = 0.0
+            ahead = self._sampler.at(min(s + lead_s, plan.duration)) if lead_s else here
+            a = ff.accel(ahead.a if ahead.stage == 1 else 0.0, ahead.v)
+        elif self.cfg.tau_gains.stage2_hold_speed and x is not None:
+            tau_ref = min(x, 0.0) / self.v_hold
+            a = ff.accel(0.0, self.v_hold)
         else:
             tau_ref = self._tau_s + (t - self.t_stage2)
-            a = 0.0
+            a = ff.accel(0.0, float(plan.v_contact))
         return Refs(tau_ref, here.x, here.v, a)
+
+    def _predicted(self, t: float, st: State) -> tuple[float, float, float]:
+        """(X [m], Xdot [m/s], horizon [s]): the controllers' gains are made for a vehicle
+        that answers within the configured ff_lead_s (the paper's Crazyflie); of a lag
+        identified beyond that, they see the state predicted that much ahead from the
+        commands still in flight (LagIdentifier.predict), so the feedback, like the
+        feed-forward, acts where its command lands (docs/errata.md §10). Horizon 0: the
+        measured state."""
+        m = self.response
+        horizon = m.lag_s - self.cfg.tau_gains.ff_lead_s if m is not None else 0.0
+        if horizon <= 0.0 or not self.cfg.tau_gains.predict:
+            return st.x, st.xdot, 0.0
+        x, v = self.lagid.predict(t, st.x, st.xdot, m, horizon)
+        return x, v, horizon
+
+    def _lag_view(self, t: float, st: State, refs: Refs) -> tuple[State, Refs]:
+        """The state and references the tau controller acts on (_predicted)."""
+        x, v, horizon = self._predicted(t, st)
+        if horizon == 0.0:
+            return st, refs
+        # Predicted at or past the surface: tau = X/Xdot from just before it, so that the
+        # stage-2 error stays 1 - Xdot/V_c instead of tau's sign flipping.
+        x = min(x, -1e-3)
+        tau = x / v if v > self.cfg.estimator.min_speed_mps else None
+        seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
+        return seen, self._refs_at(t + horizon, x, self.ff.lead_s - horizon)
+
+    def _observe_response(self, t: float, st: State) -> None:
+        """Record the ticks for the lag identification (the stages' commands feed its
+        prediction), and refit every LagIdGains.refit_s of the approach so the approach's
+        own feed-forward meets the drag."""
+        if not self.cfg.tau_gains.identify or self.phase not in _OBSERVED:
+            return
+        self.lagid.record(t, self.ctl.last_ux_sent, st.x, st.xdot)
+        if self.phase is not Phase.APPROACH or t - self._t_refit < self.cfg.lag_id.refit_s:
+            return
+        self._t_refit = t
+        model = self.lagid.fit().model
+        if model is not None:
+            self.response = model
+            self.ff = FeedForward(model.lag_s, model.drag_per_s, model.bias_mps2)
+
+    def _identify(self, t: float) -> None:
+        """Fit the lag and drag of the hold and approach just flown (flight/lagid.py) and
+        feed them forward from the trigger on; a refused fit keeps the configured lead."""
+        self.lag_fit = fit = self.lagid.fit()
+        self.response = m = fit.model
+        if m is None:
+            self.ff = FeedForward(self.cfg.tau_gains.ff_lead_s)
+            self.events.append(LogEvent(t, "lag-unidentified", (
+                f"{fit.why}: flying the configured lead {self.ff.lead_s:g} s and no drag term"),
+                {"lead_s": self.ff.lead_s}))
+            return
+        self.ff = FeedForward(m.lag_s, m.drag_per_s, m.bias_mps2)
+        self.events.append(LogEvent(t, "lag-identified", (
+            f"lag {m.lag_s:.3f} s, drag {m.drag_per_s:.3f} 1/s"), {
+                "lag_s": m.lag_s, "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
+                "rms_mps": m.rms_mps, "samples": m.samples,
+                "speed_span_mps": m.speed_span_mps}))
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,7 +15,7 @@ from typing import IO, Any, Iterator
 
 from perchd.core.errors import PerchdError
 from perchd.core.extras import require
-from perchd.logs.flightlog import FlightLog, LogRow, jsonable
+from perchd.logs.flightlog import FlightLog, LogEvent, LogRow, jsonable
 
 PREFIX = "/perchd"
 
@@ -89,29 +89,45 @@ def messages(log: FlightLog) -> list[Message]:
 
 def _flight(log: FlightLog) -> Iterator[Message]:
     start = log.rows[0].t if log.rows else (log.events[0].t if log.events else 0.0)
-    yield Message(FLIGHT, ns(start),
-                  {"header": log.header, "end": log.end, "complete": log.complete})
+    yield flight_message(log.header, log.end, start)
 
 
 def _rows(log: FlightLog) -> Iterator[Message]:
     previous: str | None = None
     for row in log.rows:
-        t = ns(row.t)
-        for s in ROW_STREAMS:
-            yield Message(s.topic, t, {name: getattr(row, name) for name in s.fields})
-        if row.phase != previous:  # phase changes only
-            yield Message(PHASE, t, {"phase": row.phase, "previous": previous})
-            previous = row.phase
+        yield from row_messages(row, previous)
+        previous = row.phase
 
 
 def _events(log: FlightLog) -> Iterator[Message]:
     for ev in log.events:
-        yield Message(EVENTS, ns(ev.t), {"t": ev.t, "kind": ev.kind, "detail": ev.detail,
-                                         "values": ev.values})
+        yield event_message(ev)
 
 
-def _json(payload: dict[str, Any]) -> bytes:
-    # jsonable: a non-finite float (read from a hand-edited log) is null, never a bare NaN.
+def flight_message(header: dict[str, Any], end: dict[str, Any] | None, t: float) -> Message:
+    """The /perchd/flight message at `t` [s]: `complete` once the log has its end."""
+    return Message(FLIGHT, ns(t), {"header": header, "end": end, "complete": end is not None})
+
+
+def row_messages(row: LogRow, previous: str | None) -> list[Message]:
+    """A row's message on every row channel, and on /perchd/phase when its phase differs
+    from `previous` (the phase of the row before; None for the first)."""
+    t = ns(row.t)
+    out = [Message(s.topic, t, {name: getattr(row, name) for name in s.fields})
+           for s in ROW_STREAMS]
+    if row.phase != previous:  # phase changes only
+        out.append(Message(PHASE, t, {"phase": row.phase, "previous": previous}))
+    return out
+
+
+def event_message(ev: LogEvent) -> Message:
+    return Message(EVENTS, ns(ev.t), {"t": ev.t, "kind": ev.kind, "detail": ev.detail,
+                                      "values": ev.values})
+
+
+def payload_bytes(payload: dict[str, Any]) -> bytes:
+    """A message's JSON; jsonable: a non-finite float (read from a hand-edited log) is null,
+    never a bare NaN."""
     return json.dumps(jsonable(payload), separators=(",", ":"), allow_nan=False).encode()
 
 
@@ -132,7 +148,7 @@ def write_mcap(log: FlightLog, out: IO[bytes]) -> int:
     for m in msgs:
         w.add_message(channel_id=channels[m.topic], log_time=m.log_time,
                       publish_time=m.log_time, sequence=seq[m.topic],
-                      data=_json(m.payload))
+                      data=payload_bytes(m.payload))
         seq[m.topic] += 1
     w.add_metadata("perchd.flightlog", {"schema": str(log.header.get("schema", "")),
                                         "outcome": str((log.end or {}).get("outcome", "")),

@@ -2,8 +2,10 @@
 
 One column per flight, three rows: distance X [m], velocity Xdot [m/s] and tau [s], each
 measured (the estimator's, as logged) against the plan's reference, over time since the
-trigger. Dotted lines mark the stage switch and the contact. matplotlib is imported here,
-lazily, through perchd.core.extras (extra "plot").
+trigger. Dotted lines mark the stage switch and the contact. The lines end at the contact:
+after it the wall holds the vehicle while the logged estimate runs on past the surface
+(0.17 m in the 0.2 s after a case-1 contact), which is no part of the perch. matplotlib is
+imported here, lazily, through perchd.core.extras (extra "plot").
 """
 
 from __future__ import annotations
@@ -45,10 +47,18 @@ def plot_flight(log: FlightLog, out: str | Path, title: str = "") -> Path:
     return plot_flights([log], out, [title])
 
 
-def _column(axes, log: FlightLog, title: str) -> None:
+def shown_rows(log: FlightLog) -> tuple[float, list]:
+    """(the trigger's time [s], the rows plotted): from PRE_TRIGGER_S before the trigger up
+    to the contact, when there is one."""
     events = {e.kind: e.t for e in log.events}
     t0 = events.get("stage1", log.rows[0].t if log.rows else 0.0)
-    rows = [r for r in log.rows if r.t >= t0 - PRE_TRIGGER_S]
+    end = events.get("contact", float("inf"))
+    return t0, [r for r in log.rows if t0 - PRE_TRIGGER_S <= r.t <= end]
+
+
+def _column(axes, log: FlightLog, title: str) -> None:
+    events = {e.kind: e.t for e in log.events}
+    t0, rows = shown_rows(log)
     t = [r.t - t0 for r in rows]
     for ax, (meas, ref, label) in zip(axes, ROWS):
         m = [_clip(getattr(r, meas), meas) for r in rows]

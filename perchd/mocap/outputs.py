@@ -12,11 +12,11 @@
 
 from __future__ import annotations
 
-import errno
 from typing import Protocol
 
 from perchd.core.clock import Clock
 from perchd.core.errors import LinkError, UriError
+from perchd.core.netbind import port_error
 from perchd.core.types import Pose
 from perchd.core.uri import parse_uri
 from perchd.core.uriparams import bool_param, float_param
@@ -73,16 +73,6 @@ def _natnet_output(uri, bodies: list[str], clock: Clock):
     except ValueError as err:
         raise UriError(f"{uri.raw}: cannot serve NatNet: {err}") from None
     return _NatNetOutput(server.start())
-
-
-def port_error(what: str, err: Exception) -> Exception:
-    """A taken port is bad input (exit 2, docs/contracts.md §6), whatever the transport; other
-    failures to listen stay what they were (an OSError or LinkError becomes a LinkError)."""
-    text = getattr(err, "strerror", None) or str(err)
-    if getattr(err, "errno", None) == errno.EADDRINUSE or "Address already in use" in text:
-        return UriError(f"{what}: the port is taken (another perchd sim, Motive or server is "
-                        "listening there); choose another PORT, or 0 for any free one")
-    return err if isinstance(err, LinkError) else LinkError(f"{what}: cannot listen: {text}")
 
 
 def _version(uri) -> tuple[int, int]:

@@ -30,7 +30,7 @@ import zmq
 
 from perchd.core.clock import Clock
 from perchd.core.errors import LinkError, UriError
-from perchd.core.netbind import check_bind
+from perchd.core.netbind import check_bind, port_error
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import Uri
@@ -143,6 +143,8 @@ class ZmqPoseSource(ThreadedSource):
             (sock.bind if self._bind else sock.connect)(self.endpoint)
         except zmq.ZMQError as err:
             sock.close(0)
+            if self._bind:  # a taken port is bad input (exit 2), as for every listener
+                raise port_error(self._name, err) from None
             raise LinkError(f"{self._name}: cannot open {self.endpoint}: {err}") from None
         if self._bind:  # port 0 binds an ephemeral port: say which
             self.endpoint = sock.getsockopt(zmq.LAST_ENDPOINT).decode()

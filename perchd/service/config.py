@@ -9,8 +9,8 @@
     [estimator]  the FlightConfig sections, keys named as its fields
 
 Every table and key maps onto a dataclass field, so anything else is an unknown key. A field
-in radians (`*_rad`) may be given in degrees as `*_deg` instead. Errors name file, table and
-key: "perchd.toml: [safety] tilt_max_deg: expected a number, got 'x'".
+in radians (`*_rad`) may be given in degrees as `*_deg` instead (not both: refused). Errors
+name file, table and key: "perchd.toml: [safety] tilt_max_deg: expected a number, got 'x'".
 """
 
 from __future__ import annotations
@@ -157,6 +157,9 @@ def _build(cls: type, table: Any, name: str, where: str, base: Any = None) -> An
         field = key
         if key.endswith("_deg") and key[:-4] + "_rad" in fields:
             field = key[:-4] + "_rad"
+            if field in table:  # neither silently wins
+                raise ConfigError(f"{name}: [{where}] {key} and {field}: give one of them, "
+                                  "not both")
         if field not in fields:
             raise ConfigError(f"{name}: [{where}] {key}: unknown key (known: "
                               f"{', '.join(sorted(_public_keys(fields)))})")

@@ -27,6 +27,8 @@ from perchd.core.errors import ConfigError, LinkError
 
 MAX_LINE = 65536
 """[bytes] a longer request line is refused and the client dropped."""
+UNIX_PATH_MAX = 107
+"""[bytes] longest AF_UNIX socket path Linux binds (sun_path is 108 bytes with its NUL)."""
 MAX_CLIENTS = 32
 """Connections served at once; more are refused (select() and the fd table stay bounded)."""
 
@@ -184,8 +186,17 @@ class ControlServer:
         conn.close()
 
 
+def _check_length(path: Path) -> None:
+    """bind() of a longer path fails with no errno text ("cannot listen: None"): say why."""
+    size = len(os.fsencode(path))
+    if size > UNIX_PATH_MAX:
+        raise ConfigError(f"--socket {path}: path too long ({size} bytes; an AF_UNIX socket "
+                          f"path has at most {UNIX_PATH_MAX}); choose a shorter one")
+
+
 def _bind(path: Path, mode: int) -> socket.socket:
     """A listening AF_UNIX stream socket at `path`, created with `mode`."""
+    _check_length(path)
     _remove_stale(path)
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
     old = os.umask(0o777 & ~mode)  # never world-accessible, not even between bind and chmod

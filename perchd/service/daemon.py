@@ -7,9 +7,11 @@ flies. systemd hears READY=1 once mocap and driver are connected, WATCHDOG=1 fro
 flight's own tick callback while flying and from the service loop while idle and the link is
 healthy (a stalled loop stops the pings and gets restarted), STATUS= with the phase, and
 STOPPING=1 on the way out. SIGTERM/SIGINT abort a flight with the driver's failsafe (end
-reason SIGNAL), wait for its log to close, and exit 0; SIGHUP reloads the config between
-flights (RELOADING=1 at once, READY=1 when done: Type=notify-reload). The control socket
-is bound here, or taken from systemd's socket activation (perchd.service.activation).
+reason SIGNAL) and wait for its log to close; SIGTERM is a service's stop request (systemctl
+stop), so it exits 0, while SIGINT (Ctrl-C) exits 130 like every command (docs/contracts.md
+§6). SIGHUP reloads the config between flights (RELOADING=1 at once, READY=1 when done:
+Type=notify-reload). The control socket is bound here, or taken from systemd's socket
+activation (perchd.service.activation).
 
 With [service] realtime the whole process (the flight thread, the links' threads) runs
 under SCHED_FIFO from start-up (core/realtime.py); refused, one line says what is missing
@@ -33,6 +35,7 @@ from typing import Any
 from perchd.core import realtime
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import ConfigError, PerchdError, PlanError
+from perchd.core.interrupts import exit_code
 from perchd.core.runtime import Runtime
 from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
@@ -166,6 +169,7 @@ class Daemon:
         self.flights = 0
         self.reload_pending = False
         self.stopping = False
+        self.stop_signal: int | None = None
         self.links: Links | None = None
         self.server: ControlServer | None = None
         self.wake_fd = -1  # the self-pipe's write end, open while run() runs
@@ -192,7 +196,7 @@ class Daemon:
             os.close(rfd)
             os.close(wfd)
         say("stopped")
-        return 0
+        return stop_exit_code(self.stop_signal)
 
     def _start(self) -> None:
         svc = self.config.service
@@ -236,6 +240,7 @@ class Daemon:
             if byte in (signal.SIGTERM, signal.SIGINT):
                 say(f"{signal.Signals(byte).name}: stopping")
                 self.stopping = True
+                self.stop_signal = self.stop_signal or byte
                 if self.job is not None:
                     self.job.abort.request(EndReason.SIGNAL)
             elif byte == signal.SIGHUP:
@@ -396,6 +401,12 @@ class Daemon:
             n += 1
             path = base / f"{stem}-{n}.jsonl"
         return path
+
+
+def stop_exit_code(signum: int | None) -> int:
+    """0 for SIGTERM, a service's normal stop (systemd counts a non-zero exit as a failure
+    unless the unit says otherwise); 130 for SIGINT, as any command (docs/contracts.md §6)."""
+    return 0 if signum in (None, signal.SIGTERM) else exit_code(signum)
 
 
 def apply_overrides(config: Config, overrides: dict[str, str],

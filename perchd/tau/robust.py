@@ -16,6 +16,7 @@ Every result is then shrunk (about its centre, or about the state it must hold) 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import differential_evolution, minimize
@@ -23,6 +24,9 @@ from scipy.optimize import differential_evolution, minimize
 from perchd.core.errors import PlanError
 from perchd.tau.certify import Box, Certificate, certify_box, first_switch
 from perchd.tau.profiles import InversePolynomial
+
+Progress = Callable[[int, int], None]
+"""progress(done, total): steps of a long search done so far."""
 
 T_SAMPLES = 97          # time samples per trajectory in the search (certifier bounds between)
 SEARCH_MARGIN = 2e-3    # relative slack the search keeps from every limit
@@ -213,17 +217,20 @@ def shrink_until_certified(k, box: Box, lim: RobustLimits, about=None, steps: in
 
 def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(), *,
                 seed: int = 0, maxiter: int = 60, popsize: int = 12, k_bound: float = 2.0,
-                start: RobustResult | None = None, polish_evals: int | None = None) -> RobustResult:
+                start: RobustResult | None = None, polish_evals: int | None = None,
+                progress: Progress | None = None) -> RobustResult:
     """k_1..k_n (n = order) and the largest certified box for them (see module docstring).
     `start` (e.g. the order n-1 result, padded with zeros) seeds the search, so a higher
-    order never does worse than the lower one it contains."""
+    order never does worse than the lower one it contains. progress(generation, maxiter)
+    is called after each generation of the search."""
 
     if order < 1:
         raise PlanError(f"order must be >= 1, got {order}")
     bounds = [(-3.0, 1.0)] + [(-k_bound, k_bound)] * (order - 1)
     guess = None if start is None else np.pad(start.k, (0, order - len(start.k)))[:order]
     de = differential_evolution(_score, bounds, args=(lim, dom), seed=seed, maxiter=maxiter,
-                                popsize=popsize, tol=1e-8, polish=False, x0=guess)
+                                popsize=popsize, tol=1e-8, polish=False, x0=guess,
+                                callback=_generations(progress, maxiter))
     candidates = [(de.x, grid_box(de.x, lim, dom))]
     if start is not None:
         candidates.append((guess, start.box))
@@ -241,10 +248,11 @@ def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(
 
 
 def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
-              maxiter: int = 60) -> RobustResult:
+              maxiter: int = 60, progress: Progress | None = None) -> RobustResult:
     """k_1..k_n certified over `box` with the least worst-case duration: first the k with the
     widest sampled margin over the box (differential evolution), then the worst duration
-    t_s(k_max) + |tau_s| minimised under a sampled margin (COBYLA), then certified."""
+    t_s(k_max) + |tau_s| minimised under a sampled margin (COBYLA), then certified.
+    progress(generation, maxiter) is called after each generation of the first search."""
 
     if order < 1:
         raise PlanError(f"order must be >= 1, got {order}")
@@ -257,7 +265,8 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
     k_max = box.k0_range[1]
     bounds = [(-3.0, 1.0)] + [(-2.0, 2.0)] * (order - 1)
     de = differential_evolution(lambda k: -box_margin(k, box, lim), bounds, seed=seed,
-                                maxiter=maxiter, popsize=12, tol=1e-8, polish=False)
+                                maxiter=maxiter, popsize=12, tol=1e-8, polish=False,
+                                callback=_generations(progress, maxiter))
     if -de.fun < SEARCH_MARGIN:
         cert = lim.certify(de.x, box)
         raise PlanError(f"no order-{order} k holds over x0 {box.x0[0]:g}..{box.x0[1]:g} m, "
@@ -281,6 +290,18 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
     if cert.certified:
         return RobustResult(tuple(map(float, best)), box, cert)
     raise PlanError(f"order-{order} k for the box could not be certified: {cert.reason}")
+
+
+def _generations(progress: Progress | None, maxiter: int):
+    """A differential_evolution callback counting generations into `progress` (or None)."""
+    if progress is None:
+        return None
+    done = [0]
+
+    def callback(intermediate_result) -> None:  # scipy passes the result by this name
+        done[0] += 1
+        progress(done[0], maxiter)
+    return callback
 
 
 def contact_ratio(box: Box) -> tuple[float, float]:

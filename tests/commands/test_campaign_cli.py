@@ -5,8 +5,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
-import pty
 import statistics
 import subprocess
 import sys
@@ -14,8 +12,9 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+from terminal import run_on_terminal
 
-from perchd.commands.campaign import Progress
+from perchd.commands.progress import Progress
 
 PLANS = Path(__file__).parents[2] / "plans"
 BOX = str(PLANS / "robust-n3-table2-box.json")
@@ -103,9 +102,9 @@ def rows(*outcomes: str):
 
 def test_on_a_terminal_the_bar_is_rewritten_in_place_and_ends_the_line():
     term = Terminal()
-    bar = Progress(4, term)
+    bar = Progress(4, "flights", "sim", term)
     for row in rows("CONTACT", "CONTACT", "GEOFENCE", "CONTACT"):
-        bar(row)
+        bar(row.outcome)
     bar.close()
     text = term.getvalue()
     assert text.count("\r") == 4 and text.endswith("\n") and text.count("\n") == 1
@@ -117,9 +116,9 @@ def test_on_a_terminal_the_bar_is_rewritten_in_place_and_ends_the_line():
 
 def test_elsewhere_a_line_comes_at_every_tenth_of_the_campaign():
     out = io.StringIO()
-    bar = Progress(25, out)
+    bar = Progress(25, "flights", "sim", out)
     for row in rows(*["CONTACT"] * 25):
-        bar(row)
+        bar(row.outcome)
     bar.close()
     lines = out.getvalue().splitlines()
     assert [line.split()[2] for line in lines] == [f"{n}/25" for n in (2, 4, 6, 8, 10, 12, 14,
@@ -128,23 +127,9 @@ def test_elsewhere_a_line_comes_at_every_tenth_of_the_campaign():
 
 
 def test_the_command_draws_the_bar_when_stderr_is_a_real_terminal(tmp_path):
-    leader, follower = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "perchd", "sim", "--campaign", BOX,
-                             "--flights", "3", "--table", str(tmp_path / "t.csv")],
-                            stdout=subprocess.PIPE, stderr=follower, text=True)
-    os.close(follower)
-    seen = b""
-    while True:
-        try:
-            chunk = os.read(leader, 4096)
-        except OSError:   # EIO: the child closed the terminal
-            break
-        if not chunk:
-            break
-        seen += chunk
-    os.close(leader)
-    out, _ = proc.communicate(timeout=60)
-    bars = seen.decode().split("\r")
-    assert proc.returncode == 0 and out.startswith("flights: 3 in ")
+    code, out, seen = run_on_terminal("sim", "--campaign", BOX, "--flights", "3",
+                                      "--table", str(tmp_path / "t.csv"))
+    bars = seen.split("\r")
+    assert code == 0 and out.startswith("flights: 3 in ")
     assert [b.split("] ")[1].split()[0] for b in bars[1:4]] == ["1/3", "2/3", "3/3"]
-    assert "perchd sim:" not in seen.decode()   # no line-per-tenth form on a terminal
+    assert "perchd sim:" not in seen   # no line-per-tenth form on a terminal

@@ -25,6 +25,23 @@ def test_plan_check_json_holds_the_contract_fields():
     assert doc["feasible"] is True
 
 
+def test_plan_check_verifies_a_plan_library_node_by_node(tmp_path):
+    lib = PLANS / "libraries" / "case1-ipts-n3.json"
+    out = perchd("plan", "check", str(lib), "--json")
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    assert doc["schema"] == "perchd.planlib/1" and doc["feasible"] is True
+    assert doc["plans"] == doc["nodes"] == 63
+    tight = json.loads(lib.read_text())
+    tight["limits"]["a_max"] = 0.9  # the plans were made for 1.4 m/s^2
+    (tmp_path / "tight.json").write_text(json.dumps(tight))
+    out = perchd("plan", "check", str(tmp_path / "tight.json"))
+    assert out.returncode == 1 and "NOT feasible: nodes[" in out.stdout and "a_max" in out.stdout
+    out = perchd("plan", "check", str(lib), "--plot", str(tmp_path / "l.png"))
+    assert out.returncode == 2 and "is a plan library" in out.stderr
+    assert out.stderr.count("\n") == 1 and not (tmp_path / "l.png").exists()
+
+
 def test_plan_ipts_writes_a_file_that_checks(tmp_path):
     out = perchd("plan", "ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5",
                  "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4",

@@ -19,12 +19,12 @@ import pytest
 import zmq
 from announced import start_announced
 from caseplans import PLANS, case1_ipts
-from perchd.drivers.base import open_driver
 
 import perchd.flight.run as flight
 from perchd.core.clock import ManualClock
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
+from perchd.drivers.base import open_driver
 from perchd.mocap.base import open_source
 
 
@@ -36,13 +36,16 @@ class SimProcess:
             "sim", "--pose-out", pose_out, "--setpoint-in", "zmq://127.0.0.1:0", "--json", *extra)
 
     def finish(self, timeout: float = 10.0) -> dict:
-        """Its one JSON summary (after --exit-on-stop, or after a SIGTERM we send)."""
+        """Its one JSON summary after --exit-on-stop (exit 0), or after a SIGTERM we send
+        when it has not stopped (exit 143, docs/contracts.md §6)."""
+        expected = 0
         try:
             out, _ = self.proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             self.proc.send_signal(signal.SIGTERM)
             out, _ = self.proc.communicate(timeout=5.0)
-        assert self.proc.returncode == 0
+            expected = 128 + signal.SIGTERM
+        assert self.proc.returncode == expected
         return json.loads(out)
 
     def kill(self) -> None:
@@ -112,8 +115,7 @@ def test_the_sim_counts_bad_setpoints_obeys_stop_and_reports_on_sigterm():
                                            "thrust": 0.2943, "phase": "hold"}).encode())
         send(pub, b"stop", json.dumps({"vehicle": "cf1", "reason": "operator abort"}).encode())
         time.sleep(0.3)
-        sim.proc.send_signal(signal.SIGTERM)
-        report = sim.finish()
+        report = sim.finish(timeout=0.1)  # SIGTERMs it, which must exit 143
     finally:
         pub.close(0)
         sim.kill()
@@ -131,3 +133,17 @@ def test_bad_arguments_are_one_line_and_exit_2(args, message):
                           capture_output=True, text=True, timeout=30)
     assert done.returncode == 2
     assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_stops_the_sim_with_its_summary_and_the_table_s_exit_code(sig):
+    """docs/contracts.md §6: 130 after SIGINT, 143 after SIGTERM, the summary still printed."""
+    sim = SimProcess()
+    try:
+        sim.proc.send_signal(sig)
+        out, err = sim.proc.communicate(timeout=10)
+    finally:
+        sim.kill()
+    assert sim.proc.returncode == 128 + sig
+    assert json.loads(out)["contact"] is False
+    assert f"interrupted by {sig.name}" in err

@@ -56,7 +56,7 @@ class Fly:
         raise AssertionError(f"perchd fly ended before {phase}: {self.proc.wait()}")
 
     def finish(self) -> tuple[int, dict | None]:
-        out, _ = self.proc.communicate(timeout=20)
+        out, self.err = self.proc.communicate(timeout=20)
         return self.proc.returncode, json.loads(out) if out.strip() else None
 
     def kill(self) -> None:
@@ -76,14 +76,15 @@ def test_a_signal_mid_flight_ends_it_on_the_next_tick_with_the_failsafe(sig, sim
     finally:
         flight.kill()
     injected(sig.name, real_time=True)
-    assert code == 1 and out["outcome"] == "SIGNAL" and out["failsafe_sent"] is True
+    assert code == 128 + sig and out["outcome"] == "SIGNAL" and out["failsafe_sent"] is True
+    assert f"interrupted by {sig.name}" in flight.err
     log = read_log(out["log"])
     assert log.complete and log.end["outcome"] == "SIGNAL"
     after = [r for r in log.rows if r.t >= sent]
     assert 1 <= len(after) <= 2 and after[-1].end == "SIGNAL"  # the next tick (or the one after)
     assert sim.summary()["stops"] >= 1  # the vehicle heard the stop
     report(f"process: {sig.name} to perchd fly", "signal handler -> abort flag, read every "
-           "tick", "SIGNAL, failsafe, log closed, exit 1", "stop published (motors off)",
+           "tick", f"SIGNAL, failsafe, log closed, exit {128 + sig}", "stop published (motors off)",
            [log.rows[-1].t - sent])
 
 

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from fwharness import start_harness, stop_harness
+from fwharness import lag_event, start_harness, stop_harness
 
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
 INSTANCE = os.environ.get("PERCHD_FW_INSTANCE", "0")
@@ -163,12 +163,17 @@ def test_the_agent_perches_on_arducopter_sitl(tmp_path):
             "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
             "trigger": fly["trigger"], "pitch_lag_s": pitch_lag(tmp_path / "flight.jsonl", rec.samples),
             "takeoff_overshoot_m": takeoff_overshoot(tmp_path / "flight.jsonl", rec.samples),
-            "modes": sim["modes"], "load": os.getloadavg()})
+            "lag": lag_event(tmp_path / "flight.jsonl"), "modes": sim["modes"],
+            "load": os.getloadavg()})
     lo, hi = plan["limits"]["v_contact"]
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
-    assert lo - 0.15 <= sim["contact"]["speed"] <= hi + 0.15
-    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.15)
+    # measured over 10 flights (docs/firmware.md, "Lag and drag"): contact 0.947-1.007 m/s,
+    # perch time within 0.65 % but for one flight triggered 0.16 m/s fast (+4.7 %), the
+    # ~0.3 s lag identified; +4.9-6.6 % and 0.88-0.97 m/s without
+    assert lo <= sim["contact"]["speed"] <= hi + 0.03
+    assert sim["contact"]["speed"] == pytest.approx(plan["v_contact"], abs=0.06)
+    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.05)
     # measured 0.22 m (main: leapt 0.79 m); the 0.1 m target is not met: docs/firmware.md
     assert takeoff_overshoot(tmp_path / "flight.jsonl", rec.samples) <= 0.3
 

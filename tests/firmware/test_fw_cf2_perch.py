@@ -2,9 +2,9 @@
 user runs it: `perchd sim firmware --cf2 ...` in one process, `perchd fly
 plans/case1-ipts-n3.json --driver udp://... --mocap zmq://...` in another.
 
-Figures (contact speed, perch time against the plan's, trigger speed, yaw range, the
-harness's IMU rate) are printed (pytest -s) and, with PERCHD_FW_REPORT=PATH, appended
-there as JSON lines."""
+Figures (contact speed, perch time against the plan's, trigger speed, yaw range, the lag
+and drag the flight identified, the harness's IMU rate) are printed (pytest -s) and, with
+PERCHD_FW_REPORT=PATH, appended there as JSON lines. The mocap carries 1 mm of noise."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 from cf2rig import CF2, needs_cf2
-from fwharness import start_harness, stop_harness
+from fwharness import lag_event, start_harness, stop_harness
 from perchd.drivers.thrust import CrazyflieThrust
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
@@ -31,8 +31,8 @@ default thrust model, which the flight flies in when no hover= calibrates it."""
 
 
 def harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
-    return start_harness("--cf2", CF2, "--link", "udp://127.0.0.1:0", "--fw-log",
-                         str(tmp / "cf2.log"), env=ENV)
+    return start_harness("--cf2", CF2, "--link", "udp://127.0.0.1:0", "--noise", "0.001",
+                         "--fw-log", str(tmp / "cf2.log"), env=ENV)
 
 
 @pytest.mark.parametrize("flight", [1, 2, 3])
@@ -58,7 +58,8 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
         "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
         "trigger_speed": fly["trigger"] and fly["trigger"]["v"],
         "hover_n": fly["hover_n"], "hover_true_n": HOVER_TRUE_N,
-        "yaw_range_rad": yaws, "imu_rate_hz": sim["imu"]["rate_hz"],
+        "yaw_range_rad": yaws, "lag": lag_event(tmp_path / "flight.jsonl"),
+        "imu_rate_hz": sim["imu"]["rate_hz"],
         "imu_late_max_ms": sim["imu"]["late_max_ms"], "imu_skipped": sim["imu"]["skipped_late"],
         "launches": [r["outcome"] for r in sim["launches"]]}
     print("\n" + json.dumps(figures))
@@ -67,8 +68,12 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
             f.write(json.dumps(figures) + "\n")
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
-    assert lo - 0.1 <= sim["contact"]["speed"] <= hi + 0.1
-    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.10)
+    assert lo <= sim["contact"]["speed"] <= hi
+    # measured (docs/firmware.md): -0.03 m/s and +1.4..2 % with the lag and drag identified,
+    # -0.055 m/s and +5.2 % without
+    assert sim["contact"]["speed"] == pytest.approx(plan["v_contact"], abs=0.05)
+    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.03)
+    assert 0.05 <= figures["lag"]["lag_s"] <= 0.3 and 0.1 <= figures["lag"]["drag_per_s"] <= 0.4
     assert fly["hover_n"] == pytest.approx(HOVER_TRUE_N, rel=0.03)
     assert abs(fly["trigger"]["v"] - plan["v0"]) < 0.03
     assert max(abs(y) for y in yaws) < 0.1  # the heading held (a yaw run-away fails here)

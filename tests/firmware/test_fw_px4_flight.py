@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -23,6 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fwharness import YawWatch, flight_window, heading_error, lag_event, start_placed
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import Phase, Pose, Setpoint
@@ -129,19 +129,9 @@ def hold_height(v: Px4Vehicle, drv, z_ref: float, yaw: float, seconds: float) ->
 # -- whole perches through the CLI ------------------------------------------------------------
 
 def harness(tmp: Path, *extra: str) -> tuple[subprocess.Popen, str, str, list[str]]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "sim", "firmware", "--px4", PX4, *PX4_EXTRA, "--instance",
-         str(INSTANCE), "--ahead", str(AHEAD_M), "--px4-param", f"SIH_KDV={DRAG}",
-         "--fw-log", str(tmp / "px4.log"), "--json", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    surface: list[str] = []
-    for line in proc.stderr:
-        if (found := re.search(r"px4: surface (\S+ \S+ \S+) normal (\S+ \S+ \S+)", line)):
-            surface = ["--surface", *found.group(1).split(), "--normal", *found.group(2).split()]
-        if (found := re.search(r"ready: mocap (\S+) driver (\S+)", line)):
-            return proc, found.group(1), found.group(2), surface
-    proc.kill()
-    raise AssertionError(f"perchd sim firmware --px4 did not start: {proc.stderr.read()}")
+    return start_placed("--px4", PX4, *PX4_EXTRA, "--instance", str(INSTANCE), "--ahead",
+                        str(AHEAD_M), "--px4-param", f"SIH_KDV={DRAG}", "--fw-log",
+                        str(tmp / "px4.log"), *extra, env=ENV)
 
 
 def surface_normal(surface: list[str]) -> tuple[float, float, float]:
@@ -173,49 +163,6 @@ def shut(proc: subprocess.Popen) -> None:
             proc.kill()
 
 
-class YawWatch:
-    """The mocap's true yaw [rad] by pose time, collected while `perchd fly` runs."""
-
-    def __init__(self, mocap: str) -> None:
-        from perchd.mocap.base import open_source
-        self.src = open_source(mocap, Runtime.real())
-        self.src.start()
-        self.samples: list[tuple[float, float]] = []
-        self.positions: list[tuple[float, tuple[float, float, float]]] = []  # (t, p)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        seq = 0
-        while not self._stop.is_set():
-            pose = self.src.wait(seq, 0.2)
-            if pose is not None:
-                seq = pose.seq
-                self.samples.append((pose.t, yaw_of(pose.q)))
-                self.positions.append((time.monotonic(), pose.p))
-
-    def between(self, t0: float, t1: float) -> list[float]:
-        return [y for t, y in self.samples if t0 <= t <= t1]
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=1.0)
-        self.src.close()
-
-
-def flight_window(log: Path) -> tuple[float, float]:
-    """[s] monotonic times of the flight's first and last control ticks (perchd fly's clock)."""
-    ticks = [json.loads(line)["row"]["t"] for line in log.read_text().splitlines()
-             if line.startswith('{"row"')]
-    return ticks[0], ticks[-1]
-
-
-def heading_error(yaws: list[float], heading: float) -> float:
-    """[rad] largest |yaw - heading|."""
-    return max(abs(math.remainder(y - heading, math.tau)) for y in yaws)
-
-
 @pytest.mark.parametrize("flight", [1, 2, 3])
 def test_the_agent_perches_on_px4_sih(tmp_path, flight):
     plan = json.loads(PLAN.read_text())
@@ -241,7 +188,7 @@ def test_the_agent_perches_on_px4_sih(tmp_path, flight):
         "yaw_error_deg": math.degrees(heading_error(
             watch.between(*flight_window(tmp_path / "flight.jsonl")), heading)),
         "yaw_error_whole_run_deg": math.degrees(heading_error(sim["yaw_range_rad"], heading)),
-        "modes": sim["modes"]}
+        "lag": lag_event(tmp_path / "flight.jsonl"), "modes": sim["modes"]}
     report(figures)
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None

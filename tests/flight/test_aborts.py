@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import pytest
 from aborts import TRIGGER_T, assert_failsafe_and_closed_log, fly, safety
@@ -109,6 +110,14 @@ def test_a_loop_that_keeps_missing_its_deadlines_ends_the_flight(tmp_path):
 def test_a_flight_that_takes_too_long_times_out(tmp_path):
     sim, res = fly(tmp_path, safety(timeout_s=1.0))
     assert_failsafe_and_closed_log(sim, res, EndReason.TIMEOUT)
+
+
+def test_the_timeout_says_how_long_it_flew_beside_the_limit_it_passed(tmp_path):
+    """Not "0.5 s > 0.5 s": the time flown to the millisecond, and the limit's key."""
+    _, res = fly(tmp_path, safety(timeout_s=0.5))
+    flown = float(re.search(r"flying (\d+\.\d{3}) s", res.detail).group(1))
+    assert res.outcome is EndReason.TIMEOUT and flown > 0.5
+    assert res.detail.endswith("longer than [safety] timeout_s = 0.5 s")
 
 
 def test_a_trigger_state_outside_the_tolerance_is_refused_not_flown(tmp_path):

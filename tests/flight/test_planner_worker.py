@@ -25,6 +25,7 @@ from perchd.core.clock import MonotonicClock
 from perchd.core.types import EndReason, Phase, Setpoint
 from perchd.flight.config import (
     FlightConfig,
+    TauGains,
     TriggerConfig,
     TriggerFallback,
     TriggerPolicy,
@@ -122,7 +123,10 @@ def test_the_plan_made_ahead_is_flown_at_the_trigger_with_no_wait(tmp_path):
     """An ordinary replan in real time: drag leaves the approach short of v0 by more than
     ahead_v_tol_mps (as on PX4 SIH), the worker planned for the predicted trigger speed
     during the approach, the trigger takes that plan in its own tick, and it perches."""
-    session, res = real_time_flight(tmp_path, REPLAN, uri=DRAG)
+    # Without the lag and drag identification, whose drag feed-forward brings the approach
+    # to v0 (docs/errata.md §10): this flight needs a trigger speed off the plan's.
+    cfg = dataclasses.replace(REPLAN, tau_gains=TauGains(identify=False))
+    session, res = real_time_flight(tmp_path, cfg, uri=DRAG)
     log = read_log(res.log)
     kinds = [e.kind for e in log.events]
     assert res.outcome is EndReason.CONTACT

@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import json
+import math
+import re
 import signal
 import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
 
 from announced import start_announced
 
@@ -12,6 +18,37 @@ from announced import start_announced
 def start_harness(*args: str, env: dict | None = None) -> tuple[subprocess.Popen, str, str]:
     """Start `perchd sim firmware ARGS --json`; its process and the announced URIs."""
     return start_announced("sim", "firmware", *args, "--json", env=env)
+
+
+def start_placed(*args: str, env: dict | None = None
+                 ) -> tuple[subprocess.Popen, str, str, list[str]]:
+    """`perchd sim firmware ARGS --json` for a vehicle whose harness places the surface
+    itself (PX4: ahead along its heading, said on stderr before the ready line): its
+    process, mocap and driver URIs, and the `--surface ... --normal ...` options for
+    `perchd fly` (none when the harness said nothing)."""
+    proc = subprocess.Popen([sys.executable, "-m", "perchd", "sim", "firmware", *args, "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    surface: list[str] = []
+    for line in proc.stderr:
+        if (found := re.search(r"surface (\S+ \S+ \S+) normal (\S+ \S+ \S+)", line)):
+            surface = ["--surface", *found.group(1).split(), "--normal", *found.group(2).split()]
+        if (found := re.search(r"ready: mocap (\S+) driver (\S+)", line)):
+            return proc, found.group(1), found.group(2), surface
+    proc.kill()
+    raise RuntimeError(f"perchd sim firmware {' '.join(args[:2])} did not start: "
+                       f"{proc.stderr.read()}")
+
+
+def lag_event(log: Path) -> dict:
+    """The flight's lag-identified (or -unidentified) event from its log as {"kind": ...,
+    **values} (docs/contracts.md, flight log); {} without one."""
+    if not log.exists():
+        return {}
+    for line in log.read_text().splitlines():
+        if '"kind":"lag-' in line:
+            ev = json.loads(line)["event"]
+            return {"kind": ev["kind"], **ev["values"]}
+    return {}
 
 
 def stop_harness(proc: subprocess.Popen, timeout_s: float = 20.0) -> dict:
@@ -23,3 +60,49 @@ def stop_harness(proc: subprocess.Popen, timeout_s: float = 20.0) -> dict:
         if proc.poll() is None:
             proc.kill()
     return json.loads(out)
+
+
+class YawWatch:
+    """The mocap's true yaw [rad] by pose time, collected while `perchd fly` runs."""
+
+    def __init__(self, mocap: str) -> None:
+        from perchd.core.runtime import Runtime
+        from perchd.mocap.base import open_source
+        self.src = open_source(mocap, Runtime.real())
+        self.src.start()
+        self.samples: list[tuple[float, float]] = []
+        self.positions: list[tuple[float, tuple[float, float, float]]] = []  # (t, p)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        from perchd.sim.firmware.harness import yaw_of
+        seq = 0
+        while not self._stop.is_set():
+            pose = self.src.wait(seq, 0.2)
+            if pose is not None:
+                seq = pose.seq
+                self.samples.append((pose.t, yaw_of(pose.q)))
+                self.positions.append((time.monotonic(), pose.p))
+
+    def between(self, t0: float, t1: float) -> list[float]:
+        return [y for t, y in self.samples if t0 <= t <= t1]
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=1.0)
+        self.src.close()
+
+
+def flight_window(log: Path) -> tuple[float, float]:
+    """[s] monotonic times of the flight's first and last control ticks (perchd fly's clock);
+    an empty window when the flight ticked none."""
+    ticks = [json.loads(line)["row"]["t"] for line in log.read_text().splitlines()
+             if line.startswith('{"row"')] if log.exists() else []
+    return (ticks[0], ticks[-1]) if ticks else (0.0, -1.0)
+
+
+def heading_error(yaws: list[float], heading: float) -> float:
+    """[rad] largest |yaw - heading|."""
+    return max(abs(math.remainder(y - heading, math.tau)) for y in yaws)

@@ -66,6 +66,10 @@ def test_values_map_onto_flight_config_with_degrees_converted():
     ({"safety": {"overrun_streak": 2.5}}, "[safety] overrun_streak: expected an integer, got 2.5"),
     ({"tau_gains": {"feedforward": 1}}, "[tau_gains] feedforward: expected true or false"),
     ({"service": {"socket": 3}}, "[service] socket: expected a string, got 3"),
+    ({"flight": {"tilt_limit_deg": 20, "tilt_limit_rad": 0.3}},
+     "[flight] tilt_limit_deg and tilt_limit_rad: give one of them, not both"),
+    ({"safety": {"tilt_max_rad": 0.5, "tilt_max_deg": 30}},
+     "[safety] tilt_max_deg and tilt_max_rad: give one of them, not both"),
 ])
 def test_a_bad_key_or_value_is_one_error_naming_it(doc, message):
     with pytest.raises(ConfigError) as err:

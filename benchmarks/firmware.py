@@ -1,0 +1,252 @@
+"""Perches on the vehicles' own firmware, beside the same flights in perchd's simulator.
+
+    python benchmarks/firmware.py [--flights N] [--noise M] [--only NAME ...] [--json]
+
+For each firmware whose environment variable names a binary (PERCHD_CF2: the Crazyflie's
+cf2; PERCHD_ARDUCOPTER: ArduCopter SITL; PERCHD_PX4: a PX4 SITL build folder; the others are
+skipped with one line), N flights (default 10) of plans/case1-ipts-n3.json, each as a user
+flies it: `perchd sim firmware ... --noise M` (the harness, perchd/sim/firmware, docs/firmware.md)
+and `perchd fly` with the harness's mocap and driver URIs, no mass or hover in the URI (the
+flight config names the vehicle, the hold learns its hover thrust). Printed per firmware:
+flights perched / flown, the true contact speed (median, min, max) against the plan's,
+perch time (median, % error against the plan), the true heading's largest departure from
+the start heading (PX4: the harness's, at take-over; else the first of the flight) between the
+flight's first and last control tick, the speed at the trigger against the plan's v0, the
+lag and drag the flight identified (flight/lagid.py); beside it the same N flights in
+perchd's simulator (sim:// with the same mocap noise, seeds 0..N-1: its Crazyflie plant and
+the default flight config).
+
+Flights run in real time: on a loaded machine a firmware or `perchd fly` descheduled for
+tens of milliseconds changes the figures. The load average is printed with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "helpers"))  # the firmware tests' harness helpers
+PLAN = ROOT / "plans" / "case1-ipts-n3.json"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+STALE = """[safety]
+stale_timeout_s = 0.25
+"""
+"""The stale-mocap limit as tests/firmware/test_fw_px4_flight.py has it: beside a firmware
+and its harness on two shared cores `perchd fly` is descheduled for tens of milliseconds,
+past the default three mocap periods (30 ms at 100 Hz)."""
+PX4_CONFIG = """version = 1
+[vehicle]
+mass_kg = 1.0
+thrust_min_n = 2.0
+thrust_max_n = 18.0
+""" + STALE
+"""SIH's quadrotor (1 kg, 4 x 5 N)."""
+
+
+@dataclass(frozen=True)
+class Firmware:
+    """name; env: the variable naming the binary; flag: `perchd sim firmware`'s option for it;
+    extra: more harness options; config: the flight config (TOML text, None: the default
+    Crazyflie)."""
+
+    name: str
+    env: str
+    flag: str
+    extra: tuple[str, ...] = ()
+    config: str | None = None
+
+
+FIRMWARES = (
+    Firmware("cf2", "PERCHD_CF2", "--cf2", ("--link", "udp://127.0.0.1:0"),
+             config="version = 1\n" + STALE),
+    Firmware("arducopter", "PERCHD_ARDUCOPTER", "--arducopter",
+             config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text() + STALE),
+    Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5"), config=PX4_CONFIG),
+)
+
+
+def driver_uri(ready: str) -> str:
+    """The ready line's driver URI without mass= or hover= (the flight config names the
+    vehicle, the hold learns its hover thrust)."""
+    base, _, query = ready.partition("?")
+    kept = [kv for kv in query.split("&") if kv and kv.split("=")[0] not in ("mass", "hover")]
+    return base + ("?" + "&".join(kept) if kept else "")
+
+
+def start_harness(fw: Firmware, binary: str, noise: float, tmp: Path):
+    """`perchd sim firmware`: its process, mocap URI, driver URI and surface options."""
+    from fwharness import start_placed
+    proc, mocap, driver, surface = start_placed(
+        fw.flag, binary, *fw.extra, "--noise", str(noise), "--fw-log", str(tmp / "fw.log"),
+        env=ENV)
+    return proc, mocap, driver_uri(driver), surface
+
+
+def stop_harness(proc: subprocess.Popen) -> dict:
+    from fwharness import stop_harness as stop
+    return stop(proc, 30.0)
+
+
+def lag_event(log: Path) -> dict:
+    from fwharness import lag_event as event
+    return event(log)
+
+
+def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
+                 config_add: str = "") -> dict:
+    proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
+    config: list[str] = []
+    if fw.config is not None or config_add.strip():
+        (tmp / "flight.toml").write_text((fw.config or "version = 1\n") + config_add)
+        config = ["--config", str(tmp / "flight.toml")]
+    from fwharness import YawWatch, flight_window, heading_error
+    watch = YawWatch(mocap)
+    try:
+        done = subprocess.run(
+            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
+             mocap, *config, *surface, "--log", str(tmp / "flight.jsonl"),
+             "--state", str(tmp / "vehicles.json"), "--json"],
+            capture_output=True, text=True, timeout=180, env=ENV)
+    finally:
+        watch.close()
+        sim = stop_harness(proc)
+    fly = json.loads(done.stdout) if done.stdout.strip() else {
+        "outcome": "NO_RESULT", "detail": done.stderr.strip()[-300:]}
+    yaws = watch.between(*flight_window(tmp / "flight.jsonl"))
+    heading = sim.get("start_heading_rad")
+    heading = yaws[0] if heading is None and yaws else heading or 0.0
+    return {
+        "outcome": fly["outcome"], "detail": fly.get("detail"),
+        "contact_speed": (sim.get("contact") or {}).get("speed"),
+        "agent_contact_speed": fly.get("contact_speed"), "perch_time": fly.get("perch_time"),
+        "trigger_v": (fly.get("trigger") or {}).get("v"),
+        "yaw_dev_deg": math.degrees(heading_error(yaws, heading)) if yaws else None,
+        "lag": lag_event(tmp / "flight.jsonl")}
+
+
+def fly_sim(noise: float, seed: int, tmp: Path) -> dict:
+    """The same flight in perchd's own simulator (its Crazyflie, the default flight config),
+    in process on a simulated clock."""
+    from simflight import Sim
+
+    from perchd.tau.planfile import load_plan
+    res = Sim(f"sim://?noise={noise}&seed={seed}").fly(load_plan(PLAN), tmp / "sim.jsonl")
+    return {"outcome": res.outcome.name, "contact_speed": res.true_contact_speed,
+            "perch_time": res.true_perch_time, "trigger_v": res.trigger and res.trigger.v,
+            "yaw_dev_deg": 0.0, "lag": lag_event(tmp / "sim.jsonl")}
+
+
+def summary(flights: list[dict], plan: dict) -> dict:
+    ok = [f for f in flights if f["outcome"] == "CONTACT" and f["contact_speed"] is not None]
+    lo, hi = plan["limits"]["v_contact"]
+    speeds = [f["contact_speed"] for f in ok]
+    times = [f["perch_time"] for f in ok if f["perch_time"] is not None]
+    trig = [f["trigger_v"] - plan["v0"] for f in flights if f["trigger_v"] is not None]
+    yaws = [f["yaw_dev_deg"] for f in flights if f["yaw_dev_deg"] is not None]
+    lags = [f["lag"].get("lag_s") for f in flights if f["lag"].get("lag_s") is not None]
+    drags = [f["lag"].get("drag_per_s") for f in flights if f["lag"].get("drag_per_s") is not None]
+    med = statistics.median
+    return {
+        "flights": len(flights), "perched": len(ok),
+        "in_window": sum(lo <= s <= hi for s in speeds),
+        "outcomes": sorted({f["outcome"] for f in flights}),
+        "contact_median": med(speeds) if speeds else None,
+        "contact_min": min(speeds, default=None), "contact_max": max(speeds, default=None),
+        "contact_err_maxabs": max((abs(s - plan["v_contact"]) for s in speeds), default=None),
+        "perch_time_median": med(times) if times else None,
+        "perch_time_err_pct": 100 * (med(times) / plan["duration"] - 1) if times else None,
+        "perch_time_err_pct_maxabs": max((100 * abs(t / plan["duration"] - 1) for t in times),
+                                         default=None),
+        "yaw_dev_deg_max": max(yaws, default=None),
+        "trigger_v_err_median": med(trig) if trig else None,
+        "trigger_v_err_maxabs": max(map(abs, trig), default=None),
+        "lag_s": [round(x, 3) for x in lags], "drag_per_s": [round(x, 3) for x in drags]}
+
+
+def fmt(v, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def print_row(name: str, s: dict, plan: dict) -> None:
+    print(f"  {name:9s} perched {s['perched']}/{s['flights']} (in window {s['in_window']}); "
+          f"contact {fmt(s['contact_median'], '.3f')} [{fmt(s['contact_min'], '.3f')}.."
+          f"{fmt(s['contact_max'], '.3f')}] vs {plan['v_contact']:.3f} m/s "
+          f"(max |err| {fmt(s['contact_err_maxabs'], '.3f')}); perch time "
+          f"{fmt(s['perch_time_median'], '.3f')} s vs {plan['duration']:.4f} s "
+          f"({fmt(s['perch_time_err_pct'], '+.2f')} %, max |err| "
+          f"{fmt(s['perch_time_err_pct_maxabs'], '.2f')} %); yaw within "
+          f"{fmt(s['yaw_dev_deg_max'], '.2f')} deg; trigger v err median "
+          f"{fmt(s['trigger_v_err_median'], '+.3f')} (max |err| "
+          f"{fmt(s['trigger_v_err_maxabs'], '.3f')}) m/s")
+    if s["lag_s"]:
+        print(f"            identified lag {min(s['lag_s'])}..{max(s['lag_s'])} s, drag "
+              f"{min(s['drag_per_s'])}..{max(s['drag_per_s'])} 1/s")
+    if set(s["outcomes"]) - {"CONTACT"}:
+        print(f"            outcomes: {', '.join(s['outcomes'])}")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--flights", type=int, default=10, help="flights per firmware (10)")
+    ap.add_argument("--noise", type=float, default=0.001, help="[m] mocap noise std (0.001)")
+    ap.add_argument("--only", nargs="*", choices=[f.name for f in FIRMWARES],
+                    help="these firmwares only")
+    ap.add_argument("--keep", metavar="DIR", help="keep each flight's logs under DIR")
+    ap.add_argument("--config-add", default="", metavar="TOML",
+                    help="TOML tables appended to every firmware flight's config, e.g. "
+                         "'[tau_gains]\\npredict = false' (the sim:// flights keep the default)")
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+    args = ap.parse_args()
+    if args.flights < 1 or not 0.0 <= args.noise <= 0.1:
+        print("benchmarks/firmware.py: --flights must be >= 1 and --noise 0..0.1 m",
+              file=sys.stderr)
+        return 2
+    plan = json.loads(PLAN.read_text())
+    out: dict = {"plan": {"duration": plan["duration"], "v_contact": plan["v_contact"],
+                          "v0": plan["v0"]}, "noise_m": args.noise, "firmwares": {}}
+    root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="perchd-fwbench-"))
+    for fw in FIRMWARES:
+        if args.only and fw.name not in args.only:
+            continue
+        binary = os.environ.get(fw.env, "")
+        if not binary:
+            print(f"{fw.name}: skipped ({fw.env} is not set)", file=sys.stderr)
+            continue
+        runs: dict[str, list[dict]] = {"firmware": [], "sim": []}
+        for i in range(args.flights):
+            tmp = root / fw.name / str(i)
+            tmp.mkdir(parents=True, exist_ok=True)
+            runs["firmware"].append(fly_firmware(fw, binary, args.noise, i, tmp,
+                                                 args.config_add.replace("\\n", "\n") + "\n"))
+            runs["sim"].append(fly_sim(args.noise, i, tmp))
+            if not args.json:
+                f = runs["firmware"][-1]
+                print(f"{fw.name} flight {i + 1}: {f['outcome']} contact "
+                      f"{fmt(f['contact_speed'], '.3f')} m/s, perch time "
+                      f"{fmt(f['perch_time'], '.3f')} s, lag {fmt(f['lag'].get('lag_s'), '.3f')} s "
+                      f"drag {fmt(f['lag'].get('drag_per_s'), '.3f')} 1/s", file=sys.stderr)
+        out["firmwares"][fw.name] = {
+            "load_avg": os.getloadavg(), "firmware": summary(runs["firmware"], plan),
+            "sim": summary(runs["sim"], plan), "flights": runs}
+        if not args.json:
+            res = out["firmwares"][fw.name]
+            print(f"{fw.name} (load average {res['load_avg'][0]:.2f}, mocap noise "
+                  f"{args.noise:g} m):")
+            print_row("firmware", res["firmware"], plan)
+            print_row("sim://", res["sim"], plan)
+    if args.json:
+        print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

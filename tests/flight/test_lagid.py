@@ -1,0 +1,95 @@
+"""The lag and drag identification (flight/lagid.py) on data from a known response: a hold,
+then an approach at constant commanded acceleration, flown through a delay and linear drag."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from perchd.flight.config import LagIdGains
+from perchd.flight.lagid import LagIdentifier, LagModel
+
+DT = 0.01
+
+
+def fly(lag_s: float, drag: float, bias: float = 0.0, accel: float = 0.75,
+        hold_s: float = 1.0, approach_s: float = 2.0, noise_m: float = 0.0, seed: int = 0,
+        cfg: LagIdGains = LagIdGains()) -> LagIdentifier:
+    """Record a hold and an approach of the model Xddot = u(t - lag) - drag Xdot + bias, the
+    command holding position until the approach, then `accel` plus drag at the speed
+    reached; X measured with noise_m [m] of noise, Xdot with 10 noise_m / s (about the
+    estimator's velocity scatter on millimetre mocap noise)."""
+    rng = random.Random(seed)
+    ident = LagIdentifier(cfg)
+    x, v, sent = -4.5, 0.0, []
+    n_hold, n = int(hold_s / DT), int((hold_s + approach_s) / DT)
+    for k in range(n):
+        t = k * DT
+        u = -bias if k < n_hold else accel + drag * v - bias
+        sent.append(u)
+        ident.record(t, u, x + rng.gauss(0.0, noise_m), v + rng.gauss(0.0, 10 * noise_m))
+        late = k - round(lag_s / DT)
+        u_now = sent[late] if late >= 0 else sent[0]
+        for _ in range(10):  # 1 ms steps
+            a = u_now - drag * v + bias
+            v += a * DT / 10
+            x += v * DT / 10
+    return ident
+
+
+@pytest.mark.parametrize("lag_s, drag", [(0.0, 0.0), (0.08, 0.0), (0.15, 0.22), (0.3, 1.0)])
+def test_the_fit_finds_the_delay_and_the_drag_it_was_flown_with(lag_s, drag):
+    fit = fly(lag_s, drag).fit()
+    assert fit.model is not None, fit.why
+    assert fit.model.lag_s == pytest.approx(lag_s, abs=0.012)
+    assert fit.model.drag_per_s == pytest.approx(drag, abs=0.02)
+
+
+def test_a_constant_push_is_told_from_drag():
+    fit = fly(0.15, 0.3, bias=0.2).fit()
+    assert fit.model.bias_mps2 == pytest.approx(0.2, abs=0.03)
+    assert fit.model.drag_per_s == pytest.approx(0.3, abs=0.03)
+
+
+def test_millimetre_mocap_noise_leaves_the_lag_within_two_ticks():
+    for seed in range(3):
+        fit = fly(0.2, 0.3, noise_m=0.001, seed=seed).fit()
+        assert fit.model is not None, fit.why
+        assert fit.model.lag_s == pytest.approx(0.2, abs=0.02)
+        assert fit.model.drag_per_s == pytest.approx(0.3, abs=0.06)
+
+
+def test_too_little_motion_is_refused_with_the_reason():
+    fit = fly(0.1, 0.0, accel=0.1, approach_s=2.0).fit()
+    assert fit.model is None
+    assert "changed speed by 0.19 m/s, less than the 0.5 m/s" in fit.why  # 0.1 x (2 - 0.1 s)
+
+
+def test_a_lag_beyond_the_bound_is_refused_not_clipped():
+    fit = fly(0.3, 0.0, cfg=LagIdGains(lag_max_s=0.2)).fit()
+    assert fit.model is None
+    assert "bound 0.2 s" in fit.why
+
+
+def test_an_absurd_drag_is_refused():
+    fit = fly(0.1, 1.5, cfg=LagIdGains(drag_max_per_s=1.0)).fit()
+    assert fit.model is None
+    assert "drag" in fit.why and "outside 0..1 1/s" in fit.why
+
+
+def test_the_prediction_adds_the_commands_still_in_flight():
+    """A step of 1 m/s^2 sent 0.1 s ago reaches a vehicle with a 0.2 s lag 0.1 s from now:
+    0.2 s later the speed has gained 0.1 m/s and X 0.1^2 / 2 m beyond coasting; 0.1 s
+    later nothing yet."""
+    ident = LagIdentifier(LagIdGains())
+    for k in range(100):
+        ident.record(k * DT, 1.0 if k >= 90 else 0.0, 0.0, 0.0)
+    late = LagModel(0.2, 0.0, 0.0, 0.0, 0, 0.0)
+    x, v = ident.predict(1.0, -1.0, 1.0, late, 0.2)
+    assert v == pytest.approx(1.1, abs=1e-9)
+    assert x == pytest.approx(-1.0 + 0.2 + 0.005, abs=1e-9)
+    x, v = ident.predict(1.0, -1.0, 1.0, late, 0.1)
+    assert (x, v) == pytest.approx((-0.9, 1.0), abs=1e-9)
+    dragged = LagModel(0.2, 0.5, 0.0, 0.0, 0, 0.0)  # drag takes 0.5 * 1 m/s for 0.2 s
+    assert ident.predict(1.0, -1.0, 1.0, dragged, 0.2)[1] == pytest.approx(1.0, abs=1e-9)
