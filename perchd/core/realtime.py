@@ -192,6 +192,14 @@ def below_loop(pid: int) -> None:
         pass
 
 
+def leave_realtime() -> None:
+    """Back to the normal scheduler, for a helper process (the live view) that inherited the
+    agent's SCHED_FIFO: a niceness means nothing to a real-time thread, and a busy helper
+    at the loop's priority would delay it. Lowering needs no privilege."""
+    if sys.platform.startswith("linux") and os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
 def settle_heap() -> None:
     """Between flights: collect every cycle, then freeze what survives (gc.freeze) so later
     collections never scan the long-lived objects again (modules, the open links)."""

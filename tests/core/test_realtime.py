@@ -88,3 +88,18 @@ child.kill()
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert json.loads(out.stdout) == [getattr(os, f"SCHED_{policy}"), child_prio]
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="granted only with CAP_SYS_NICE (root here)")
+def test_a_helper_process_such_as_the_live_view_leaves_the_inherited_fifo():
+    """A niceness means nothing under SCHED_FIFO: the view would compete with the loop."""
+    code = """
+import json, os, subprocess, sys
+from perchd.core.realtime import RealtimeConfig, apply
+apply(RealtimeConfig(20, lock_memory=False))
+probe = "import os; from perchd.core.realtime import leave_realtime; a = os.sched_getscheduler(0); leave_realtime(); print(a, os.sched_getscheduler(0))"
+print(json.dumps(subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert json.loads(out.stdout) == [str(os.SCHED_FIFO), str(os.SCHED_OTHER)]
