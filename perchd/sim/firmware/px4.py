@@ -66,11 +66,6 @@ REFINE_MAX_DT_S = 0.02
 (lockstep: its vehicle froze with it), not flight."""
 RESEND_AFTER_S = 0.025
 """[s] a truth sample older than this is sent again stamped now (Px4Vehicle.truth)."""
-HEADING_SETTLE_S, HEADING_SETTLE_DEG, HEADING_TIMEOUT_S = 2.0, 1.0, 30.0
-"""Ready once PX4's heading estimate has stayed within HEADING_SETTLE_DEG [deg] of the
-true heading plus a constant for HEADING_SETTLE_S [s] (waited for at most
-HEADING_TIMEOUT_S [s]): after take-off its EKF re-aligns the heading from GPS for ~10 s,
-by ~10 deg at 1-2 deg/s, and turns the vehicle with it (docs/firmware.md, "PX4 SIH")."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
 BOOT_TIMEOUT_S, TAKEOFF_TIMEOUT_S = 30.0, 40.0
 
@@ -180,7 +175,6 @@ class Px4Vehicle(FirmwareVehicle):
         self._samples = 0
         self._truth_acked = False  # PX4 took the 100 Hz truth rate (25 Hz before)
         self._heading_errors: list[tuple[float, float]] = []  # (t [s], EKF - true [rad])
-        self.heading_settled: bool | None = None
         self._ready_t: float | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -201,7 +195,6 @@ class Px4Vehicle(FirmwareVehicle):
                    cancel, "ground truth (HIL_STATE_QUATERNION) from PX4 SIH", self._ask_truth)
         if self.params.takeoff:
             self._take_off(cancel)
-            self._settle_heading(cancel)
         truth = self._truth
         self._ready_t = truth.t
         self.start_heading = yaw_of(truth.q)
@@ -235,7 +228,6 @@ class Px4Vehicle(FirmwareVehicle):
         return {"firmware": "px4", "instance": self.params.instance, "log": str(self.log),
                 "workdir": str(self.workdir), "truth_samples": self._samples,
                 "start_heading_rad": self.start_heading, "modes": self._modes_seen,
-                "heading_settled": self.heading_settled,
                 "heading_estimate_error_deg": self._heading_span_deg(),
                 "surface": None if s is None else {"point": list(s.point), "normal": list(s.normal)},
                 "contact": contact_json(self._contact, 0.0)}
@@ -341,6 +333,8 @@ class Px4Vehicle(FirmwareVehicle):
                 self._contact = Contact(truth.t, self.surface.speed(truth.v), truth.p)
 
     def _on_attitude(self, msg: Any) -> None:
+        """PX4's heading estimate against the truth: SIH's EKF2 heading wanders ~10 deg
+        during a flight, and PX4 steers it (docs/firmware.md, "PX4 SIH")."""
         true_ned = math.pi / 2 - yaw_of(self._truth.q)  # ENU yaw -> NED heading
         error = math.remainder(msg.yaw - true_ned, math.tau)
         self._heading_errors = [*self._heading_errors[-600:], (self._truth.t, error)]
@@ -349,23 +343,6 @@ class Px4Vehicle(FirmwareVehicle):
         """[rad] smallest and largest PX4 heading estimate - true heading since `since` [s]."""
         errors = [e for t, e in self._heading_errors if t >= since]
         return (min(errors), max(errors)) if errors else None
-
-    def _settle_heading(self, cancel: threading.Event) -> None:
-        """Hold until the heading estimate has settled (HEADING_SETTLE_S); unsettled after
-        HEADING_TIMEOUT_S it goes on, and the summary says so."""
-        deadline = time.monotonic() + HEADING_TIMEOUT_S
-        while time.monotonic() < deadline:
-            if cancel.is_set():
-                raise Interrupted()
-            now = self.clock.now()
-            span = self.heading_error_span(now - HEADING_SETTLE_S)
-            first = self._heading_errors[0][0] if self._heading_errors else now
-            if span is not None and now - first >= HEADING_SETTLE_S and \
-                    span[1] - span[0] <= math.radians(HEADING_SETTLE_DEG):
-                self.heading_settled = True
-                return
-            time.sleep(0.1)
-        self.heading_settled = False
 
     def _on_heartbeat(self, msg: Any) -> None:
         self._armed = bool(msg.base_mode & 128)
