@@ -1,25 +1,19 @@
 """IPTS cold solve times per order for both paper cases, what each plan reaches, and the
-warm replan from the plan libraries: the same figures as `perchd bench planner`, with all
-orders 2..7 by default.
+warm replan from the plan libraries: `perchd bench planner` with all orders 2..7 by default.
 
-Run: python benchmarks/planner.py [--repeat N] [--orders 2 3 4 5 6 7] [--replans N] [--json]
+Run: python benchmarks/planner.py [any `perchd bench planner` option, e.g. --orders 3 5
+--repeat 7 --load 3 --json]
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 
-from perchd.commands.bench import run_planner
+from perchd.cli import main
 
-
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--orders", type=int, nargs="+", default=[2, 3, 4, 5, 6, 7])
-    ap.add_argument("--replans", type=int, default=200)
-    ap.add_argument("--json", action="store_true")
-    return run_planner(ap.parse_args())
-
+DEFAULT_ORDERS = ["--orders", "2", "3", "4", "5", "6", "7"]
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    given = sys.argv[1:]
+    orders = [] if "--orders" in given else DEFAULT_ORDERS
+    raise SystemExit(main(["bench", "planner", *orders, *given]))

@@ -1,19 +1,24 @@
-"""`perchd bench planner|loop [--json]`: timing figures with min/median/p99.
+"""`perchd bench planner|loop [--load N] [--json]`: timing figures with min/median/p99.
 
 The loop figures are measured by perchd.sim.loopbench (also `python benchmarks/loop.py`).
+--load N measures the same figures twice in one run, without load and with N CPU-bound
+processes beside them (perchd.sim.cpuload), which are stopped however the run ends.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import random
 import sys
 import time
 from pathlib import Path
 
+from perchd.core import realtime
 from perchd.core.errors import ConfigError
 from perchd.flight.loop import spread
 from perchd.sim import loopbench
+from perchd.sim.cpuload import MAX_HOGS, cpu_hogs
 from perchd.tau import plan_bound, plan_ipts
 from perchd.tau.cases import CASES
 from perchd.tau.library import build_library, load_library
@@ -30,14 +35,35 @@ def register(sub) -> None:
                    help="warm replans from each plan library (the first 10 also cold-solved) "
                         "(default: 200)")
     p.add_argument("--json", action="store_true", help="print one JSON list")
+    add_load(p, "the solves (as a flight's planner worker runs under fly --realtime)")
     p.set_defaults(run=run_planner)
-    lp = bench_sub.add_parser("loop", help="control loop: 500 Hz jitter, agent compute, "
+    lp = bench_sub.add_parser("loop", help="control loop: 500 Hz jitter, overruns per minute "
+                                            "at 100 and 500 Hz, agent compute, "
                                             "pose-to-setpoint latency over ZMQ, CPU")
     lp.add_argument("--seconds", type=float, default=5.0,
                     help="[s] length of the 500 Hz run and of each ZMQ mode (default 5; "
                          "60 for the issue's overrun figure)")
     lp.add_argument("--json", action="store_true", help="print one JSON object")
+    add_load(lp, "the loops, the rig and the agent (perchd fly --realtime)")
     lp.set_defaults(run=run_loop)
+
+
+def add_load(parser, what: str) -> None:
+    """--load N and --realtime[=PRIO] (for `what`)."""
+    parser.add_argument("--load", type=int, default=0, metavar="N",
+                        help="measure without load, then again with N CPU-bound processes "
+                             "running beside (stopped at the end, Ctrl-C included), and print "
+                             "the two side by side")
+    parser.add_argument("--realtime", nargs="?", type=int, const=realtime.DEFAULT_PRIORITY,
+                        default=0, metavar="PRIO",
+                        help=f"run {what} under SCHED_FIFO at PRIO (default "
+                             f"{realtime.DEFAULT_PRIORITY}); the load processes stay at the "
+                             "normal policy")
+
+
+def check_load(n: int) -> None:
+    if not 0 <= n <= MAX_HOGS:
+        raise ConfigError(f"--load {n} is outside 0..{MAX_HOGS} processes")
 
 
 def percentiles_ms(times_s: list[float]) -> dict:
@@ -112,6 +138,10 @@ def _libraries():
 
 
 def run_planner(args) -> int:
+    check_load(args.load)
+    realtime.apply(realtime.RealtimeConfig(args.realtime))
+    if args.load:
+        return planner_under_load(args)
     rows = planner_rows(args.orders, args.repeat)
     warm = replan_rows(args.replans, min(args.replans, 10))
     if args.json:
@@ -129,9 +159,43 @@ def run_planner(args) -> int:
     return 0
 
 
+def planner_under_load(args) -> int:
+    """Cold solves and warm replans without load, then with args.load hogs: medians side
+    by side, and the loaded cold median as a multiple of the idle one."""
+    planner_rows(args.orders[:1], 1)  # imports and first-call costs out of the idle figures
+    load_before = os.getloadavg()[0]
+    idle = planner_rows(args.orders, args.repeat) + replan_rows(args.replans, 0)
+    with cpu_hogs(args.load):
+        busy = planner_rows(args.orders, args.repeat) + replan_rows(args.replans, 0)
+        load_during = os.getloadavg()[0]
+    rows = [{**a, "loaded_median_ms": b["median_ms"], "loaded_p99_ms": b["p99_ms"],
+             "ratio_loaded": b["median_ms"] / a["median_ms"]} for a, b in zip(idle, busy)]
+    if args.json:
+        print(json.dumps({"hogs": args.load, "realtime": args.realtime,
+                          "load_before": load_before,
+                          "load_during": load_during, "rows": rows}))
+        return 0
+    print(f"{args.load} CPU-bound processes beside the loaded run; {os.cpu_count()} cores; load "
+          f"average {load_before:.2f} before, {load_during:.2f} loaded; BLAS threads "
+          f"{os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}; --realtime: "
+          f"{realtime.RealtimeConfig(args.realtime).describe()}")
+    print(f"{'case':6} {'n':>2} {'solve':5} {'median ms':>10} {'loaded ms':>10} {'x idle':>7}"
+          f"   (target for cold solves: x idle <= 3)")
+    for r in rows:
+        print(f"{r['case']:6} {r['order']:>2} {r['solve']:5} {r['median_ms']:>10.2f} "
+              f"{r['loaded_median_ms']:>10.2f} {r['ratio_loaded']:>7.2f}")
+    return 0
+
+
 def run_loop(args) -> int:
     if not 0.1 <= args.seconds <= 3600:
         raise ConfigError(f"--seconds {args.seconds:g} is outside 0.1..3600 s")
-    figures = loopbench.measure(args.seconds)
+    check_load(args.load)
+    realtime.apply(realtime.RealtimeConfig(args.realtime))
+    if args.load:
+        figures = loopbench.measure_under_load(args.seconds, args.load, args.realtime)
+        print(json.dumps(figures) if args.json else loopbench.load_text(figures))
+        return 0
+    figures = loopbench.measure(args.seconds, args.realtime)
     print(json.dumps(figures) if args.json else loopbench.text(figures))
     return 0

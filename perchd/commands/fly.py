@@ -27,6 +27,7 @@ from pathlib import Path
 
 from perchd.commands.argcheck import numbers_as_values, within
 from perchd.commands.log import write_file
+from perchd.core import realtime
 from perchd.core.errors import ConfigError, PerchdError
 from perchd.core.extras import require
 from perchd.core.interrupts import catching
@@ -45,6 +46,14 @@ from perchd.tau import load_plan
 EPILOG = f"""URI query parameters, KEY [unit] (default); any other key is refused
 (docs/contracts.md §7), e.g. sim://?latency=0.02&noise=0.001:
 {params_help()}
+
+The loop: by default each mocap frame releases a tick (`[flight] sync = "mocap"`, rate_hz
+= the mocap rate), so a setpoint follows its pose by the compute time only; with no frame for
+1.5 periods it ticks anyway (stale mocap still ends the flight; the Crazyflie and MAVLink
+drivers repeat the last setpoint themselves after 100 ms). `sync = "fixed"` ticks at
+rate_hz whatever the frames do (a pose then waits up to a period): for a link whose firmware
+wants a steady setpoint rate, or a mocap much faster than the link should be commanded.
+--realtime[=PRIO] runs the agent under SCHED_FIFO (needs CAP_SYS_NICE or ulimit -r PRIO).
 
 sim:// flies on a simulated clock, faster than real time. In real time: run
 `perchd sim --pose-out natnet://127.0.0.1:0 --setpoint-in zmq://127.0.0.1:0` and fly
@@ -74,6 +83,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--state", help="per-vehicle memory of learned hover thrusts (JSON; default "
                                    "$XDG_STATE_HOME/perchd/vehicles.json, i.e. "
                                    "~/.local/state/perchd/vehicles.json)")
+    p.add_argument("--realtime", nargs="?", type=int, const=realtime.DEFAULT_PRIORITY,
+                   default=0, metavar="PRIO",
+                   help="run the agent under SCHED_FIFO at priority PRIO (1..99, default "
+                        f"{realtime.DEFAULT_PRIORITY}) with its memory locked; refused in one "
+                        "line, nothing flown, if the system does not permit it "
+                        "(CAP_SYS_NICE or ulimit -r; docs/safety.md)")
+    p.add_argument("--cpu", type=int, default=-1, metavar="N",
+                   help="with --realtime: pin the agent to CPU N")
     p.add_argument("--foxglove", metavar="[HOST:]PORT",
                    help="serve the flight live over the Foxglove WebSocket protocol (the MCAP "
                         "export's channels, docs/contracts.md §5) on HOST (default 127.0.0.1), "
@@ -209,6 +226,8 @@ def run(args: argparse.Namespace) -> int:
     if mcap is not None:
         args.log = str(mcap.with_suffix(".jsonl"))
     log = log_path(args, plan.strategy)
+    rt = realtime_config(args)
+    realtime.apply(rt)  # before the links and the view start their threads: they inherit it
     view = live_view(args.foxglove, log)
     abort = FlightAbort()
     status = StatusLine()
@@ -216,7 +235,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
             res = links.fly(plan, log, cfg, abort, status,
-                            header={"plan_file": str(args.plan), "mocap": args.mocap})
+                            header={"plan_file": str(args.plan), "mocap": args.mocap,
+                                    "scheduling": rt.describe()})
         finally:
             status.close()
             if view is not None:
@@ -230,6 +250,13 @@ def run(args: argparse.Namespace) -> int:
     print(json.dumps(out) if args.json else text)
     caught.say("fly", f"the flight ended {res.outcome.name}; log {log}")
     return caught.exit_code(0 if res.outcome is EndReason.CONTACT else 1)
+
+
+def realtime_config(args: argparse.Namespace) -> realtime.RealtimeConfig:
+    """--realtime and --cpu as a RealtimeConfig (ConfigError for values out of range)."""
+    if args.cpu >= 0 and not args.realtime:
+        raise ConfigError(f"--cpu {args.cpu}: only with --realtime")
+    return realtime.RealtimeConfig(args.realtime, args.cpu)
 
 
 def _warn(line: str) -> None:

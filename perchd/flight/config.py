@@ -279,11 +279,15 @@ class TriggerConfig:
 class LoopSync(enum.Enum):
     """What releases a control tick.
 
-    FIXED: a clock at rate_hz; a pose waits up to one period for the tick that uses it.
-    MOCAP: the arrival of each new pose (mocap-synchronous): the setpoint follows the pose by
-        the compute time only. rate_hz is then the expected mocap rate: a tick overruns when
-        it ends a period after it started, and runs anyway after 1.5 periods without
-        a pose (so stale mocap is still detected). Set it to the mocap system's rate.
+    MOCAP (the default): the arrival of each new pose (mocap-synchronous): the setpoint
+        follows the pose by the compute time only. rate_hz is then the expected mocap rate:
+        a tick overruns when it ends a period after it started, and runs anyway after 1.5
+        periods without a pose, so stale mocap is still detected and the driver still gets
+        a setpoint at least that often (every driver here also repeats the last one on its
+        own after 100 ms: docs/safety.md). Set rate_hz to the mocap system's rate.
+    FIXED: a clock at rate_hz; a pose waits up to one period for the tick that uses it. For
+        a link whose firmware wants setpoints at a steady rate, or a mocap far faster than
+        the link should be commanded.
     """
 
     FIXED = "fixed"
@@ -366,7 +370,7 @@ class SurfaceConfig:
 class FlightConfig:
     """Everything one flight needs besides the plan and the two links.
 
-    rate_hz: [Hz] control loop rate, 20..500 (with sync MOCAP: the mocap rate).
+    rate_hz: [Hz] control loop rate, 20..500 (with sync MOCAP, the default: the mocap rate).
     sync: what releases a tick (LoopSync: a fixed-rate clock, or each mocap frame).
     tilt_limit_rad: [rad] setpoint saturation
     (eq. 25, 25 deg).  post_contact_s: [s] the post-contact action is held this long.
@@ -384,7 +388,7 @@ class FlightConfig:
     estimator: EstimatorConfig = EstimatorConfig()
     surface: SurfaceConfig = SurfaceConfig()
     rate_hz: float = 100.0
-    sync: LoopSync = LoopSync.FIXED
+    sync: LoopSync = LoopSync.MOCAP
     tilt_limit_rad: float = math.radians(25.0)
     post_contact: PostContact = PostContact.CUT
     post_contact_s: float = 0.2

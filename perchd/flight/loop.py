@@ -14,6 +14,13 @@ come late off the network loop overruns, and end a flight the agent kept up with
 counts pose numbers skipped between two ticks. With no pose
 for `timeout_periods` periods it ticks anyway, so the supervisor's stale-mocap rule still runs.
 
+While a loop runs the cyclic garbage collector is off (no_collections): a collection stops
+every thread of the process for as long as it scans, milliseconds for the oldest generation,
+at moments no tick chooses. Reference counting still frees everything that is not a cycle;
+the cycles a flight leaves are collected after it (the service does so between flights,
+service/daemon.py). Collections that happen anyway (another thread calling gc.collect) are
+counted in the summary.
+
 Jitter (actual start - deadline) is read on the injected clock; compute time on a separate
 wall timer, because a simulated clock does not move while the tick computes. Over the run,
 the process CPU time (all threads: the pose receiver too) over the wall time is the agent's
@@ -24,8 +31,10 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import gc
 import statistics
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator
@@ -63,7 +72,8 @@ class LoopSummary:
     arrival to the setpoint computed from it handed to the driver (each pose's first; the
 flight records it);
     cpu_fraction: process CPU time / wall time over the run (1.0 = one core);
-    wall_s [s]; sync: "fixed" or "mocap"."""
+    wall_s [s]; sync: "fixed" or "mocap"; gc_collections: garbage collections that ran
+    during the run (0 unless some thread forced one: the loop turns the collector off)."""
 
     ticks: int
     overruns: int
@@ -88,6 +98,7 @@ flight records it);
     cpu_fraction: float = 0.0
     wall_s: float = 0.0
     sync: str = "fixed"
+    gc_collections: int = 0
 
 
 def p99(values: list[float]) -> float:
@@ -115,6 +126,7 @@ class LoopStats:
         self.max_streak = 0
         self.cpu_s = 0.0
         self.wall_s = 0.0
+        self.gc_collections = 0
 
     def add(self, timing: TickTiming) -> None:
         self.jitter.append(timing.jitter_s)
@@ -130,7 +142,7 @@ class LoopStats:
                            *jitter, *compute, j0, c0, *spread(self.agent),
                            *spread(self.latency),
                            self.cpu_s / self.wall_s if self.wall_s > 0 else 0.0,
-                           self.wall_s, sync)
+                           self.wall_s, sync, self.gc_collections)
 
 
 @contextlib.contextmanager
@@ -153,6 +165,36 @@ def timer_slack(ns: int) -> Iterator[None]:
             prctl(PR_SET_TIMERSLACK, before, 0, 0, 0)
 
 
+_gc_lock = threading.Lock()
+_gc_holders = [0, False]
+"""Loops running now (threads of one process may each run one), and whether the collector
+was on when the first of them started: it comes back on when the last one ends."""
+
+
+@contextlib.contextmanager
+def no_collections(stats: LoopStats) -> Iterator[None]:
+    """The cyclic garbage collector off inside the block (and back as it was once no loop
+    runs); every collection that runs anyway is counted in stats.gc_collections."""
+    def count(phase: str, info: dict) -> None:
+        if phase == "start":
+            stats.gc_collections += 1
+
+    with _gc_lock:
+        if _gc_holders[0] == 0:
+            _gc_holders[1] = gc.isenabled()
+            gc.disable()
+        _gc_holders[0] += 1
+        gc.callbacks.append(count)
+    try:
+        yield
+    finally:
+        with _gc_lock:
+            gc.callbacks.remove(count)
+            _gc_holders[0] -= 1
+            if _gc_holders[0] == 0 and _gc_holders[1]:
+                gc.enable()
+
+
 class _Loop:
     """What both loops share: the rate, the timed tick, the statistics and the CPU meter."""
 
@@ -173,7 +215,7 @@ class _Loop:
         tick being run cannot know its own compute time yet)."""
         cpu0, wall0 = time.process_time(), time.perf_counter()
         try:
-            with timer_slack(TIMER_SLACK_NS):
+            with timer_slack(TIMER_SLACK_NS), no_collections(self.stats):
                 self._run(tick)
         finally:
             self.stats.cpu_s += time.process_time() - cpu0

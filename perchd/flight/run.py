@@ -16,6 +16,7 @@ from typing import Any, Callable, Protocol
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import ConfigError
+from perchd.core.realtime import below_loop
 from perchd.core.types import EndReason, Phase, State
 from perchd.drivers.base import Driver
 from perchd.flight.config import FlightConfig, TriggerPolicy
@@ -244,6 +245,7 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
     cfg = bind_vehicle(driver, cfg)  # before the log: a refused vehicle never flies
     if planner is None and needs_worker(cfg, clock):
         planner = WorkerPlanner(plan, cfg.trigger.library)  # loads while the vehicle holds
+        below_loop(planner.pid)  # a solve must never hold the loop's CPU (docs/safety.md)
     try:
         return _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world,
                     header, planner)

@@ -30,6 +30,7 @@ from typing import Any
 from perchd.core.errors import LinkError, PerchdError, UriError
 from perchd.core.extras import require
 from perchd.core.netbind import port_error
+from perchd.core.realtime import leave_realtime
 from perchd.logs.flightlog import SCHEMA, LogEvent, LogRow
 from perchd.logs.mcapexport import (
     Message,
@@ -252,6 +253,7 @@ def main(argv: list[str]) -> int:
     or until stdin closes. Ctrl-C reaches the whole process group: the flight's own end
     stops this process, not the signal."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    leave_realtime()
     os.nice(VIEW_NICE)
     host, port, log = argv
     try:

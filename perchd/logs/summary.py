@@ -55,6 +55,7 @@ class LogSummary:
     tau_rows: int
     ticks: int
     rate_hz: float | None
+    sync: str | None
     period: Spread | None
     jitter: Spread | None
     duration_s: float
@@ -72,7 +73,7 @@ def summarize(log: FlightLog) -> LogSummary:
     events = {e.kind: e for e in log.events}
     contact, trigger = events.get("contact"), events.get("stage1")
     plan = log.header.get("plan") or {}
-    rate = (log.header.get("config") or {}).get("rate_hz")
+    config = log.header.get("config") or {}
     tracked = [r for r in log.rows if r.phase in TAU_STAGES and r.tau is not None
                and r.tau_ref is not None]
     ts = [r.t for r in log.rows]
@@ -89,7 +90,8 @@ def summarize(log: FlightLog) -> LogSummary:
         plan_duration=plan.get("duration"),
         tau_rms=_rms(tracked),
         tau_rms_stage1=_rms([r for r in tracked if r.phase == "stage1"]),
-        tau_rows=len(tracked), ticks=len(log.rows), rate_hz=rate,
+        tau_rows=len(tracked), ticks=len(log.rows), rate_hz=config.get("rate_hz"),
+        sync=config.get("sync"),
         period=Spread.of([b - a for a, b in zip(ts, ts[1:])]),
         jitter=Spread.of([r.jitter_s for r in log.rows[1:]]),  # row 0 has no previous tick
         duration_s=ts[-1] - ts[0] if ts else 0.0)
@@ -114,6 +116,8 @@ def summary_text(s: LogSummary) -> str:
                      f"(stage 1 alone {s.tau_rms_stage1 * 1e3:.1f} ms)" if s.tau_rms_stage1 is not None
                      else f"tau tracking RMS: {s.tau_rms * 1e3:.1f} ms over {s.tau_rows} ticks")
     rate = f" at {s.rate_hz:g} Hz" if s.rate_hz else ""
+    if s.sync == "mocap":  # no clock: the period below is the mocap's
+        rate = " on each mocap frame"
     lines.append(f"loop: {s.ticks} ticks{rate} over {s.duration_s:.2f} s; period {_ms(s.period)}")
     lines.append(f"loop jitter: {_ms(s.jitter)}")
     return "\n".join(lines)

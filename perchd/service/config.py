@@ -2,7 +2,8 @@
 
     version = 1
     [service]   vehicle, driver, mocap, body, socket, plan_dir, log_dir,
-                allowed_users, allowed_groups
+                allowed_users, allowed_groups,
+                realtime = { priority, cpu, lock_memory }  (or a [service.realtime] table)
     [flight]    rate_hz, tilt_limit_deg, post_contact, post_contact_s, idle_thrust_n
     [vehicle] [surface] [tau_gains] [lateral.y] [lateral.z] [approach] [trigger] [safety]
     [estimator]  the FlightConfig sections, keys named as its fields
@@ -28,6 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from perchd.core.errors import ConfigError
+from perchd.core.realtime import RealtimeConfig
 from perchd.core.safefile import read_regular
 from perchd.flight.config import FlightConfig
 from perchd.service.control_socket import PeerPolicy
@@ -46,7 +48,9 @@ class ServiceConfig:
     plan_dir: plans in `fly` requests must lie here (relative names resolve here); log_dir:
     flight logs. state_dir: where vehicles.json keeps each vehicle's learned hover thrust
     (flight/vehiclestate.py; empty: log_dir). allowed_users, allowed_groups: names or numeric ids let onto the control
-    socket besides the service's own user and root (checked by SO_PEERCRED)."""
+    socket besides the service's own user and root (checked by SO_PEERCRED). realtime: how
+    the service's process is scheduled (core/realtime.py: SCHED_FIFO priority, CPU pin,
+    locked memory), granted at start-up; refused, the service runs and refuses flights."""
 
     vehicle: str = "cf1"
     driver: str = "sim://"
@@ -58,6 +62,7 @@ class ServiceConfig:
     state_dir: str = ""
     allowed_users: tuple[int | str, ...] = ()
     allowed_groups: tuple[int | str, ...] = ()
+    realtime: RealtimeConfig = RealtimeConfig()
 
     def peer_policy(self, name: str = "perchd.toml") -> "PeerPolicy":
         """The control socket's PeerPolicy; ConfigError naming an unknown user or group."""

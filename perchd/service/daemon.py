@@ -12,6 +12,12 @@ stop), so it exits 0, while SIGINT (Ctrl-C) exits 130 like every command (docs/c
 §6). SIGHUP reloads the config between flights (RELOADING=1 at once, READY=1 when done:
 Type=notify-reload). The control socket is bound here, or taken from systemd's socket
 activation (perchd.service.activation).
+
+With [service] realtime the whole process (the flight thread, the links' threads) runs
+under SCHED_FIFO from start-up (core/realtime.py); refused, one line says what is missing
+and every fly request is refused with it, while the service stays up. The garbage collector
+is off during a flight (flight/loop.py); between flights the service collects and freezes
+what survives (settle_heap).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from perchd.core import realtime
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import ConfigError, PerchdError, PlanError
 from perchd.core.interrupts import exit_code
@@ -166,6 +173,7 @@ class Daemon:
         self.links: Links | None = None
         self.server: ControlServer | None = None
         self.wake_fd = -1  # the self-pipe's write end, open while run() runs
+        self.realtime_refused = ""  # why [service] realtime was not granted
 
     # --- the service loop ---------------------------------------------------------------------
     def run(self) -> int:
@@ -198,11 +206,23 @@ class Daemon:
                                     listening=activated_socket())
         if self.server.activated and str(self.server.path) != svc.socket:
             say(f"control socket {self.server.path} from systemd (not {svc.socket})")
+        self._realtime(svc.realtime)  # before the links start their threads: they inherit it
         self.notifier.status(f"{svc.vehicle}: connecting {svc.mocap_uri()} and {svc.driver}")
         self.links = Links(svc, self.config.flight.surface, self.config.flight.vehicle.mass_kg)
+        realtime.settle_heap()
         self.notifier.ready(f"{svc.vehicle}: idle")
         say(f"ready: vehicle {svc.vehicle}, driver {svc.driver}, mocap {svc.mocap_uri()}, "
             f"socket {self.server.path}" + (" (from systemd)" if self.server.activated else ""))
+
+    def _realtime(self, cfg: realtime.RealtimeConfig) -> None:
+        try:
+            realtime.apply(cfg)
+        except realtime.RealtimeRefused as err:
+            self.realtime_refused = f"[service] realtime refused: {err}"
+            say(f"{self.realtime_refused}; flights are refused until it is granted (restart)")
+            return
+        if cfg.enabled:
+            say(f"scheduling: {cfg.describe()}")
 
     def _wait(self, rfd: int) -> None:
         readable, _, _ = select.select([rfd, *self.server.fds()], [], [], IDLE_POLL_S)
@@ -235,6 +255,7 @@ class Daemon:
         self.last = self.job.result
         say(f"flight ended: {self.last.get('outcome')}; log {self.last.get('log')}")
         self.job = None
+        realtime.settle_heap()  # the collections the flight went without
         self.notifier.status(f"{self.config.service.vehicle}: idle, last flight "
                              f"{self.last.get('outcome')}")
         if self.reload_pending:
@@ -284,11 +305,8 @@ class Daemon:
             new = apply_overrides(load_config(self.config_path), self.overrides)
             check_dirs(new.service)
             peers = new.service.peer_policy()
-            if new.service.socket != self.config.service.socket:
-                say("SIGHUP: [service] socket changes only on restart; keeping "
-                    f"{self.config.service.socket}")
-                new = dataclasses.replace(new, service=dataclasses.replace(
-                    new.service, socket=self.config.service.socket))
+            new = self._restart_only(new, "socket")
+            new = self._restart_only(new, "realtime")
             moved = self.links.simulated and new.flight.surface != self.links.surface
             if moved or (new.service.driver, new.service.mocap_uri()) != (self.links.driver_uri,
                                                                           self.links.mocap_uri):
@@ -303,6 +321,14 @@ class Daemon:
         say(f"SIGHUP: reloaded {self.config_path}")
         return f"{new.service.vehicle}: idle, config reloaded"
 
+    def _restart_only(self, new: Config, key: str) -> Config:
+        """`new` with [service] `key` kept as it is: it changes only on restart."""
+        old = getattr(self.config.service, key)
+        if getattr(new.service, key) == old:
+            return new
+        say(f"SIGHUP: [service] {key} changes only on restart; keeping {old}")
+        return dataclasses.replace(new, service=dataclasses.replace(new.service, **{key: old}))
+
     # --- the control socket (docs/contracts.md §4) -----------------------------------------------------
     def dispatch(self, req: dict[str, Any]) -> dict[str, Any]:
         handler = {"fly": self.cmd_fly, "abort": self.cmd_abort,
@@ -316,6 +342,8 @@ class Daemon:
             return {"ok": False, "error": "the service is stopping"}
         if self.job is not None:
             return {"ok": False, "error": "a flight is in progress; abort it or wait"}
+        if self.realtime_refused:
+            return {"ok": False, "error": self.realtime_refused}
         if not isinstance(req.get("plan"), str) or not req["plan"]:
             return {"ok": False, "error": 'fly needs "plan": a plan file path'}
         try:
@@ -354,7 +382,9 @@ class Daemon:
         out: dict[str, Any] = {"ok": True, "vehicle": svc.vehicle, "state": "flying" if job else "idle",
                                "driver": self.links.driver_uri, "mocap": self.links.mocap_uri,
                                "link_ok": self.links.healthy(), "flights": self.flights,
-                               "config": self.config_path, "last": self.last}
+                               "config": self.config_path, "last": self.last,
+                               "scheduling": self.realtime_refused
+                               or svc.realtime.describe()}
         if job is not None:
             st = job.tick
             out.update(log=str(job.log), plan=str(job.plan_path),

@@ -23,6 +23,7 @@ The load average before and after is printed: figures from a busy machine say so
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -33,7 +34,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from perchd.core.clock import MonotonicClock
 from perchd.core.runtime import Runtime
@@ -43,10 +44,11 @@ from perchd.drivers.zmq import parse_setpoint_message
 from perchd.flight.config import FlightConfig, VehicleConfig
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
-from perchd.flight.loop import NO_SEQ, FixedRateLoop, spread
+from perchd.flight.loop import NO_SEQ, FixedRateLoop, LoopStats, spread
 from perchd.flight.supervisor import Conditions, Supervisor
 from perchd.mocap.base import open_source
 from perchd.mocap.zmq import ZmqPosePublisher
+from perchd.sim.cpuload import cpu_hogs
 from perchd.sim.receiver import bind_setpoint_socket
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 from perchd.tau import plan_ipts, save_plan
@@ -109,34 +111,63 @@ class SyntheticAgent:
         return True
 
 
-def fixed_rate_figures(plan: Plan, seconds: float) -> dict[str, Any]:
-    """The 500 Hz loop on the real clock for `seconds`, ticking the synthetic agent."""
-    agent = SyntheticAgent(plan, LOOP_HZ)
-    loop = FixedRateLoop(MonotonicClock(), LOOP_HZ)
+def fixed_rate_figures(plan: Plan, seconds: float, rate_hz: float = LOOP_HZ) -> dict[str, Any]:
+    """The loop at rate_hz on the real clock for `seconds`, ticking the synthetic agent."""
+    agent = SyntheticAgent(plan, rate_hz)
+    loop = FixedRateLoop(MonotonicClock(), rate_hz)
     starts: list[float] = []
     end = time.monotonic() + seconds
+    steal = StealMeter()
 
     def tick(k: int, t: float) -> bool:
         starts.append(t)
         agent.tick()
         return t < end
     stats = loop.run(tick)
-    period = 1.0 / LOOP_HZ
+    period = 1.0 / rate_hz
     deviation = [abs(b - a - period) for a, b in zip(starts, starts[1:])]
-    return {"rate_hz": LOOP_HZ, "seconds": stats.wall_s, "ticks": len(stats.jitter),
-            "overruns": stats.overruns, "missed": stats.missed,
+    return {"rate_hz": rate_hz, "seconds": stats.wall_s, "ticks": len(stats.jitter),
+            "overruns": stats.overruns, "overruns_per_min": per_minute(stats),
+            "missed": stats.missed, "steal_ms": steal.ms(), "gc_collections": stats.gc_collections,
             "lateness": stats_us(stats.jitter), "period_deviation": stats_us(deviation),
             "agent_compute": stats_us(agent.compute), "tick_compute": stats_us(stats.compute),
             "cpu_fraction": stats.cpu_s / stats.wall_s}
+
+
+def per_minute(stats: LoopStats) -> float:
+    """Overruns per minute of the run."""
+    return 60.0 * stats.overruns / stats.wall_s if stats.wall_s > 0 else 0.0
+
+
+class StealMeter:
+    """[ms] CPU time the hypervisor gave other guests while this machine's vCPUs wanted to run
+    (/proc/stat "steal", summed over CPUs) since it was made: on a VM, a wake-up that comes
+    milliseconds late with no other runnable program is the vCPU descheduled by the host."""
+
+    def __init__(self) -> None:
+        self.start = self.read()
+
+    @staticmethod
+    def read() -> int:
+        try:
+            with open("/proc/stat") as f:
+                return int(f.readline().split()[8])
+        except (OSError, IndexError, ValueError):
+            return 0
+
+    def ms(self) -> float:
+        return (self.read() - self.start) * 1000.0 / os.sysconf("SC_CLK_TCK")
 
 
 def idle_loop_figures(seconds: float) -> dict[str, Any]:
     """The 500 Hz loop with nothing to do: what the machine's scheduler alone costs."""
     loop = FixedRateLoop(MonotonicClock(), LOOP_HZ)
     end = time.monotonic() + seconds
+    steal = StealMeter()
     stats = loop.run(lambda k, t: t < end)
     return {"seconds": stats.wall_s, "ticks": len(stats.jitter), "overruns": stats.overruns,
-            "missed": stats.missed, "lateness": stats_us(stats.jitter)}
+            "overruns_per_min": per_minute(stats), "missed": stats.missed,
+            "steal_ms": steal.ms(), "lateness": stats_us(stats.jitter)}
 
 
 def hot_compute(plan: Plan, ticks: int = 5000) -> dict[str, Any]:
@@ -213,7 +244,7 @@ class Rig:
 
 
 def _agent(plan_file: Path, rig: Rig, sync: str, rate_hz: float, tmp: Path,
-           n: int) -> subprocess.Popen:
+           n: int, realtime: int = 0) -> subprocess.Popen:
     if sync == "echo":
         cmd = [sys.executable, "-m", "perchd.sim.loopbench", "echo", rig.mocap_uri, rig.driver_uri]
         return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
@@ -222,20 +253,22 @@ def _agent(plan_file: Path, rig: Rig, sync: str, rate_hz: float, tmp: Path,
     config.write_text(f'version = 1\n[flight]\nsync = "{sync}"\nrate_hz = {rate_hz}\n')
     cmd = [sys.executable, "-m", "perchd", "fly", str(plan_file), "--driver", rig.driver_uri,
            "--mocap", rig.mocap_uri, "--config", str(config), "--json",
-           "--log", str(tmp / f"{sync}-{n}.jsonl")]
+           "--log", str(tmp / f"{sync}-{n}.jsonl"), *([f"--realtime={realtime}"] * (realtime > 0))]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
 
 
-def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path) -> dict[str, Any]:
-    """Fly perches back to back over ZMQ in one loop mode for `seconds` (at least one)."""
+def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path,
+                     realtime: int = 0) -> dict[str, Any]:
+    """Fly perches back to back over ZMQ in one loop mode for `seconds` (at least one);
+    realtime: the agent's `perchd fly --realtime` priority (0: none)."""
     mocap_hz = 120.0 if sync == "fixed" else RIG_HZ
     rig = Rig(mocap_hz)
     flights: list[Flight] = []
     end = time.monotonic() + seconds
     try:
         while not flights or time.monotonic() < end:
-            agent = _agent(plan_file, rig, sync, RIG_HZ, tmp, len(flights))
+            agent = _agent(plan_file, rig, sync, RIG_HZ, tmp, len(flights), realtime)
             try:
                 flights.append(rig.fly(agent, end))
             finally:
@@ -254,11 +287,15 @@ def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path) -> d
             "agent_compute": _loop_us(loops, "agent"),
             "jitter": _loop_us(loops, "jitter"),
             "overruns": sum(lp["overruns"] for lp in loops),
+            "gc_collections": sum(lp.get("gc_collections", 0) for lp in loops),
             "cpu_fraction": _weighted_cpu(loops)}
 
 
 def echo(mocap_uri: str, driver_uri: str) -> None:
     """Send each pose's seq straight back as a hover setpoint until SIGINT (no agent work)."""
+    # A shell's background job starts with SIGINT ignored, and Python then leaves it so:
+    # the rig's SIGINT would never end the echo.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     rt = Runtime.real()
     source, driver = open_source(mocap_uri, rt), open_driver(driver_uri, rt)
     hover = VehicleConfig().mass_kg * VehicleConfig().g
@@ -294,22 +331,53 @@ def _weighted_cpu(loops: list[dict]) -> float:
     return sum(lp["cpu_fraction"] * lp["wall_s"] for lp in loops) / wall if wall else 0.0
 
 
-def measure(seconds: float) -> dict[str, Any]:
+@contextlib.contextmanager
+def bench_plan() -> Iterator[tuple[Plan, Path, Path]]:
+    """The paper's case-1 IPTS order-3 plan, its file, and a scratch folder for the flights."""
     case = CASES[0]
     plan = plan_ipts(case.x0, case.v0, case.tau_s, case.v_contact, case.v_max, case.a_max, 3)
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         plan_file = tmp / "case1-ipts-n3.json"
         save_plan(plan, plan_file)
+        yield plan, plan_file, tmp
+
+
+def measure(seconds: float, realtime: int = 0) -> dict[str, Any]:
+    with bench_plan() as (plan, plan_file, tmp):
         load = os.getloadavg()[0]
         return {"seconds": seconds, "load_before": load,
                 "agent_compute_hot": hot_compute(plan),
                 "fixed_500hz": fixed_rate_figures(plan, seconds),
-                "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp),
-                "zmq_fixed": zmq_mode_figures(plan_file, "fixed", seconds, tmp),
+                "fixed_100hz": fixed_rate_figures(plan, seconds, 100.0),
+                "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp, realtime),
+                "zmq_fixed": zmq_mode_figures(plan_file, "fixed", seconds, tmp, realtime),
                 "zmq_echo": zmq_mode_figures(plan_file, "echo", min(seconds, 20.0), tmp),
                 "idle_500hz": idle_loop_figures(min(seconds, 20.0)),
                 "load_after": os.getloadavg()[0]}
+
+
+def load_figures(plan: Plan, plan_file: Path, seconds: float, tmp: Path,
+                 realtime: int) -> dict[str, Any]:
+    """What load changes: overruns at 100 and 500 Hz, and the default (mocap-synchronous)
+    loop's pose-to-setpoint latency over ZMQ."""
+    return {"fixed_100hz": fixed_rate_figures(plan, seconds, 100.0),
+            "fixed_500hz": fixed_rate_figures(plan, seconds, LOOP_HZ),
+            "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp, realtime)}
+
+
+def measure_under_load(seconds: float, hogs: int, realtime: int = 0) -> dict[str, Any]:
+    """load_figures without load, then with `hogs` CPU-bound processes beside them."""
+    with bench_plan() as (plan, plan_file, tmp):
+        out: dict[str, Any] = {"seconds": seconds, "hogs": hogs, "realtime": realtime,
+                               "load_before": os.getloadavg()[0]}
+        for name in ("idle", "loaded"):  # each run's flight logs in a folder of its own
+            (tmp / name).mkdir()
+        out["idle"] = load_figures(plan, plan_file, seconds, tmp / "idle", realtime)
+        with cpu_hogs(hogs):
+            out["loaded"] = load_figures(plan, plan_file, seconds, tmp / "loaded", realtime)
+            out["load_during"] = os.getloadavg()[0]
+        return out
 
 
 # ------------------------------------------------------------------ report
@@ -345,17 +413,51 @@ def text(fig: dict[str, Any]) -> str:
     for name, s, target in rows(fig):
         out.append(f"{name:36} {s['min_us']:8.1f} {s['median_us']:8.1f} {s['p99_us']:8.1f} "
                    f"{s['max_us']:8.1f}   {target}")
-    out.append(f"500 Hz loop: {f5['ticks']} ticks in {f5['seconds']:.1f} s, {f5['overruns']} "
-               f"overruns, {f5['missed']} missed deadlines (target 0), "
-               f"CPU {100 * f5['cpu_fraction']:.1f} % of a core")
+    for f in (f5, fig["fixed_100hz"]):
+        out.append(overrun_line(f) + f", CPU {100 * f['cpu_fraction']:.1f} % of a core")
     idle = fig["idle_500hz"]
     out.append(f"500 Hz loop with an empty tick: {idle['ticks']} ticks in {idle['seconds']:.1f} "
-               f"s, {idle['overruns']} overruns (the machine's own wake-up tail)")
+               f"s, {idle['overruns']} overruns ({idle['overruns_per_min']:.1f} per minute; the "
+               f"machine's own wake-up tail; hypervisor steal {idle['steal_ms']:.0f} ms)")
     for z in (zm, zf):
         out.append(f"ZMQ {z['sync']:5} {z['rate_hz']:g} Hz loop, {z['mocap_hz']:g} Hz mocap: "
                    f"{z['flights']} flight(s) {', '.join(map(str, z['outcomes']))}; "
                    f"{z['setpoints_matched']} poses matched; {z['overruns']} overruns; agent "
                    f"CPU {100 * z['cpu_fraction']:.1f} % of a core (target <= 10 %)")
+    return "\n".join(out)
+
+
+def overrun_line(f: dict[str, Any]) -> str:
+    return (f"{f['rate_hz']:g} Hz loop: {f['ticks']} ticks in {f['seconds']:.1f} s, "
+            f"{f['overruns']} overruns ({f['overruns_per_min']:.1f} per minute, target 0), "
+            f"{f['missed']} missed deadlines, hypervisor steal {f['steal_ms']:.0f} ms, "
+            f"{f['gc_collections']} garbage collections")
+
+
+def load_text(fig: dict[str, Any]) -> str:
+    """Each figure without load beside the same figure with the hogs running."""
+    rt = f"SCHED_FIFO {fig['realtime']} (bench and agent)" if fig["realtime"] else "none"
+    idle, busy = fig["idle"], fig["loaded"]
+    out = [f"{fig['hogs']} CPU-bound processes beside the loaded run; {os.cpu_count()} cores; "
+           f"load average {fig['load_before']:.2f} before, {fig['load_during']:.2f} loaded; "
+           f"--realtime: {rt}",
+           f"{'figure':44} {'no load':>16} {'loaded':>16}"]
+
+    def row(name: str, get) -> None:
+        out.append(f"{name:44} {get(idle):>16} {get(busy):>16}")
+    for key in ("fixed_100hz", "fixed_500hz"):
+        hz = idle[key]["rate_hz"]
+        row(f"{hz:g} Hz loop: overruns (per minute)",
+            lambda f, k=key: f"{f[k]['overruns']} ({f[k]['overruns_per_min']:.1f})")
+        row(f"{hz:g} Hz loop: lateness p50 / p99 [us]",
+            lambda f, k=key: f"{f[k]['lateness']['median_us']:.0f} / "
+                             f"{f[k]['lateness']['p99_us']:.0f}")
+    for name, key in (("in agent", "latency_agent"), ("sockets", "latency_sockets")):
+        row(f"pose->setpoint, mocap-sync, {name} p50 / p99 [us]",
+            lambda f, k=key: f"{f['zmq_mocap'][k]['median_us']:.0f} / "
+                             f"{f['zmq_mocap'][k]['p99_us']:.0f}")
+    row("ZMQ flights: agent overruns / poses matched",
+        lambda f: f"{f['zmq_mocap']['overruns']} / {f['zmq_mocap']['setpoints_matched']}")
     return "\n".join(out)
 
 

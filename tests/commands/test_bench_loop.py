@@ -28,15 +28,19 @@ def test_a_short_json_run_has_every_figure_and_they_come_from_real_runs():
     assert out.returncode == 0, out.stderr
     fig = json.loads(out.stdout)
     assert set(fig) == {"seconds", "load_before", "agent_compute_hot", "fixed_500hz",
-                        "zmq_mocap", "zmq_fixed", "zmq_echo", "idle_500hz", "load_after"}
+                        "fixed_100hz", "zmq_mocap", "zmq_fixed", "zmq_echo", "idle_500hz",
+                        "load_after"}
     assert fig["seconds"] == 0.4
 
-    f5 = fig["fixed_500hz"]
-    for key in ("lateness", "period_deviation", "agent_compute", "tick_compute"):
-        assert_spread(f5[key])
-    # every deadline in the run was either ticked or counted as missed
-    assert f5["ticks"] + f5["missed"] == pytest.approx(500 * f5["seconds"], abs=3)
-    assert 0 <= f5["overruns"] <= f5["ticks"] and 0.0 < f5["cpu_fraction"] <= 2.0
+    for key, hz in (("fixed_500hz", 500), ("fixed_100hz", 100)):
+        f = fig[key]
+        for name in ("lateness", "period_deviation", "agent_compute", "tick_compute"):
+            assert_spread(f[name])
+        # every deadline in the run was either ticked or counted as missed
+        assert f["ticks"] + f["missed"] == pytest.approx(hz * f["seconds"], abs=3)
+        assert 0 <= f["overruns"] <= f["ticks"] and 0.0 < f["cpu_fraction"] <= 2.0
+        assert f["overruns_per_min"] == pytest.approx(60 * f["overruns"] / f["seconds"])
+        assert f["gc_collections"] == 0 and f["steal_ms"] >= 0.0
 
     hot = fig["agent_compute_hot"]
     assert hot["ticks"] == 5000
@@ -75,14 +79,21 @@ def test_the_text_report_names_each_figure_and_its_target():
     fig = {"load_before": 0.1, "load_after": 0.2, "agent_compute_hot": {"ticks": 5, **s},
            "fixed_500hz": {"lateness": s, "period_deviation": s, "agent_compute": s,
                            "ticks": 2500, "seconds": 5.0, "overruns": 0, "missed": 0,
-                           "cpu_fraction": 0.04},
+                           "cpu_fraction": 0.04, "rate_hz": 500.0, "overruns_per_min": 0.0,
+                           "steal_ms": 0.0, "gc_collections": 0},
+           "fixed_100hz": {"lateness": s, "period_deviation": s, "agent_compute": s,
+                           "ticks": 500, "seconds": 5.0, "overruns": 1, "missed": 1,
+                           "cpu_fraction": 0.01, "rate_hz": 100.0, "overruns_per_min": 12.0,
+                           "steal_ms": 30.0, "gc_collections": 0},
            "zmq_mocap": z, "zmq_fixed": {**z, "sync": "fixed", "mocap_hz": 120.0},
            "zmq_echo": {**z, "sync": "echo"},
-           "idle_500hz": {"lateness": s, "ticks": 2500, "seconds": 5.0, "overruns": 0}}
+           "idle_500hz": {"lateness": s, "ticks": 2500, "seconds": 5.0, "overruns": 0,
+                          "overruns_per_min": 0.0, "steal_ms": 10.0}}
     report = text(fig)
     for name, _, target in rows(fig):
         assert f"{name}" in report and target in report
-    assert "2500 ticks in 5.0 s, 0 overruns, 0 missed" in report
+    assert "500 Hz loop: 2500 ticks in 5.0 s, 0 overruns (0.0 per minute, target 0)" in report
+    assert "100 Hz loop: 500 ticks in 5.0 s, 1 overruns (12.0 per minute, target 0)" in report
     assert "agent CPU 5.0 % of a core" in report
 
 

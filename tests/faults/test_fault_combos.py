@@ -8,7 +8,7 @@ import math
 
 import pytest
 from aborts import assert_failsafe_and_closed_log, safety
-from faultsim import PERIOD, TICK, fly, report
+from faultsim import FIXED, PERIOD, TICK, fly, report
 from simflight import NOISY, Sim, case1
 
 from perchd.core.types import EndReason, Phase
@@ -92,7 +92,7 @@ def test_a_signal_and_stale_mocap_on_the_same_tick_end_as_signal(tmp_path):
     def on_tick(st):  # the signal lands just before the tick on which mocap turns stale
         if st.t >= 3.02 - 1e-9:
             abort.request(EndReason.SIGNAL)
-    res = sim.fly(case1("ipts"), tmp_path / "f.jsonl", abort=abort, on_tick=on_tick)
+    res = sim.fly(case1("ipts"), tmp_path / "f.jsonl", FIXED, abort=abort, on_tick=on_tick)
     assert_failsafe_and_closed_log(sim, res, EndReason.SIGNAL)
     assert read_log(res.log).rows[-1].t == pytest.approx(3.03)  # stale from this tick too
 

@@ -43,7 +43,7 @@ STALE = {
 
 
 LOOPS = {
-    "fixed 100 Hz": (FlightConfig(), TICK),
+    "fixed 100 Hz": (FlightConfig(sync=LoopSync.FIXED), TICK),
     "mocap-sync 120 Hz": (FlightConfig(sync=LoopSync.MOCAP, rate_hz=120.0), 1.5 * PERIOD),
 }
 """The two loops (FlightConfig.sync) and the longest gap between their ticks [s]: the fixed

@@ -97,7 +97,7 @@ def test_a_mocap_synchronous_perch_ticks_once_per_pose_and_reaches_contact(tmp_p
 
 
 def test_in_fixed_rate_mode_a_pose_waits_less_than_one_period(tmp_path):
-    res = Sim().fly(case1("ipts"), tmp_path / "f.jsonl")
+    res = Sim().fly(case1("ipts"), tmp_path / "f.jsonl", FlightConfig(sync=LoopSync.FIXED))
     assert res.loop.sync == "fixed"
     assert 0.0 < res.loop.latency_median_s < res.loop.latency_max_s < 1 / 100
 
@@ -114,7 +114,9 @@ def test_mocap_silent_mid_flight_ends_stale_with_the_failsafe(tmp_path):
 def test_the_config_file_selects_the_mode_and_refuses_others():
     doc = {"version": 1, "flight": {"sync": "mocap", "rate_hz": 120.0}}
     assert config_from_dict(doc).flight.sync is LoopSync.MOCAP
-    assert config_from_dict({"version": 1}).flight.sync is LoopSync.FIXED
+    assert config_from_dict({"version": 1}).flight.sync is LoopSync.MOCAP  # the default
+    fixed = config_from_dict({"version": 1, "flight": {"sync": "fixed"}})
+    assert fixed.flight.sync is LoopSync.FIXED
     with pytest.raises(ConfigError, match=r"\[flight\] sync: expected 'fixed' or 'mocap'"):
         config_from_dict({"version": 1, "flight": {"sync": "free"}})
 
@@ -123,7 +125,6 @@ def test_over_real_zmq_sockets_each_published_pose_releases_one_setpoint():
     """Publisher -> zmq:// source -> MocapSyncLoop -> zmq driver -> subscriber: the setpoints'
     pose_seq are exactly the poses published, each once."""
     from perchd.drivers.zmq import ZmqSetpointDriver
-
     from perchd.mocap.zmq import ZmqPosePublisher
 
     rt = Runtime(MonotonicClock())
@@ -180,3 +181,22 @@ def test_over_real_zmq_sockets_each_published_pose_releases_one_setpoint():
         listening.clear()
         receiver.join()
         sub.close()
+
+
+def test_by_default_the_loop_is_mocap_synchronous_and_a_dropout_keeps_setpoints_flowing(tmp_path):
+    """The default loop ticks on each frame; when the frames stop it still ticks every 1.5
+    periods, so a driver never goes quiet long enough for its own keep-alive (100 ms on the
+    Crazyflie keeper and MAVLink) to stand in, and stale mocap ends the flight on time."""
+    from perchd.drivers import cflink, mavlink
+
+    sim = Sim()
+    sim.world.faults.mocap_outages.append((2.0, 9.0))
+    res = sim.fly(case1("ipts"), tmp_path / "f.jsonl")  # FlightConfig()
+    assert res.loop.sync == "mocap" and res.outcome is EndReason.STALE_MOCAP
+    rows = read_log(res.log).rows
+    last_pose = rows[-1].t - rows[-1].age + 0.004  # the newest frame's arrival (4 ms latency)
+    assert 3 / 120 < rows[-1].t - last_pose <= 3 / 120 + 1.5 / 100 + 1e-9
+    times = [r.t for r in rows]
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    assert max(gaps) <= 1.5 / 100 + 1e-9 < min(cflink.KEEPALIVE_S, mavlink.KEEPALIVE_S)
+    assert len(sim.world.sent) >= len(rows) - 1  # every tick but the failsafe one sent

@@ -7,7 +7,7 @@ import pytest
 from simflight import NOISY, PLANS, Sim, case1
 
 from perchd.core.types import EndReason
-from perchd.flight.config import FlightConfig, TauGains
+from perchd.flight.config import FlightConfig, LoopSync, TauGains
 from perchd.logs.flightlog import read_log
 
 LINKS = {"nominal": "sim://", "latency+noise": NOISY, "latency+noise seed 1": NOISY + "&seed=1"}
@@ -96,7 +96,7 @@ def test_after_contact_the_motors_are_cut_or_idled_as_configured(action, thrust,
     from perchd.core.types import Phase
     from perchd.flight.config import PostContact
     sim = Sim()
-    cfg = FlightConfig(post_contact=PostContact(action))
+    cfg = FlightConfig(post_contact=PostContact(action), sync=LoopSync.FIXED)  # counts ticks
     res = sim.fly(case1("ctdts"), tmp_path / "f.jsonl", cfg)
     after = [sp for sp in sim.world.sent if sp.phase is Phase.CONTACT]
     assert res.outcome is EndReason.CONTACT and not res.failsafe_sent
@@ -108,7 +108,8 @@ def test_after_contact_the_motors_are_cut_or_idled_as_configured(action, thrust,
 @pytest.mark.parametrize("rate_hz", [50.0, 500.0])
 def test_the_loop_perches_as_well_at_50_and_500_hz(rate_hz, tmp_path):
     plan = case1("ipts")
-    res = Sim(NOISY).fly(plan, tmp_path / "f.jsonl", FlightConfig(rate_hz=rate_hz))
+    res = Sim(NOISY).fly(plan, tmp_path / "f.jsonl",
+                         FlightConfig(rate_hz=rate_hz, sync=LoopSync.FIXED))
     assert res.outcome is EndReason.CONTACT
     assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.05)
     assert res.loop.ticks == pytest.approx(rate_hz * read_log(res.log).rows[-1].t, rel=0.01)

@@ -18,13 +18,16 @@ from typing import Any
 from simflight import Sim, case1
 
 from perchd.core.types import Pose
-from perchd.flight.config import FlightConfig
+from perchd.flight.config import FlightConfig, LoopSync
 from perchd.logs.flightlog import FlightLog, read_log
 
 PERIOD = 1.0 / 120.0
 """[s] the simulated mocap's frame period (120 Hz)."""
 TICK = 0.01
 """[s] the control loop's period (100 Hz)."""
+FIXED = FlightConfig(sync=LoopSync.FIXED)
+"""The fault suites time their rules against the fixed 100 Hz tick (TICK); a test about the
+mocap-synchronous loop (the default) says so."""
 
 TABLE: list[dict[str, Any]] = []
 INJECTED: list[str] = []
@@ -71,7 +74,7 @@ class Flown:
         return self.end_t - self.arrivals.claimed[self.log.rows[-1].pose_seq]
 
 
-def fly(tmp_path: Path, *faults: Any, cfg: FlightConfig = FlightConfig(), uri: str = "sim://",
+def fly(tmp_path: Path, *faults: Any, cfg: FlightConfig = FIXED, uri: str = "sim://",
         setup=None, on_tick=None, strategy: str = "ipts", name: str = "f") -> Flown:
     sim = Sim(uri)
     arrivals = Arrivals()

@@ -93,11 +93,14 @@ class Serve:
     `listen`, started as systemd's socket activation starts it: that socket at fd 3."""
 
     def __init__(self, tmp: Path, notify: NotifyListener, *extra: str, tables: str = "",
-                 listen: socket.socket | None = None, **service: str) -> None:
+                 listen: socket.socket | None = None, prefix: tuple[str, ...] = (),
+                 **service: str) -> None:
+        """prefix: a command the service runs under (prlimit, setpriv)."""
         self.config = write_config(tmp, tables, **service)
         self.sock = tmp / "control.sock"
         env = {**os.environ, "NOTIFY_SOCKET": notify.address, "WATCHDOG_USEC": "2000000"}
-        cmd = [sys.executable, "-m", "perchd", "serve", "--config", str(self.config), *extra]
+        cmd = [*prefix, sys.executable, "-m", "perchd", "serve", "--config", str(self.config),
+               *extra]
         fds: tuple[int, ...] = ()
         if listen is not None:
             fds = (listen.fileno(),)

@@ -145,7 +145,11 @@ def test_a_stalled_control_loop_stops_the_watchdog_and_a_resumed_one_pings_again
 @pytest.mark.slow
 def test_sigterm_while_the_loop_is_stalled_ends_the_flight_once_it_resumes(tmp_path, notify):
     at, length = STALL
-    serve = Serve(tmp_path, notify, "--driver", f"sim://?stall={at},{length}", "--mocap", "sim://")
+    # The fixed-rate loop: the stalled link holds a tick, which then ends the flight. (The
+    # default mocap-synchronous loop is held waiting for the stalled world's next frame, and
+    # its first tick after the stall ends it.)
+    serve = Serve(tmp_path, notify, "--driver", f"sim://?stall={at},{length}", "--mocap", "sim://",
+                  tables='[flight]\nsync = "fixed"\n')
     try:
         notify.wait_for("READY=1")
         started = ctl(serve.sock, "fly", str(PLAN))
