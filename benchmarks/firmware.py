@@ -37,6 +37,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "helpers"))  # the firmware tests' harness helpers
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+INSTANCE = os.environ.get("PERCHD_FW_INSTANCE")
+"""The SITL instance (ports moved by N) as the firmware tests take it, for a machine shared
+with other runs; None: the harness's default (0)."""
 STALE = """[safety]
 stale_timeout_s = 0.25
 """
@@ -85,9 +88,10 @@ def driver_uri(ready: str) -> str:
 def start_harness(fw: Firmware, binary: str, noise: float, tmp: Path):
     """`perchd sim firmware`: its process, mocap URI, driver URI and surface options."""
     from fwharness import start_placed
+    instance = ("--instance", INSTANCE) if INSTANCE and fw.name != "cf2" else ()
     proc, mocap, driver, surface = start_placed(
-        fw.flag, binary, *fw.extra, "--noise", str(noise), "--fw-log", str(tmp / "fw.log"),
-        env=ENV)
+        fw.flag, binary, *fw.extra, *instance, "--noise", str(noise), "--fw-log",
+        str(tmp / "fw.log"), env=ENV)
     return proc, mocap, driver_uri(driver), surface
 
 

@@ -745,8 +745,21 @@ class Supervisor:
         self._t_refit = t
         model = self.lagid.fit().model
         if model is not None:
+            ff = FeedForward(model.lag_s, model.drag_per_s, model.bias_mps2)
+            self._hand_over_integral(st, ff)
             self.response = model
-            self.ff = FeedForward(model.lag_s, model.drag_per_s, model.bias_mps2)
+            self.ff = ff
+
+    def _hand_over_integral(self, st: State, ff: FeedForward) -> None:
+        """What a new feed-forward adds (the drag), the approach's integral, which was
+        taking it up, gives back: the command does not step and nothing counts twice."""
+        a = self.cfg.approach
+        if a.ki_v <= 0.0:
+            return
+        v_ref = self._v_ref(st.x)
+        step = ff.accel(self._a_app, v_ref) - self.ff.accel(self._a_app, v_ref)
+        bound = a.i_limit_mps2 / a.ki_v
+        self._v_int = min(max(self._v_int - step / a.ki_v, -bound), bound)
 
     def _identify(self, t: float) -> None:
         """Fit the lag and drag of the hold and approach just flown (flight/lagid.py) and

@@ -189,7 +189,8 @@ def test_the_agent_perches_on_px4_sih(tmp_path, flight):
         "yaw_error_deg": math.degrees(heading_error(
             watch.between(*flight_window(tmp_path / "flight.jsonl")), heading)),
         "yaw_error_whole_run_deg": math.degrees(heading_error(sim["yaw_range_rad"], heading)),
-        "lag": lag_event(tmp_path / "flight.jsonl"), "modes": sim["modes"]}
+        "lag": lag_event(tmp_path / "flight.jsonl"), "modes": sim["modes"],
+        "heading_estimate_error_deg": sim["heading_estimate_error_deg"]}
     report(figures)
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None

@@ -61,3 +61,23 @@ def test_a_refused_fit_flies_the_configured_lead_and_says_why(tmp_path):
     assert "bound 0.04 s" in ev.detail
     assert "flying the configured lead 0.1 s and no drag term" in ev.detail
     assert res.outcome is EndReason.CONTACT
+
+
+def largest_approach_step(log) -> float:
+    """[m/s^2] the largest tick-to-tick change of the approach's acceleration command."""
+    ux = [r.ux for r in read_log(log).rows if r.phase == "approach"]
+    return max(abs(b - a) for a, b in zip(ux, ux[1:]))
+
+
+def test_a_refit_hands_its_drag_over_from_the_integral_without_a_step(tmp_path):
+    """While the approach has no model its speed integral takes up the drag; the refit
+    that adds drag * v to the feed-forward takes as much back from the integral, so the
+    command does not jump (and the speed does not overshoot into the trigger)."""
+    plan = case1("ipts")
+    res = Sim("sim://?drag=1.0").fly(plan, tmp_path / "f.jsonl")
+    assert res.outcome is EndReason.CONTACT
+    fixed = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(refit_s=1e9))  # no refits
+    Sim("sim://?drag=1.0").fly(plan, tmp_path / "once.jsonl", fixed)
+    assert largest_approach_step(tmp_path / "f.jsonl") < 0.2
+    assert largest_approach_step(tmp_path / "f.jsonl") <= \
+        largest_approach_step(tmp_path / "once.jsonl") + 0.05

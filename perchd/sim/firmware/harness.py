@@ -172,24 +172,33 @@ class TruthPublisher:
         self.poses = 0
         self.yaw_range: tuple[float, float] | None = None  # [rad] of the true poses published
         self._rng = random.Random(params.seed)
+        self._sent_t: float | None = None  # [s] stamp of the last truth published
 
     def pose(self, truth: Truth) -> Pose:
         n = self.params.noise_m
         p = truth.p if n <= 0 else tuple(c + self._rng.gauss(0.0, n) for c in truth.p)
         return Pose(self.params.body, self.poses + 1, truth.t, p, truth.q)  # type: ignore[arg-type]
 
+    def step(self) -> None:
+        """Publish the vehicle's newest truth, unless it was published already: the same
+        sample again is no news to a tracker, and a later stamp on it would be a speed the
+        vehicle never had."""
+        truth = self.vehicle.truth()
+        if truth is None or truth.t == self._sent_t:
+            return
+        self._sent_t = truth.t
+        self.output.publish(self.pose(truth))
+        self.poses += 1
+        yaw = yaw_of(truth.q)
+        lo, hi = self.yaw_range or (yaw, yaw)
+        self.yaw_range = (min(lo, yaw), max(hi, yaw))
+
     def run(self, done: threading.Event, until: float | None = None) -> None:
         """Until `done` is set or the clock reaches `until` [s]."""
         period = 1.0 / self.params.rate_hz
         due = self.clock.now()
         while not done.is_set():
-            truth = self.vehicle.truth()
-            if truth is not None:
-                self.output.publish(self.pose(truth))
-                self.poses += 1
-                yaw = yaw_of(truth.q)
-                lo, hi = self.yaw_range or (yaw, yaw)
-                self.yaw_range = (min(lo, yaw), max(hi, yaw))
+            self.step()
             due += period
             now = self.clock.now()
             if until is not None and now >= until:

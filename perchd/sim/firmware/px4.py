@@ -58,6 +58,14 @@ VISION_PARAMS = {"EKF2_EV_CTRL": "11", "EKF2_HGT_REF": "3", "EKF2_GPS_CTRL": "0"
 GPS off (drivers/mavparams.py checks the first two); the noise floors down to the mocap's
 (drivers/mavvision.py: EKF2 takes the larger of its floor, 0.1 m and 0.1 rad by default,
 and the covariance sent)."""
+REFINE_GAIN = 0.05
+"""Share of the gap to the quantised fix a refined truth position takes up per sample: ~20
+samples (0.2 s at 100 Hz) average out the steps of HIL_STATE_QUATERNION's lat/lon."""
+REFINE_MAX_DT_S = 0.02
+"""[s] longest interval the truth velocity is integrated over: longer gaps are px4 held up
+(lockstep: its vehicle froze with it), not flight."""
+RESEND_AFTER_S = 0.025
+"""[s] a truth sample older than this is sent again stamped now (Px4Vehicle.truth)."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
 BOOT_TIMEOUT_S, TAKEOFF_TIMEOUT_S = 30.0, 40.0
 
@@ -108,6 +116,28 @@ def truth_from_hil(msg: Any, t: float, origin: tuple[float, float, float]) -> Tr
     return Truth(t, p, v, enu_quat(tuple(msg.attitude_quaternion)), w)
 
 
+class PositionRefiner:
+    """SIH's truth position at mocap resolution. HIL_STATE_QUATERNION gives lat/lon in
+    1e-7 deg: steps of 1.1 cm north and ~0.75 cm east, i.e. +-1 m/s between two samples
+    10 ms apart, which perchd's estimator (trusting millimetre mocap) turns into +-0.1 m/s of
+    speed noise. Its truth velocity (1 cm/s steps) is integrated between samples and pulled
+    towards the fix by REFINE_GAIN per sample (docs/firmware.md, "PX4 SIH")."""
+
+    def __init__(self, gain: float = REFINE_GAIN, max_dt_s: float = REFINE_MAX_DT_S) -> None:
+        self.gain, self.max_dt_s = gain, max_dt_s
+        self._last: Truth | None = None
+
+    def update(self, truth: Truth) -> Truth:
+        last = self._last
+        if last is not None:
+            dt = min(max(0.0, truth.t - last.t), self.max_dt_s)
+            pred = [last.p[i] + dt * 0.5 * (last.v[i] + truth.v[i]) for i in range(3)]
+            p = tuple(pred[i] + self.gain * (truth.p[i] - pred[i]) for i in range(3))
+            truth = replace(truth, p=p)
+        self._last = truth
+        return truth
+
+
 def surface_ahead(p: Vec3, yaw: float, distance_m: float) -> Surface:
     """A wall `distance_m` ahead of p along the horizontal heading yaw [rad, ENU]."""
     n = (math.cos(yaw), math.sin(yaw), 0.0)
@@ -136,6 +166,7 @@ class Px4Vehicle(FirmwareVehicle):
         self.start_heading: float | None = None  # [rad] ENU yaw when ready
         self._conn: Any = None
         self._truth: Truth | None = None
+        self._refiner = PositionRefiner()
         self._origin: tuple[float, float, float] | None = None
         self._mode: tuple[int, int] | None = None
         self._armed = False
@@ -143,6 +174,8 @@ class Px4Vehicle(FirmwareVehicle):
         self._modes_seen: list[str] = []
         self._samples = 0
         self._truth_acked = False  # PX4 took the 100 Hz truth rate (25 Hz before)
+        self._heading_errors: list[tuple[float, float]] = []  # (t [s], EKF - true [rad])
+        self._ready_t: float | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._proc: Any = None
@@ -163,16 +196,21 @@ class Px4Vehicle(FirmwareVehicle):
         if self.params.takeoff:
             self._take_off(cancel)
         truth = self._truth
+        self._ready_t = truth.t
         self.start_heading = yaw_of(truth.q)
         if self.params.surface_ahead_m is not None:
             self.surface = surface_ahead(truth.p, self.start_heading, self.params.surface_ahead_m)
 
     def truth(self) -> Truth | None:
-        """The newest sample, stamped now: SIH runs in lockstep, so while px4 is held up
+        """The newest sample, stamped when it arrived (the publisher sends each once: a
+        publish time would put its own jitter into the speed perchd measures). One older
+        than RESEND_AFTER_S is stamped now: SIH runs in lockstep, so while px4 is held up
         (a loaded machine) its vehicle is frozen too and the last sample is still its state;
-        the receipt time would age it into perchd's stale-mocap rule for nothing."""
-        truth = self._truth
-        return None if truth is None else replace(truth, t=self.clock.now())
+        its age would run into perchd's stale-mocap rule for nothing."""
+        truth, now = self._truth, self.clock.now()
+        if truth is None or now - truth.t <= RESEND_AFTER_S:
+            return truth
+        return replace(truth, t=now)
 
     def driver_uri(self) -> str:
         port = OFFBOARD_PORT + self.params.instance
@@ -190,8 +228,14 @@ class Px4Vehicle(FirmwareVehicle):
         return {"firmware": "px4", "instance": self.params.instance, "log": str(self.log),
                 "workdir": str(self.workdir), "truth_samples": self._samples,
                 "start_heading_rad": self.start_heading, "modes": self._modes_seen,
+                "heading_estimate_error_deg": self._heading_span_deg(),
                 "surface": None if s is None else {"point": list(s.point), "normal": list(s.normal)},
                 "contact": contact_json(self._contact, 0.0)}
+
+    def _heading_span_deg(self) -> list[float] | None:
+        """[deg] PX4's heading estimate - true heading, smallest and largest since ready."""
+        span = self.heading_error_span(self._ready_t) if self._ready_t is not None else None
+        return None if span is None else [round(math.degrees(e), 2) for e in span]
 
     def close(self) -> None:
         self._stop.set()
@@ -220,6 +264,7 @@ class Px4Vehicle(FirmwareVehicle):
         if self._conn.clients:
             self._command(511, 115, 10000)
             self._command(511, 93, -1)
+            self._command(511, 30, 100000)  # ATTITUDE at 10 Hz: its heading estimate
 
     def _take_off(self, cancel: threading.Event) -> None:
         """NAV_TAKEOFF then ARM (PX4's own take-off to MIS_TAKEOFF_ALT); ready once PX4
@@ -269,6 +314,8 @@ class Px4Vehicle(FirmwareVehicle):
             kind = msg.get_type()
             if kind == "HIL_STATE_QUATERNION":
                 self._on_truth(msg)
+            elif kind == "ATTITUDE" and self._truth is not None:
+                self._on_attitude(msg)
             elif kind == "COMMAND_ACK" and msg.command == 511 and msg.result == 0:
                 self._truth_acked = True
             elif kind == "HEARTBEAT" and msg.get_srcSystem() == self.params.instance + 1 \
@@ -278,12 +325,24 @@ class Px4Vehicle(FirmwareVehicle):
     def _on_truth(self, msg: Any) -> None:
         if self._origin is None:  # on the ground at boot: that is the world origin
             self._origin = (msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3)
-        truth = truth_from_hil(msg, self.clock.now(), self._origin)
+        truth = self._refiner.update(truth_from_hil(msg, self.clock.now(), self._origin))
         previous, self._truth = self._truth, truth
         self._samples += 1
         if self._contact is None and self.surface is not None and previous is not None:
             if self.surface.gap(previous.p) < 0 <= self.surface.gap(truth.p):
                 self._contact = Contact(truth.t, self.surface.speed(truth.v), truth.p)
+
+    def _on_attitude(self, msg: Any) -> None:
+        """PX4's heading estimate against the truth: SIH's EKF2 heading wanders ~10 deg
+        during a flight, and PX4 steers it (docs/firmware.md, "PX4 SIH")."""
+        true_ned = math.pi / 2 - yaw_of(self._truth.q)  # ENU yaw -> NED heading
+        error = math.remainder(msg.yaw - true_ned, math.tau)
+        self._heading_errors = [*self._heading_errors[-600:], (self._truth.t, error)]
+
+    def heading_error_span(self, since: float) -> tuple[float, float] | None:
+        """[rad] smallest and largest PX4 heading estimate - true heading since `since` [s]."""
+        errors = [e for t, e in self._heading_errors if t >= since]
+        return (min(errors), max(errors)) if errors else None
 
     def _on_heartbeat(self, msg: Any) -> None:
         self._armed = bool(msg.base_mode & 128)
