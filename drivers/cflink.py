@@ -13,7 +13,8 @@ Wire (a SOCK_SEQPACKET pair, one message per packet, little-endian):
                     thrust units, hold units (the thrust whose vertical part the last
                     command had, i.e. the level thrust that holds height);
                     b"P" <7f> extpose (x, y, z, qx, qy, qz, qw); b"A" alive; b"X" stop;
-                    b"C" close (the keeper exits).
+                    b"U" leave the stop (the next flight's take-over; ignored once the
+                    agent is gone); b"C" close (the keeper exits).
   keeper -> driver: b"R" link open; b"E" message: cflib could not open it; b"H" <dd> seconds since the vehicle was last heard
                     (-1: never), echo round trip median (-1: none), then a UTF-8 link error
                     ("" while the link is fine).
@@ -173,6 +174,8 @@ class Keeper:
             self.loc.send_extpose(list(vals[:3]), list(vals[3:]))
         elif kind == b"X":
             self.stop()
+        elif kind == b"U" and not self.agent_gone:
+            self.stop_until = None
         elif kind == b"C":
             if self.stop_until is None:
                 self.stop()

@@ -41,12 +41,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import perchd
 from perchd.drivers import cflink
-from perchd.drivers.base import DriverBase, agreed_mass
+from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.drivers.ticker import Ticker
 
+import perchd
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.runtime import Runtime
@@ -167,6 +167,17 @@ class CrazyflieDriver(DriverBase):
         with self._wire:
             if not self._stopped:  # a failsafe from another thread may have come between
                 self._send(b"S" + cflink.CMD.pack(roll, pitch, yawrate, units, hold))
+
+    def engage(self, poses: PoseFeed = no_poses) -> None:
+        """A flight after a failsafe on the same link (perchd serve): the keeper leaves its
+        stop and the thrust lock is opened again with a zero-thrust setpoint, as at connect.
+        Without a failsafe before, connect was the take-over: nothing to do."""
+        if not self._stopped or self._sock is None:
+            return
+        with self._wire:
+            self._send(b"U")
+            self._send(b"S" + cflink.CMD.pack(0.0, 0.0, 0.0, 0, 0))
+            self._stopped = False
 
     def failsafe(self, reason: EndReason) -> None:
         self.failsafe_reasons.append(reason)

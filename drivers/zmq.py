@@ -16,6 +16,7 @@ import time
 from typing import Any
 
 import zmq
+from perchd.drivers.base import DriverBase, PoseFeed, no_poses
 
 from perchd.core.errors import LinkError, UriError
 from perchd.core.netbind import check_bind, port_error
@@ -23,7 +24,6 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param
-from perchd.drivers.base import DriverBase
 
 SETPOINT, STOP = b"setpoint", b"stop"
 
@@ -121,6 +121,11 @@ class ZmqSetpointDriver(DriverBase):
         body = setpoint_message(self.vehicle, self._seq, setpoint)
         self._seq += 1
         self._publish(SETPOINT, body)
+
+    def engage(self, poses: PoseFeed = no_poses) -> None:
+        """A flight after a failsafe on the same link (perchd serve) streams again; the last
+        flight's `stop` was its end."""
+        self._stopped = False
 
     def failsafe(self, reason: EndReason) -> None:
         self.failsafe_reasons.append(reason)

@@ -21,6 +21,7 @@ from perchd.drivers.thrust import CrazyflieThrust
 from ticks import level
 
 from perchd.core.runtime import Runtime
+from perchd.core.types import EndReason
 
 pytest.importorskip("cflib")
 
@@ -128,3 +129,20 @@ def test_the_keeper_outlives_signals_sent_to_the_whole_group(responder, sig):
         os.kill(cf._keeper.pid, sig)
         time.sleep(0.1)
         assert cf.health().ok
+
+
+def test_a_flight_after_a_failsafe_on_the_same_link_is_flown_again(responder):
+    """perchd serve keeps the link across flights: the stop latches until the next flight's
+    engage, which unlocks the thrust with a zero setpoint before anything else."""
+    with open_driver(responder.uri, Runtime.real()) as cf:
+        cf.failsafe(EndReason.GEOFENCE)
+        assert responder.wait_for(lambda: responder.stops())
+        cf.send(level(HOVER_N))  # the ended flight's late tick: never flown
+        time.sleep(0.3)
+        assert not [s for s in responder.setpoints() if s.t > responder.stops()[0].t]
+        cf.engage()
+        cf.send(level(HOVER_N))
+        assert responder.wait_for(lambda: [s for s in responder.setpoints()
+                                           if s.t > responder.stops()[-1].t and s.thrust > 0])
+        after = [s.thrust for s in responder.setpoints() if s.t > responder.stops()[-1].t]
+    assert after[0] == 0 and max(after) > 0  # the zero-thrust unlock first

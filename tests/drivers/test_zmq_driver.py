@@ -91,3 +91,15 @@ def test_the_receiving_end_reads_back_exactly_what_the_driver_sent():
 def test_a_malformed_setpoint_is_refused_naming_the_field(body, field):
     with pytest.raises(BadSetpoint, match=field):
         parse_setpoint_message(body)
+
+
+def test_a_flight_after_a_failsafe_on_the_same_link_streams_again(sub):
+    """perchd serve keeps its links across flights: the next flight's engage lifts the
+    last flight's stop, and nothing streams between the failsafe and that engage."""
+    with open_driver(sub.uri, Runtime.real()) as drv:
+        drv.failsafe(EndReason.GEOFENCE)
+        drv.send(level(0.3))  # the ended flight's late tick: silenced
+        drv.engage()
+        drv.send(level(0.25))
+        assert sub.wait_for(lambda: sub.of("setpoint"))
+    assert [s["thrust"] for s in sub.of("setpoint")] == [0.25]
