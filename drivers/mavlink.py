@@ -124,11 +124,9 @@ ARM_RETRY_S = 0.5
 MODE_CONFIRM_S = 1.5
 """[s] after an acknowledged mode switch a heartbeat still showing the old mode is one sent
 before the switch (heartbeats come at 1 Hz); past this the vehicle really is elsewhere."""
-YAW0_TRACK_S = 0.1
-"""[s] time constant of yaw0=auto's offset tracking: ten mocap frames, slower than one
-frame's jitter, faster than the autopilot's heading estimate wanders while the vehicle
-accelerates (PX4 SIH's EKF: 10-14 deg within a flight; at 0.5 s the flown heading lagged
-it by 4-9 deg in stage 1, at 0.1 s by 1.2-1.5 deg; docs/firmware.md)."""
+YAW0_TRACK_S = 0.5
+"""[s] time constant of yaw0=auto's offset tracking: slower than one mocap frame's jitter,
+faster than a compass heading drifts (PX4 SIH: ~3 deg/s)."""
 PX4_OFFBOARD_PORT = 14540
 NO_HEARTBEAT_CAUSES = (
     "is the autopilot running and sending to this address? PX4 sends only to its fixed "
