@@ -34,7 +34,7 @@ from perchd.core.interrupts import catching
 from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
-from perchd.flight.config import FlightConfig, SurfaceConfig
+from perchd.flight.config import MAX_COORD_M, FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
 from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.logs.flightlog import read_log
@@ -115,10 +115,6 @@ def load_config(args: argparse.Namespace):
                    "--surface" if args.surface else f"[surface] point ({where})",
                    "--normal" if args.normal else f"[surface] normal ({where})")
     return dataclasses.replace(cfg, surface=SurfaceConfig(surface.point, surface.normal))
-
-
-MAX_COORD_M = 1000.0
-"""[m] largest |coordinate| of a surface point: no flying room is bigger; 1e300 is a typo."""
 
 
 def check_geometry(point, normal, point_flag: str, normal_flag: str) -> None:

@@ -366,6 +366,10 @@ class SurfaceConfig:
     normal: tuple[float, float, float] = (1.0, 0.0, 0.0)
 
 
+MAX_COORD_M = 1000.0
+"""[m] largest |coordinate| of a surface point: no flying room is bigger; 1e300 is a typo."""
+
+
 @dataclass(frozen=True)
 class FlightConfig:
     """Everything one flight needs besides the plan and the two links.
@@ -412,8 +416,13 @@ def validate(cfg: FlightConfig) -> None:
         ("hover.timeout_s", cfg.hover.timeout_s, 0.5, 60.0),
         ("trigger.solve_max_s", cfg.trigger.solve_max_s, 0.0, 5.0),
         ("trigger.ahead_v_tol_mps", cfg.trigger.ahead_v_tol_mps, 0.0, 1.0),
+        *((f"surface.point[{i}]", c, -MAX_COORD_M, MAX_COORD_M)
+          for i, c in enumerate(cfg.surface.point)),
+        *((f"surface.normal[{i}]", c, -1e6, 1e6) for i, c in enumerate(cfg.surface.normal)),
     ]
     for name, value, lo, hi in checks:
+        if not math.isfinite(value):
+            raise ConfigError(f"{name} = {value:g} is not a finite number")
         if not lo <= value <= hi:
             side = f"below {lo:g} by {lo - value:g}" if value < lo else f"above {hi:g} by {value - hi:g}"
             raise ConfigError(f"{name} = {value:g} is {side}")

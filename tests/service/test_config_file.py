@@ -100,3 +100,15 @@ def test_fly_reads_the_flight_part_of_the_same_file(tmp_path):
     done = perchd("fly", "plans/case1-ipts-n3.json", "--driver", "sim://", "--mocap", "sim://",
                   "--config", str(cfg), cwd=EXAMPLE.parents[1])
     assert done.returncode == 2 and "rate_hz = 5 is below 20 by 15" in done.stderr
+
+
+@pytest.mark.parametrize("surface, message", [
+    ({"point": [math.inf, 0.0, 0.0]}, "surface.point[0] = inf is not a finite number"),
+    ({"normal": [1.0, math.nan, 0.0]}, "surface.normal[1] = nan is not a finite number"),
+    ({"point": [0.0, 1e300, 0.0]}, "surface.point[1] = 1e+300 is above 1000"),
+])
+def test_a_service_surface_is_held_to_the_same_geometry_rule_as_fly_flags(surface, message):
+    """`perchd fly --surface` refused these; the service's [surface] table flew them (found
+    by the config fuzzer: an infinite point loaded)."""
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        config_from_dict({"version": 1, "surface": surface})
