@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from fwharness import lag_event, start_harness, stop_harness
+from fwharness import ENV, PLAN, lag_event, start_harness, stop_harness
 
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
 INSTANCE = os.environ.get("PERCHD_FW_INSTANCE", "0")
@@ -28,12 +28,9 @@ pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
     reason="set PERCHD_ARDUCOPTER to the built arducopter SITL binary (docs/firmware.md)")]
 pytest.importorskip("pymavlink")
 
-ROOT = Path(__file__).parents[2]
-PLAN = ROOT / "plans" / "case1-ipts-n3.json"
 CONFIG = Path(__file__).with_name("arducopter-3kg.toml")
 MASS = "mass=3.0"
 """[kg] ArduPilot SITL's default quad (libraries/SITL/SIM_Frame.h)."""
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 DEG = math.pi / 180.0
 HOLD_HEIGHT_M = 1.0
 """[m] ApproachConfig.takeoff_height_m (the config leaves it at its default)."""
@@ -114,11 +111,11 @@ def pitch_lag(log: Path, truth: list[tuple[float, float, float, float, float]]) 
 
 
 def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_path):
+    from perchd.drivers.base import open_driver
     from pymavlink import mavutil  # noqa: F401 (the driver's dependency)
 
     from perchd.core.runtime import Runtime
     from perchd.core.types import Phase, Setpoint
-    from perchd.drivers.base import open_driver
     proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
@@ -255,9 +252,9 @@ def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
     import threading
 
     from fwvision import PoseFeed, climb_and_compare
+    from perchd.drivers.base import open_driver
 
     from perchd.core.runtime import Runtime
-    from perchd.drivers.base import open_driver
     from perchd.sim.firmware.ardupilot import ArduPilotParams, ArduPilotVehicle
     from perchd.sim.firmware.harness import ProcessGroup
     with ProcessGroup() as procs:

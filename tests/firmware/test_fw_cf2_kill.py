@@ -17,14 +17,11 @@ from pathlib import Path
 
 import pytest
 from cf2rig import CF2, needs_cf2
-from fwharness import start_harness, stop_harness
+from fwharness import ENV, PLAN, start_harness, stop_harness
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
 pytest.importorskip("cflib")
 
-ROOT = Path(__file__).parents[2]
-PLAN = ROOT / "plans" / "case1-ipts-n3.json"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 INTO_STAGE1_S = 0.5
 RISE_MAX_M = 0.1
 MOTORS_STOP_S = 2.5

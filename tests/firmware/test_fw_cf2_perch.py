@@ -16,15 +16,12 @@ from pathlib import Path
 
 import pytest
 from cf2rig import CF2, needs_cf2
-from fwharness import lag_event, start_harness, stop_harness
+from fwharness import ENV, PLAN, lag_event, start_harness, stop_harness
 from perchd.drivers.thrust import CrazyflieThrust
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
 pytest.importorskip("cflib")
 
-ROOT = Path(__file__).parents[2]
-PLAN = ROOT / "plans" / "case1-ipts-n3.json"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 HOVER_TRUE_N = CrazyflieThrust().newtons(38780)
 """[N] the SITL vehicle's weight (it hovers at 38780 units) in the newtons of the driver's
 default thrust model, which the flight flies in when no hover= calibrates it."""

@@ -22,11 +22,19 @@ import time
 from pathlib import Path
 
 import pytest
-from fwharness import YawWatch, flight_window, heading_error, lag_event, start_placed
+from fwharness import (
+    ENV,
+    PLAN,
+    YawWatch,
+    flight_window,
+    heading_error,
+    lag_event,
+    start_placed,
+)
+from perchd.drivers.base import open_driver
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import Phase, Pose, Setpoint
-from perchd.drivers.base import open_driver
 from perchd.sim.firmware.harness import ProcessGroup, yaw_of
 from perchd.sim.firmware.px4 import SIH_MASS_KG, Px4Params, Px4Vehicle
 
@@ -38,9 +46,6 @@ pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
     reason="set PERCHD_PX4 to a PX4 SITL build folder (docs/firmware.md)")]
 pytest.importorskip("pymavlink")
 
-ROOT = Path(__file__).parents[2]
-PLAN = ROOT / "plans" / "case1-ipts-n3.json"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 G = 9.81
 DRAG = 0.1
 """[N/(m/s)] SIH's linear drag, 1.0 by default: 1.5 m/s^2 against a 1 kg vehicle at the

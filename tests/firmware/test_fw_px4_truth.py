@@ -12,10 +12,10 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+from perchd.drivers.mavlink import ned_attitude
 
 from perchd.core.errors import UriError
 from perchd.core.types import Phase, Setpoint
-from perchd.drivers.mavlink import ned_attitude
 from perchd.sim.firmware.px4 import (
     EARTH_RADIUS_M,
     Px4Params,

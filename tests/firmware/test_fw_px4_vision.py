@@ -15,9 +15,9 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from fwvision import PoseFeed, climb_and_compare
+from perchd.drivers.base import open_driver
 
 from perchd.core.runtime import Runtime
-from perchd.drivers.base import open_driver
 from perchd.sim.firmware.harness import ProcessGroup
 from perchd.sim.firmware.px4 import SIH_MASS_KG, Px4Params, Px4Vehicle
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import signal
 import subprocess
@@ -13,6 +14,13 @@ import time
 from pathlib import Path
 
 from announced import start_announced
+
+ROOT = Path(__file__).parents[2]
+"""The repository: a firmware test's perchd processes run from it."""
+PLAN = ROOT / "plans" / "case1-ipts-n3.json"
+"""The plan every firmware flight perches on (paper case 1, IPTS order 3)."""
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+"""The environment of those processes."""
 
 
 def start_harness(*args: str, env: dict | None = None) -> tuple[subprocess.Popen, str, str]:
