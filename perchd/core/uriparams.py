@@ -53,6 +53,7 @@ SIM = (
     ("motor_tau", "s", "0.03", "motor response time constant, 0.001..1"),
     ("mass", "kg", "0.03", "vehicle mass, 0.005..50"),
     ("drag", "1/s", "0", "linear drag per unit mass, 0..5"),
+    ("qdrag", "1/m", "0", "quadratic drag per unit mass (|v| v), 0..5"),
     ("mocap_rate", "Hz", "120", "mocap frame rate, 1..1000"),
     ("mocap_latency", "s", "0.004", "mocap latency, 0..0.5"),
     ("noise", "m", "0", "mocap noise std per axis, 0..0.1"),

@@ -157,6 +157,9 @@ class LagIdGains:
     drag_max_per_s: [1/s] an identified drag above this is refused.
     speed_span_min_mps: [m/s] the fitted ticks must cover this speed range (the approach).
     rms_max_mps: [m/s] a fit with a larger residual is refused.
+    stage2_refit: at the stage-2 switch, fit drag and bias again from stage 1 alone (the
+        lag kept) and feed that forward in stage 2: the drag of the perch, not of the
+        approach (LagIdentifier.refit_drag).
     """
 
     window_s: float = 8.0
@@ -166,6 +169,7 @@ class LagIdGains:
     drag_max_per_s: float = 2.0
     speed_span_min_mps: float = 0.5
     rms_max_mps: float = 0.1
+    stage2_refit: bool = True
 
 
 @dataclass(frozen=True)

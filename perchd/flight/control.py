@@ -92,6 +92,16 @@ class TauController:
     def reset(self) -> None:
         self.pid.reset()
 
+    def give_back(self, step: float) -> None:
+        """A feed-forward grows by step [m/s^2]: the integral gives back what it holds of
+        it (at most all it holds, never turning it the other way), so the command does not
+        step by what the integral was already supplying."""
+        if self.gains.ki <= 0.0:
+            return
+        held = self.gains.ki * self.pid.integral
+        give = max(min(step, held), 0.0) if step > 0.0 else min(max(step, held), 0.0)
+        self.pid.integral -= give / self.gains.ki
+
     def step(self, state: State, tau_ref: float, a_plan: float, dt: float,
              saturated: bool = False, schedule: bool = True) -> float:
         """schedule=False uses kp_slow both ways (eq. 20's argument, a shrinking |X| under

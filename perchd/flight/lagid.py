@@ -95,16 +95,23 @@ class LagIdentifier:
         if i == len(lags) - 1:
             return LagFit(None, f"the best lag is at the bound {c.lag_max_s:g} s or beyond")
         lag = _refine(lags, sse, i)
-        mse, sol1 = _solve(t, u, x, v, np.array([lag]))
-        drag, bias = float(sol1[0, 0]), float(sol1[1, 0])
-        rms = float(np.sqrt(mse[0]))
-        model = LagModel(lag, max(drag, 0.0), bias, rms, len(t), span)
-        if not -c.drag_max_per_s * 0.1 <= drag <= c.drag_max_per_s:
-            return LagFit(None, f"identified drag {drag:.3f} 1/s outside "
-                                f"0..{c.drag_max_per_s:g} 1/s")
-        if rms > c.rms_max_mps:
-            return LagFit(None, f"the fit's residual {rms:.3f} m/s exceeds {c.rms_max_mps:g} m/s")
-        return LagFit(model)
+        return _checked(_model_at(t, u, x, v, lag, span, c), c)
+
+    def refit_drag(self, lag_s: float, since_t: float) -> LagFit:
+        """Drag and bias again, with the lag kept at lag_s [s], from the ticks since since_t
+        [s] alone: stage 1 (its braking is the excitation) tells the drag the vehicle meets
+        in the perch, which stage 2's feed-forward needs; the approach's, at another speed
+        and tilt, may differ (docs/errata.md §10). Refused as `fit` refuses."""
+        c = self.cfg
+        rows = [r for r in self._rows if r[0] >= since_t]
+        if len(rows) < 20:
+            return LagFit(None, f"{len(rows)} ticks since {since_t:.3f} s, too few to fit")
+        t, u, x, v = (np.array(col) for col in zip(*rows))
+        span = float(v.max() - v.min())
+        if span < c.speed_span_min_mps:
+            return LagFit(None, f"the speed changed by {span:.2f} m/s, less than the "
+                                f"{c.speed_span_min_mps:g} m/s needed to fit the drag")
+        return _checked(_model_at(t, u, x, v, lag_s, span, c), c)
 
     def predict(self, t: float, x: float, xdot: float, model: "Response",
                 horizon_s: float) -> tuple[float, float]:
@@ -128,6 +135,30 @@ class LagIdentifier:
                 xdot + dv + push * horizon_s)
 
 
+def _model_at(t, u, x, v, lag_s: float, span: float, c: LagIdGains) -> LagModel:
+    """Drag and bias at lag_s [s]. A slightly negative drag (noise about none; down to a
+    tenth of drag_max_per_s, below is refused) is solved again as none: clipping it alone
+    would keep the bias fitted beside it, and the push the two predict together
+    (bias - drag Xdot) would be off by the clipped drag times the speed."""
+    lag = np.array([lag_s])
+    mse, sol = _solve(t, u, x, v, lag)
+    if -0.1 * c.drag_max_per_s <= sol[0, 0] < 0.0:
+        mse, sol = _solve(t, u, x, v, lag, drag=False)
+    return LagModel(lag_s, float(sol[0, 0]), float(sol[1, 0]), float(np.sqrt(mse[0])),
+                    len(t), span)
+
+
+def _checked(m: LagModel, c: LagIdGains) -> LagFit:
+    """The fit, refused when its drag is out of bounds or its residual large."""
+    if not 0.0 <= m.drag_per_s <= c.drag_max_per_s:
+        return LagFit(None, f"identified drag {m.drag_per_s:.3f} 1/s outside "
+                            f"0..{c.drag_max_per_s:g} 1/s")
+    if m.rms_mps > c.rms_max_mps:
+        return LagFit(None, f"the fit's residual {m.rms_mps:.3f} m/s exceeds "
+                            f"{c.rms_max_mps:g} m/s")
+    return LagFit(m)
+
+
 def _shifted_integrals(t: np.ndarray, u: np.ndarray, lags: np.ndarray,
                        at: np.ndarray) -> np.ndarray:
     """U(t[at] - lag) for each lag (rows): the integral of the zero-order-held command from
@@ -139,17 +170,18 @@ def _shifted_integrals(t: np.ndarray, u: np.ndarray, lags: np.ndarray,
     return np.interp(shifted.ravel(), t, big_u).reshape(shifted.shape) + before
 
 
-def _solve(t, u, x, v, lags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _solve(t, u, x, v, lags: np.ndarray, drag: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """For each lag: the mean squared residual [m^2/s^2] and the least-squares (drag,
-    bias, offset) as columns, integrated from the first tick. The regressors do not depend
-    on the lag, so one pseudo-inverse serves every lag; the integrals take every tick, the
-    regression at most FIT_POINTS of them (a refit stays about a millisecond)."""
+    bias, offset) as columns, integrated from the first tick (drag=False: drag held at 0).
+    The regressors do not depend on the lag, so one pseudo-inverse serves every lag; the
+    integrals take every tick, the regression at most FIT_POINTS of them (a refit stays
+    about a millisecond)."""
     at = np.unique(np.linspace(0, len(t) - 1, min(len(t), FIT_POINTS)).astype(int))
     big_u = _shifted_integrals(t, u, lags, at)
     t, x, v = t[at], x[at], v[at]
     y = (v - v[0])[:, None] - (big_u - big_u[:, :1]).T
     # The ones column absorbs the noise of the reference tick's own speed.
-    a = np.column_stack((-(x - x[0]), t - t[0], np.ones_like(t)))
+    a = np.column_stack((-(x - x[0]) * drag, t - t[0], np.ones_like(t)))
     sol = np.linalg.pinv(a) @ y
     r = y - a @ sol
     return np.einsum("ij,ij->j", r, r) / len(t), sol

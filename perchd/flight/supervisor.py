@@ -369,6 +369,7 @@ class Supervisor:
             self.t_stage2 = t
             self._enter(Phase.STAGE2, t, "measured tau reached tau_s", tau=st.tau,
                         since_trigger=t - self.trigger.t)
+            self._refit_stage2(t)
         refs, ux, e, vz_ref = NO_REFS, 0.0, None, 0.0
         if self.phase in (Phase.STAGE1, Phase.STAGE2):
             refs = self._refs(t)
@@ -760,6 +761,27 @@ class Supervisor:
         step = ff.accel(self._a_app, v_ref) - self.ff.accel(self._a_app, v_ref)
         bound = a.i_limit_mps2 / a.ki_v
         self._v_int = min(max(self._v_int - step / a.ki_v, -bound), bound)
+
+    def _refit_stage2(self, t: float) -> None:
+        """Stage 2's feed-forward takes the drag and bias of stage 1 (the lag kept): the
+        drag of the perch itself (docs/errata.md §10). What the step adds, the tau PID's
+        integral gives back as far as it holds it."""
+        if self.response is None or not self.cfg.lag_id.stage2_refit:
+            return
+        fit = self.lagid.refit_drag(self.response.lag_s, self.trigger.t)
+        m = fit.model
+        if m is None:
+            self.events.append(LogEvent(t, "drag-unrefitted", f"{fit.why}: stage 2 keeps "
+                                        f"drag {self.ff.drag_per_s:.3f} 1/s"))
+            return
+        ff = FeedForward(m.lag_s, m.drag_per_s, m.bias_mps2)
+        step = ff.accel(0.0, self.v_hold) - self.ff.accel(0.0, self.v_hold)
+        self.ctl.tau.give_back(step)
+        self.ff, self.response = ff, m
+        self.events.append(LogEvent(t, "drag-refit", (
+            f"stage 2: drag {m.drag_per_s:.3f} 1/s, bias {m.bias_mps2:.3f} m/s^2 from stage 1"), {
+                "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2, "rms_mps": m.rms_mps,
+                "samples": m.samples, "step_mps2": step}))
 
     def _identify(self, t: float) -> None:
         """Fit the lag and drag of the hold and approach just flown (flight/lagid.py) and

@@ -26,7 +26,8 @@ from perchd.flight.frame import body_z
 class PlantParams:
     """mass_kg [kg] (30 g Crazyflie 2.0 with markers); thrust_max_n [N] collective (four CF2.0
     motors give about 0.6 N); attitude_tau_s, motor_tau_s [s] first-order time constants;
-    latency_s [s] command delay; drag_per_s [1/s] linear drag coefficient; g [m/s^2];
+    latency_s [s] command delay; drag_per_s [1/s] linear drag coefficient; qdrag_per_m
+    [1/m] quadratic drag coefficient (deceleration qdrag_per_m |v| v); g [m/s^2];
     step_s [s] integration step; stick_s [s] on the floor, how long the thrust must lift
     (exceed the weight) before the vehicle leaves it (0: at once)."""
 
@@ -36,6 +37,7 @@ class PlantParams:
     motor_tau_s: float = 0.03
     latency_s: float = 0.0
     drag_per_s: float = 0.0
+    qdrag_per_m: float = 0.0
     g: float = G_M_S2
     step_s: float = 0.001
     stick_s: float = 0.0
@@ -120,8 +122,9 @@ class Plant:
         self.thrust += dt / (prm.motor_tau_s + dt) * (target - self.thrust)
         bz = body_z(*self.att)
         f = self.thrust / prm.mass_kg
-        acc = [f * bz[0] - prm.drag_per_s * self.v[0], f * bz[1] - prm.drag_per_s * self.v[1],
-               f * bz[2] - prm.g - prm.drag_per_s * self.v[2]]
+        drag = prm.drag_per_s + prm.qdrag_per_m * math.sqrt(sum(c * c for c in self.v))
+        acc = [f * bz[0] - drag * self.v[0], f * bz[1] - drag * self.v[1],
+               f * bz[2] - prm.g - drag * self.v[2]]
         if self._stuck(acc[2], dt):
             return
         for i in range(3):

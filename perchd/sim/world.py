@@ -10,7 +10,7 @@ URI options (read by whichever factory creates the world): latency [s] command d
 noise [m] mocap noise std, mocap_rate [Hz], mocap_latency [s], start=X,Y,Z [m],
 attitude_tau [s], motor_tau [s], seed, stall=AT,FOR [s] (perchd.sim.stall: a hung link),
 mass [kg] the simulated vehicle's true mass (the flight config may disagree, as a real
-weight may), drag [1/s] linear drag.
+weight may), drag [1/s] linear drag, qdrag [1/m] quadratic drag.
 """
 
 from __future__ import annotations
@@ -225,7 +225,8 @@ def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldPar
         attitude_tau_s=float_param(uri, "attitude_tau", wp.plant.attitude_tau_s, 0.005, 1.0, " s"),
         motor_tau_s=float_param(uri, "motor_tau", wp.plant.motor_tau_s, 0.001, 1.0, " s"),
         mass_kg=float_param(uri, "mass", wp.plant.mass_kg, 0.005, 50.0, " kg"),
-        drag_per_s=float_param(uri, "drag", wp.plant.drag_per_s, 0.0, 5.0, " 1/s"))
+        drag_per_s=float_param(uri, "drag", wp.plant.drag_per_s, 0.0, 5.0, " 1/s"),
+        qdrag_per_m=float_param(uri, "qdrag", wp.plant.qdrag_per_m, 0.0, 5.0, " 1/m"))
     mocap = replace(
         wp.mocap,
         rate_hz=float_param(uri, "mocap_rate", wp.mocap.rate_hz, 1.0, 1000.0, " Hz"),

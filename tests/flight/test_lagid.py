@@ -15,24 +15,29 @@ DT = 0.01
 
 def fly(lag_s: float, drag: float, bias: float = 0.0, accel: float = 0.75,
         hold_s: float = 1.0, approach_s: float = 2.0, noise_m: float = 0.0, seed: int = 0,
-        cfg: LagIdGains = LagIdGains()) -> LagIdentifier:
+        cfg: LagIdGains = LagIdGains(), brake: tuple[float, float, float] | None = None
+        ) -> LagIdentifier:
     """Record a hold and an approach of the model Xddot = u(t - lag) - drag Xdot + bias, the
     command holding position until the approach, then `accel` plus drag at the speed
     reached; X measured with noise_m [m] of noise, Xdot with 10 noise_m / s (about the
-    estimator's velocity scatter on millimetre mocap noise)."""
+    estimator's velocity scatter on millimetre mocap noise). brake (seconds, decel, drag):
+    then that many seconds braking at decel [m/s^2] while the vehicle meets another drag
+    (a perch's stage 1), its command still compensating the approach's."""
     rng = random.Random(seed)
     ident = LagIdentifier(cfg)
     x, v, sent = -4.5, 0.0, []
-    n_hold, n = int(hold_s / DT), int((hold_s + approach_s) / DT)
+    n_hold, n_app = int(hold_s / DT), int((hold_s + approach_s) / DT)
+    n = n_app + (int(brake[0] / DT) if brake else 0)
     for k in range(n):
         t = k * DT
-        u = -bias if k < n_hold else accel + drag * v - bias
+        u = -bias if k < n_hold else (accel if k < n_app else -brake[1]) + drag * v - bias
+        true_drag = brake[2] if brake and k - round(lag_s / DT) >= n_app else drag
         sent.append(u)
         ident.record(t, u, x + rng.gauss(0.0, noise_m), v + rng.gauss(0.0, 10 * noise_m))
         late = k - round(lag_s / DT)
         u_now = sent[late] if late >= 0 else sent[0]
         for _ in range(10):  # 1 ms steps
-            a = u_now - drag * v + bias
+            a = u_now - true_drag * v + bias
             v += a * DT / 10
             x += v * DT / 10
     return ident
@@ -50,6 +55,38 @@ def test_a_constant_push_is_told_from_drag():
     fit = fly(0.15, 0.3, bias=0.2).fit()
     assert fit.model.bias_mps2 == pytest.approx(0.2, abs=0.03)
     assert fit.model.drag_per_s == pytest.approx(0.3, abs=0.03)
+
+
+def test_the_refit_tells_the_drag_of_the_braking_alone_with_the_lag_kept():
+    """Approach at drag 0.2 /s, then 1.5 s braking at 0.5 m/s^2 against drag 0.45 /s: the
+    fit of everything is pulled toward the approach's drag; the refit since the braking
+    began finds the braking's."""
+    ident = fly(0.15, 0.2, bias=0.1, brake=(1.5, 0.5, 0.45), noise_m=0.001)
+    whole = ident.fit().model
+    since = ident.refit_drag(0.15, since_t=3.0 + 0.15).model
+    assert since is not None
+    assert since.lag_s == 0.15
+    assert since.drag_per_s == pytest.approx(0.45, abs=0.05)
+    assert since.bias_mps2 == pytest.approx(0.1, abs=0.06)
+    assert abs(whole.drag_per_s - 0.45) > 3 * abs(since.drag_per_s - 0.45)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_drag_that_noise_makes_negative_is_fitted_as_none_with_its_own_bias(seed):
+    """No drag, no push; 3 mm of noise makes the joint fit's drag come out at -0.04 to
+    -0.12 /s with a bias beside it of about the same: clipping only the drag to 0 left
+    that bias, a push of up to -0.15 m/s^2 that stage 2 would have fed forward."""
+    m = fly(0.15, 0.0, brake=(1.5, 0.5, 0.0), noise_m=0.003, seed=seed
+            ).refit_drag(0.15, since_t=3.15).model
+    assert m.drag_per_s >= 0.0
+    assert m.bias_mps2 - m.drag_per_s * 1.0 == pytest.approx(0.0, abs=0.03)
+
+
+def test_a_refit_over_too_little_change_of_speed_is_refused():
+    ident = fly(0.15, 0.2, brake=(0.2, 0.5, 0.45))
+    fit = ident.refit_drag(0.15, since_t=3.0)
+    assert fit.model is None
+    assert "less than the 0.5 m/s needed to fit the drag" in fit.why
 
 
 def test_millimetre_mocap_noise_leaves_the_lag_within_two_ticks():

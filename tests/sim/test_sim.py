@@ -57,6 +57,16 @@ def test_a_pitched_vehicle_accelerates_as_the_attitude_and_motor_lags_allow():
     assert v[2] == pytest.approx(0.0, abs=0.02)
 
 
+def test_quadratic_drag_brakes_by_qdrag_times_the_speed_squared():
+    """Level at the weight, 2 m/s along X: v' = -q v^2, so v(t) = v0 / (1 + q v0 t)."""
+    rt, d, _ = world("sim://?qdrag=0.5")
+    rt.sim.plant.v[0] = 2.0
+    for k in range(101):
+        rt.clock.sleep_until(k * 0.01)
+        d.send(sp(k * 0.01))
+    assert rt.sim.state().v[0] == pytest.approx(2.0 / (1.0 + 0.5 * 2.0 * 1.0), rel=0.01)
+
+
 def test_command_latency_delays_the_setpoint():
     rt, d, _ = world("sim://?latency=0.02")
     d.send(sp(0.0, 0.2))
