@@ -90,7 +90,7 @@ class LagIdentifier:
             return LagFit(None, f"the approach changed speed by {span:.2f} m/s, less than "
                                 f"the {c.speed_span_min_mps:g} m/s needed to fit the lag")
         lags = np.arange(0.0, c.lag_max_s + 1e-9, c.lag_step_s)
-        sse, sol = _solve(t, u, x, v, lags)
+        sse, _ = _solve(t, u, x, v, lags)
         i = int(np.argmin(sse))
         if i == len(lags) - 1:
             return LagFit(None, f"the best lag is at the bound {c.lag_max_s:g} s or beyond")
