@@ -36,9 +36,9 @@ from perchd.flight.config import (
 from perchd.flight.control import AxisController, Controller, FeedForward
 from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner
-from perchd.flight.lagid import LagFit, LagIdentifier, LagModel
 from perchd.flight.planner_worker import InlinePlanner, Planner, PlanReply
 from perchd.flight.planrefs import PlanSampler
+from perchd.flight.response import VehicleResponse, feed_forward
 from perchd.flight.takeoff import TakeoffProfile
 from perchd.logs.flightlog import LogEvent
 from perchd.tau.library import load_library
@@ -208,10 +208,7 @@ class Supervisor:
         self.hover_learned_n: float | None = None  # [N] once the hold's estimate settled
         self._hover_waiting = False
         self._v_int = 0.0  # [m/s] integral of the approach's speed error
-        self.lagid = LagIdentifier(cfg.lag_id)
-        self.ff = FeedForward(cfg.tau_gains.ff_lead_s)
-        self.lag_fit: LagFit | None = None  # once identified (at the first stage-1 refs)
-        self.response: LagModel | None = None  # the latest accepted fit
+        self.response = VehicleResponse(cfg.tau_gains, cfg.lag_id, self.events)
         self._t_refit = -math.inf  # [s] the approach's last refit
 
     # --- helpers ----------------------------------------------------------------------------
@@ -438,13 +435,13 @@ class Supervisor:
         (x0, v0); the integral takes up what the feed-forward misses (ApproachConfig.ki_v),
         frozen while the mapping saturates."""
         a = self.cfg.approach
-        x, v, _ = self._predicted(t, st)
+        x, v, _ = self.response.predicted(t, st.x, st.xdot)
         v_ref = self._v_ref(x)
         err = v_ref - v
         if not self.ctl.saturated and a.ki_v > 0.0:
             bound = a.i_limit_mps2 / a.ki_v
             self._v_int = min(max(self._v_int + err * dt, -bound), bound)
-        return self.ff.accel(self._a_app, v_ref) + a.kv * err + a.ki_v * self._v_int
+        return self.response.ff.accel(self._a_app, v_ref) + a.kv * err + a.ki_v * self._v_int
 
     def _v_ref(self, x: float) -> float:
         """[m/s] the approach's speed reference at X = x: the profile to (x0, v0), or, while a
@@ -686,14 +683,14 @@ class Supervisor:
         return self._refs_memo[1]
 
     def _compute_refs(self, t: float) -> Refs:
-        if self.lag_fit is None and self.cfg.tau_gains.identify:
-            self._identify(t)
-        return self._refs_at(t, self._x, self.ff.lead_s)
+        if self.response.identified is None and self.cfg.tau_gains.identify:
+            self.response.identify(t)
+        return self._refs_at(t, self._x, self.response.ff.lead_s)
 
     def _refs_at(self, t: float, x: float | None, lead_s: float) -> Refs:
         """The references at time t [s] for the vehicle at X = x [m], with the feed-forward
         taken lead_s [s] ahead."""
-        plan, ff = self.plan, self.ff
+        plan, ff = self.plan, self.response.ff
         s = min(max(t - self.trigger.t, 0.0), plan.duration)
         here = self._sampler.at(s)
         if self.t_stage2 is None:
@@ -708,23 +705,11 @@ class Supervisor:
             a = ff.accel(0.0, float(plan.v_contact))
         return Refs(tau_ref, here.x, here.v, a)
 
-    def _predicted(self, t: float, st: State) -> tuple[float, float, float]:
-        """(X [m], Xdot [m/s], horizon [s]): the controllers' gains are made for a vehicle
-        that answers within the configured ff_lead_s (the paper's Crazyflie); of a lag
-        identified beyond that, they see the state predicted that much ahead from the
-        commands still in flight (LagIdentifier.predict), so the feedback, like the
-        feed-forward, acts where its command lands (docs/errata.md §10). Horizon 0: the
-        measured state."""
-        m = self.response
-        horizon = m.lag_s - self.cfg.tau_gains.ff_lead_s if m is not None else 0.0
-        if horizon <= 0.0 or not self.cfg.tau_gains.predict:
-            return st.x, st.xdot, 0.0
-        x, v = self.lagid.predict(t, st.x, st.xdot, m, horizon)
-        return x, v, horizon
-
     def _lag_view(self, t: float, st: State, refs: Refs) -> tuple[State, Refs]:
-        """The state and references the tau controller acts on (_predicted)."""
-        x, v, horizon = self._predicted(t, st)
+        """The state and references the tau controller acts on: predicted over the lag
+        beyond what the gains were made for (VehicleResponse.predicted, docs/errata.md
+        §10)."""
+        x, v, horizon = self.response.predicted(t, st.x, st.xdot)
         if horizon == 0.0:
             return st, refs
         # Predicted at or past the surface: tau = X/Xdot from just before it, so that the
@@ -732,7 +717,7 @@ class Supervisor:
         x = min(x, -1e-3)
         tau = x / v if v > self.cfg.estimator.min_speed_mps else None
         seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
-        return seen, self._refs_at(t + horizon, x, self.ff.lead_s - horizon)
+        return seen, self._refs_at(t + horizon, x, self.response.ff.lead_s - horizon)
 
     def _observe_response(self, t: float, st: State) -> None:
         """Record the ticks for the lag identification (the stages' commands feed its
@@ -740,16 +725,14 @@ class Supervisor:
         own feed-forward meets the drag."""
         if not self.cfg.tau_gains.identify or self.phase not in _OBSERVED:
             return
-        self.lagid.record(t, self.ctl.last_ux_sent, st.x, st.xdot)
+        self.response.record(t, self.ctl.last_ux_sent, st.x, st.xdot)
         if self.phase is not Phase.APPROACH or t - self._t_refit < self.cfg.lag_id.refit_s:
             return
         self._t_refit = t
-        model = self.lagid.fit().model
+        model = self.response.refit()
         if model is not None:
-            ff = FeedForward(model.lag_s, model.drag_per_s, model.bias_mps2)
-            self._hand_over_integral(st, ff)
-            self.response = model
-            self.ff = ff
+            self._hand_over_integral(st, feed_forward(model))
+            self.response.adopt(model)
 
     def _hand_over_integral(self, st: State, ff: FeedForward) -> None:
         """What a new feed-forward adds (the drag), the approach's integral, which was
@@ -758,48 +741,14 @@ class Supervisor:
         if a.ki_v <= 0.0:
             return
         v_ref = self._v_ref(st.x)
-        step = ff.accel(self._a_app, v_ref) - self.ff.accel(self._a_app, v_ref)
+        step = ff.accel(self._a_app, v_ref) - self.response.ff.accel(self._a_app, v_ref)
         bound = a.i_limit_mps2 / a.ki_v
         self._v_int = min(max(self._v_int - step / a.ki_v, -bound), bound)
 
     def _refit_stage2(self, t: float) -> None:
-        """Stage 2's feed-forward takes the drag and bias of stage 1 (the lag kept): the
-        drag of the perch itself (docs/errata.md §10). What the step adds, the tau PID's
-        integral gives back as far as it holds it."""
-        if self.response is None or not self.cfg.lag_id.stage2_refit:
-            return
-        fit = self.lagid.refit_drag(self.response.lag_s, self.trigger.t)
-        m = fit.model
-        if m is None:
-            self.events.append(LogEvent(t, "drag-unrefitted", f"{fit.why}: stage 2 keeps "
-                                        f"drag {self.ff.drag_per_s:.3f} 1/s"))
-            return
-        ff = FeedForward(m.lag_s, m.drag_per_s, m.bias_mps2)
-        step = ff.accel(0.0, self.v_hold) - self.ff.accel(0.0, self.v_hold)
-        self.ctl.tau.give_back(step)
-        self.ff, self.response = ff, m
-        self.events.append(LogEvent(t, "drag-refit", (
-            f"stage 2: drag {m.drag_per_s:.3f} 1/s, bias {m.bias_mps2:.3f} m/s^2 from stage 1"), {
-                "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2, "rms_mps": m.rms_mps,
-                "samples": m.samples, "step_mps2": step}))
-
-    def _identify(self, t: float) -> None:
-        """Fit the lag and drag of the hold and approach just flown (flight/lagid.py) and
-        feed them forward from the trigger on; a refused fit keeps the configured lead."""
-        self.lag_fit = fit = self.lagid.fit()
-        self.response = m = fit.model
-        if m is None:
-            self.ff = FeedForward(self.cfg.tau_gains.ff_lead_s)
-            self.events.append(LogEvent(t, "lag-unidentified", (
-                f"{fit.why}: flying the configured lead {self.ff.lead_s:g} s and no drag term"),
-                {"lead_s": self.ff.lead_s}))
-            return
-        self.ff = FeedForward(m.lag_s, m.drag_per_s, m.bias_mps2)
-        self.events.append(LogEvent(t, "lag-identified", (
-            f"lag {m.lag_s:.3f} s, drag {m.drag_per_s:.3f} 1/s"), {
-                "lag_s": m.lag_s, "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
-                "rms_mps": m.rms_mps, "samples": m.samples,
-                "speed_span_mps": m.speed_span_mps}))
+        """Stage 2 flies the drag refitted from stage 1 (VehicleResponse.refit_stage2); what
+        that adds, the tau PID's integral gives back as far as it holds it."""
+        self.ctl.tau.give_back(self.response.refit_stage2(t, self.trigger.t, self.v_hold))
 
 
 @dataclass(frozen=True, slots=True)

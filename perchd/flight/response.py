@@ -1,0 +1,98 @@
+"""What the flight knows of its vehicle's response along X, and what it feeds forward.
+
+One object holds the identification (flight/lagid.py) through a flight: it records the
+ticks, refits during the approach, identifies at the trigger, refits the drag at the
+stage-2 switch, and predicts the state the commands still in flight will bring; it logs
+each fit. The supervisor decides when each happens and hands the feed-forward's steps
+over to its integrals (docs/errata.md §10).
+"""
+
+from __future__ import annotations
+
+from perchd.flight.config import LagIdGains, TauGains
+from perchd.flight.control import FeedForward
+from perchd.flight.lagid import LagFit, LagIdentifier, LagModel
+from perchd.logs.flightlog import LogEvent
+
+
+def feed_forward(m: LagModel) -> FeedForward:
+    """The feed-forward of an identified response."""
+    return FeedForward(m.lag_s, m.drag_per_s, m.bias_mps2)
+
+
+class VehicleResponse:
+    """ff: the feed-forward flown now; model: the latest accepted fit (None: none yet or
+    refused); identified: the trigger's fit, once made. events: where fits are logged."""
+
+    def __init__(self, gains: TauGains, cfg: LagIdGains, events: list[LogEvent]) -> None:
+        self.gains, self.cfg = gains, cfg
+        self.lagid = LagIdentifier(cfg)
+        self.ff = FeedForward(gains.ff_lead_s)
+        self.model: LagModel | None = None
+        self.identified: LagFit | None = None
+        self._events = events
+
+    def record(self, t: float, u_x: float, x: float, xdot: float) -> None:
+        """One tick: t [s], u_x [m/s^2] the command sent, x [m], xdot [m/s] measured."""
+        self.lagid.record(t, u_x, x, xdot)
+
+    def refit(self) -> LagModel | None:
+        """An approach refit, None when refused; the caller hands its feed-forward's step
+        over to its integral, then `adopt`s it."""
+        return self.lagid.fit().model
+
+    def adopt(self, m: LagModel) -> None:
+        """Fly m from now on."""
+        self.model, self.ff = m, feed_forward(m)
+
+    def identify(self, t: float) -> None:
+        """The trigger's fit of the hold and approach just flown, fed forward from here on;
+        a refused fit keeps the configured lead and no drag term."""
+        self.identified = fit = self.lagid.fit()
+        self.model = m = fit.model
+        if m is None:
+            self.ff = FeedForward(self.gains.ff_lead_s)
+            self._events.append(LogEvent(t, "lag-unidentified", (
+                f"{fit.why}: flying the configured lead {self.ff.lead_s:g} s and no drag term"),
+                {"lead_s": self.ff.lead_s}))
+            return
+        self.ff = feed_forward(m)
+        self._events.append(LogEvent(t, "lag-identified", (
+            f"lag {m.lag_s:.3f} s, drag {m.drag_per_s:.3f} 1/s"), {
+                "lag_s": m.lag_s, "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
+                "rms_mps": m.rms_mps, "samples": m.samples,
+                "speed_span_mps": m.speed_span_mps}))
+
+    def refit_stage2(self, t: float, since_t: float, v_hold: float) -> float:
+        """At the stage-2 switch: drag and bias again from stage 1 (since since_t [s]), the
+        lag kept, fed forward from here on. Returns the step [m/s^2] this adds at the held
+        speed v_hold [m/s] (0 when refused, logged, or nothing was identified)."""
+        if self.model is None or not self.cfg.stage2_refit:
+            return 0.0
+        fit = self.lagid.refit_drag(self.model.lag_s, since_t)
+        m = fit.model
+        if m is None:
+            self._events.append(LogEvent(t, "drag-unrefitted", f"{fit.why}: stage 2 keeps "
+                                         f"drag {self.ff.drag_per_s:.3f} 1/s"))
+            return 0.0
+        ff = feed_forward(m)
+        step = ff.accel(0.0, v_hold) - self.ff.accel(0.0, v_hold)
+        self.ff, self.model = ff, m
+        self._events.append(LogEvent(t, "drag-refit", (
+            f"stage 2: drag {m.drag_per_s:.3f} 1/s, bias {m.bias_mps2:.3f} m/s^2 from stage 1"), {
+                "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2, "rms_mps": m.rms_mps,
+                "samples": m.samples, "step_mps2": step}))
+        return step
+
+    def predicted(self, t: float, x: float, xdot: float) -> tuple[float, float, float]:
+        """(X [m], Xdot [m/s], horizon [s]): the controllers' gains are made for a vehicle
+        that answers within the configured ff_lead_s (the paper's Crazyflie); of a lag
+        identified beyond that, they see the state predicted that much ahead from the
+        commands still in flight (LagIdentifier.predict), so the feedback, like the
+        feed-forward, acts where its command lands. Horizon 0: the measured state."""
+        m = self.model
+        horizon = m.lag_s - self.gains.ff_lead_s if m is not None else 0.0
+        if horizon <= 0.0 or not self.gains.predict:
+            return x, xdot, 0.0
+        px, pv = self.lagid.predict(t, x, xdot, m, horizon)
+        return px, pv, horizon
