@@ -58,6 +58,7 @@ SIM = (
     ("mocap_latency", "s", "0.004", "mocap latency, 0..0.5"),
     ("noise", "m", "0", "mocap noise std per axis, 0..0.1"),
     ("start", "m", "4.5 m before the surface, 1 m up", "start position X,Y,Z"),
+    ("draught", "m, m/s^2", "none", "X,A: acceleration A along X from x = X on"),
     ("seed", "", "0", "noise seed"),
     ("body", "", "cf1", "rigid body name"),
     ("stall", "s", "none", "AT,FOR: hold the link FOR s at AT s (docs/safety.md)"),

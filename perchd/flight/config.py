@@ -157,9 +157,9 @@ class LagIdGains:
     drag_max_per_s: [1/s] an identified drag above this is refused.
     speed_span_min_mps: [m/s] the fitted ticks must cover this speed range (the approach).
     rms_max_mps: [m/s] a fit with a larger residual is refused.
-    stage2_refit: at the stage-2 switch, fit drag and bias again from stage 1 alone (the
-        lag kept) and feed that forward in stage 2: the drag of the perch, not of the
-        approach (LagIdentifier.refit_drag).
+    stage2_refit: at the stage-2 switch, fit the bias again from stage 1 alone (lag and
+        drag kept) and feed it forward in stage 2: a push the approach never met
+        (LagIdentifier.refit_bias).
     """
 
     window_s: float = 8.0

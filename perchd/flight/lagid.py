@@ -35,6 +35,8 @@ from perchd.flight.config import LagIdGains
 
 FIT_POINTS = 200
 """Ticks the regression samples at most (evenly spread over the window)."""
+HOLDOUT = 0.4
+"""The share of a refit's ticks, the last, that its candidate is not fitted to but judged on."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,23 +99,31 @@ class LagIdentifier:
         lag = _refine(lags, sse, i)
         return _checked(_model_at(t, u, x, v, lag, span, c), c)
 
-    def refit_drag(self, lag_s: float, since_t: float) -> LagFit:
-        """Drag and bias again, with the lag kept at lag_s [s], from the ticks since since_t
-        [s] alone: stage 1 (its braking is the excitation) tells the drag the vehicle meets
-        in the perch, which stage 2's feed-forward needs; the approach's, at another speed
-        and tilt, may differ (docs/errata.md §10). Refused as `fit` refuses."""
-        c = self.cfg
+    def refit_bias(self, base: Response, since_t: float) -> LagFit:
+        """The bias again, base's lag and drag kept, from the ticks since since_t [s]: what
+        the perch's stage 1 shows beyond the approach's model is a push stage 2 meets too
+        (docs/errata.md §10). Drag and bias together are not told apart over stage 1's
+        narrow speed range (the approach's 0-to-v0 tells the drag). Flown only if it
+        predicts better: fitted to all but the last HOLDOUT of the ticks, it must predict
+        the speed over those, the nearest to stage 2, closer than base does (a drag that
+        grows with speed shows in stage 1's faster part as a push stage 2 does not meet).
+        Refused otherwise, on too few ticks, or on a large residual."""
         rows = [r for r in self._rows if r[0] >= since_t]
-        if len(rows) < 20:
+        if len(rows) < 40:
             return LagFit(None, f"{len(rows)} ticks since {since_t:.3f} s, too few to fit")
         t, u, x, v = (np.array(col) for col in zip(*rows))
-        span = float(v.max() - v.min())
-        if span < c.speed_span_min_mps:
-            return LagFit(None, f"the speed changed by {span:.2f} m/s, less than the "
-                                f"{c.speed_span_min_mps:g} m/s needed to fit the drag")
-        return _checked(_model_at(t, u, x, v, lag_s, span, c), c)
+        lag, drag, k = np.array([base.lag_s]), base.drag_per_s, int(len(t) * (1 - HOLDOUT))
+        trained = float(_solve(t[:k], u[:k], x[:k], v[:k], lag, drag=drag)[1][1, 0])
+        new, old = (_holdout_rms(t, u, x, v, base, b, k) for b in (trained, base.bias_mps2))
+        if new >= old:
+            return LagFit(None, f"the approach's model predicts the last {HOLDOUT:.0%} of "
+                                f"the ticks as well or better ({old:.3f} m/s rms, the "
+                                f"refit {new:.3f})")
+        mse, sol = _solve(t, u, x, v, lag, drag=drag)
+        return _checked(LagModel(base.lag_s, drag, float(sol[1, 0]), float(np.sqrt(mse[0])),
+                                 len(t), float(v.max() - v.min())), self.cfg)
 
-    def predict(self, t: float, x: float, xdot: float, model: "Response",
+    def predict(self, t: float, x: float, xdot: float, model: Response,
                 horizon_s: float) -> tuple[float, float]:
         """(X [m], Xdot [m/s]) horizon_s (<= the lag) after t, from the state measured at t
         and the commands recorded that the vehicle answers within the horizon: those sent
@@ -143,7 +153,7 @@ def _model_at(t, u, x, v, lag_s: float, span: float, c: LagIdGains) -> LagModel:
     lag = np.array([lag_s])
     mse, sol = _solve(t, u, x, v, lag)
     if -0.1 * c.drag_max_per_s <= sol[0, 0] < 0.0:
-        mse, sol = _solve(t, u, x, v, lag, drag=False)
+        mse, sol = _solve(t, u, x, v, lag, drag=0.0)
     return LagModel(lag_s, float(sol[0, 0]), float(sol[1, 0]), float(np.sqrt(mse[0])),
                     len(t), span)
 
@@ -159,6 +169,15 @@ def _checked(m: LagModel, c: LagIdGains) -> LagFit:
     return LagFit(m)
 
 
+def _holdout_rms(t, u, x, v, m: Response, bias: float, k: int) -> float:
+    """[m/s] rms error of the speed predicted from tick k on by m's lag and drag with
+    `bias`, against the speed measured."""
+    big_u = _shifted_integrals(t, u, np.array([m.lag_s]), np.arange(k, len(t)))[0]
+    dv = (v[k:] - v[k]) - (big_u - big_u[0]) + m.drag_per_s * (x[k:] - x[k]) \
+        - bias * (t[k:] - t[k])
+    return float(np.sqrt(np.mean(dv * dv)))
+
+
 def _shifted_integrals(t: np.ndarray, u: np.ndarray, lags: np.ndarray,
                        at: np.ndarray) -> np.ndarray:
     """U(t[at] - lag) for each lag (rows): the integral of the zero-order-held command from
@@ -170,9 +189,10 @@ def _shifted_integrals(t: np.ndarray, u: np.ndarray, lags: np.ndarray,
     return np.interp(shifted.ravel(), t, big_u).reshape(shifted.shape) + before
 
 
-def _solve(t, u, x, v, lags: np.ndarray, drag: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def _solve(t, u, x, v, lags: np.ndarray, drag: float | None = None
+           ) -> tuple[np.ndarray, np.ndarray]:
     """For each lag: the mean squared residual [m^2/s^2] and the least-squares (drag,
-    bias, offset) as columns, integrated from the first tick (drag=False: drag held at 0).
+    bias, offset) as columns, integrated from the first tick (a given drag [1/s] is held).
     The regressors do not depend on the lag, so one pseudo-inverse serves every lag; the
     integrals take every tick, the regression at most FIT_POINTS of them (a refit stays
     about a millisecond)."""
@@ -181,9 +201,14 @@ def _solve(t, u, x, v, lags: np.ndarray, drag: bool = True) -> tuple[np.ndarray,
     t, x, v = t[at], x[at], v[at]
     y = (v - v[0])[:, None] - (big_u - big_u[:, :1]).T
     # The ones column absorbs the noise of the reference tick's own speed.
-    a = np.column_stack((-(x - x[0]) * drag, t - t[0], np.ones_like(t)))
+    a = np.column_stack((-(x - x[0]), t - t[0], np.ones_like(t)))
+    if drag is not None:
+        y = y + drag * (x - x[0])[:, None]
+        a[:, 0] = 0.0
     sol = np.linalg.pinv(a) @ y
     r = y - a @ sol
+    if drag is not None:
+        sol[0] = drag
     return np.einsum("ij,ij->j", r, r) / len(t), sol
 
 

@@ -64,24 +64,25 @@ class VehicleResponse:
                 "speed_span_mps": m.speed_span_mps}))
 
     def refit_stage2(self, t: float, since_t: float, v_hold: float) -> float:
-        """At the stage-2 switch: drag and bias again from stage 1 (since since_t [s]), the
-        lag kept, fed forward from here on. Returns the step [m/s^2] this adds at the held
+        """At the stage-2 switch: the bias again from stage 1 (since since_t [s]), lag and
+        drag kept, fed forward from here on if it predicts stage 1's end better
+        (LagIdentifier.refit_bias). Returns the step [m/s^2] this adds at the held
         speed v_hold [m/s] (0 when refused, logged, or nothing was identified)."""
         if self.model is None or not self.cfg.stage2_refit:
             return 0.0
-        fit = self.lagid.refit_drag(self.model.lag_s, since_t)
+        fit = self.lagid.refit_bias(self.model, since_t)
         m = fit.model
         if m is None:
-            self._events.append(LogEvent(t, "drag-unrefitted", f"{fit.why}: stage 2 keeps "
-                                         f"drag {self.ff.drag_per_s:.3f} 1/s"))
+            self._events.append(LogEvent(t, "bias-unrefitted", f"{fit.why}: stage 2 keeps "
+                                         f"bias {self.ff.bias_mps2:.3f} m/s^2"))
             return 0.0
         ff = feed_forward(m)
         step = ff.accel(0.0, v_hold) - self.ff.accel(0.0, v_hold)
         self.ff, self.model = ff, m
-        self._events.append(LogEvent(t, "drag-refit", (
-            f"stage 2: drag {m.drag_per_s:.3f} 1/s, bias {m.bias_mps2:.3f} m/s^2 from stage 1"), {
-                "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2, "rms_mps": m.rms_mps,
-                "samples": m.samples, "step_mps2": step}))
+        self._events.append(LogEvent(t, "bias-refit", (
+            f"stage 2: bias {m.bias_mps2:.3f} m/s^2 from stage 1"), {
+                "bias_mps2": m.bias_mps2, "rms_mps": m.rms_mps, "samples": m.samples,
+                "step_mps2": step}))
         return step
 
     def predicted(self, t: float, x: float, xdot: float) -> tuple[float, float, float]:

@@ -27,7 +27,8 @@ class PlantParams:
     """mass_kg [kg] (30 g Crazyflie 2.0 with markers); thrust_max_n [N] collective (four CF2.0
     motors give about 0.6 N); attitude_tau_s, motor_tau_s [s] first-order time constants;
     latency_s [s] command delay; drag_per_s [1/s] linear drag coefficient; qdrag_per_m
-    [1/m] quadratic drag coefficient (deceleration qdrag_per_m |v| v); g [m/s^2];
+    [1/m] quadratic drag coefficient (deceleration qdrag_per_m |v| v); draught_mps2
+    [m/s^2] a constant acceleration along world X where x >= draught_x_m [m]; g [m/s^2];
     step_s [s] integration step; stick_s [s] on the floor, how long the thrust must lift
     (exceed the weight) before the vehicle leaves it (0: at once)."""
 
@@ -38,6 +39,8 @@ class PlantParams:
     latency_s: float = 0.0
     drag_per_s: float = 0.0
     qdrag_per_m: float = 0.0
+    draught_x_m: float = math.inf
+    draught_mps2: float = 0.0
     g: float = G_M_S2
     step_s: float = 0.001
     stick_s: float = 0.0
@@ -123,7 +126,8 @@ class Plant:
         bz = body_z(*self.att)
         f = self.thrust / prm.mass_kg
         drag = prm.drag_per_s + prm.qdrag_per_m * math.sqrt(sum(c * c for c in self.v))
-        acc = [f * bz[0] - drag * self.v[0], f * bz[1] - drag * self.v[1],
+        push = prm.draught_mps2 if self.p[0] >= prm.draught_x_m else 0.0
+        acc = [f * bz[0] - drag * self.v[0] + push, f * bz[1] - drag * self.v[1],
                f * bz[2] - prm.g - drag * self.v[2]]
         if self._stuck(acc[2], dt):
             return

@@ -10,7 +10,8 @@ URI options (read by whichever factory creates the world): latency [s] command d
 noise [m] mocap noise std, mocap_rate [Hz], mocap_latency [s], start=X,Y,Z [m],
 attitude_tau [s], motor_tau [s], seed, stall=AT,FOR [s] (perchd.sim.stall: a hung link),
 mass [kg] the simulated vehicle's true mass (the flight config may disagree, as a real
-weight may), drag [1/s] linear drag, qdrag [1/m] quadratic drag.
+weight may), drag [1/s] linear drag, qdrag [1/m] quadratic drag, draught=X,A a constant
+acceleration A [m/s^2] along world X from world x = X [m] on (air off a wall).
 """
 
 from __future__ import annotations
@@ -232,19 +233,30 @@ def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldPar
         rate_hz=float_param(uri, "mocap_rate", wp.mocap.rate_hz, 1.0, 1000.0, " Hz"),
         latency_s=float_param(uri, "mocap_latency", wp.mocap.latency_s, 0.0, 0.5, " s"),
         noise_m=float_param(uri, "noise", wp.mocap.noise_m, 0.0, 0.1, " m"))
-    start = wp.start
-    text = uri.param("start")
-    if text is not None:
-        try:
-            start = tuple(float(v) for v in text.split(","))
-        except ValueError:
-            start = ()
-        if len(start) != 3 or not all(math.isfinite(v) for v in start):
-            raise UriError(f"{uri.raw}: start={text!r} must be X,Y,Z in metres")
+    start = _floats(uri, "start", "X,Y,Z in metres") or wp.start
+    draught = _floats(uri, "draught", "X,A: from world x = X [m] on, A [m/s^2] along X")
+    if draught is not None:
+        plant = replace(plant, draught_x_m=draught[0], draught_mps2=draught[1])
     seed = int(float_param(uri, "seed", float(wp.seed), 0, 2 ** 31, ""))
     return replace(wp, plant=plant, mocap=mocap, start=start, seed=seed,
                    body=uri.param("body", wp.body) or wp.body,
                    stall=stall_from_uri(uri) or wp.stall)
+
+
+def _floats(uri: Uri, key: str, form: str) -> tuple[float, ...] | None:
+    """The URI's `key` as the finite numbers `form` names (as many as its commas say),
+    None when absent; anything else is one UriError."""
+    text = uri.param(key)
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != form.split(":")[0].count(",") + 1 or \
+            not all(math.isfinite(v) for v in values):
+        raise UriError(f"{uri.raw}: {key}={text!r} must be {form}")
+    return values
 
 
 def world_for(uri: Uri, runtime: Runtime) -> SimWorld:

@@ -67,6 +67,16 @@ def test_quadratic_drag_brakes_by_qdrag_times_the_speed_squared():
     assert rt.sim.state().v[0] == pytest.approx(2.0 / (1.0 + 0.5 * 2.0 * 1.0), rel=0.01)
 
 
+def test_a_draught_pushes_only_beyond_its_x():
+    rt, d, _ = world("sim://?draught=-4.4,-0.5")
+    rt.sim.plant.v[0] = 1.0  # from x = -4.5: 0.1 m free, then 0.5 m/s^2 against
+    for k in range(101):
+        rt.clock.sleep_until(k * 0.01)
+        d.send(sp(k * 0.01))
+    # 0.1 s to reach x = -4.4, then 0.9 s braked: v = 1 - 0.5 x 0.9
+    assert rt.sim.state().v[0] == pytest.approx(1.0 - 0.5 * 0.9, abs=0.01)
+
+
 def test_command_latency_delays_the_setpoint():
     rt, d, _ = world("sim://?latency=0.02")
     d.send(sp(0.0, 0.2))
@@ -123,3 +133,5 @@ def test_a_bad_sim_option_is_one_clear_error():
         open_driver("sim://?latency=5", Runtime(ManualClock()))
     with pytest.raises(UriError, match="start='1,2' must be X,Y,Z"):
         open_source("sim://?start=1,2", Runtime(ManualClock()))
+    with pytest.raises(UriError, match="draught='-1,inf' must be X,A"):
+        open_source("sim://?draught=-1,inf", Runtime(ManualClock()))
