@@ -9,12 +9,9 @@ CONTACT (the post-contact action for post_contact_s) -> DONE.
 
 End rules, checked in this order on every tick: operator abort, signal, stale mocap, lost
 link, geofence, tilt, speed limit, tau divergence, deadline overrun streak, timeout, contact,
-plan complete. The trigger itself may end the flight (TRIGGER_REFUSED): a plan is never
-flown from a state it was not made for, except within the configured tolerance (REFUSE
-policy) or after being retargeted to the measured state (ROBUST, REPLAN): by a planner
-that never blocks the tick, planned ahead during the approach, waited for no longer than a
-deadline and replaced by the configured fallback past it (docs/architecture.md "Planning in
-flight").
+plan complete. The trigger itself may end the flight (TRIGGER_REFUSED): what it flies or
+refuses is flight/trigger.py's decision; what the flight knows of the vehicle's response
+and feeds forward is flight/response.py's.
 """
 
 from __future__ import annotations
@@ -25,23 +22,20 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
-from perchd.core.errors import ConfigError
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint, State
 from perchd.flight.config import (
     FlightConfig,
     PostContact,
-    TriggerFallback,
-    TriggerPolicy,
 )
 from perchd.flight.control import AxisController, Controller, FeedForward
 from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner
-from perchd.flight.planner_worker import InlinePlanner, Planner, PlanReply
+from perchd.flight.planner_worker import Planner
 from perchd.flight.planrefs import PlanSampler
 from perchd.flight.response import VehicleResponse, feed_forward
 from perchd.flight.takeoff import TakeoffProfile
+from perchd.flight.trigger import TriggerDesk
 from perchd.logs.flightlog import LogEvent
-from perchd.tau.library import load_library
 from perchd.tau.plan import Plan
 
 FROZEN_MAX_S = 0.3
@@ -116,19 +110,6 @@ class Trigger:
 
 
 @dataclass(frozen=True, slots=True)
-class ReplanWait:
-    """A replan asked for at the trigger: request id; t [s] the triggering tick; x [m],
-    v [m/s] measured then (the state asked for; the speed held meanwhile); deadline [s] on
-    the clock past which the fallback flies (TriggerConfig.deadline_s)."""
-
-    id: int
-    t: float
-    x: float
-    v: float
-    deadline: float
-
-
-@dataclass(frozen=True, slots=True)
 class ContactEstimate:
     """t [s] estimated time at X = 0; speed [m/s] estimated Xdot then."""
 
@@ -153,16 +134,9 @@ class Conditions:
     arrival_age_s: float | None = None
 
 
-AHEAD_FILTER_S = 0.2
-"""[s] time constant of the low-pass on the approach's speed error that predicts the speed at
-the trigger: the plan ahead follows the error's trend, not the estimator's noise."""
-_RETARGETS = (TriggerPolicy.ROBUST, TriggerPolicy.REPLAN)
-
-
 class Supervisor:
-    """planner: where ROBUST and REPLAN get their plans (flight/planner_worker.py); None: an
-    InlinePlanner, solving in the tick (a simulated clock: a solve takes no simulated time).
-    The caller owns it (starts and closes it)."""
+    """planner: where the trigger's ROBUST and REPLAN get their plans (TriggerDesk); None:
+    solved in the tick. The caller owns it (starts and closes it)."""
 
     def __init__(self, plan: Plan, cfg: FlightConfig, frame: PerchFrame,
                  planner: Planner | None = None) -> None:
@@ -191,19 +165,7 @@ class Supervisor:
         self._x: float | None = None  # [m] measured X of the tick in hand
         self._sampler = PlanSampler(plan)
         self._refs_memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
-        self._library = _open_library(cfg.trigger.library, plan)
-        self.planner: Planner | None = planner
-        if planner is None and cfg.trigger.policy in _RETARGETS:
-            self.planner = InlinePlanner(plan, self._library)
-        # The newest plan made ahead for the trigger, and the speed [m/s] last asked for: a
-        # REPLAN flight's own plan is the one for (x0, v0) until the prediction drifts.
-        replan = cfg.trigger.policy is TriggerPolicy.REPLAN
-        self._ahead: Plan | None = plan if replan else None
-        self._ahead_asked_v: float | None = plan.v0 if replan else None
-        self._v_err = 0.0  # [m/s] low-passed approach speed error (measured - profile)
-        self._wait: ReplanWait | None = None
-        self._planner_waiting = False
-        self._late_id: int | None = None  # a replan given up on, still solving (logged when in)
+        self.desk = TriggerDesk(plan, cfg, planner, self.events)
         self.hover = HoverLearner(cfg.hover, cfg.vehicle.hover_guess_n, cfg.vehicle.g)
         self.hover_learned_n: float | None = None  # [N] once the hold's estimate settled
         self._hover_waiting = False
@@ -351,7 +313,7 @@ class Supervisor:
             self._enter(Phase.HOLD, t)
         self._learn_hover(t, dt, st)
         if self.phase is Phase.HOLD and t - self._t_phase >= self.cfg.approach.hold_s \
-                and self._hover_ready(t, st) and self._planner_ready(t):
+                and self._hover_ready(t, st) and self.desk.ready(t):
             self._begin_approach(t, st)
         if self.end is not None:
             return self._ended(t, st)
@@ -359,8 +321,8 @@ class Supervisor:
             self._approach_plans(t, dt, st)
             if self.end is not None:
                 return self._ended(t, st)
-        elif self._late_id is not None:
-            self._note_late(t)
+        else:
+            self.desk.note_late(t)
         if self.phase is Phase.STAGE1 and self._tau_s is not None and st.tau is not None \
                 and st.tau >= self._tau_s:
             self.t_stage2 = t
@@ -446,8 +408,8 @@ class Supervisor:
     def _v_ref(self, x: float) -> float:
         """[m/s] the approach's speed reference at X = x: the profile to (x0, v0), or, while a
         replan is awaited past x0, the speed measured at the trigger (held constant)."""
-        if self._wait is not None:
-            return self._wait.v
+        if self.desk.wait is not None:
+            return self.desk.wait.v
         v0 = self.plan.v0
         return math.sqrt(max(0.0, v0 * v0 - 2.0 * self._a_app * (self.plan.x0 - x)))
 
@@ -505,128 +467,16 @@ class Supervisor:
             "since_hold_s": t - self._t_phase}))
         return True
 
-    def _planner_ready(self, t: float) -> bool:
-        """The approach waits in the hold for the trigger's planner to have loaded (a worker
-        process takes seconds on a busy PC), or it could not plan ahead; the flight's
-        timeout bounds the wait."""
-        if self.planner is None or self.planner.ready:
-            return True
-        if not self._planner_waiting:
-            self._planner_waiting = True
-            self.events.append(LogEvent(t, "planner-wait", "waiting for the planner worker "
-                                        "to load before the approach"))
-        return False
-
-    # --- the trigger and its plans (docs/architecture.md "Planning in flight") -------------
+    # --- the trigger (flight/trigger.py) ---------------------------------------------------
     def _approach_plans(self, t: float, dt: float, st: State) -> None:
-        """Per approach tick: plan ahead, trigger at x0, or wait for the trigger's replan."""
-        if self._wait is not None:
-            self._await_replan(t)
-        elif st.x >= self.plan.x0:
-            self._trigger(t, st)
+        """Per approach tick: what the trigger desk decided, flown or refused."""
+        d = self.desk.approach_tick(t, dt, st, self._v_ref(st.x))
+        if d is None:
+            return
+        if d.plan is None:
+            self._finish(EndReason.TRIGGER_REFUSED, t, d.action)
         else:
-            self._plan_ahead(dt, st)
-
-    def _plan_ahead(self, dt: float, st: State) -> None:
-        """Keep a plan ready for the predicted trigger state (x0, v0 + the approach's speed
-        error, low-passed): asked again only when the prediction drifts by more than half
-        ahead_v_tol_mps from the last one asked for. Needs a planner that takes time."""
-        if self.planner is None or self.planner.instant:
-            return
-        reply = self.planner.poll()
-        if reply is not None:
-            self._took_ahead(reply)
-        err = st.xdot - self._v_ref(st.x)
-        self._v_err += (err - self._v_err) * min(1.0, dt / AHEAD_FILTER_S)
-        v_pred = self.plan.v0 + self._v_err
-        asked = self._ahead_asked_v
-        # Re-asked at half the tolerance the trigger accepts: the other half is for the
-        # drift between the newest plan and the trigger.
-        if not self.planner.busy and (asked is None or abs(v_pred - asked) >
-                                      0.5 * self.cfg.trigger.ahead_v_tol_mps):
-            self._ahead_asked_v = v_pred
-            self.planner.request(self.plan.x0, v_pred)
-
-    def _took_ahead(self, reply: PlanReply) -> None:
-        values = {"v0": reply.v0_mps, "solve_s": reply.solve_s}
-        if reply.plan is not None:
-            self._ahead = reply.plan
-            self.events.append(LogEvent(self._t_prev, "plan-ahead", f"made for v0 = "
-                                        f"{reply.v0_mps:.3f} m/s", values))
-        else:
-            self.events.append(LogEvent(self._t_prev, "plan-ahead", f"failed: {reply.error}",
-                                        values))
-
-    def _trigger(self, t: float, st: State) -> None:
-        tr = self.cfg.trigger
-        if tr.policy is TriggerPolicy.REFUSE or self._outside_box(st) is not None:
-            plan, action, why = self._refuse_rule(st)
-            if plan is None:
-                self._finish(EndReason.TRIGGER_REFUSED, t, why)
-            else:
-                self._start_plan(t, t, st.x, st.xdot, plan, action)
-            return
-        if self.planner.instant:  # the solve takes no time on this clock: fly it now
-            self.planner.request(st.x, st.xdot)
-            self._take_reply(t, ReplanWait(0, t, st.x, st.xdot, t), self.planner.poll())
-            return
-        ahead = self._ahead
-        if ahead is not None and abs(st.xdot - ahead.v0) <= tr.ahead_v_tol_mps:
-            self._start_plan(t, t, st.x, st.xdot, ahead, (
-                f"{self._how()}: planned ahead for v0 = {ahead.v0:.3f} m/s, flown from "
-                f"x = {st.x:.3f} m, v = {st.xdot:.3f} m/s"))
-            return
-        deadline = t + tr.deadline_s(float(self.plan.peaks.a))
-        self._wait = ReplanWait(self.planner.request(st.x, st.xdot), t, st.x, st.xdot,
-                                deadline)
-        self.events.append(LogEvent(t, "trigger-wait", "replan asked for the measured state",
-                                    {"x": st.x, "v": st.xdot, "deadline_s": deadline - t}))
-
-    def _await_replan(self, t: float) -> None:
-        w = self._wait
-        reply = self.planner.poll()
-        if reply is not None:
-            self._take_reply(t, w, reply)
-        elif t >= w.deadline:
-            self._late_id = w.id
-            self._fallback(t, w, f"replan not in after {t - w.t:.3f} s (deadline "
-                                 f"{w.deadline - w.t:.3f} s)", t - w.t)
-
-    def _take_reply(self, t: float, w: ReplanWait, reply: PlanReply) -> None:
-        """Fly the replan from the trigger state it was made for; its clock starts at the
-        triggering tick (docs/architecture.md: a plan is time-invariant in X)."""
-        self._wait = None
-        if reply.plan is None:
-            self._fallback(t, w, f"no plan from x = {w.x:.3f} m, v = {w.v:.3f} m/s: "
-                                 f"{reply.error}", reply.solve_s)
-            return
-        if w.id:
-            self.events.append(LogEvent(t, "trigger-solve", "replan in", {
-                "solve_s": reply.solve_s, "waited_s": t - w.t}))
-        self._start_plan(t, w.t, w.x, w.v, reply.plan, (
-            f"{self._how()}: retargeted to x0 = {w.x:.3f} m, v0 = {w.v:.3f} m/s"))
-
-    def _fallback(self, t: float, w: ReplanWait, why: str, solve_s: float) -> None:
-        self._wait = None
-        fb = self.cfg.trigger.fallback
-        values = {"solve_s": solve_s, "deadline_s": w.deadline - w.t}
-        if fb is TriggerFallback.PLAN:
-            plan, action, refused = self._refuse_rule(ReplanState(w.x, w.v), self._ahead)
-            if plan is not None:
-                self.events.append(LogEvent(t, "trigger-fallback", f"{why}: {action}", values))
-                self._start_plan(t, w.t, w.x, w.v, plan, f"fallback plan ({why}); {action}")
-                return
-            why = f"{why}; fallback plan: {refused}"
-        self.events.append(LogEvent(t, "trigger-fallback", f"{why}: refused", values))
-        self._finish(EndReason.TRIGGER_REFUSED, t, f"{why} (fallback {fb.value})")
-
-    def _note_late(self, t: float) -> None:
-        """Log the solve time of a replan given up on, when it finally comes in."""
-        reply = self.planner.poll()
-        if reply is not None:
-            self._late_id = None
-            self.events.append(LogEvent(t, "trigger-late-solve", "the replan given up on came "
-                                        "in", {"solve_s": reply.solve_s}))
+            self._start_plan(t, d.t_meas, d.x, d.v, d.plan, d.action)
 
     def _start_plan(self, t: float, t_meas: float, x: float, v: float, plan: Plan,
                     action: str) -> None:
@@ -640,39 +490,6 @@ class Supervisor:
         self.trigger = Trigger(t0, x, v, plan.x0, plan.v0, action)
         self.ctl.tau.reset()
         self._enter(Phase.STAGE1, t, action, x=x, v=v, plan_x0=plan.x0, plan_v0=plan.v0)
-
-    def _how(self) -> str:
-        return f"{self.cfg.trigger.policy.value}{' (library)' if self._library else ''}"
-
-    def _outside_box(self, st: State) -> str | None:
-        """Why ROBUST cannot fly from this state (no box, or outside it), or None."""
-        if self.cfg.trigger.policy is not TriggerPolicy.ROBUST:
-            return None
-        box = getattr(self.plan, "robust", None)
-        if box is None:
-            return "trigger policy 'robust' but the plan has no robust box"
-        (xl, xh), (vl, vh) = box
-        if not (xl <= st.x <= xh and vl <= st.xdot <= vh):
-            return (f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s outside the "
-                    f"plan's robust box x0 {xl:g}..{xh:g}, v0 {vl:g}..{vh:g}")
-        return None
-
-    def _refuse_rule(self, st: Any, ahead: Plan | None = None) -> tuple[Any, str, str]:
-        """(plan, what was done, why not): the nearest of the flight's plan and `ahead` in
-        speed, flown as made if the state is within tolerance of it (REFUSE; the PLAN
-        fallback). A ROBUST state outside the box is refused here."""
-        boxed = self._outside_box(st)
-        if boxed is not None:
-            return None, "", boxed
-        tr = self.cfg.trigger
-        plan = min((p for p in (ahead, self.plan) if p is not None),
-                   key=lambda p: abs(st.xdot - p.v0))
-        dx, dv = st.x - plan.x0, st.xdot - plan.v0
-        if abs(dx) <= tr.x_tol_m and abs(dv) <= tr.v_tol_mps:
-            return plan, f"flown as made (dx {dx:+.3f} m, dv {dv:+.3f} m/s within tolerance)", ""
-        return None, "", (f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s differ from the "
-                          f"plan's x0 = {plan.x0:g}, v0 = {plan.v0:g} by {dx:+.3f} m, "
-                          f"{dv:+.3f} m/s (tolerance {tr.x_tol_m:g} m, {tr.v_tol_mps:g} m/s)")
 
     def _refs(self, t: float) -> Refs:
         """The references at tick time t; computed once per tick (the tau watch and the
@@ -749,24 +566,3 @@ class Supervisor:
         """Stage 2 flies the drag refitted from stage 1 (VehicleResponse.refit_stage2); what
         that adds, the tau PID's integral gives back as far as it holds it."""
         self.ctl.tau.give_back(self.response.refit_stage2(t, self.trigger.t, self.v_hold))
-
-
-@dataclass(frozen=True, slots=True)
-class ReplanState:
-    """The trigger state a replan was asked for, as the refuse rule reads a State:
-    x [m], xdot [m/s]."""
-
-    x: float
-    xdot: float
-
-
-def _open_library(path: str | None, plan: Plan) -> Any:
-    """The trigger's plan library, loaded before the flight and checked against its plan."""
-    if path is None:
-        return None
-
-    lib = load_library(path)
-    why = lib.matches(plan)
-    if why:
-        raise ConfigError(f"trigger.library {path}: {why}")
-    return lib
