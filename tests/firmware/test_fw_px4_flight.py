@@ -50,9 +50,10 @@ G = 9.81
 DRAG = 0.1
 """[N/(m/s)] SIH's linear drag, 1.0 by default: 1.5 m/s^2 against a 1 kg vehicle at the
 plan's v0 = 1.5 m/s, more than the plan's a_max = 1.4 m/s^2 (the run-up never reached v0)."""
-AHEAD_M = 8.0
-"""[m] surface ahead of the hover point: 5 m of run-up to the plan's x0 = -3 m (with 1.5 m,
-PX4's attitude lag left the approach at 1.1 of v0 = 1.5 m/s and the trigger refused)."""
+AHEAD_M = 7.5
+"""[m] surface ahead of the hover point: 4.5 m of run-up to the plan's x0 = -3 m (with 1.5 m,
+PX4's attitude lag left the approach at 1.1 of v0 = 1.5 m/s and the trigger refused), the
+hold 0.5 m inside the geofence's x_min = -8 m (at 8 m a hold swaying 0.2 m ended GEOFENCE)."""
 CONFIG = f"""version = 1
 [vehicle]
 mass_kg = {SIH_MASS_KG}
