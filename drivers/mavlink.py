@@ -124,9 +124,11 @@ ARM_RETRY_S = 0.5
 MODE_CONFIRM_S = 1.5
 """[s] after an acknowledged mode switch a heartbeat still showing the old mode is one sent
 before the switch (heartbeats come at 1 Hz); past this the vehicle really is elsewhere."""
-YAW0_TRACK_S = 0.5
-"""[s] time constant of yaw0=auto's offset tracking: slower than one mocap frame's jitter,
-faster than a compass heading drifts (PX4 SIH: ~3 deg/s)."""
+YAW0_TRACK_S = 0.1
+"""[s] time constant of yaw0=auto's offset tracking: ten mocap frames, against one frame's
+jitter; and fast, because the autopilot steers its own heading estimate, which PX4 SIH's
+EKF2 moves by 10-14 deg within a perch: at 0.5 s the true heading strayed 3.7-13 deg over
+eight flights, at 0.1 s at most 2.2 deg over six (docs/firmware.md)."""
 PX4_OFFBOARD_PORT = 14540
 NO_HEARTBEAT_CAUSES = (
     "is the autopilot running and sending to this address? PX4 sends only to its fixed "
