@@ -30,17 +30,24 @@ def sp(t, pitch=0.0, thrust=0.030 * G):
     return Setpoint(t, 0.0, pitch, 0.0, thrust, 0, Phase.STAGE1)
 
 
+def coast(uri: str, vx: float, ticks: int = 101):
+    """The world of `uri`, its vehicle set moving at vx [m/s] along X, then held level at
+    its weight for `ticks` 10 ms ticks."""
+    rt, d, _ = world(uri)
+    rt.sim.plant.v[0] = vx
+    for k in range(ticks):
+        rt.clock.sleep_until(k * 0.01)
+        d.send(sp(k * 0.01))
+    return rt
+
+
 def test_driver_and_mocap_share_one_world_created_by_the_first_to_open():
     rt, d, m = world()
     assert d.world is rt.sim and m.world is rt.sim
 
 
 def test_a_hovering_vehicle_given_its_weight_stays_put():
-    rt, d, m = world()
-    for k in range(200):
-        rt.clock.sleep_until(k * 0.01)
-        d.send(sp(k * 0.01))
-    p = rt.sim.state().p
+    p = coast("sim://", 0.0, ticks=200).sim.state().p
     assert p == pytest.approx((-4.5, 0.0, 1.0), abs=1e-6)
 
 
@@ -59,20 +66,12 @@ def test_a_pitched_vehicle_accelerates_as_the_attitude_and_motor_lags_allow():
 
 def test_quadratic_drag_brakes_by_qdrag_times_the_speed_squared():
     """Level at the weight, 2 m/s along X: v' = -q v^2, so v(t) = v0 / (1 + q v0 t)."""
-    rt, d, _ = world("sim://?qdrag=0.5")
-    rt.sim.plant.v[0] = 2.0
-    for k in range(101):
-        rt.clock.sleep_until(k * 0.01)
-        d.send(sp(k * 0.01))
+    rt = coast("sim://?qdrag=0.5", 2.0)
     assert rt.sim.state().v[0] == pytest.approx(2.0 / (1.0 + 0.5 * 2.0 * 1.0), rel=0.01)
 
 
 def test_a_draught_pushes_only_beyond_its_x():
-    rt, d, _ = world("sim://?draught=-4.4,-0.5")
-    rt.sim.plant.v[0] = 1.0  # from x = -4.5: 0.1 m free, then 0.5 m/s^2 against
-    for k in range(101):
-        rt.clock.sleep_until(k * 0.01)
-        d.send(sp(k * 0.01))
+    rt = coast("sim://?draught=-4.4,-0.5", 1.0)  # from x = -4.5: 0.1 m free, then braked
     # 0.1 s to reach x = -4.4, then 0.9 s braked: v = 1 - 0.5 x 0.9
     assert rt.sim.state().v[0] == pytest.approx(1.0 - 0.5 * 0.9, abs=0.01)
 
@@ -107,11 +106,7 @@ def test_waiting_for_a_pose_moves_simulated_time_to_its_arrival():
 
 
 def test_reaching_the_surface_records_contact_time_and_speed_and_the_vehicle_stays_perched():
-    rt, d, _ = world("sim://?start=-0.5,0,1")
-    rt.sim.plant.v[0] = 1.0
-    for k in range(100):
-        rt.clock.sleep_until(k * 0.01)
-        d.send(sp(k * 0.01))
+    rt = coast("sim://?start=-0.5,0,1", 1.0, ticks=100)
     c = rt.sim.contact
     assert c.t == pytest.approx(0.5, abs=1e-3) and c.speed == pytest.approx(1.0)
     assert rt.sim.state().p[0] == pytest.approx(0.0, abs=2e-3)
