@@ -1,7 +1,7 @@
 """What the flight knows of its vehicle's response along X, and what it feeds forward.
 
 One object holds the identification (flight/lagid.py) through a flight: it records the
-ticks, refits during the approach, identifies at the trigger, refits the drag at the
+ticks, refits during the approach, identifies at the trigger, refits the bias at the
 stage-2 switch, and predicts the state the commands still in flight will bring; it logs
 each fit. The supervisor decides when each happens and hands the feed-forward's steps
 over to its integrals (docs/errata.md §10).
