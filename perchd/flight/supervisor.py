@@ -23,10 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint, State
-from perchd.flight.config import (
-    FlightConfig,
-    PostContact,
-)
+from perchd.flight.config import FlightConfig, PostContact
 from perchd.flight.control import AxisController, Controller, FeedForward
 from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner

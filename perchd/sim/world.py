@@ -233,8 +233,8 @@ def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldPar
         rate_hz=float_param(uri, "mocap_rate", wp.mocap.rate_hz, 1.0, 1000.0, " Hz"),
         latency_s=float_param(uri, "mocap_latency", wp.mocap.latency_s, 0.0, 0.5, " s"),
         noise_m=float_param(uri, "noise", wp.mocap.noise_m, 0.0, 0.1, " m"))
-    start = _floats(uri, "start", "X,Y,Z in metres") or wp.start
-    draught = _floats(uri, "draught", "X,A: from world x = X [m] on, A [m/s^2] along X")
+    start = _floats(uri, "start", 3, "X,Y,Z in metres") or wp.start
+    draught = _floats(uri, "draught", 2, "X,A: from world x = X [m] on, A [m/s^2] along X")
     if draught is not None:
         plant = replace(plant, draught_x_m=draught[0], draught_mps2=draught[1])
     seed = int(float_param(uri, "seed", float(wp.seed), 0, 2 ** 31, ""))
@@ -243,9 +243,9 @@ def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldPar
                    stall=stall_from_uri(uri) or wp.stall)
 
 
-def _floats(uri: Uri, key: str, form: str) -> tuple[float, ...] | None:
-    """The URI's `key` as the finite numbers `form` names (as many as its commas say),
-    None when absent; anything else is one UriError."""
+def _floats(uri: Uri, key: str, n: int, form: str) -> tuple[float, ...] | None:
+    """The URI's `key` as n comma-separated finite numbers, None when absent; anything
+    else is one UriError saying the `form` wanted."""
     text = uri.param(key)
     if text is None:
         return None
@@ -253,8 +253,7 @@ def _floats(uri: Uri, key: str, form: str) -> tuple[float, ...] | None:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != form.split(":")[0].count(",") + 1 or \
-            not all(math.isfinite(v) for v in values):
+    if len(values) != n or not all(math.isfinite(v) for v in values):
         raise UriError(f"{uri.raw}: {key}={text!r} must be {form}")
     return values
 
