@@ -108,20 +108,22 @@ class LagIdentifier:
         the speed over those, the nearest to stage 2, closer than base does (a drag that
         grows with speed shows in stage 1's faster part as a push stage 2 does not meet).
         Refused otherwise, on too few ticks, or on a large residual."""
-        rows = [r for r in self._rows if r[0] >= since_t]
-        if len(rows) < 40:
-            return LagFit(None, f"{len(rows)} ticks since {since_t:.3f} s, too few to fit")
-        t, u, x, v = (np.array(col) for col in zip(*rows))
-        lag, drag, k = np.array([base.lag_s]), base.drag_per_s, int(len(t) * (1 - HOLDOUT))
-        trained = float(_solve(t[:k], u[:k], x[:k], v[:k], lag, drag=drag)[1][1, 0])
+        t, u, x, v = (np.array(col) for col in zip(*self._rows)) if self._rows else ([],) * 4
+        first = int(np.searchsorted(t, since_t))
+        n = len(t) - first
+        if n < 40:
+            return LagFit(None, f"{n} ticks since {since_t:.3f} s, too few to fit")
+        # The ticks before since_t stay in: the commands still in flight at since_t.
+        lag, drag, k = np.array([base.lag_s]), base.drag_per_s, first + int(n * (1 - HOLDOUT))
+        trained = float(_solve(t[:k], u[:k], x[:k], v[:k], lag, drag, first)[1][1, 0])
         new, old = (_holdout_rms(t, u, x, v, base, b, k) for b in (trained, base.bias_mps2))
         if new >= old:
             return LagFit(None, f"the approach's model predicts the last {HOLDOUT:.0%} of "
                                 f"the ticks as well or better ({old:.3f} m/s rms, the "
                                 f"refit {new:.3f})")
-        mse, sol = _solve(t, u, x, v, lag, drag=drag)
+        mse, sol = _solve(t, u, x, v, lag, drag, first)
         return _checked(LagModel(base.lag_s, drag, float(sol[1, 0]), float(np.sqrt(mse[0])),
-                                 len(t), float(v.max() - v.min())), self.cfg)
+                                 n, float(v[first:].max() - v[first:].min())), self.cfg)
 
     def predict(self, t: float, x: float, xdot: float, model: Response,
                 horizon_s: float) -> tuple[float, float]:
@@ -189,14 +191,15 @@ def _shifted_integrals(t: np.ndarray, u: np.ndarray, lags: np.ndarray,
     return np.interp(shifted.ravel(), t, big_u).reshape(shifted.shape) + before
 
 
-def _solve(t, u, x, v, lags: np.ndarray, drag: float | None = None
+def _solve(t, u, x, v, lags: np.ndarray, drag: float | None = None, start: int = 0
            ) -> tuple[np.ndarray, np.ndarray]:
     """For each lag: the mean squared residual [m^2/s^2] and the least-squares (drag,
-    bias, offset) as columns, integrated from the first tick (a given drag [1/s] is held).
-    The regressors do not depend on the lag, so one pseudo-inverse serves every lag; the
-    integrals take every tick, the regression at most FIT_POINTS of them (a refit stays
-    about a millisecond)."""
-    at = np.unique(np.linspace(0, len(t) - 1, min(len(t), FIT_POINTS)).astype(int))
+    bias, offset) as columns, integrated from tick `start` (a given drag [1/s] is held;
+    the ticks before start only supply the commands in flight). The regressors do not
+    depend on the lag, so one pseudo-inverse serves every lag; the integrals take every
+    tick, the regression at most FIT_POINTS of them (a refit stays about a millisecond)."""
+    n = len(t) - start
+    at = np.unique(np.linspace(start, len(t) - 1, min(n, FIT_POINTS)).astype(int))
     big_u = _shifted_integrals(t, u, lags, at)
     t, x, v = t[at], x[at], v[at]
     y = (v - v[0])[:, None] - (big_u - big_u[:, :1]).T

@@ -160,3 +160,17 @@ def test_the_prediction_adds_the_commands_still_in_flight():
     assert (x, v) == pytest.approx((-0.9, 1.0), abs=1e-9)
     dragged = LagModel(0.2, 0.5, 0.0, 0.0, 0, 0.0)  # drag takes 0.5 * 1 m/s for 0.2 s
     assert ident.predict(1.0, -1.0, 1.0, dragged, 0.2)[1] == pytest.approx(1.0, abs=1e-9)
+
+
+
+
+def test_the_refit_counts_the_commands_in_flight_when_it_begins():
+    """Refitted from the braking command's first tick with 0.3 s of lag, the approach's
+    commands of the last 0.3 s are still arriving. Taken for the braking's (as the refit
+    once did), they predicted 0.3 s of braking that never came, and the refit was refused.
+    The push of -0.15 m/s^2 arrives with the braking, 0.3 s into the 1.8 s refitted."""
+    base = fly(0.3, 0.2).fit().model
+    ident = fly(0.3, 0.2, brake=(1.5, 0.5, 0.2, -0.15))
+    since = ident.refit_bias(base, since_t=3.0).model
+    assert since is not None
+    assert -0.15 <= since.bias_mps2 <= -0.15 * 1.5 / 1.8
