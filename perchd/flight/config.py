@@ -126,6 +126,12 @@ class TauGains:
     v_contact_margin_mps: [m/s] with stage2_hold_speed, the speed held is the plan's V_c
         moved at least this far inside the contact window [V_l, V_u]: a minimum-time plan
         puts V_c on the window's edge (V_u), where any tracking error would leave it.
+    scale_gain: gamma of stage 1's scale correction: tau is the same for every trajectory
+        c times the plan's (X and Xdot scaled alike), so a vehicle a lag behind in X keeps
+        tau by being faster and reaches the stage-2 switch c times too fast. Stage 1 aims
+        at tau_ref c^-gamma, c = X / X_plan: c returns to 1 with time constant |tau|/gamma,
+        never faster than twice the lag, faded out between three and two lags before the
+        plan's switch (docs/errata.md §10). 0: the paper's tau reference alone.
     """
 
     kp_fast: float = from_paper_units(38750.0)
@@ -141,6 +147,7 @@ class TauGains:
     terminal_s: float = 0.15
     stage2_hold_speed: bool = True
     v_contact_margin_mps: float = 0.015
+    scale_gain: float = 3.0
     identify: bool = True
     predict: bool = True
 
@@ -209,6 +216,10 @@ class ApproachConfig:
         otherwise leave the speed at the trigger ~0.09 m/s short of v0 on the Crazyflie
         firmware. i_limit_mps2: [m/s^2] clamp of its contribution; it does not
         integrate while the mapping saturates, and is reset when the approach begins.
+    lead_into_plan: the approach's references continue past x0 as the plan's own, so that
+        a vehicle answering a lag late is already commanded the plan's first acceleration
+        when it crosses x0 (off: the plan's acceleration is first asked for at the
+        trigger, and the vehicle starts stage 1 a lag behind it; docs/errata.md §10).
     """
 
     takeoff_height_m: float = 1.0
@@ -218,6 +229,7 @@ class ApproachConfig:
     kv: float = 3.0
     ki_v: float = 8.0
     i_limit_mps2: float = 1.0
+    lead_into_plan: bool = True
 
 
 class TriggerPolicy(enum.Enum):

@@ -28,7 +28,7 @@ from perchd.flight.control import AxisController, Controller, FeedForward
 from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner
 from perchd.flight.planner_worker import Planner
-from perchd.flight.planrefs import PlanSampler
+from perchd.flight.planrefs import PlanPoint, PlanSampler
 from perchd.flight.response import VehicleResponse, feed_forward
 from perchd.flight.takeoff import TakeoffProfile
 from perchd.flight.trigger import TriggerDesk
@@ -336,7 +336,8 @@ class Supervisor:
             else:
                 hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
                 seen, aim = self._lag_view(t, st, refs)
-                ux = self.ctl.tau.step(seen, aim.tau_ref, aim.a, dt, self.ctl.saturated,
+                tau_aim = aim.tau_ref if hold else self._scale_corrected(t, seen, aim)
+                ux = self.ctl.tau.step(seen, tau_aim, aim.a, dt, self.ctl.saturated,
                                        schedule=not hold)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
@@ -390,17 +391,42 @@ class Supervisor:
         self._enter(Phase.APPROACH, t, "", accel=need)
 
     def _approach_accel(self, t: float, st: State, dt: float) -> float:
-        """Feed-forward (with the drag identified so far) + PI on the speed profile to
-        (x0, v0); the integral takes up what the feed-forward misses (ApproachConfig.ki_v),
-        frozen while the mapping saturates."""
+        """Feed-forward (with the drag identified so far) + PI on the speed reference; the
+        integral takes up what the feed-forward misses (ApproachConfig.ki_v), frozen while
+        the mapping saturates."""
         a = self.cfg.approach
-        x, v, _ = self.response.predicted(t, st.x, st.xdot)
-        v_ref = self._v_ref(x)
+        x, v, horizon = self.response.predicted(t, st.x, st.xdot)
+        v_ref, a_ff = self._approach_ref(x, self.response.ff.lead_s - horizon)
         err = v_ref - v
         if not self.ctl.saturated and a.ki_v > 0.0:
             bound = a.i_limit_mps2 / a.ki_v
             self._v_int = min(max(self._v_int + err * dt, -bound), bound)
-        return self.response.ff.accel(self._a_app, v_ref) + a.kv * err + a.ki_v * self._v_int
+        return a_ff + a.kv * err + a.ki_v * self._v_int
+
+    def _approach_ref(self, x: float, lead_s: float) -> tuple[float, float]:
+        """(v_ref [m/s] at X = x [m], the feed-forward [m/s^2] for where the vehicle will be
+        lead_s [s] later). Past x0 the references are the plan's own: the vehicle answers
+        a lag late, so the approach's last commands already fly the start of the plan
+        (ApproachConfig.lead_into_plan, docs/errata.md §10)."""
+        ff, wait = self.response.ff, self.desk.wait
+        if wait is not None:
+            return wait.v, ff.accel(0.0, wait.v)
+        leads, x0 = self.cfg.approach.lead_into_plan, self.plan.x0
+        v_ref = self._plan_at(x).v if leads and x >= x0 else self._v_ref(x)
+        ahead = x + v_ref * max(lead_s, 0.0)
+        if not leads or ahead < x0:
+            return v_ref, ff.accel(self._a_app, v_ref)
+        p = self._plan_at(ahead)
+        return v_ref, ff.accel(p.a if p.stage == 1 else 0.0, p.v)
+
+    def _plan_at(self, x: float) -> PlanPoint:
+        """The plan's point where its X is x [m] (>= x0), by Newton's method from x0."""
+        plan, at = self.plan, self._sampler.at
+        s = (x - plan.x0) / plan.v0
+        for _ in range(3):
+            p = at(min(max(s, 0.0), plan.duration))
+            s -= (p.x - x) / max(p.v, 1e-3)
+        return at(min(max(s, 0.0), plan.duration))
 
     def _v_ref(self, x: float) -> float:
         """[m/s] the approach's speed reference at X = x: the profile to (x0, v0), or, while a
@@ -532,6 +558,22 @@ class Supervisor:
         tau = x / v if v > self.cfg.estimator.min_speed_mps else None
         seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
         return seen, self._refs_at(t + horizon, x, self.response.ff.lead_s - horizon)
+
+    def _scale_corrected(self, t: float, seen: State, aim: Refs) -> float:
+        """The tau reference corrected for the scale error c = X / X_plan: tau = X/Xdot is
+        blind to it (c times the plan's X and Xdot keep the plan's tau), yet it reaches the
+        stage-2 switch as c times the plan's speed there. Aiming at tau_ref c^-gamma brings
+        c back to 1 with time constant |tau| / gamma, never faster than twice the lag, and
+        fades out from three lags before the plan's switch to two: a catch-up that late
+        would reach the switch as speed (TauGains.scale_gain, docs/errata.md §10)."""
+        gamma, lag = self.cfg.tau_gains.scale_gain, self.response.ff.lead_s
+        if gamma <= 0.0 or lag <= 0.0 or aim.x is None or aim.x >= 0.0 or seen.x >= 0.0:
+            return aim.tau_ref
+        left = self.plan.t_switch - (t - self.trigger.t)
+        fade = min(max((left - 2.0 * lag) / lag, 0.0), 1.0)
+        gamma = fade * min(gamma, -aim.tau_ref / (2.0 * lag))
+        c = min(max(seen.x / aim.x, 0.5), 2.0)
+        return aim.tau_ref * c ** -gamma
 
     def _observe_response(self, t: float, st: State) -> None:
         """Record the ticks for the lag identification (the stages' commands feed its

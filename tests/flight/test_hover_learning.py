@@ -59,7 +59,9 @@ def test_a_learned_hover_far_from_the_weight_is_refused(tmp_path):
 def test_the_approach_meets_v0_at_the_trigger_despite_drag(tmp_path, drag):
     res = Sim(NOISY + f"&drag={drag}").fly(case1(), tmp_path / "f.jsonl")
     assert res.trigger is not None, res.detail
-    assert abs(res.trigger.v - case1().v0) < 0.03
+    # 1 mm of noise scatters the trigger speed +-0.03 m/s over seeds; the approach's lead
+    # into the plan's first acceleration (ApproachConfig.lead_into_plan) adds ~+0.005.
+    assert abs(res.trigger.v - case1().v0) < 0.04
 
 
 def test_the_default_thrust_cap_is_the_crazyflie_firmware_ceiling():

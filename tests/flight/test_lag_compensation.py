@@ -74,9 +74,14 @@ def test_a_refit_hands_its_drag_over_from_the_integral_without_a_step(tmp_path):
     that adds drag * v to the feed-forward takes as much back from the integral, so the
     command does not jump (and the speed does not overshoot into the trigger)."""
     plan = case1("ipts")
-    res = Sim("sim://?drag=1.0").fly(plan, tmp_path / "f.jsonl")
+    # The approach's last lag flies the step into the plan's first acceleration
+    # (ApproachConfig.lead_into_plan): a step of the plan's, not of a refit.
+    base = FlightConfig()
+    base = dataclasses.replace(base, approach=dataclasses.replace(base.approach,
+                                                                  lead_into_plan=False))
+    res = Sim("sim://?drag=1.0").fly(plan, tmp_path / "f.jsonl", base)
     assert res.outcome is EndReason.CONTACT
-    fixed = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(refit_s=1e9))  # no refits
+    fixed = dataclasses.replace(base, lag_id=LagIdGains(refit_s=1e9))  # no refits
     Sim("sim://?drag=1.0").fly(plan, tmp_path / "once.jsonl", fixed)
     assert largest_approach_step(tmp_path / "f.jsonl") < 0.2
     assert largest_approach_step(tmp_path / "f.jsonl") <= \
