@@ -260,8 +260,9 @@ KILL_SPEED_MPS = 0.5
 def wait_for_speed(log: Path, speed: float, timeout_s: float) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        lines = log.read_text().splitlines()[-3:] if log.exists() else []
-        for line in lines:
+        text = log.read_text() if log.exists() else ""
+        # Only complete lines: the flight may be half-way through writing the last one.
+        for line in text[:text.rfind("\n") + 1].splitlines()[-3:]:
             row = json.loads(line).get("row") if line.startswith('{"row"') else None
             if row and row["phase"] == "approach" and row["xdot"] >= speed:
                 return True
