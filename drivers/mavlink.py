@@ -34,7 +34,9 @@ ATC_ANGLE_BOOST), or whose EKF does not take the mocap (docs/firmware.md, "Mocap
 autopilot") is refused by name there. engage(), once per flight, takes it: level at its
 heading, the offboard mode, arming (arm=1), the spool-up; the flight's poses go to the EKF
 meanwhile. Until then perchd's heartbeat is all the vehicle hears, and a failsafe before
-it commands nothing (the vehicle is not perchd's to land).
+it commands nothing (the vehicle is not perchd's to land). From the acknowledged mode switch
+on, a sentinel process (drivers/mavsentinel.py) holds a copy of the link and commands LAND
+the moment this process dies, until the vehicle leaves the offboard mode.
 Each pose the flight uses goes to the autopilot as VISION_POSITION_ESTIMATE
 (drivers/mavvision.py), so its own failsafe can hold or land in place; an EKF on mocap alone
 refuses to arm until it has some, so engage() asks again every ARM_RETRY_S within `wait`.
@@ -77,6 +79,7 @@ from perchd.drivers.mavparams import (
     check_params,
     rules_for,
 )
+from perchd.drivers.mavsentinel import Sentinel
 from perchd.drivers.mavvision import timesync_reply, vision_estimate
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
@@ -330,6 +333,7 @@ class MavlinkDriver(DriverBase):
         self._engaging = False  # engage() is under way: a failsafe meanwhile ends it
         self._poses: PoseFeed = no_poses  # engage()'s pose feed, read while it waits
         self._pumped_seq: int | None = None  # the newest pose engage() forwarded
+        self._sentinel: Sentinel | None = None  # lands the vehicle if this process dies
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -363,6 +367,7 @@ class MavlinkDriver(DriverBase):
             self._prestream()
             self._engaged = True
             self._switch_mode()
+            self._guard()
             if self.arm:
                 self._arm()
                 if self.autopilot == ARDUPILOT and not self._airborne_before_arm:
@@ -507,6 +512,21 @@ class MavlinkDriver(DriverBase):
         self._flight_mode = mode
         self._mode_seen = self._mode == mode
 
+    def _guard(self) -> None:
+        """From the acknowledged mode switch on, the sentinel (drivers/mavsentinel.py)
+        lands the vehicle if this process dies."""
+        if self._sentinel is None:
+            try:
+                self._sentinel = Sentinel(self._conn, self._target, self._land_mode())
+            except (OSError, ValueError) as err:
+                log.warning("%s: no MAVLink sentinel (%s): if this process dies, only the "
+                            "autopilot's own failsafe acts", self.uri, err)
+                return
+        self._sentinel.flying(True)
+
+    def _land_mode(self) -> tuple[int, int]:
+        return PX4_AUTO_LAND if self.autopilot == PX4 else (ARDUPILOT_LAND, 0)
+
     def _left_flight_mode(self) -> bool:
         if self._mode == self._flight_mode:
             return False
@@ -623,6 +643,8 @@ class MavlinkDriver(DriverBase):
         if (self._stopped and now < self._land_until and now - self._land_sent >= LAND_RETRY_S
                 and not self._land_taken()):
             self._command_land(repeats=1)
+        if self._stopped and self._sentinel is not None and self._land_taken():
+            self._sentinel.flying(False)  # landing, or the pilot's: no longer ours to land
 
     def _land(self) -> None:
         """Stop streaming and hand the vehicle to the autopilot's own landing mode; the
@@ -637,9 +659,8 @@ class MavlinkDriver(DriverBase):
 
     def _command_land(self, repeats: int) -> None:
         self._land_sent = time.monotonic()
-        main_sub = PX4_AUTO_LAND if self.autopilot == PX4 else (ARDUPILOT_LAND, 0)
         for _ in range(repeats):
-            self._set_mode(*main_sub)
+            self._set_mode(*self._land_mode())
 
     def _land_taken(self) -> bool:
         """The vehicle's heartbeat shows it no longer flies our setpoints: it left the mode
@@ -698,6 +719,9 @@ class MavlinkDriver(DriverBase):
             self._armed = bool(msg.base_mode & 128)  # MAV_MODE_FLAG_SAFETY_ARMED
 
     def _release(self) -> None:
+        sentinel, self._sentinel = self._sentinel, None
+        if sentinel is not None:
+            sentinel.release()
         for ticker in self._tickers:
             ticker.stop()
         conn, self._conn = self._conn, None
