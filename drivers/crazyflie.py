@@ -32,21 +32,17 @@ on-board estimator).
 from __future__ import annotations
 
 import math
-import os
 import socket
 import subprocess
-import sys
 import threading
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
-from perchd.drivers import cflink
+from perchd.drivers import cflink, childproc
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.drivers.ticker import Ticker
 
-import perchd
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.runtime import Runtime
@@ -245,14 +241,10 @@ class CrazyflieDriver(DriverBase):
         """`python -m perchd.drivers.cflink FD URI REPEAT_S` on one end of a socket pair; this very
         perchd first on its path, so the keeper runs the same code."""
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        root = str(Path(perchd.__file__).resolve().parents[1])
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-            p for p in (root, os.environ.get("PYTHONPATH", "")) if p)}
         try:
-            self._keeper = subprocess.Popen(
-                [sys.executable, "-m", "perchd.drivers.cflink", str(theirs.fileno()),
-                 self.link_uri, repr(FAILSAFE_REPEAT_S)], pass_fds=(theirs.fileno(),), env=env,
-                stdin=subprocess.DEVNULL)
+            self._keeper = childproc.start(
+                "perchd.drivers.cflink", [str(theirs.fileno()), self.link_uri,
+                                          repr(FAILSAFE_REPEAT_S)], (theirs.fileno(),))
         finally:
             theirs.close()
         ours.settimeout(0.05)
@@ -325,13 +317,4 @@ class CrazyflieDriver(DriverBase):
             sock.close()
         keeper, self._keeper = self._keeper, None
         if keeper is not None:  # reaped in the background: it exits after its stop
-            threading.Thread(target=_reap, args=(keeper,), name="crazyflie-reap",
-                             daemon=True).start()
-
-
-def _reap(proc: subprocess.Popen) -> None:
-    try:
-        proc.wait(cflink.DESCENT_S + 2.0)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+            childproc.reap_later(keeper, cflink.DESCENT_S + 2.0, "crazyflie-reap")

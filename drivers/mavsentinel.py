@@ -25,12 +25,12 @@ import logging
 import os
 import signal
 import socket
-import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 from typing import Any
+
+from perchd.drivers import childproc
 
 LAND_REPEATS = 10
 LAND_REPEAT_S = 0.1
@@ -124,17 +124,12 @@ class Sentinel:
     tells it whether perchd flies the vehicle; release() ends it without acting."""
 
     def __init__(self, conn: Any, target: tuple[int, int], mode: tuple[int, int]) -> None:
-        import perchd
         link_fd, dest = link_endpoint(conn)
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        root = str(Path(perchd.__file__).resolve().parents[1])  # the keeper runs this code
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-            p for p in (root, os.environ.get("PYTHONPATH", "")) if p)}
         argv = [str(theirs.fileno()), str(link_fd), dest, *map(str, (*target, *mode))]
         try:
-            self._proc = subprocess.Popen(
-                [sys.executable, "-m", "perchd.drivers.mavsentinel", *argv],
-                pass_fds=(theirs.fileno(), link_fd), env=env, stdin=subprocess.DEVNULL)
+            self._proc = childproc.start("perchd.drivers.mavsentinel", argv,
+                                         (theirs.fileno(), link_fd))
         finally:
             theirs.close()
         self._lock = threading.Lock()
@@ -152,9 +147,7 @@ class Sentinel:
             sock, self._sock = self._sock, None
         if sock is not None:
             sock.close()
-        proc = self._proc
-        threading.Thread(target=_reap, args=(proc,), name="mavsentinel-reap",
-                         daemon=True).start()
+        childproc.reap_later(self._proc, 2.0, "mavsentinel-reap")
 
     def _send(self, msg: bytes) -> None:
         with self._lock:
@@ -167,14 +160,6 @@ class Sentinel:
                             "autopilot's own failsafe acts", err)
                 self._sock.close()
                 self._sock = None
-
-
-def _reap(proc: subprocess.Popen) -> None:
-    try:
-        proc.wait(2.0)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 if __name__ == "__main__":
