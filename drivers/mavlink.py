@@ -79,7 +79,7 @@ from perchd.drivers.mavparams import (
     check_params,
     rules_for,
 )
-from perchd.drivers.mavsentinel import Sentinel
+from perchd.drivers.mavsentinel import CMD_DO_SET_MODE, CUSTOM_MODE_ENABLED, Sentinel
 from perchd.drivers.mavvision import timesync_reply, vision_estimate
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
@@ -113,7 +113,7 @@ STATUS_HZ = 10.0
 """[Hz] LOCAL_POSITION_NED (the autopilot's own estimate: does it take the mocap?) and
 ATTITUDE_TARGET (the thrust it applies: spooled up?) asked for: a spool-up seen 0.1 s late
 costs nothing, and every message parsed is Python time beside the control loop."""
-CMD_DO_SET_MODE, CMD_ARM, CMD_SET_MESSAGE_INTERVAL = 176, 400, 511
+CMD_ARM, CMD_SET_MESSAGE_INTERVAL = 400, 511
 MAV_RESULT_ACCEPTED, MAV_RESULT_IN_PROGRESS = 0, 5
 LANDED_ON_GROUND = 1  # MAV_LANDED_STATE
 SPOOL_FRACTION = 0.25
@@ -614,7 +614,7 @@ class MavlinkDriver(DriverBase):
         return self._params[name]
 
     def _set_mode(self, main: int, sub: int) -> None:
-        self._command(CMD_DO_SET_MODE, 1, main, sub)  # 1: MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        self._command(CMD_DO_SET_MODE, CUSTOM_MODE_ENABLED, main, sub)
 
     def _command(self, command: int, *params: float) -> None:
         p = list(params) + [0.0] * (7 - len(params))

@@ -14,9 +14,10 @@ Wire (SOCK_SEQPACKET, one byte per message), driver -> sentinel: b"F" perchd fli
 vehicle (its offboard mode was acknowledged); b"D" it does not any more (the driver has
 commanded LAND itself); b"R" release: exit without acting.
 
-Run as `python -m perchd.drivers.mavsentinel CTL_FD LINK_FD DEST SYS COMP MAIN SUB` by
-drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a stream; SYS,
-COMP the vehicle's ids; MAIN, SUB the LAND mode as DO_SET_MODE's param2 and param3.
+Run as `python -m perchd.drivers.mavsentinel CTL_FD LINK_FD DEST SSYS SCOMP SYS COMP MAIN
+SUB` by drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a
+stream; SSYS, SCOMP the driver's own ids; SYS, COMP the vehicle's; MAIN, SUB the LAND mode
+as DO_SET_MODE's param2 and param3.
 """
 
 from __future__ import annotations
@@ -37,17 +38,16 @@ LAND_REPEAT_S = 0.1
 """LAND goes out at once and then every LAND_REPEAT_S, LAND_REPEATS times in all (1 s)."""
 CMD_DO_SET_MODE = 176
 CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-SOURCE = (255, 191)
-"""The driver's own MAVLink system and component (drivers/mavlink.py, connect)."""
 
 log = logging.getLogger("perchd.drivers.mavsentinel")
 
 
-def land_frame(target: tuple[int, int], main: int, sub: int) -> bytes:
-    """COMMAND_LONG DO_SET_MODE to the LAND mode, framed in the MAVLink version pymavlink
-    speaks in this environment (the driver's own)."""
+def land_frame(source: tuple[int, int], target: tuple[int, int], main: int, sub: int
+               ) -> bytes:
+    """COMMAND_LONG DO_SET_MODE to the LAND mode from `source` (the driver's system and
+    component), framed in the MAVLink version pymavlink speaks here (the driver's own)."""
     from pymavlink import mavutil
-    mav = mavutil.mavlink.MAVLink(None, *SOURCE)
+    mav = mavutil.mavlink.MAVLink(None, *source)
     msg = mav.command_long_encode(*target, CMD_DO_SET_MODE, 0, CUSTOM_MODE_ENABLED, main,
                                   sub, 0, 0, 0, 0)
     return msg.pack(mav)
@@ -86,8 +86,8 @@ def main(argv: list[str]) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT):
         signal.signal(sig, signal.SIG_IGN)
     ctl_fd, link_fd, dest = int(argv[0]), int(argv[1]), argv[2]
-    target, mode = (int(argv[3]), int(argv[4])), (int(argv[5]), int(argv[6]))
-    frame = land_frame(target, *mode)
+    source, target, mode = (tuple(map(int, argv[i:i + 2])) for i in (3, 5, 7))
+    frame = land_frame(source, target, *mode)
     if not agent_died_flying(socket.socket(fileno=ctl_fd)):
         return 0
     sys.stderr.write("perchd mavsentinel: the agent died flying the vehicle: LAND\n")
@@ -126,7 +126,9 @@ class Sentinel:
     def __init__(self, conn: Any, target: tuple[int, int], mode: tuple[int, int]) -> None:
         link_fd, dest = link_endpoint(conn)
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        argv = [str(theirs.fileno()), str(link_fd), dest, *map(str, (*target, *mode))]
+        source = (conn.mav.srcSystem, conn.mav.srcComponent)
+        argv = [str(theirs.fileno()), str(link_fd), dest,
+                *map(str, (*source, *target, *mode))]
         try:
             self._proc = childproc.start("perchd.drivers.mavsentinel", argv,
                                          (theirs.fileno(), link_fd))
