@@ -159,8 +159,13 @@ class LagIdGains:
     window_s: [s] the last this many seconds of the hold and the approach are fitted.
     refit_s: [s] period of the refits during the approach (its own feed-forward uses
         the drag found so far); the fit at the trigger is the one logged and flown.
-    lag_max_s, lag_step_s: [s] the lags tried (0..lag_max_s); a best lag at the bound is
-        refused (the vehicle is slower than any lag tried).
+    lag_max_s, lag_step_s: [s] the delays tried (0..lag_max_s); a best delay at the bound
+        is refused (the vehicle is slower than any tried).
+    time_constant_max_s: [s] the first-order lags tried behind the delay (0 up to this, in
+        lag_step_s): an attitude loop's time constant. 0 (the default): one pure delay.
+        Above, the lead flown is delay + T, right for a first-order attitude response
+        (the Crazyflie firmware: 0.980-0.983 m/s at contact) but fast on the autopilots'
+        shaped ones (ArduCopter 1.01, PX4 SIH 1.04 median; docs/firmware.md).
     drag_max_per_s: [1/s] an identified drag above this is refused.
     speed_span_min_mps: [m/s] the fitted ticks must cover this speed range (the approach).
     rms_max_mps: [m/s] a fit with a larger residual is refused.
@@ -173,6 +178,7 @@ class LagIdGains:
     refit_s: float = 0.25
     lag_max_s: float = 0.5
     lag_step_s: float = 0.02
+    time_constant_max_s: float = 0.0
     drag_max_per_s: float = 2.0
     speed_span_min_mps: float = 0.5
     rms_max_mps: float = 0.1

@@ -6,30 +6,42 @@ autopilot's attitude loop (a firmware shapes its attitude input with a time cons
 make a perch late and slow (docs/errata.md §10). Along the perching normal X the flight is
 modelled as
 
-    Xddot(t) = u(t - lag) - drag * Xdot(t) + bias
+    Xddot(t) = a(t - delay) - drag * Xdot(t) + bias,    T da/dt = u - a
 
-u [m/s^2] the acceleration the setpoint commanded (after the saturations), lag [s] one
-delay standing for the whole chain, drag [1/s] linear drag per unit mass, bias [m/s^2] a
+u [m/s^2] the acceleration the setpoint commanded (after the saturations), a the
+acceleration the vehicle reaches, a delay [s] (the link, the shaping) and a first-order lag
+T [s] (an attitude loop) behind it; drag [1/s] linear drag per unit mass, bias [m/s^2] a
 constant push (a trim error, a draught). The gain is 1: the hold has calibrated the thrust
-(flight/hover.py). Integrated from a reference tick s, it is linear in drag and bias for a
-given lag:
+(flight/hover.py). The lead flown is lag = delay + T. By default T is none (one pure delay
+for the whole chain, LagIdGains.time_constant_max_s 0): on a first-order response a pure
+delay fits short of delay + T (0.26 s on a 0.1 + 0.2 s plant), and the flight perches a
+little slow, yet the autopilots' shaped responses flown with delay + T perched fast
+(docs/firmware.md, "Positions, not speeds").
 
-    Xdot(t) - Xdot(s) - [U(t - lag) - U(s - lag)] = -drag * (X(t) - X(s)) + bias * (t - s)
+Integrated twice from a reference tick s, the model is linear in drag, bias and the speed at
+s for a given delay and T:
 
-with U the running integral of u. Integrals, not derivatives: millimetre mocap noise
-differentiated twice would swamp the fit. The lag is the one, on a grid, with the smallest
-residual; drag and bias are its least-squares solution. The fit refuses (and the flight
-falls back to the configured lead, no drag term) when the approach moved too little, the
-best lag sits on the grid's edge, the drag is out of bounds or the residual is large.
+    X(t) - X(s) - W(t - delay) + W(s - delay) + A(s - delay)(t - s)
+        = -drag * int_s^t (X - X(s)) + bias (t - s)^2 / 2 + Xdot(s) (t - s)
+
+with A the running integral of a and W that of A. Positions, not speeds: the mocap measures
+X to a millimetre and independently frame to frame, while the estimator's Xdot carries that
+noise differentiated and correlated over tens of ticks, which moved the lag found by
++-0.02 s between flights of one plant. (delay, T) are those, on a grid, with the smallest
+residual; drag, bias and Xdot(s) are their least-squares solution. The fit refuses (and the
+flight falls back to the configured lead, no drag term) when the approach moved too little,
+the best delay sits on the grid's edge, the drag is out of bounds or the speed it predicts
+strays from the speed measured.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
+from scipy.signal import lfilter
 
 from perchd.flight.config import LagIdGains
 
@@ -37,12 +49,16 @@ FIT_POINTS = 200
 """Ticks the regression samples at most (evenly spread over the window)."""
 HOLDOUT = 0.4
 """The share of a refit's ticks, the last, that its candidate is not fitted to but judged on."""
+FINE_S = 0.001
+"""[s] the grid the prediction filters the commands on."""
 
 
 @dataclass(frozen=True, slots=True)
 class LagModel:
-    """lag_s [s]; drag_per_s [1/s]; bias_mps2 [m/s^2]; rms_mps [m/s] residual of the fit;
-    samples: ticks fitted; speed_span_mps [m/s] the speed range they covered."""
+    """lag_s [s] the delay plus the time constant: the lead flown; drag_per_s [1/s];
+    bias_mps2 [m/s^2]; rms_mps [m/s] how far the speed predicted strays from the speed
+    measured; samples: ticks fitted; speed_span_mps [m/s] the speed range they covered;
+    time_constant_s [s] T, the part of the lag that is a first-order lag."""
 
     lag_s: float
     drag_per_s: float
@@ -50,6 +66,12 @@ class LagModel:
     rms_mps: float
     samples: int
     speed_span_mps: float
+    time_constant_s: float = 0.0
+
+    @property
+    def delay_s(self) -> float:
+        """[s] the pure delay in front of the first-order lag."""
+        return self.lag_s - self.time_constant_s
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,15 +113,16 @@ class LagIdentifier:
         if span < c.speed_span_min_mps:
             return LagFit(None, f"the approach changed speed by {span:.2f} m/s, less than "
                                 f"the {c.speed_span_min_mps:g} m/s needed to fit the lag")
-        lags = np.arange(0.0, c.lag_max_s + 1e-9, c.lag_step_s)
-        sse, _ = _solve(t, u, x, v, lags)
-        i = int(np.argmin(sse))
-        if i == len(lags) - 1:
+        delays = np.arange(0.0, c.lag_max_s + 1e-9, c.lag_step_s)
+        taus = np.arange(0.0, c.time_constant_max_s + 1e-9, c.lag_step_s)
+        sse = _solve(t, _first_order(t, u, taus), x, delays)[0]
+        j, i = np.unravel_index(int(np.argmin(sse)), sse.shape)
+        if i == len(delays) - 1:
             return LagFit(None, f"the best lag is at the bound {c.lag_max_s:g} s or beyond")
-        lag = _refine(lags, sse, i)
-        return _checked(_model_at(t, u, x, v, lag, span, c), c)
+        delay = _refine(delays, sse[j], int(i))
+        return _checked(_model_at(t, u, x, v, delay, float(taus[j]), span, c), c)
 
-    def refit_bias(self, base: Response, since_t: float) -> LagFit:
+    def refit_bias(self, base: LagModel, since_t: float) -> LagFit:
         """The bias again, base's lag and drag kept, from the ticks since since_t [s]: what
         the perch's stage 1 shows beyond the approach's model is a push stage 2 meets too
         (docs/errata.md §10). Drag and bias together are not told apart over stage 1's
@@ -114,23 +137,38 @@ class LagIdentifier:
         if n < 40:
             return LagFit(None, f"{n} ticks since {since_t:.3f} s, too few to fit")
         # The ticks before since_t stay in: the commands still in flight at since_t.
-        lag, drag, k = np.array([base.lag_s]), base.drag_per_s, first + int(n * (1 - HOLDOUT))
-        trained = float(_solve(t[:k], u[:k], x[:k], v[:k], lag, drag, first)[1][1, 0])
-        new, old = (_holdout_rms(t, u, x, v, base, b, k) for b in (trained, base.bias_mps2))
+        a = _first_order(t, u, np.array([base.time_constant_s]))
+        k = first + int(n * (1 - HOLDOUT))
+        delay, drag = np.array([base.delay_s]), base.drag_per_s
+        trained = float(_solve(t[:k], a[:, :k], x[:k], delay, drag, first)[1][0, 1, 0])
+        new, old = (_holdout_rms(t, u, x, v, replace(base, bias_mps2=b), k)
+                    for b in (trained, base.bias_mps2))
         if new >= old:
             return LagFit(None, f"the approach's model predicts the last {HOLDOUT:.0%} of "
                                 f"the ticks as well or better ({old:.3f} m/s rms, the "
                                 f"refit {new:.3f})")
-        mse, sol = _solve(t, u, x, v, lag, drag, first)
-        return _checked(LagModel(base.lag_s, drag, float(sol[1, 0]), float(np.sqrt(mse[0])),
-                                 n, float(v[first:].max() - v[first:].min())), self.cfg)
+        span = float(v[first:].max() - v[first:].min())
+        return _checked(_model_at(t, u, x, v, base.delay_s, base.time_constant_s, span,
+                                  self.cfg, drag, first), self.cfg)
 
     def predict(self, t: float, x: float, xdot: float, model: Response,
                 horizon_s: float) -> tuple[float, float]:
         """(X [m], Xdot [m/s]) horizon_s (<= the lag) after t, from the state measured at t
         and the commands recorded that the vehicle answers within the horizon: those sent
-        between lag and lag - horizon_s ago (a Smith predictor)."""
-        lag = model.lag_s
+        between lag and lag - horizon_s ago (a Smith predictor). A model with a first-order
+        part answers each command spread over its time constant instead."""
+        tc = getattr(model, "time_constant_s", 0.0)
+        if tc > 0.0:
+            dv, dx = self._landing(t, model.lag_s - tc, tc, horizon_s)
+        else:
+            dv, dx = self._landing_delayed(t, model.lag_s, horizon_s)
+        push = model.bias_mps2 - model.drag_per_s * xdot
+        return (x + xdot * horizon_s + dx + 0.5 * push * horizon_s ** 2,
+                xdot + dv + push * horizon_s)
+
+    def _landing_delayed(self, t: float, lag: float, horizon_s: float) -> tuple[float, float]:
+        """(speed [m/s], distance [m]) the commands in flight add over the horizon, each
+        answered whole `lag` [s] after it was sent."""
         dv = dx = 0.0
         rows = self._rows
         for i in range(len(rows) - 1, -1, -1):
@@ -142,22 +180,46 @@ class LagIdentifier:
             held = min(rows[i + 1][0] if i + 1 < len(rows) else t, t - lag + horizon_s) - t_k
             dv += u_k * held
             dx += u_k * held * (t + horizon_s - (t_k + lag + 0.5 * held))
-        push = model.bias_mps2 - model.drag_per_s * xdot
-        return (x + xdot * horizon_s + dx + 0.5 * push * horizon_s ** 2,
-                xdot + dv + push * horizon_s)
+        return dv, dx
+
+    def _landing(self, t: float, delay: float, tc: float, horizon_s: float
+                 ) -> tuple[float, float]:
+        """(speed [m/s], distance [m]) over the horizon from the acceleration the vehicle
+        reaches through the first-order lag tc [s], `delay` [s] behind the commands: the
+        commands held between ticks (the last one beyond t), filtered on a 1 ms grid from
+        six time constants back."""
+        lo, hi = t - delay, t - delay + horizon_s
+        tail = []
+        for row in reversed(self._rows):
+            tail.append(row[:2])
+            if row[0] <= lo - 6.0 * tc:
+                break
+        if not tail:
+            return 0.0, 0.0
+        t_k, u_k = np.array(tail[::-1]).T
+        grid = np.arange(t_k[0], hi, FINE_S)
+        u = u_k[np.clip(np.searchsorted(t_k, grid, side="right") - 1, 0, None)]
+        keep = float(np.exp(-FINE_S / tc))
+        a = lfilter([1.0 - keep], [1.0, -keep], u, zi=[keep * u[0]])[0][grid >= lo]
+        return float(a.sum() * FINE_S), float((a * (hi - grid[grid >= lo])).sum() * FINE_S)
 
 
-def _model_at(t, u, x, v, lag_s: float, span: float, c: LagIdGains) -> LagModel:
-    """Drag and bias at lag_s [s]. A slightly negative drag (noise about none; down to a
+def _model_at(t, u, x, v, delay_s: float, tc_s: float, span: float, c: LagIdGains,
+              drag: float | None = None, start: int = 0) -> LagModel:
+    """Drag (unless given) and bias at delay_s [s] and time constant tc_s [s], integrated
+    from tick start; rms_mps is how far the speed they predict from the fitted Xdot(s)
+    strays from the speed measured. A slightly negative drag (noise about none; down to a
     tenth of drag_max_per_s, below is refused) is solved again as none: clipping it alone
     would keep the bias fitted beside it, and the push the two predict together
     (bias - drag Xdot) would be off by the clipped drag times the speed."""
-    lag = np.array([lag_s])
-    mse, sol = _solve(t, u, x, v, lag)
-    if -0.1 * c.drag_max_per_s <= sol[0, 0] < 0.0:
-        mse, sol = _solve(t, u, x, v, lag, drag=0.0)
-    return LagModel(lag_s, float(sol[0, 0]), float(sol[1, 0]), float(np.sqrt(mse[0])),
-                    len(t), span)
+    a, delay = _first_order(t, u, np.array([tc_s])), np.array([delay_s])
+    sol = _solve(t, a, x, delay, drag, start)[1][0, :, 0]
+    if drag is None and -0.1 * c.drag_max_per_s <= sol[0] < 0.0:
+        sol = _solve(t, a, x, delay, 0.0, start)[1][0, :, 0]
+    m = LagModel(delay_s + tc_s, float(sol[0]), float(sol[1]), 0.0, len(t) - start, span,
+                 tc_s)
+    err = _speed_errors(t, u, x, v, m, start, float(sol[2]))
+    return replace(m, rms_mps=float(np.sqrt(np.mean(err * err))))
 
 
 def _checked(m: LagModel, c: LagIdGains) -> LagFit:
@@ -171,48 +233,88 @@ def _checked(m: LagModel, c: LagIdGains) -> LagFit:
     return LagFit(m)
 
 
-def _holdout_rms(t, u, x, v, m: Response, bias: float, k: int) -> float:
-    """[m/s] rms error of the speed predicted from tick k on by m's lag and drag with
-    `bias`, against the speed measured."""
-    big_u = _shifted_integrals(t, u, np.array([m.lag_s]), np.arange(k, len(t)))[0]
-    dv = (v[k:] - v[k]) - (big_u - big_u[0]) + m.drag_per_s * (x[k:] - x[k]) \
-        - bias * (t[k:] - t[k])
-    return float(np.sqrt(np.mean(dv * dv)))
+def _holdout_rms(t, u, x, v, m: LagModel, k: int) -> float:
+    """[m/s] rms error of the speed m predicts from tick k on, against the speed measured."""
+    err = _speed_errors(t, u, x, v, m, k, float(v[k]))
+    return float(np.sqrt(np.mean(err * err)))
 
 
-def _shifted_integrals(t: np.ndarray, u: np.ndarray, lags: np.ndarray,
-                       at: np.ndarray) -> np.ndarray:
-    """U(t[at] - lag) for each lag (rows): the integral of the zero-order-held command from
-    t[0], delayed by lag (held at its first value before t[0]: the hold's commands are
-    steady)."""
-    big_u = np.concatenate(([0.0], np.cumsum(u[:-1] * np.diff(t))))
-    shifted = t[at][None, :] - lags[:, None]
-    before = np.minimum(shifted - t[0], 0.0) * u[0]
-    return np.interp(shifted.ravel(), t, big_u).reshape(shifted.shape) + before
+def _speed_errors(t, u, x, v, m: LagModel, k: int, v_k: float) -> np.ndarray:
+    """[m/s] the speed measured from tick k on, less the speed m predicts from v_k [m/s]
+    at tick k."""
+    a = _first_order(t, u, np.array([m.time_constant_s]))
+    times = t[None, k:] - m.delay_s
+    big_a = _delayed(t, _integrals(t, a)[0], times)[0, 0] \
+        + np.minimum(times[0] - t[0], 0.0) * a[0, 0]
+    return (v[k:] - v_k) - (big_a - big_a[0]) + m.drag_per_s * (x[k:] - x[k]) \
+        - m.bias_mps2 * (t[k:] - t[k])
 
 
-def _solve(t, u, x, v, lags: np.ndarray, drag: float | None = None, start: int = 0
+def _first_order(t: np.ndarray, u: np.ndarray, tc_s: np.ndarray) -> np.ndarray:
+    """The commands u through first-order lags of time constants tc_s [s] (one row each),
+    held between ticks and settled on the first before it (the hold's commands are steady);
+    the ticks taken as evenly spaced at their median interval (the loop's jitter is a few
+    percent of it)."""
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    rows = [u if tc <= 0.0 or dt <= 0.0 else
+            lfilter([1.0 - k], [1.0, -k], u, zi=[k * u[0]])[0]
+            for tc in tc_s for k in [float(np.exp(-dt / max(tc, 1e-9)))]]
+    return np.array(rows)
+
+
+def _integrals(t: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A, W) at the ticks for each row of a (inputs, ticks): A the integral of the
+    zero-order-held acceleration from t[0], W the integral of A (exact at the ticks)."""
+    dt = np.diff(t)
+    zero = np.zeros((len(a), 1))
+    big_a = np.cumsum(np.concatenate((zero, a[:, :-1] * dt), axis=1), axis=1)
+    big_w = np.cumsum(np.concatenate((zero, (big_a[:, :-1] + 0.5 * a[:, :-1] * dt) * dt),
+                                     axis=1), axis=1)
+    return big_a, big_w
+
+
+def _delayed(t: np.ndarray, big: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """big (inputs, ticks) at times (lags, points), shaped (inputs, lags, points); linear
+    between ticks (W's error there is a dt^2 / 8, micrometres), clamped at t[0] (the
+    caller adds what was held before it). The weights depend on the times alone, so every
+    input shares them."""
+    q = np.clip(times, t[0], t[-1])
+    i = np.clip(np.searchsorted(t, q, side="right") - 1, 0, len(t) - 2)
+    w = (q - t[i]) / (t[i + 1] - t[i])
+    return big[:, i] * (1.0 - w) + big[:, i + 1] * w
+
+
+def _solve(t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
            ) -> tuple[np.ndarray, np.ndarray]:
-    """For each lag: the mean squared residual [m^2/s^2] and the least-squares (drag,
-    bias, offset) as columns, integrated from tick `start` (a given drag [1/s] is held;
-    the ticks before start only supply the commands in flight). The regressors do not
-    depend on the lag, so one pseudo-inverse serves every lag; the integrals take every
-    tick, the regression at most FIT_POINTS of them (a refit stays about a millisecond)."""
-    n = len(t) - start
-    at = np.unique(np.linspace(start, len(t) - 1, min(n, FIT_POINTS)).astype(int))
-    big_u = _shifted_integrals(t, u, lags, at)
-    t, x, v = t[at], x[at], v[at]
-    y = (v - v[0])[:, None] - (big_u - big_u[:, :1]).T
-    # The ones column absorbs the noise of the reference tick's own speed.
-    a = np.column_stack((-(x - x[0]), t - t[0], np.ones_like(t)))
+    """For each row of a (inputs, ticks) and each lag (its delay): the mean squared
+    residual [m^2], shaped (inputs, lags), and the least-squares (drag, bias, Xdot(s),
+    offset), shaped (inputs, 4, lags), integrated from tick s = `start` (a given drag
+    [1/s] is held; the ticks before start only supply the commands in flight). The
+    regressors depend on neither, so one pseudo-inverse serves all; the integrals take
+    every tick, the regression at most FIT_POINTS of them (a fit stays a few ms)."""
+    at = np.unique(np.linspace(start, len(t) - 1, min(len(t) - start, FIT_POINTS)).astype(int))
+    big_a, big_w = _integrals(t, a)
+    times = t[at][None, :] - lags[:, None]
+    # Before t[0] the input is held at its first value.
+    before, a0 = np.minimum(times - t[0], 0.0), a[:, :1, None]
+    w = _delayed(t, big_w, times) + 0.5 * before ** 2 * a0
+    a_s = _delayed(t, big_a, times[:, :1]) + before[:, :1] * a0
+    s = t[at] - t[at[0]]
+    x_s = x[at[0]]
+    area = np.concatenate(([0.0], np.cumsum(0.5 * (x[1:] + x[:-1] - 2.0 * x_s) * np.diff(t))))
+    area = area[at] - area[at[0]]
+    y = (x[at] - x_s) - (w - w[..., :1] - a_s * s)
+    # The speed column takes Xdot(s); the ones column the noise of X(s) itself.
+    cols = np.column_stack((-area, 0.5 * s * s, s, np.ones_like(s)))
     if drag is not None:
-        y = y + drag * (x - x[0])[:, None]
-        a[:, 0] = 0.0
-    sol = np.linalg.pinv(a) @ y
-    r = y - a @ sol
+        y, cols = y + drag * area, cols[:, 1:]
+    q, r = np.linalg.qr(cols)
+    proj = y @ q  # the residual is what the columns' span leaves of y
+    mse = (np.einsum("...p,...p->...", y, y) - np.einsum("...k,...k->...", proj, proj)) / len(s)
+    sol = np.linalg.solve(r, np.moveaxis(proj, -1, -2))
     if drag is not None:
-        sol[0] = drag
-    return np.einsum("ij,ij->j", r, r) / len(t), sol
+        sol = np.concatenate((np.full_like(sol[:, :1], drag), sol), axis=1)
+    return np.maximum(mse, 0.0), sol
 
 
 def _refine(lags: np.ndarray, sse: np.ndarray, i: int) -> float:

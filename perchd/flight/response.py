@@ -58,8 +58,10 @@ class VehicleResponse:
             return
         self.ff = feed_forward(m)
         self._events.append(LogEvent(t, "lag-identified", (
-            f"lag {m.lag_s:.3f} s, drag {m.drag_per_s:.3f} 1/s"), {
-                "lag_s": m.lag_s, "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
+            f"lag {m.lag_s:.3f} s ({m.time_constant_s:.3f} s of it first-order), "
+            f"drag {m.drag_per_s:.3f} 1/s"), {
+                "lag_s": m.lag_s, "time_constant_s": m.time_constant_s,
+                "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
                 "rms_mps": m.rms_mps, "samples": m.samples,
                 "speed_span_mps": m.speed_span_mps}))
 
