@@ -38,7 +38,6 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, replace
-from typing import Protocol
 
 import numpy as np
 from scipy.signal import lfilter
@@ -80,15 +79,6 @@ class LagFit:
 
     model: LagModel | None
     why: str = ""
-
-
-class Response(Protocol):
-    """What a prediction needs of the response: lag_s [s], drag_per_s [1/s], bias_mps2
-    [m/s^2] (a LagModel, or the feed-forward built from one)."""
-
-    lag_s: float
-    drag_per_s: float
-    bias_mps2: float
 
 
 class LagIdentifier:
@@ -151,15 +141,15 @@ class LagIdentifier:
         return _checked(_model_at(t, u, x, v, base.delay_s, base.time_constant_s, span,
                                   self.cfg, drag, first), self.cfg)
 
-    def predict(self, t: float, x: float, xdot: float, model: Response,
+    def predict(self, t: float, x: float, xdot: float, model: LagModel,
                 horizon_s: float) -> tuple[float, float]:
         """(X [m], Xdot [m/s]) horizon_s (<= the lag) after t, from the state measured at t
         and the commands recorded that the vehicle answers within the horizon: those sent
         between lag and lag - horizon_s ago (a Smith predictor). A model with a first-order
         part answers each command spread over its time constant instead."""
-        tc = getattr(model, "time_constant_s", 0.0)
+        tc = model.time_constant_s
         if tc > 0.0:
-            dv, dx = self._landing(t, model.lag_s - tc, tc, horizon_s)
+            dv, dx = self._landing(t, model.delay_s, tc, horizon_s)
         else:
             dv, dx = self._landing_delayed(t, model.lag_s, horizon_s)
         push = model.bias_mps2 - model.drag_per_s * xdot

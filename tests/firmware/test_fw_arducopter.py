@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 from fwharness import ENV, PLAN, lag_event, start_harness, stop_harness
+from fwharness import log_rows as rows
 
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
 INSTANCE = os.environ.get("PERCHD_FW_INSTANCE", "0")
@@ -56,15 +57,6 @@ def report(figures: dict) -> None:
     if os.environ.get("PERCHD_FW_REPORT"):
         with open(os.environ["PERCHD_FW_REPORT"], "a") as f:
             f.write(json.dumps(figures) + "\n")
-
-
-def rows(log: Path) -> list[dict]:
-    out = []
-    for line in log.read_text().splitlines():
-        doc = json.loads(line)
-        if "row" in doc:
-            out.append(doc["row"])
-    return out
 
 
 class Recorder:
@@ -218,7 +210,7 @@ def test_sigkill_of_perchd_fly_mid_approach_levels_within_1_s_and_lands_within_3
         log = tmp_path / "flight.jsonl"
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline and fly.poll() is None:
-            r = rows(log)[-1:] if log.exists() else []
+            r = rows(log)[-1:]
             if r and r[0]["phase"] == "approach" and r[0]["xdot"] > 0.5:
                 break
             time.sleep(0.05)

@@ -29,6 +29,7 @@ from fwharness import (
     flight_window,
     heading_error,
     lag_event,
+    log_rows,
     start_placed,
 )
 from perchd.drivers.base import open_driver
@@ -260,12 +261,8 @@ KILL_SPEED_MPS = 0.5
 def wait_for_speed(log: Path, speed: float, timeout_s: float) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        text = log.read_text() if log.exists() else ""
-        # Only complete lines: the flight may be half-way through writing the last one.
-        for line in text[:text.rfind("\n") + 1].splitlines()[-3:]:
-            row = json.loads(line).get("row") if line.startswith('{"row"') else None
-            if row and row["phase"] == "approach" and row["xdot"] >= speed:
-                return True
+        if any(r["phase"] == "approach" and r["xdot"] >= speed for r in log_rows(log)[-3:]):
+            return True
         time.sleep(0.02)
     return False
 

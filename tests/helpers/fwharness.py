@@ -47,6 +47,14 @@ def start_placed(*args: str, env: dict | None = None
                        f"{proc.stderr.read()}")
 
 
+def log_rows(log: Path) -> list[dict]:
+    """The flight log's rows (docs/contracts.md, flight log), from complete lines only: a
+    flight still flying may be half-way through writing its last one."""
+    text = log.read_text() if log.exists() else ""
+    return [json.loads(line)["row"] for line in text[:text.rfind("\n") + 1].splitlines()
+            if line.startswith('{"row"')]
+
+
 def lag_event(log: Path) -> dict:
     """The flight's lag-identified (or -unidentified) event from its log as {"kind": ...,
     **values} (docs/contracts.md, flight log); {} without one."""
