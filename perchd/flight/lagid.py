@@ -13,10 +13,11 @@ acceleration the vehicle reaches, a delay [s] (the link, the shaping) and a firs
 T [s] (an attitude loop) behind it; drag [1/s] linear drag per unit mass, bias [m/s^2] a
 constant push (a trim error, a draught). The gain is 1: the hold has calibrated the thrust
 (flight/hover.py). The lead flown is lag = delay + T. By default T is none (one pure delay
-for the whole chain, LagIdGains.time_constant_max_s 0): on a first-order response a pure
-delay fits short of delay + T (0.26 s on a 0.1 + 0.2 s plant), and the flight perches a
-little slow, yet the autopilots' shaped responses flown with delay + T perched fast
-(docs/firmware.md, "Positions, not speeds").
+for the whole chain, LagIdGains.time_constant_max_s 0). Fitted to a first-order response,
+a pure delay finds about delay + T but pays for its sharper answer in drag and bias (0.353
+/s and +0.016 m/s^2 for 0.3 and 0 behind 0.1 + 0.2 s, tests/flight/test_lagid.py); the
+first-order fit finds all four. Flown, it perched the Crazyflie firmware closest to the
+held speed, the autopilots fast (docs/firmware.md, "Positions, not speeds").
 
 Integrated twice from a reference tick s, the model is linear in drag, bias and the speed at
 s for a given delay and T:
@@ -28,7 +29,8 @@ with A the running integral of a and W that of A. Positions, not speeds: the moc
 X to a millimetre and independently frame to frame, while the estimator's Xdot carries that
 noise differentiated and correlated over tens of ticks, which moved the lag found by
 +-0.02 s between flights of one plant. (delay, T) are those, on a grid, with the smallest
-residual; drag, bias and Xdot(s) are their least-squares solution. The fit refuses (and the
+residual (the delay refined between grid points, T not); drag, bias and Xdot(s) are their
+least-squares solution. The fit refuses (and the
 flight falls back to the configured lead, no drag term) when the approach moved too little,
 the best delay sits on the grid's edge, the drag is out of bounds or the speed it predicts
 strays from the speed measured.
@@ -104,12 +106,12 @@ class LagIdentifier:
             return LagFit(None, f"the approach changed speed by {span:.2f} m/s, less than "
                                 f"the {c.speed_span_min_mps:g} m/s needed to fit the lag")
         delays = np.arange(0.0, c.lag_max_s + 1e-9, c.lag_step_s)
-        taus = np.arange(0.0, c.time_constant_max_s + 1e-9, c.lag_step_s)
-        sse = _solve(t, _first_order(t, u, taus), x, delays)[0]
-        j, i = np.unravel_index(int(np.argmin(sse)), sse.shape)
+        taus = np.arange(0.0, max(c.time_constant_max_s, 0.0) + 1e-9, c.lag_step_s)
+        mse = _solve(t, _first_order(t, u, taus), x, delays)[0]
+        j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
         if i == len(delays) - 1:
             return LagFit(None, f"the best lag is at the bound {c.lag_max_s:g} s or beyond")
-        delay = _refine(delays, sse[j], int(i))
+        delay = _refine(delays, mse[j], int(i))
         return _checked(_model_at(t, u, x, v, delay, float(taus[j]), span, c), c)
 
     def refit_bias(self, base: LagModel, since_t: float) -> LagFit:
@@ -146,7 +148,8 @@ class LagIdentifier:
         """(X [m], Xdot [m/s]) horizon_s (<= the lag) after t, from the state measured at t
         and the commands recorded that the vehicle answers within the horizon: those sent
         between lag and lag - horizon_s ago (a Smith predictor). A model with a first-order
-        part answers each command spread over its time constant instead."""
+        part answers each command spread over its time constant instead, and a horizon
+        beyond its delay reaches past t: the last command is taken as held."""
         tc = model.time_constant_s
         if tc > 0.0:
             dv, dx = self._landing(t, model.delay_s, tc, horizon_s)
@@ -188,10 +191,14 @@ class LagIdentifier:
             return 0.0, 0.0
         t_k, u_k = np.array(tail[::-1]).T
         grid = np.arange(t_k[0], hi, FINE_S)
+        if len(grid) == 0:
+            return 0.0, 0.0
         u = u_k[np.clip(np.searchsorted(t_k, grid, side="right") - 1, 0, None)]
-        keep = float(np.exp(-FINE_S / tc))
-        a = lfilter([1.0 - keep], [1.0, -keep], u, zi=[keep * u[0]])[0][grid >= lo]
-        return float(a.sum() * FINE_S), float((a * (hi - grid[grid >= lo])).sum() * FINE_S)
+        inside = grid >= lo
+        a = _first_order(grid, u, np.array([tc]))[0][inside]
+        # Each fine step's mean acceleration, at its midpoint for the distance.
+        return (float(a.sum() * FINE_S),
+                float((a * (hi - grid[inside] - 0.5 * FINE_S)).sum() * FINE_S))
 
 
 def _model_at(t, u, x, v, delay_s: float, tc_s: float, span: float, c: LagIdGains,
@@ -241,14 +248,20 @@ def _speed_errors(t, u, x, v, m: LagModel, k: int, v_k: float) -> np.ndarray:
 
 
 def _first_order(t: np.ndarray, u: np.ndarray, tc_s: np.ndarray) -> np.ndarray:
-    """The commands u through first-order lags of time constants tc_s [s] (one row each),
-    held between ticks and settled on the first before it (the hold's commands are steady);
-    the ticks taken as evenly spaced at their median interval (the loop's jitter is a few
-    percent of it)."""
+    """The commands u through first-order lags of time constants tc_s [s] (one row each):
+    each tick's mean over the interval to the next (the command held across it), settled
+    on the first command before t[0] (the hold's commands are steady); the ticks taken as
+    evenly spaced at their median interval (the loop's jitter is a few percent of it)."""
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    rows = [u if tc <= 0.0 or dt <= 0.0 else
-            lfilter([1.0 - k], [1.0, -k], u, zi=[k * u[0]])[0]
-            for tc in tc_s for k in [float(np.exp(-dt / max(tc, 1e-9)))]]
+    rows = []
+    for tc in tc_s:
+        if tc <= 0.0 or dt <= 0.0:
+            rows.append(u)
+            continue
+        keep = float(np.exp(-dt / tc))
+        end = lfilter([1.0 - keep], [1.0, -keep], u, zi=[keep * u[0]])[0]
+        start = np.concatenate(([u[0]], end[:-1]))
+        rows.append(u + (start - u) * tc / dt * (1.0 - keep))
     return np.array(rows)
 
 

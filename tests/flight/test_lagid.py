@@ -13,7 +13,7 @@ from perchd.core.types import Pose
 from perchd.flight.config import EstimatorConfig, LagIdGains
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
-from perchd.flight.lagid import LagIdentifier, LagModel
+from perchd.flight.lagid import LagIdentifier, LagModel, _solve
 
 DT = 0.01
 
@@ -76,13 +76,21 @@ def test_a_first_order_lag_behind_the_delay_is_flown_as_delay_plus_time_constant
         delay_s, time_constant_s):
     """An attitude loop's time constant T behind a delay: after a step the speed ends
     delay + T late. With first-order lags tried (LagIdGains.time_constant_max_s), the fit
-    finds both; a pure delay fitted to it comes out short (0.26 s for 0.1 + 0.2)."""
+    finds both, and the drag."""
     fit = fly(delay_s, 0.3, time_constant_s=time_constant_s, noise_m=0.001,
               estimated=True, cfg=LagIdGains(time_constant_max_s=0.3)).fit()
     assert fit.model is not None, fit.why
     assert fit.model.lag_s == pytest.approx(delay_s + time_constant_s, abs=0.01)
     assert fit.model.time_constant_s == pytest.approx(time_constant_s, abs=0.03)
     assert fit.model.drag_per_s == pytest.approx(0.3, abs=0.03)
+
+
+def test_a_pure_delay_fitted_to_a_first_order_response_pays_in_drag():
+    """The default, one pure delay, on 0.1 s + 0.2 s: the lag comes out near 0.3 s, but
+    the sharper answer it assumes is made up by a drag 0.05 /s high and a push."""
+    m = fly(0.1, 0.3, time_constant_s=0.2, noise_m=0.001, estimated=True).fit().model
+    assert m.lag_s == pytest.approx(0.3, abs=0.01)
+    assert m.drag_per_s > 0.34 and m.bias_mps2 > 0.01
 
 
 def test_a_constant_push_is_told_from_drag():
@@ -141,14 +149,17 @@ def drag_free_bias(rows, lag_s: float) -> float:
 @pytest.mark.parametrize("seed", [17, 18])
 def test_a_drag_that_noise_makes_negative_is_fitted_as_none_with_its_own_bias(seed):
     """No drag, no push, a short approach under 4 mm of noise: the joint fit's drag comes
-    out at -0.11 /s with a bias of -0.04 m/s^2 fitted beside it. Clipping only the drag
-    kept that bias; the fit is the drag-free one instead."""
+    out at about -0.11 /s with a bias of about -0.04 m/s^2 beside it. Clipping only the
+    drag kept that bias; the fit is the drag-free one instead."""
     ident = fly(0.15, 0.0, hold_s=0.3, approach_s=1.0, noise_m=0.004, seed=seed,
                 cfg=LagIdGains(speed_span_min_mps=0.3), estimated=True)
     m = ident.fit().model
+    t, u, x, _ = (np.array(c) for c in zip(*ident._rows))
+    joint = _solve(t, u[None], x, np.array([m.lag_s]))[1][0, :, 0]  # (drag, bias, ...)
+    assert -0.2 < joint[0] < 0.0
     assert m.drag_per_s == 0.0
     assert m.bias_mps2 == pytest.approx(drag_free_bias(ident._rows, m.lag_s), abs=0.003)
-    assert abs(m.bias_mps2 + 0.04) > 0.015  # not the bias fitted beside the negative drag
+    assert abs(m.bias_mps2 - joint[1]) > 0.015  # not the bias fitted beside it
 
 
 @pytest.mark.parametrize("lag_s", [0.13, 0.25, 0.35])
@@ -210,19 +221,22 @@ def test_the_prediction_adds_the_commands_still_in_flight():
 
 
 def test_a_first_order_response_is_predicted_through_its_filter():
-    """A step of 1 m/s^2 sent at t = 0.9 s reaches a vehicle 0.1 s later through a
-    first-order lag of 0.2 s: 0.15 s after t = 1.0 the speed has gained
-    int_0^0.15 (1 - exp(-s / 0.2)) ds beyond coasting (the 1 ms grid: within 1e-3)."""
+    """0.5 m/s^2 sent from t = 0.5 s, 1 m/s^2 from 0.9 s, to a vehicle that answers 0.1 s
+    late through a first-order lag of 0.2 s: at t = 1.0 the filter holds a0 = 0.5 (1 -
+    exp(-0.4 / 0.2)) of the first step, and over the next 0.15 s the speed gains
+    int_0^h 1 + (a0 - 1) exp(-s / 0.2) ds beyond coasting (closed form; the 1 ms grid
+    within 1e-4)."""
     ident = LagIdentifier(LagIdGains())
     for k in range(100):
-        ident.record(k * DT, 1.0 if k >= 90 else 0.0, 0.0, 0.0)
+        ident.record(k * DT, 1.0 if k >= 90 else 0.5 if k >= 50 else 0.0, 0.0, 0.0)
     m = LagModel(0.3, 0.0, 0.0, 0.0, 0, 0.0, time_constant_s=0.2)
     x, v = ident.predict(1.0, -1.0, 1.0, m, 0.15)
     h, tc = 0.15, 0.2
-    gain = h - tc * (1.0 - math.exp(-h / tc))
-    far = h * h / 2.0 - tc * h + tc * tc * (1.0 - math.exp(-h / tc))
-    assert v == pytest.approx(1.0 + gain, abs=1e-3)
-    assert x == pytest.approx(-1.0 + h + far, abs=1e-4)
+    a0 = 0.5 * (1.0 - math.exp(-0.4 / tc))
+    gain = h + (a0 - 1.0) * tc * (1.0 - math.exp(-h / tc))
+    far = h * h / 2.0 + (a0 - 1.0) * (tc * h - tc * tc * (1.0 - math.exp(-h / tc)))
+    assert v == pytest.approx(1.0 + gain, abs=1e-4)
+    assert x == pytest.approx(-1.0 + h + far, abs=1e-5)
 
 
 def test_the_refit_counts_the_commands_in_flight_when_it_begins():
