@@ -164,8 +164,8 @@ class LagIdGains:
     time_constant_max_s: [s] the first-order lags tried behind the delay (0 up to this, in
         lag_step_s): an attitude loop's time constant. 0 (the default): one pure delay.
         Above, the lead flown is delay + T, right for a first-order attitude response
-        (the Crazyflie firmware: 0.980-0.983 m/s at contact) but fast on the autopilots'
-        shaped ones (ArduCopter 1.01, PX4 SIH 1.04 median; docs/firmware.md).
+        (the Crazyflie firmware: 0.975-0.984 m/s at contact) but fast on the autopilots'
+        shaped ones (ArduCopter 1.004, PX4 SIH 1.015 median; docs/firmware.md).
     drag_max_per_s: [1/s] an identified drag above this is refused.
     speed_span_min_mps: [m/s] the fitted ticks must cover this speed range (the approach).
     rms_max_mps: [m/s] a fit with a larger residual is refused.
