@@ -195,7 +195,7 @@ class LagIdentifier:
             return 0.0, 0.0
         u = u_k[np.clip(np.searchsorted(t_k, grid, side="right") - 1, 0, None)]
         inside = grid >= lo
-        a = _first_order(grid, u, np.array([tc]))[0][inside]
+        a = _first_order(grid, u, np.array([tc]), FINE_S)[0][inside]
         # Each fine step's mean acceleration, at its midpoint for the distance.
         return (float(a.sum() * FINE_S),
                 float((a * (hi - grid[inside] - 0.5 * FINE_S)).sum() * FINE_S))
@@ -240,19 +240,20 @@ def _speed_errors(t, u, x, v, m: LagModel, k: int, v_k: float) -> np.ndarray:
     """[m/s] the speed measured from tick k on, less the speed m predicts from v_k [m/s]
     at tick k."""
     a = _first_order(t, u, np.array([m.time_constant_s]))
-    times = t[None, k:] - m.delay_s
-    big_a = _delayed(t, _integrals(t, a)[0], times)[0, 0] \
-        + np.minimum(times[0] - t[0], 0.0) * a[0, 0]
+    big_a = _delayed(t, _integrals(t, a)[0], t[None, k:] - m.delay_s, a, 1)[0, 0]
     return (v[k:] - v_k) - (big_a - big_a[0]) + m.drag_per_s * (x[k:] - x[k]) \
         - m.bias_mps2 * (t[k:] - t[k])
 
 
-def _first_order(t: np.ndarray, u: np.ndarray, tc_s: np.ndarray) -> np.ndarray:
+def _first_order(t: np.ndarray, u: np.ndarray, tc_s: np.ndarray,
+                 dt: float | None = None) -> np.ndarray:
     """The commands u through first-order lags of time constants tc_s [s] (one row each):
     each tick's mean over the interval to the next (the command held across it), settled
     on the first command before t[0] (the hold's commands are steady); the ticks taken as
-    evenly spaced at their median interval (the loop's jitter is a few percent of it)."""
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    evenly spaced at dt [s], by default their median interval (the loop's jitter is a few
+    percent of it)."""
+    if dt is None:
+        dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     rows = []
     for tc in tc_s:
         if tc <= 0.0 or dt <= 0.0:
@@ -276,15 +277,17 @@ def _integrals(t: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return big_a, big_w
 
 
-def _delayed(t: np.ndarray, big: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """big (inputs, ticks) at times (lags, points), shaped (inputs, lags, points); linear
-    between ticks (W's error there is a dt^2 / 8, micrometres), clamped at t[0] (the
-    caller adds what was held before it). The weights depend on the times alone, so every
-    input shares them."""
+def _delayed(t: np.ndarray, big: np.ndarray, times: np.ndarray, a: np.ndarray,
+             order: int) -> np.ndarray:
+    """big (inputs, ticks), the order-th integral of a (1: A, 2: W), at times (lags,
+    points), shaped (inputs, lags, points): linear between ticks (W's error there is
+    a dt^2 / 8, micrometres) and, before t[0], what a held at its first value adds. The
+    weights depend on the times alone, so every input shares them."""
     q = np.clip(times, t[0], t[-1])
     i = np.clip(np.searchsorted(t, q, side="right") - 1, 0, len(t) - 2)
     w = (q - t[i]) / (t[i + 1] - t[i])
-    return big[:, i] * (1.0 - w) + big[:, i + 1] * w
+    held = np.minimum(times - t[0], 0.0) ** order / order * a[:, :1, None]
+    return big[:, i] * (1.0 - w) + big[:, i + 1] * w + held
 
 
 def _solve(t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
@@ -298,10 +301,7 @@ def _solve(t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
     at = np.unique(np.linspace(start, len(t) - 1, min(len(t) - start, FIT_POINTS)).astype(int))
     big_a, big_w = _integrals(t, a)
     times = t[at][None, :] - lags[:, None]
-    # Before t[0] the input is held at its first value.
-    before, a0 = np.minimum(times - t[0], 0.0), a[:, :1, None]
-    w = _delayed(t, big_w, times) + 0.5 * before ** 2 * a0
-    a_s = _delayed(t, big_a, times[:, :1]) + before[:, :1] * a0
+    w, a_s = _delayed(t, big_w, times, a, 2), _delayed(t, big_a, times[:, :1], a, 1)
     s = t[at] - t[at[0]]
     x_s = x[at[0]]
     area = np.concatenate(([0.0], np.cumsum(0.5 * (x[1:] + x[:-1] - 2.0 * x_s) * np.diff(t))))
@@ -320,11 +320,11 @@ def _solve(t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
     return np.maximum(mse, 0.0), sol
 
 
-def _refine(lags: np.ndarray, sse: np.ndarray, i: int) -> float:
+def _refine(lags: np.ndarray, mse: np.ndarray, i: int) -> float:
     """The parabola's vertex through the grid minimum and its neighbours."""
     if i == 0:
         return float(lags[0])
-    y0, y1, y2 = sse[i - 1], sse[i], sse[i + 1]
+    y0, y1, y2 = mse[i - 1], mse[i], mse[i + 1]
     den = y0 - 2.0 * y1 + y2
     step = float(lags[1] - lags[0])
     shift = 0.5 * (y0 - y2) / den if den > 0 else 0.0
