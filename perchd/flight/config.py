@@ -438,6 +438,10 @@ def validate(cfg: FlightConfig) -> None:
         ("hover.timeout_s", cfg.hover.timeout_s, 0.5, 60.0),
         ("trigger.solve_max_s", cfg.trigger.solve_max_s, 0.0, 5.0),
         ("trigger.ahead_v_tol_mps", cfg.trigger.ahead_v_tol_mps, 0.0, 1.0),
+        ("lag_id.window_s", cfg.lag_id.window_s, 1.0, 60.0),
+        ("lag_id.lag_step_s", cfg.lag_id.lag_step_s, 0.005, 0.1),
+        ("lag_id.lag_max_s", cfg.lag_id.lag_max_s, 2.0 * cfg.lag_id.lag_step_s, 2.0),
+        ("lag_id.time_constant_max_s", cfg.lag_id.time_constant_max_s, 0.0, 1.0),
         *((f"surface.point[{i}]", c, -MAX_COORD_M, MAX_COORD_M)
           for i, c in enumerate(cfg.surface.point)),
         *((f"surface.normal[{i}]", c, -1e6, 1e6) for i, c in enumerate(cfg.surface.normal)),

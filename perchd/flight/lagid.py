@@ -106,7 +106,7 @@ class LagIdentifier:
             return LagFit(None, f"the approach changed speed by {span:.2f} m/s, less than "
                                 f"the {c.speed_span_min_mps:g} m/s needed to fit the lag")
         delays = np.arange(0.0, c.lag_max_s + 1e-9, c.lag_step_s)
-        taus = np.arange(0.0, max(c.time_constant_max_s, 0.0) + 1e-9, c.lag_step_s)
+        taus = np.arange(0.0, c.time_constant_max_s + 1e-9, c.lag_step_s)
         mse = _solve(t, _first_order(t, u, taus), x, delays)[0]
         j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
         if i == len(delays) - 1:

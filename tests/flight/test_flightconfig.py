@@ -8,7 +8,7 @@ import math
 import pytest
 
 from perchd.core.errors import ConfigError
-from perchd.flight.config import FlightConfig, SurfaceConfig, VehicleConfig
+from perchd.flight.config import FlightConfig, LagIdGains, SurfaceConfig, VehicleConfig
 
 
 def test_defaults_are_a_30_g_crazyflie_at_100_hz_with_25_degree_tilt():
@@ -24,6 +24,9 @@ def test_defaults_are_a_30_g_crazyflie_at_100_hz_with_25_degree_tilt():
     ({"tilt_limit_rad": 0.0}, "tilt_limit_rad = 0 is below 0.01 by 0.01"),
     ({"vehicle": VehicleConfig(thrust_max_n=0.2)}, "vehicle.thrust_max_n = 0.2 is below 0.2943"),
     ({"surface": SurfaceConfig(normal=(0.0, 0.0, 1.0))}, "surface.normal .* must point more sideways"),
+    ({"lag_id": LagIdGains(lag_step_s=0.0)}, "lag_id.lag_step_s = 0 is below 0.005 by 0.005"),
+    ({"lag_id": LagIdGains(time_constant_max_s=-1.0)},
+     "lag_id.time_constant_max_s = -1 is below 0 by 1"),
 ])
 def test_a_field_out_of_range_is_one_error_naming_it_and_by_how_much(kwargs, message):
     with pytest.raises(ConfigError, match=message):
