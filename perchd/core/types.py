@@ -86,6 +86,9 @@ class State:
         the last one moved): a flying body never stays bit-still, a stuck tracker does.
     zddot: [m/s^2] acceleration along the perching frame's z (the hover-thrust learner
         reads it: flight/hover.py).
+    lean_x: the body z axis's component along the perching normal X, as the newest pose
+        measured it (at t - age): where the thrust points (flight/lagid.py fits the
+        attitude's response to the setpoints on it).
     """
 
     t: float
@@ -103,6 +106,7 @@ class State:
     pose_seq: int
     frozen_s: float = 0.0
     zddot: float = 0.0
+    lean_x: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

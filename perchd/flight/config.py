@@ -160,18 +160,24 @@ class LagIdGains:
     refit_s: [s] period of the refits during the approach (its own feed-forward uses
         the drag found so far); the fit at the trigger is the one logged and flown.
     lag_max_s, lag_step_s: [s] the delays tried (0..lag_max_s); a best delay at the bound
-        is refused (the vehicle is slower than any tried).
-    time_constant_max_s: [s] the first-order lags tried behind the delay (0 up to this, in
-        lag_step_s): an attitude loop's time constant. 0 (the default): one pure delay.
-        Above, the lead flown is delay + T, right for a first-order attitude response
-        (the Crazyflie firmware: 0.975-0.984 m/s at contact) but fast on the autopilots'
-        shaped ones (ArduCopter 1.004, PX4 SIH 1.015 median; docs/firmware.md).
+        is refused (the vehicle is slower than any tried). lag_max_s also bounds the lag
+        (delay + T) fitted to the attitude (from_attitude).
+    time_constant_max_s: [s] when the lag is fitted to the positions (no attitude, or
+        from_attitude off): the first-order lags tried behind the delay (0 up to this, in
+        lag_step_s). 0 (the default): one pure delay. Above, the lead flown is delay + T.
     drag_max_per_s: [1/s] an identified drag above this is refused.
     speed_span_min_mps: [m/s] the fitted ticks must cover this speed range (the approach).
     rms_max_mps: [m/s] a fit with a larger residual is refused.
     stage2_refit: at the stage-2 switch, fit the bias again from stage 1 alone (lag and
         drag kept) and feed it forward in stage 2: a push the approach never met
         (LagIdentifier.refit_bias).
+    from_attitude: take the delay and the first-order lag from the attitude the mocap
+        measures, answering the setpoints' (LagIdentifier.lean_response), drag and bias
+        from the positions as before; the positions' own lag fit when the lean swept too
+        little or the fit is poor. The attitude's fit finds one vehicle's lag within a few
+        ms from flight to flight where the positions' scattered by 0.06 s (docs/firmware.md,
+        "The attitude the mocap measures"). With stage2_refit, stage 2 flies the lag of
+        stage 1's attitude alone (VehicleResponse.refit_stage2).
     """
 
     window_s: float = 8.0
@@ -183,6 +189,7 @@ class LagIdGains:
     speed_span_min_mps: float = 0.5
     rms_max_mps: float = 0.1
     stage2_refit: bool = True
+    from_attitude: bool = True
 
 
 @dataclass(frozen=True)

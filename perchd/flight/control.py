@@ -153,7 +153,8 @@ class Controller:
     vehicle's mass as the thrust path sees it, so a wrong mass or thrust calibration is
     corrected for feed-forward and gains alike. last_thrust_z [N]: the vertical component
     of the last setpoint's thrust. last_ux_sent [m/s^2]: the acceleration along X the last
-    setpoint commands after the saturations.
+    setpoint commands after the saturations. last_lean_sent: the X component of the body z
+    axis that setpoint asks for.
     """
 
     def __init__(self, cfg: FlightConfig, frame: PerchFrame) -> None:
@@ -167,6 +168,7 @@ class Controller:
         self.hover_n = cfg.vehicle.hover_guess_n
         self.last_thrust_z: float | None = None
         self.last_ux_sent = 0.0
+        self.last_lean_sent = 0.0
         self._yaw = frame.yaw_facing
 
     def lateral(self, state: State, y_ref: float, z_ref: float, dt: float,
@@ -186,5 +188,6 @@ class Controller:
         self.last_thrust_z = att.thrust * bz[2]
         # The acceleration along X this setpoint asks for once flown, saturations included:
         # what the lag identification (flight/lagid.py) compares the response with.
-        self.last_ux_sent = self.frame.rotate_in(bz)[0] * att.thrust * v.g / self.hover_n
+        self.last_lean_sent = self.frame.rotate_in(bz)[0]
+        self.last_ux_sent = self.last_lean_sent * att.thrust * v.g / self.hover_n
         return Setpoint(t, att.roll, att.pitch, att.yaw, att.thrust, pose_seq, phase)

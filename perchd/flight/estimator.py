@@ -64,6 +64,7 @@ class Estimator:
         self._moved_t = 0.0
         self._yaw = 0.0
         self._tilt = 0.0
+        self._lean_x = 0.0
         self._rejects = 0
         self.rejected = 0
         self.accepted = 0
@@ -147,6 +148,9 @@ class Estimator:
         qx, qy, qz, qw = pose.q
         self._tilt = math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (qx * qx + qy * qy))))
         self._yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        bz = (2.0 * (qx * qz + qw * qy), 2.0 * (qy * qz - qw * qx),
+              1.0 - 2.0 * (qx * qx + qy * qy))  # the body z axis in the world
+        self._lean_x = self.frame.rotate_in(bz)[0]
 
     def state(self, t: float) -> State | None:
         """The state predicted to time t [s] (None before the first pose)."""
@@ -159,4 +163,4 @@ class Estimator:
         tau = X / Xd if Xd > self.cfg.min_speed_mps else None
         return State(t, X, Xd, ax, py + dt * vy + h * ay, pz + dt * vz + h * az, vy + dt * ay,
                      vz + dt * az, tau, self._yaw, self._tilt, t - self._last.t, self._last.seq,
-                     self._last.t - self._moved_t, az)
+                     self._last.t - self._moved_t, az, self._lean_x)

@@ -12,8 +12,9 @@ u [m/s^2] the acceleration the setpoint commanded (after the saturations), a the
 acceleration the vehicle reaches, a delay [s] (the link, the shaping) and a first-order lag
 T [s] (an attitude loop) behind it; drag [1/s] linear drag per unit mass, bias [m/s^2] a
 constant push (a trim error, a draught). The gain is 1: the hold has calibrated the thrust
-(flight/hover.py). The lead flown is lag = delay + T. By default T is none (one pure delay
-for the whole chain, LagIdGains.time_constant_max_s 0). Fitted to a first-order response,
+(flight/hover.py). The lead flown is lag = delay + T. Fitted to the positions, T is by
+default none (one pure delay for the whole chain, LagIdGains.time_constant_max_s 0); fitted
+to the attitude (below) it is always tried. Fitted to a first-order response,
 a pure delay finds about delay + T but pays for its sharper answer in drag and bias (0.353
 /s and +0.016 m/s^2 for 0.3 and 0 behind 0.1 + 0.2 s, tests/flight/test_lagid.py); the
 first-order fit finds all four. Flown, it perched the Crazyflie firmware closest to the
@@ -34,6 +35,13 @@ least-squares solution. The fit refuses (and the
 flight falls back to the configured lead, no drag term) when the approach moved too little,
 the best delay sits on the grid's edge, the drag is out of bounds or the speed it predicts
 strays from the speed measured.
+
+Where the mocap measures the attitude, delay and T come from it instead (lean_response):
+the X component of the body z axis, the lean, that the setpoints sent against the one
+measured. The attitude is measured directly to a fraction of a degree, where the positions
+carry it only integrated twice beside drag and bias, so one vehicle's lag comes out within
+a few ms from flight to flight (the positions' fit scattered by 0.06 s on the autopilots);
+drag and bias are then fitted to the positions at that delay and T (docs/errata.md §10).
 """
 
 from __future__ import annotations
@@ -52,6 +60,19 @@ HOLDOUT = 0.4
 """The share of a refit's ticks, the last, that its candidate is not fitted to but judged on."""
 FINE_S = 0.001
 """[s] the grid the prediction filters the commands on."""
+LEAN_COARSE_S = (0.02, 0.04)
+"""[s] the attitude fit's first grid: its delay step and its time-constant step."""
+LEAN_FINE_S = (0.005, 0.01)
+"""[s] its second grid, four steps each way about the first grid's best (then refined
+between points)."""
+LEAN_POINTS = (60, 100)
+"""Measured leans each grid samples at most (evenly spread over the window)."""
+LEAN_TC_MAX_S = 0.4
+"""[s] the largest time constant the attitude's fit tries."""
+LEAN_SPAN_MIN = 0.03
+"""The lean the setpoints must have swept (about 1.7 deg of tilt) for its fit."""
+LEAN_RMS_MAX = 0.25
+"""The attitude's fit is refused when its residual exceeds this share of the lean's sweep."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,7 +80,9 @@ class LagModel:
     """lag_s [s] the delay plus the time constant: the lead flown; drag_per_s [1/s];
     bias_mps2 [m/s^2]; rms_mps [m/s] how far the speed predicted strays from the speed
     measured; samples: ticks fitted; speed_span_mps [m/s] the speed range they covered;
-    time_constant_s [s] T, the part of the lag that is a first-order lag."""
+    time_constant_s [s] T, the part of the lag that is a first-order lag; from_attitude:
+    delay and T were fitted to the attitude the mocap measured (LagIdentifier.lean_response),
+    not to the positions."""
 
     lag_s: float
     drag_per_s: float
@@ -68,6 +91,7 @@ class LagModel:
     samples: int
     speed_span_mps: float
     time_constant_s: float = 0.0
+    from_attitude: bool = False
 
     @property
     def delay_s(self) -> float:
@@ -89,12 +113,50 @@ class LagIdentifier:
     def __init__(self, cfg: LagIdGains) -> None:
         self.cfg = cfg
         self._rows: deque[tuple[float, float, float, float]] = deque()
+        self._lean: deque[tuple[float, float, float, float]] = deque()
 
     def record(self, t: float, u_x: float, x: float, xdot: float) -> None:
         """One tick: t [s], u_x [m/s^2] commanded at t, x [m] and xdot [m/s] measured at t."""
         self._rows.append((t, u_x, x, xdot))
         while self._rows and self._rows[0][0] < t - self.cfg.window_s:
             self._rows.popleft()
+
+    def record_lean(self, t: float, sent: float, t_measured: float, measured: float) -> None:
+        """One tick's lean (the body z axis's X component): the setpoint's, sent at t [s],
+        and the mocap's, measured at t_measured [s]."""
+        self._lean.append((t, sent, t_measured, measured))
+        while self._lean and self._lean[0][0] < t - self.cfg.window_s:
+            self._lean.popleft()
+
+    def lean_response(self, since_t: float = -np.inf) -> tuple[float, float] | None:
+        """(delay [s], T [s]) of the attitude's answer to the setpoints' lean, fitted to
+        the lean the mocap measured since since_t [s] (the commands before it still count,
+        in flight), on a coarse grid and then a fine one about its best (a few ms); None
+        when the lean swept too little, the best sits on a bound, the lag (delay + T)
+        reaches lag_max_s or the fit is poor (a rigid body whose axes are not the
+        vehicle's)."""
+        if len(self._lean) < 20:
+            return None
+        t, sent, tm, lean = (np.array(col) for col in zip(*self._lean))
+        sweep = float(np.ptp(sent[t >= since_t])) if (t >= since_t).any() else 0.0
+        if sweep < LEAN_SPAN_MIN:
+            return None
+        d_max = self.cfg.lag_max_s
+        delays = np.arange(0.0, d_max + 1e-9, LEAN_COARSE_S[0])
+        taus = np.arange(0.0, LEAN_TC_MAX_S + 1e-9, LEAN_COARSE_S[1])
+        mse = _lean_mse(t, sent, tm, lean, delays, taus, LEAN_POINTS[0], since_t)
+        j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
+        if i == len(delays) - 1 or j == len(taus) - 1:
+            return None
+        delays = np.clip(delays[i] + np.arange(-4, 5) * LEAN_FINE_S[0], 0.0, d_max)
+        taus = np.clip(taus[j] + np.arange(-4, 5) * LEAN_FINE_S[1], 0.0, LEAN_TC_MAX_S)
+        delays, taus = np.unique(delays), np.unique(taus)
+        mse = _lean_mse(t, sent, tm, lean, delays, taus, LEAN_POINTS[1], since_t)
+        j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
+        if np.sqrt(mse[j, i]) > LEAN_RMS_MAX * sweep:
+            return None
+        delay, tc = _refine(delays, mse[j], int(i)), max(_refine(taus, mse[:, i], int(j)), 0.0)
+        return (delay, tc) if delay + tc < d_max else None
 
     def fit(self) -> LagFit:
         c = self.cfg
@@ -105,6 +167,10 @@ class LagIdentifier:
         if span < c.speed_span_min_mps:
             return LagFit(None, f"the approach changed speed by {span:.2f} m/s, less than "
                                 f"the {c.speed_span_min_mps:g} m/s needed to fit the lag")
+        lean = self.lean_response() if c.from_attitude else None
+        if lean is not None:
+            m = _model_at(t, u, x, v, *lean, span, c)
+            return _checked(replace(m, from_attitude=True), c)
         delays = np.arange(0.0, c.lag_max_s + 1e-9, c.lag_step_s)
         taus = np.arange(0.0, c.time_constant_max_s + 1e-9, c.lag_step_s)
         mse = _solve(t, _first_order(t, u, taus), x, delays)[0]
@@ -320,10 +386,31 @@ def _solve(t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
     return np.maximum(mse, 0.0), sol
 
 
+def _lean_mse(t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray,
+              points: int, since_t: float = -np.inf) -> np.ndarray:
+    """Mean squared residual, shaped (taus, delays), of the lean measured at tm (since
+    since_t) against the lean sent at t through each first-order lag and delay, a constant
+    offset (the markers' trim) removed. The filtered lean is each tick's interval mean,
+    read at the intervals' midpoints."""
+    f = _first_order(t, sent, taus)
+    mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
+    keep = (tm - delays[-1] >= mid[0]) & (tm >= since_t)
+    if keep.sum() < 20:
+        return np.full((len(taus), len(delays)), np.inf)
+    at = np.unique(np.linspace(0, keep.sum() - 1, min(int(keep.sum()), points)).astype(int))
+    tm, lean = tm[keep][at], lean[keep][at]
+    q = tm[None, :] - delays[:, None]
+    i = np.clip(np.searchsorted(mid, q, side="right") - 1, 0, len(mid) - 2)
+    w = np.clip((q - mid[i]) / (mid[i + 1] - mid[i]), 0.0, 1.0)
+    r = lean - (f[:, i] * (1.0 - w) + f[:, i + 1] * w)  # (taus, delays, points)
+    return r.var(axis=-1)
+
+
 def _refine(lags: np.ndarray, mse: np.ndarray, i: int) -> float:
-    """The parabola's vertex through the grid minimum and its neighbours."""
-    if i == 0:
-        return float(lags[0])
+    """The parabola's vertex through the grid minimum and its neighbours (the minimum
+    itself at the grid's ends)."""
+    if i == 0 or i == len(lags) - 1:
+        return float(lags[i])
     y0, y1, y2 = mse[i - 1], mse[i], mse[i + 1]
     den = y0 - 2.0 * y1 + y2
     step = float(lags[1] - lags[0])

@@ -582,6 +582,7 @@ class Supervisor:
         if not self.cfg.tau_gains.identify or self.phase not in _OBSERVED:
             return
         self.response.record(t, self.ctl.last_ux_sent, st.x, st.xdot)
+        self.response.record_lean(t, self.ctl.last_lean_sent, t - st.age, st.lean_x)
         if self.phase is not Phase.APPROACH or t - self._t_refit < self.cfg.lag_id.refit_s:
             return
         self._t_refit = t

@@ -1,0 +1,165 @@
+"""The lag fitted to the attitude the mocap measures (LagIdentifier.lean_response): the
+setpoints' lean answered through a delay and a first-order lag, as an autopilot's attitude
+loop does, and measured a little later, with noise and a trim offset."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+from scipy.spatial.transform import Rotation
+
+from perchd.core.types import Pose
+from perchd.flight.config import EstimatorConfig, LagIdGains, TauGains
+from perchd.flight.estimator import Estimator
+from perchd.flight.frame import PerchFrame, body_z
+from perchd.flight.lagid import LagIdentifier
+from perchd.flight.response import VehicleResponse
+
+DT, G = 0.01, 9.81
+
+
+def lean_command(t: float) -> float:
+    """A hold, a run-up at about 4 deg, easing off, then a brake: the lean a perch sends."""
+    if t < 1.0:
+        return 0.0
+    if t < 3.0:
+        return 0.075 - 0.02 * (t - 1.0)
+    return -0.1 if t < 4.0 else 0.02
+
+
+def fly(delay_s: float, tc_s: float, noise: float = 0.0, offset: float = 0.0,
+        seen_as: float = 1.0, drag: float = 0.25, seconds: float = 4.5, seed: int = 0,
+        cfg: LagIdGains | None = None,
+        then: tuple[float, float, float] | None = None) -> LagIdentifier:
+    """Record a flight whose lean answers the lean sent `delay_s` [s] late through a
+    first-order lag `tc_s` [s] (integrated in 1 ms steps), Xddot = g lean - drag Xdot.
+    The mocap measures each tick's lean 4 ms before the tick, with `noise` added, `offset`
+    (the markers' trim) and scaled by seen_as (-1: a rigid body turned half round; 0: one
+    whose X sees none of the lean). then (t, delay, tc): from t [s] on the response is that
+    one (a shaping that answers the brake's swings sooner)."""
+    rng = random.Random(seed)
+    ident = LagIdentifier(cfg or LagIdGains())
+    sent: list[float] = []
+    lean = x = v = 0.0
+    x = -4.5
+    history: list[tuple[float, float]] = []  # (t, true lean) every 1 ms
+    for k in range(int(seconds / DT)):
+        t = k * DT
+        if then is not None and t >= then[0]:
+            delay_s, tc_s = then[1], then[2]
+        u = lean_command(t)
+        sent.append(u)
+        for n in range(10):
+            s = t + n * DT / 10
+            late = math.floor((s - delay_s) / DT + 1e-9)  # the command held at s - delay
+            cmd = sent[max(late, 0)]
+            lean += (cmd - lean) * (1.0 - math.exp(-DT / 10 / tc_s)) if tc_s > 0 else cmd - lean
+            history.append((s, lean))
+            v += (G * lean - drag * v) * DT / 10
+            x += v * DT / 10
+        measured_at = t - 0.004
+        seen = history[max(round(measured_at / (DT / 10)), 0)][1]
+        ident.record(t, G * u, x + rng.gauss(0.0, 0.001), v)
+        ident.record_lean(t, u, measured_at, seen_as * seen + offset + rng.gauss(0.0, noise))
+    return ident
+
+
+@pytest.mark.parametrize("delay_s, tc_s",
+                         [(0.11, 0.24), (0.02, 0.14), (0.13, 0.16), (0.0, 0.07), (0.2, 0.0)])
+def test_the_attitude_fit_finds_the_delay_and_the_time_constant(delay_s, tc_s):
+    found = fly(delay_s, tc_s).lean_response()
+    assert found is not None
+    assert found[0] == pytest.approx(delay_s, abs=0.006)
+    assert found[1] == pytest.approx(tc_s, abs=0.012)
+    assert sum(found) == pytest.approx(delay_s + tc_s, abs=0.006)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_mocap_noise_and_a_trim_offset_leave_the_lag_within_a_few_milliseconds(seed):
+    """0.2 deg of noise on each frame's attitude and a 1 deg trim (the markers)."""
+    found = fly(0.11, 0.24, noise=math.radians(0.2), offset=math.radians(1.0),
+                seed=seed).lean_response()
+    assert found is not None
+    assert sum(found) == pytest.approx(0.35, abs=0.008)
+
+
+@pytest.mark.parametrize("seen_as", [-1.0, 0.0])
+def test_a_rigid_body_whose_axes_are_not_the_vehicles_is_refused(seen_as):
+    assert fly(0.11, 0.24, seen_as=seen_as, noise=math.radians(0.2)).lean_response() is None
+
+
+def test_the_attitude_since_a_time_is_fitted_to_the_lean_measured_since_then():
+    """The brake from 3 s on is answered 0.03 s sooner; fitted since 3 s, the commands
+    sent before still count (in flight)."""
+    ident = fly(0.11, 0.24, then=(3.0, 0.12, 0.2), seconds=4.5)
+    found = ident.lean_response(since_t=3.0)
+    assert found is not None
+    assert sum(found) == pytest.approx(0.32, abs=0.008)
+    assert sum(ident.lean_response(since_t=3.0)) < sum(fly(0.11, 0.24).lean_response()) - 0.02
+
+
+def test_stage_2_flies_the_lag_of_stage_1s_attitude_and_logs_it():
+    events = []
+    resp = VehicleResponse(TauGains(), LagIdGains(), events)
+    ident = fly(0.11, 0.24, then=(3.0, 0.12, 0.2), seconds=4.5)
+    resp.lagid = ident
+    t_trigger = 3.0
+    resp.model = ident.fit().model  # as identified at the trigger, from the whole window
+    assert resp.model.from_attitude
+    resp.refit_stage2(4.5, t_trigger, 1.0)
+    refit = next(e for e in events if e.kind == "lag-refit")
+    assert resp.model.lag_s == pytest.approx(0.32, abs=0.008)
+    assert resp.ff.lead_s == resp.model.lag_s
+    assert refit.values["lag_s"] == resp.model.lag_s
+    assert refit.values["was_lag_s"] > resp.model.lag_s
+
+
+def test_a_lag_from_the_positions_is_kept_in_stage_2():
+    events = []
+    resp = VehicleResponse(TauGains(), LagIdGains(), events)
+    resp.lagid = ident = fly(0.11, 0.24, seen_as=0.0, then=(3.0, 0.12, 0.2))
+    resp.model = model = ident.fit().model
+    resp.refit_stage2(4.5, 3.0, 1.0)
+    assert not any(e.kind == "lag-refit" for e in events)
+    assert resp.model.lag_s == model.lag_s
+
+
+def test_a_lean_that_swept_too_little_is_refused():
+    ident = LagIdentifier(LagIdGains())
+    for k in range(300):
+        ident.record_lean(k * DT, 0.01 * math.sin(k * DT), k * DT, 0.0)
+    assert ident.lean_response() is None
+
+
+def test_the_fit_flies_the_attitudes_lag_and_fits_drag_to_the_positions():
+    fit = fly(0.11, 0.24).fit()
+    assert fit.model is not None and fit.model.from_attitude, fit.why
+    assert fit.model.lag_s == pytest.approx(0.35, abs=0.006)
+    assert fit.model.time_constant_s == pytest.approx(0.24, abs=0.012)
+    assert fit.model.drag_per_s == pytest.approx(0.25, abs=0.03)
+
+
+def test_the_positions_lag_is_fitted_when_the_attitude_is_not_used():
+    for ident in (fly(0.11, 0.24, seen_as=0.0),
+                  fly(0.11, 0.24, cfg=LagIdGains(from_attitude=False))):
+        fit = ident.fit()
+        assert fit.model is not None and not fit.model.from_attitude, fit.why
+
+
+def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of Z-Y-X angles, from scipy (a derivation apart from perchd's)."""
+    return tuple(Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat())
+
+
+@pytest.mark.parametrize("normal", [(1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.6, 0.8, 0.0)])
+@pytest.mark.parametrize("angles", [(0.0, 0.1, 0.0), (0.05, -0.2, 1.0), (-0.1, 0.0, 2.5)])
+def test_the_estimator_measures_the_lean_the_setpoint_would_send(normal, angles):
+    """The lean of a pose's quaternion is the one controller's body_z gives the same
+    angles, in any perching frame."""
+    frame = PerchFrame.from_surface((0.0, 0.0, 0.0), normal)
+    est = Estimator(EstimatorConfig(), frame)
+    est.offer(Pose("cf", 1, 0.0, (0.0, 0.0, 1.0), quaternion(*angles)))
+    sent = frame.rotate_in(body_z(*angles))[0]
+    assert est.state(0.0).lean_x == pytest.approx(sent, abs=1e-12)
