@@ -28,7 +28,7 @@ def recorded(cfg: LagIdGains, delay_s: float = 0.11, tc_s: float = 0.24,
     ident = LagIdentifier(cfg)
     x, v, lean, sent = -6.0, 0.0, 0.0, []
     step = DT / 10  # the vehicle integrated in 1 ms steps, each command held for its tick
-    keep = math.exp(-step / tc_s)
+    keep = math.exp(-step / tc_s) if tc_s > 0.0 else 0.0
     for k in range(int(cfg.window_s / DT)):
         t = k * DT
         sent.append(0.0 if t < 2.0 else (0.06 if t < 6.0 else -0.08))

@@ -42,10 +42,14 @@ measured. The attitude is measured directly to a fraction of a degree, where the
 carry it only integrated twice beside drag and bias, so one vehicle's lag comes out within
 a few ms from flight to flight (the positions' fit scattered by 0.06 s on the autopilots);
 drag and bias are then fitted to the positions at that delay and T (docs/errata.md §10).
+A lean that swept too little, fits poorly or swings by another size than the one sent (a
+rigid body whose axes are not the vehicle's), or a model refused at its lag, leaves the
+positions' fit to serve.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, replace
 
@@ -73,6 +77,12 @@ LEAN_SPAN_MIN = 0.03
 """The lean the setpoints must have swept (about 1.7 deg of tilt) for its fit."""
 LEAN_RMS_MAX = 0.25
 """The attitude's fit is refused when its residual exceeds this share of the lean's sweep."""
+LEAN_GAIN = (0.8, 1.25)
+"""The measured lean's swing over the predicted one's that the attitude's fit accepts (the
+firmwares: 1.04-1.07); outside, the mocap's axes are not the vehicle's."""
+LEAN_FINE_MOVES = 3
+"""Times the fine grid is moved onto its best when that sits on its edge (delay and T trade
+along a diagonal, so the coarse best may be more than a step off)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,7 +133,9 @@ class LagIdentifier:
 
     def record_lean(self, t: float, sent: float, t_measured: float, measured: float) -> None:
         """One tick's lean (the body z axis's X component): the setpoint's, sent at t [s],
-        and the mocap's, measured at t_measured [s]."""
+        and the mocap's, measured at t_measured [s]. A non-finite one is not kept."""
+        if not all(map(math.isfinite, (t, sent, t_measured, measured))):
+            return
         self._lean.append((t, sent, t_measured, measured))
         while self._lean and self._lean[0][0] < t - self.cfg.window_s:
             self._lean.popleft()
@@ -131,10 +143,11 @@ class LagIdentifier:
     def lean_response(self, since_t: float = -np.inf) -> tuple[float, float] | None:
         """(delay [s], T [s]) of the attitude's answer to the setpoints' lean, fitted to
         the lean the mocap measured since since_t [s] (the commands before it still count,
-        in flight), on a coarse grid and then a fine one about its best (a few ms); None
-        when the lean swept too little, the best sits on a bound, the lag (delay + T)
-        reaches lag_max_s or the fit is poor (a rigid body whose axes are not the
-        vehicle's)."""
+        in flight), on a coarse grid and then a fine one about its best, moved while the
+        best sits on its edge (a few ms in all); None when the lean swept too little, the
+        best sits on a bound, the lag (delay + T) reaches lag_max_s, or the fit is poor: a
+        residual above LEAN_RMS_MAX of the sweep or the measured lean not the sent one's
+        size (LEAN_GAIN: a rigid body whose axes are not the vehicle's)."""
         if len(self._lean) < 20:
             return None
         t, sent, tm, lean = (np.array(col) for col in zip(*self._lean))
@@ -144,16 +157,23 @@ class LagIdentifier:
         d_max = self.cfg.lag_max_s
         delays = np.arange(0.0, d_max + 1e-9, LEAN_COARSE_S[0])
         taus = np.arange(0.0, LEAN_TC_MAX_S + 1e-9, LEAN_COARSE_S[1])
-        mse = _lean_mse(t, sent, tm, lean, delays, taus, LEAN_POINTS[0], since_t)
+        mse = _lean_mse(t, sent, tm, lean, delays, taus, LEAN_POINTS[0], since_t)[0]
         j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
-        if i == len(delays) - 1 or j == len(taus) - 1:
+        if i == len(delays) - 1 or j == len(taus) - 1 or not np.isfinite(mse[j, i]):
             return None
-        delays = np.clip(delays[i] + np.arange(-4, 5) * LEAN_FINE_S[0], 0.0, d_max)
-        taus = np.clip(taus[j] + np.arange(-4, 5) * LEAN_FINE_S[1], 0.0, LEAN_TC_MAX_S)
-        delays, taus = np.unique(delays), np.unique(taus)
-        mse = _lean_mse(t, sent, tm, lean, delays, taus, LEAN_POINTS[1], since_t)
-        j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
-        if np.sqrt(mse[j, i]) > LEAN_RMS_MAX * sweep:
+        best = (float(delays[i]), float(taus[j]))
+        for _ in range(LEAN_FINE_MOVES):
+            delays, taus = (np.unique(np.clip(c + np.arange(-4, 5) * step, 0.0, top))
+                            for c, step, top in zip(best, LEAN_FINE_S, (d_max, LEAN_TC_MAX_S)))
+            mse, gain = _lean_mse(t, sent, tm, lean, delays, taus, LEAN_POINTS[1], since_t)
+            j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
+            best = (float(delays[i]), float(taus[j]))
+            inner = (0 < i < len(delays) - 1 or best[0] in (0.0, d_max)) and \
+                (0 < j < len(taus) - 1 or best[1] in (0.0, LEAN_TC_MAX_S))
+            if inner:
+                break
+        rms = np.sqrt(mse[j, i])
+        if not rms <= LEAN_RMS_MAX * sweep or not LEAN_GAIN[0] <= gain[j, i] <= LEAN_GAIN[1]:
             return None
         delay, tc = _refine(delays, mse[j], int(i)), max(_refine(taus, mse[:, i], int(j)), 0.0)
         return (delay, tc) if delay + tc < d_max else None
@@ -169,8 +189,10 @@ class LagIdentifier:
                                 f"the {c.speed_span_min_mps:g} m/s needed to fit the lag")
         lean = self.lean_response() if c.from_attitude else None
         if lean is not None:
-            m = _model_at(t, u, x, v, *lean, span, c)
-            return _checked(replace(m, from_attitude=True), c)
+            m = replace(_model_at(t, u, x, v, *lean, span, c), from_attitude=True)
+            fit = _checked(m, c)
+            if fit.model is not None:
+                return fit  # refused at the attitude's lag: the positions' own may serve
         delays = np.arange(0.0, c.lag_max_s + 1e-9, c.lag_step_s)
         taus = np.arange(0.0, c.time_constant_max_s + 1e-9, c.lag_step_s)
         mse = _solve(t, _first_order(t, u, taus), x, delays)[0]
@@ -387,23 +409,29 @@ def _solve(t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
 
 
 def _lean_mse(t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray,
-              points: int, since_t: float = -np.inf) -> np.ndarray:
+              points: int, since_t: float = -np.inf) -> tuple[np.ndarray, np.ndarray]:
     """Mean squared residual, shaped (taus, delays), of the lean measured at tm (since
-    since_t) against the lean sent at t through each first-order lag and delay, a constant
-    offset (the markers' trim) removed. The filtered lean is each tick's interval mean,
-    read at the intervals' midpoints."""
+    since_t) against the lean sent at t through each first-order lag and delay, times a
+    gain, a constant offset (the markers' trim) removed; and that gain, the measured lean's
+    swing regressed on the predicted one's (1 for a rigid body aligned with the vehicle).
+    The filtered lean is each tick's interval mean, read at the intervals' midpoints."""
     f = _first_order(t, sent, taus)
     mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
     keep = (tm - delays[-1] >= mid[0]) & (tm >= since_t)
-    if keep.sum() < 20:
-        return np.full((len(taus), len(delays)), np.inf)
+    if keep.sum() < 20 or len(mid) < 3 or np.any(np.diff(mid) <= 0.0):
+        return np.full((len(taus), len(delays)), np.inf), np.zeros((len(taus), len(delays)))
     at = np.unique(np.linspace(0, keep.sum() - 1, min(int(keep.sum()), points)).astype(int))
     tm, lean = tm[keep][at], lean[keep][at]
     q = tm[None, :] - delays[:, None]
     i = np.clip(np.searchsorted(mid, q, side="right") - 1, 0, len(mid) - 2)
     w = np.clip((q - mid[i]) / (mid[i + 1] - mid[i]), 0.0, 1.0)
-    r = lean - (f[:, i] * (1.0 - w) + f[:, i + 1] * w)  # (taus, delays, points)
-    return r.var(axis=-1)
+    pred = f[:, i] * (1.0 - w) + f[:, i + 1] * w  # (taus, delays, points)
+    pred = pred - pred.mean(axis=-1, keepdims=True)
+    seen = lean - lean.mean()
+    swing = np.einsum("...p,...p->...", pred, pred)
+    gain = np.einsum("...p,p->...", pred, seen) / np.maximum(swing, 1e-12)
+    # The residual once the gain is fitted too: a gain off 1 must not bend delay and T.
+    return np.maximum(seen @ seen - gain * gain * swing, 0.0) / len(seen), gain
 
 
 def _refine(lags: np.ndarray, mse: np.ndarray, i: int) -> float:

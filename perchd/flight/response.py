@@ -1,8 +1,8 @@
 """What the flight knows of its vehicle's response along X, and what it feeds forward.
 
 One object holds the identification (flight/lagid.py) through a flight: it records the
-ticks, refits during the approach, identifies at the trigger, refits the bias at the
-stage-2 switch, and predicts the state the commands still in flight will bring; it logs
+ticks, refits during the approach, identifies at the trigger, takes the lag again from
+stage 1's attitude and refits the bias at the stage-2 switch, and predicts the state the commands still in flight will bring; it logs
 each fit. The supervisor decides when each happens and hands the feed-forward's steps
 over to its integrals (docs/errata.md §10).
 """
@@ -15,6 +15,10 @@ from perchd.flight.config import LagIdGains, TauGains
 from perchd.flight.control import FeedForward
 from perchd.flight.lagid import LagFit, LagIdentifier, LagModel
 from perchd.logs.flightlog import LogEvent
+
+RELAG_MAX = 0.25
+"""Stage 1's attitude lag replaces the approach's if within this share of it (the firmwares:
+3-15 %)."""
 
 
 def feed_forward(m: LagModel) -> FeedForward:
@@ -102,8 +106,10 @@ class VehicleResponse:
         measures"), and stage 2 is decided by the last of them."""
         m = self.model
         lean = self.lagid.lean_response(since_t) if m.from_attitude else None
-        if lean is None:
-            return
+        if lean is None or abs(sum(lean) - m.lag_s) > RELAG_MAX * m.lag_s:
+            return  # stage 1 alone too short or too odd to overrule the approach's
+        # The lead changes where the plan's acceleration no longer does (stage 2 holds
+        # its speed from the switch on), so the feed-forward does not step.
         self.model = replace(m, lag_s=lean[0] + lean[1], time_constant_s=lean[1])
         self.ff = feed_forward(self.model)
         self._events.append(LogEvent(t, "lag-refit", (
