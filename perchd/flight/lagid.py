@@ -79,10 +79,9 @@ LEAN_RMS_MAX = 0.25
 """The attitude's fit is refused when its residual exceeds this share of the lean's sweep."""
 LEAN_GAIN = (0.8, 1.25)
 """The measured lean's swing over the predicted one's that the attitude's fit accepts (the
-firmwares: 1.04-1.07); outside, the mocap's axes are not the vehicle's."""
-LEAN_FINE_MOVES = 3
-"""Times the fine grid is moved onto its best when that sits on its edge (delay and T trade
-along a diagonal, so the coarse best may be more than a step off)."""
+firmwares: 1.04-1.07); outside, the mocap's axes are not the vehicle's. Inside, a swing
+seen small lengthens the lag found (0.9: by about 0.04 s; a rigid body yawed 10 deg off
+the vehicle's axes sees 0.985)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,8 +127,7 @@ class LagIdentifier:
     def record(self, t: float, u_x: float, x: float, xdot: float) -> None:
         """One tick: t [s], u_x [m/s^2] commanded at t, x [m] and xdot [m/s] measured at t."""
         self._rows.append((t, u_x, x, xdot))
-        while self._rows and self._rows[0][0] < t - self.cfg.window_s:
-            self._rows.popleft()
+        _keep_window(self._rows, t - self.cfg.window_s)
 
     def record_lean(self, t: float, sent: float, t_measured: float, measured: float) -> None:
         """One tick's lean (the body z axis's X component): the setpoint's, sent at t [s],
@@ -137,46 +135,39 @@ class LagIdentifier:
         if not all(map(math.isfinite, (t, sent, t_measured, measured))):
             return
         self._lean.append((t, sent, t_measured, measured))
-        while self._lean and self._lean[0][0] < t - self.cfg.window_s:
-            self._lean.popleft()
+        _keep_window(self._lean, t - self.cfg.window_s)
 
     def lean_response(self, since_t: float = -np.inf) -> tuple[float, float] | None:
         """(delay [s], T [s]) of the attitude's answer to the setpoints' lean, fitted to
         the lean the mocap measured since since_t [s] (the commands before it still count,
-        in flight), on a coarse grid and then a fine one about its best, moved while the
-        best sits on its edge (a few ms in all); None when the lean swept too little, the
+        in flight), on a coarse grid and then a fine one about its best (a few ms in
+        all); None when the lean swept too little, the
         best sits on a bound, the lag (delay + T) reaches lag_max_s, or the fit is poor: a
         residual above LEAN_RMS_MAX of the sweep or the measured lean not the sent one's
         size (LEAN_GAIN: a rigid body whose axes are not the vehicle's)."""
         if len(self._lean) < 20:
             return None
-        t, sent, tm, lean = (np.array(col) for col in zip(*self._lean))
+        data = tuple(np.array(col) for col in zip(*self._lean))
+        t, sent = data[0], data[1]
         sweep = float(np.ptp(sent[t >= since_t])) if (t >= since_t).any() else 0.0
         if sweep < LEAN_SPAN_MIN:
             return None
-        d_max = self.cfg.lag_max_s
-        delays = np.arange(0.0, d_max + 1e-9, LEAN_COARSE_S[0])
-        taus = np.arange(0.0, LEAN_TC_MAX_S + 1e-9, LEAN_COARSE_S[1])
-        mse = _lean_mse(t, sent, tm, lean, delays, taus, LEAN_POINTS[0], since_t)[0]
-        j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
-        if i == len(delays) - 1 or j == len(taus) - 1 or not np.isfinite(mse[j, i]):
+        bounds = (self.cfg.lag_max_s, LEAN_TC_MAX_S)
+        axes = [np.arange(0.0, top + 1e-9, step) for top, step in zip(bounds, LEAN_COARSE_S)]
+        mse, gain, j, i = _lean_best(data, axes, LEAN_POINTS[0], since_t)
+        if i == len(axes[0]) - 1 or j == len(axes[1]) - 1 or not np.isfinite(mse[j, i]):
             return None
-        best = (float(delays[i]), float(taus[j]))
-        for _ in range(LEAN_FINE_MOVES):
-            delays, taus = (np.unique(np.clip(c + np.arange(-4, 5) * step, 0.0, top))
-                            for c, step, top in zip(best, LEAN_FINE_S, (d_max, LEAN_TC_MAX_S)))
-            mse, gain = _lean_mse(t, sent, tm, lean, delays, taus, LEAN_POINTS[1], since_t)
-            j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
-            best = (float(delays[i]), float(taus[j]))
-            inner = (0 < i < len(delays) - 1 or best[0] in (0.0, d_max)) and \
-                (0 < j < len(taus) - 1 or best[1] in (0.0, LEAN_TC_MAX_S))
-            if inner:
-                break
-        rms = np.sqrt(mse[j, i])
-        if not rms <= LEAN_RMS_MAX * sweep or not LEAN_GAIN[0] <= gain[j, i] <= LEAN_GAIN[1]:
+        # One fine grid about the coarse best: its residual's valley runs along delay + T
+        # (the two trade), and the coarse best keeps the fit where the hold's and the
+        # approach's swings put it from flight to flight (docs/firmware.md).
+        axes = [np.unique(np.clip(ax[k] + np.arange(-4, 5) * step, 0.0, top))
+                for ax, k, step, top in zip(axes, (i, j), LEAN_FINE_S, bounds)]
+        mse, gain, j, i = _lean_best(data, axes, LEAN_POINTS[1], since_t)
+        if not np.sqrt(mse[j, i]) <= LEAN_RMS_MAX * sweep \
+                or not LEAN_GAIN[0] <= gain[j, i] <= LEAN_GAIN[1]:
             return None
-        delay, tc = _refine(delays, mse[j], int(i)), max(_refine(taus, mse[:, i], int(j)), 0.0)
-        return (delay, tc) if delay + tc < d_max else None
+        delay, tc = _refine(axes[0], mse[j], i), max(_refine(axes[1], mse[:, i], j), 0.0)
+        return (delay, tc) if delay + tc < bounds[0] else None
 
     def fit(self) -> LagFit:
         c = self.cfg
@@ -287,6 +278,12 @@ class LagIdentifier:
         # Each fine step's mean acceleration, at its midpoint for the distance.
         return (float(a.sum() * FINE_S),
                 float((a * (hi - grid[inside] - 0.5 * FINE_S)).sum() * FINE_S))
+
+
+def _keep_window(rows: deque, since_t: float) -> None:
+    """Drop the rows (time first) older than since_t [s]."""
+    while rows and rows[0][0] < since_t:
+        rows.popleft()
 
 
 def _model_at(t, u, x, v, delay_s: float, tc_s: float, span: float, c: LagIdGains,
@@ -408,12 +405,20 @@ def _solve(t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
     return np.maximum(mse, 0.0), sol
 
 
+def _lean_best(data, axes: list[np.ndarray], points: int, since_t: float):
+    """(mse, gain, j, i) of the attitude's fit on the grid axes = (delays, taus): the
+    residuals and gains (_lean_mse) and the best's indices, T first."""
+    mse, gain = _lean_mse(*data, axes[0], axes[1], points, since_t)
+    j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
+    return mse, gain, int(j), int(i)
+
+
 def _lean_mse(t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray,
               points: int, since_t: float = -np.inf) -> tuple[np.ndarray, np.ndarray]:
     """Mean squared residual, shaped (taus, delays), of the lean measured at tm (since
-    since_t) against the lean sent at t through each first-order lag and delay, times a
-    gain, a constant offset (the markers' trim) removed; and that gain, the measured lean's
-    swing regressed on the predicted one's (1 for a rigid body aligned with the vehicle).
+    since_t) against the lean sent at t through each first-order lag and delay, a constant
+    offset (the markers' trim) removed; and the gain by which the measured lean's swing
+    regresses on the predicted one's (about 1 for a rigid body aligned with the vehicle).
     The filtered lean is each tick's interval mean, read at the intervals' midpoints."""
     f = _first_order(t, sent, taus)
     mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
@@ -430,8 +435,9 @@ def _lean_mse(t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray,
     seen = lean - lean.mean()
     swing = np.einsum("...p,...p->...", pred, pred)
     gain = np.einsum("...p,p->...", pred, seen) / np.maximum(swing, 1e-12)
-    # The residual once the gain is fitted too: a gain off 1 must not bend delay and T.
-    return np.maximum(seen @ seen - gain * gain * swing, 0.0) / len(seen), gain
+    # The residual at gain 1: an attitude loop holds the lean it is sent, and how much a
+    # fast swing shrinks is what tells T from the delay (a free gain lets them trade).
+    return ((seen - pred) ** 2).mean(axis=-1), gain
 
 
 def _refine(lags: np.ndarray, mse: np.ndarray, i: int) -> float:

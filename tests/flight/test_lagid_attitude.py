@@ -100,9 +100,11 @@ def test_a_rigid_body_whose_axes_are_not_the_vehicles_is_refused(seen_as):
 
 
 def test_a_lean_seen_a_little_large_or_small_still_fits():
-    for seen_as in (0.9, 1.1):
-        found = fly(0.11, 0.24, seen_as=seen_as).lean_response()
-        assert found is not None and sum(found) == pytest.approx(0.35, abs=0.02)
+    """A rigid body yawed a little off the vehicle's axes sees the swing a little small;
+    the fit holds gain 1, so the lag found grows a little (LEAN_GAIN)."""
+    small, large = (fly(0.11, 0.24, seen_as=g).lean_response() for g in (0.95, 1.05))
+    assert small is not None and large is not None
+    assert 0.35 < sum(small) < 0.375 and 0.325 < sum(large) < 0.35
 
 
 def test_non_finite_leans_are_not_kept():
