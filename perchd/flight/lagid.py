@@ -141,10 +141,10 @@ class LagIdentifier:
         """(delay [s], T [s]) of the attitude's answer to the setpoints' lean, fitted to
         the lean the mocap measured since since_t [s] (the commands before it still count,
         in flight), on a coarse grid and then a fine one about its best (a few ms in
-        all); None when the lean swept too little, the
-        best sits on a bound, the lag (delay + T) reaches lag_max_s, or the fit is poor: a
-        residual above LEAN_RMS_MAX of the sweep or the measured lean not the sent one's
-        size (LEAN_GAIN: a rigid body whose axes are not the vehicle's)."""
+        all); None when the lean swept too little, the best sits on a bound, the lag
+        (delay + T) reaches lag_max_s, or the fit is poor: a residual above LEAN_RMS_MAX of
+        the sweep or the measured lean not the sent one's size (LEAN_GAIN: a rigid body
+        whose axes are not the vehicle's)."""
         if len(self._lean) < 20:
             return None
         data = tuple(np.array(col) for col in zip(*self._lean))
