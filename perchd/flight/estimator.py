@@ -146,11 +146,11 @@ class Estimator:
         self.accepted += 1
         self._last, self._last_p = pose, z
         qx, qy, qz, qw = pose.q
-        self._tilt = math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (qx * qx + qy * qy))))
         self._yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
         s = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)  # a tracker's q may be off unit
         bz = (s * (qx * qz + qw * qy), s * (qy * qz - qw * qx),
               1.0 - s * (qx * qx + qy * qy))  # the body z axis in the world
+        self._tilt = math.acos(max(-1.0, min(1.0, bz[2])))
         self._lean_x = self.frame.rotate_in(bz)[0]
 
     def state(self, t: float) -> State | None:

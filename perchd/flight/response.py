@@ -2,9 +2,9 @@
 
 One object holds the identification (flight/lagid.py) through a flight: it records the
 ticks, refits during the approach, identifies at the trigger, takes the lag again from
-stage 1's attitude and refits the bias at the stage-2 switch, and predicts the state the commands still in flight will bring; it logs
-each fit. The supervisor decides when each happens and hands the feed-forward's steps
-over to its integrals (docs/errata.md §10).
+stage 1's attitude and refits the bias at the stage-2 switch, and predicts the state the
+commands still in flight will bring; it logs each fit. The supervisor decides when each
+happens and hands the feed-forward's steps over to its integrals (docs/errata.md §10).
 """
 
 from __future__ import annotations
