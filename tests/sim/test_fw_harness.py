@@ -183,3 +183,32 @@ def test_perchd_sim_firmware_announces_itself_and_stops_everything_on_sigterm(fa
     assert summary["launches"][0]["outcome"] == "ready"
     assert not alive(summary["launches"][0]["pid"])
     assert summary["contact"] is None and summary["final"]["p"] == [-4.5, 0.0, 0.0]
+
+
+@pytest.mark.skipif(not Path("/usr/bin/setpriv").exists() and not os.path.exists(
+    "/bin/setpriv"), reason="util-linux's setpriv is not installed")
+def test_a_firmware_dies_with_a_harness_killed_by_sigkill(tmp_path):
+    """A harness SIGKILLed cannot stop its children: the kernel does (tied_to_parent)."""
+    pidfile = tmp_path / "child.pid"
+    harness = subprocess.Popen([sys.executable, "-c", (
+        "import sys, time\n"
+        "from pathlib import Path\n"
+        "from perchd.sim.firmware.harness import ProcessGroup\n"
+        "proc = ProcessGroup().launch(['sleep', '60'], Path(sys.argv[1]))\n"
+        "Path(sys.argv[2]).write_text(str(proc.pid))\n"
+        "time.sleep(60)\n"), str(tmp_path / "fw.log"), str(pidfile)])
+    try:
+        deadline = time.monotonic() + 10.0
+        while not pidfile.exists() or not pidfile.read_text():
+            assert time.monotonic() < deadline, "the harness never launched its child"
+            time.sleep(0.02)
+        child = int(pidfile.read_text())
+        assert alive(child)
+        harness.kill()
+        harness.wait()
+        deadline = time.monotonic() + 2.0
+        while alive(child) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert not alive(child), "the firmware outlived its harness"
+    finally:
+        harness.kill()

@@ -81,7 +81,10 @@ class ProcessGroup:
     """Every process the harness starts, stopped by close() (and at interpreter exit).
 
     Each child gets its own session, so a Ctrl-C at the terminal reaches only the harness,
-    which then stops its children in order rather than leaving a firmware half-killed."""
+    which then stops its children in order rather than leaving a firmware half-killed.
+    A harness that cannot stop them (killed itself) takes them with it: each is tied to
+    the thread that launches it (tied_to_parent), so launch from the thread that outlives
+    them (the main thread)."""
 
     def __init__(self) -> None:
         self._procs: list[subprocess.Popen] = []
@@ -93,7 +96,7 @@ class ProcessGroup:
         """Start argv with stdout and stderr appended to `log`; LinkError if it cannot run."""
         out = open(log, "ab")
         try:
-            proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, stdout=out,
+            proc = subprocess.Popen(tied_to_parent(argv), stdin=subprocess.DEVNULL, stdout=out,
                                     stderr=subprocess.STDOUT, start_new_session=True)
         except OSError as err:
             out.close()
@@ -140,6 +143,15 @@ def line_buffered(argv: Sequence[str]) -> list[str]:
     printf log is block-buffered into a file otherwise); stdbuf execs, so the pid is kept."""
     stdbuf = shutil.which("stdbuf")
     return [stdbuf, "-oL", *argv] if stdbuf else list(argv)
+
+
+def tied_to_parent(argv: Sequence[str]) -> list[str]:
+    """argv run so that the kernel SIGKILLs it when the thread that started it dies, even
+    by SIGKILL (a new session no longer shares the terminal's fate, and a firmware left
+    running holds its ports for the next harness). util-linux's setpriv sets the
+    parent-death signal and execs, so the pid is kept; argv as is where it is missing."""
+    setpriv = shutil.which("setpriv")
+    return [setpriv, "--pdeathsig", "KILL", "--", *argv] if setpriv else list(argv)
 
 
 def default_log(name: str) -> Path:
