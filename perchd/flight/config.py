@@ -93,7 +93,11 @@ class TauGains:
              units (21.1 and 8.45 m/s^2), keeping its ratio 2.5: with the plan's acceleration
              fed forward the feedback only corrects, and the full gains turn 1 mm mocap noise
              into +-2 m/s^2 of command (measured: contact speed error 0.10 vs 0.04 m/s).
-    ki: [m/s^2 per s]; paper 2500 units = 0.68.  kd: [m/s^2 s]; paper 2500 units = 0.68,
+    ki: [m/s^2 per s]; paper 2500 units = 0.68, default 6.0: what the feed-forward's model
+        misses in stage 1 (ArduCopter SITL: 0.1-0.3 m/s^2 from the trigger on) the paper's
+        integral takes up over seconds, and the vehicle falls 0.06-0.08 m behind the plan
+        within stage 1's 1.5 s; with stage 1 ended by place (end_by_position) that lateness
+        is perch time (ArduCopter +2.4-3.3 %; +0.8-2.4 % at 6.0; docs/errata.md §10).  kd: [m/s^2 s]; paper 2500 units = 0.68,
         default 0.2 (734 units): the derivative of a tau ratio amplifies mocap noise, and
         with 1 mm noise 0.2 halves the scatter of the contact speed over seeds.
     i_limit: [m/s^2] anti-windup clamp of the integral term's contribution.
@@ -132,11 +136,18 @@ class TauGains:
         at tau_ref c^-gamma, c = X / X_plan: c returns to 1 with time constant |tau|/gamma,
         never faster than twice the lag, faded out between three and two lags before the
         plan's switch (docs/errata.md §10). 0: the paper's tau reference alone.
+    end_by_position: as the scale correction fades (three to two lags before the plan's
+        switch), stage 1 aims at the plan's point where the vehicle is rather than where
+        the clock is: tau_ref and the feed-forward of that point. A vehicle behind the plan
+        in X (every lagging one is) then reaches the switch point at the plan's speed
+        instead of c times it, and its braking ends where the plan's does; the time it is
+        behind shows in the perch time instead of the contact speed (docs/errata.md §10).
+        Off: the clock's references to the switch.
     """
 
     kp_fast: float = from_paper_units(38750.0)
     kp_slow: float = from_paper_units(15500.0)
-    ki: float = from_paper_units(2500.0)
+    ki: float = 6.0
     kd: float = from_paper_units(734.0)
     i_limit: float = 1.0
     d_filter_s: float = 0.03
@@ -148,6 +159,7 @@ class TauGains:
     stage2_hold_speed: bool = True
     v_contact_margin_mps: float = 0.015
     scale_gain: float = 3.0
+    end_by_position: bool = True
     identify: bool = True
     predict: bool = True
 

@@ -89,8 +89,12 @@ class TauController:
         self.last_error = 0.0
         self.last_kp = gains.kp_slow
 
-    def reset(self) -> None:
+    def reset(self, held: float = 0.0) -> None:
+        """Start afresh, the integral supplying held [m/s^2] (within i_limit)."""
         self.pid.reset()
+        if self.gains.ki > 0.0:
+            self.pid.integral = min(max(held, -self.gains.i_limit), self.gains.i_limit) \
+                / self.gains.ki
 
     def give_back(self, step: float) -> None:
         """A feed-forward grows by step [m/s^2]: the integral gives back what it holds of

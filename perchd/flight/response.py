@@ -118,15 +118,23 @@ class VehicleResponse:
                 "lag_s": self.model.lag_s, "time_constant_s": lean[1],
                 "was_lag_s": m.lag_s}))
 
+    @property
+    def horizon_s(self) -> float:
+        """[s] how far ahead the controllers see (predicted): the lag identified beyond
+        ff_lead_s; 0 without a model or with TauGains.predict off."""
+        m = self.model
+        if m is None or not self.gains.predict:
+            return 0.0
+        return max(m.lag_s - self.gains.ff_lead_s, 0.0)
+
     def predicted(self, t: float, x: float, xdot: float) -> tuple[float, float, float]:
         """(X [m], Xdot [m/s], horizon [s]): the controllers' gains are made for a vehicle
         that answers within the configured ff_lead_s (the paper's Crazyflie); of a lag
         identified beyond that, they see the state predicted that much ahead from the
         commands still in flight (LagIdentifier.predict), so the feedback, like the
         feed-forward, acts where its command lands. Horizon 0: the measured state."""
-        m = self.model
-        horizon = m.lag_s - self.gains.ff_lead_s if m is not None else 0.0
-        if horizon <= 0.0 or not self.gains.predict:
+        horizon = self.horizon_s
+        if horizon == 0.0:
             return x, xdot, 0.0
-        px, pv = self.lagid.predict(t, x, xdot, m, horizon)
+        px, pv = self.lagid.predict(t, x, xdot, self.model, horizon)
         return px, pv, horizon

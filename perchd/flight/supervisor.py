@@ -336,7 +336,9 @@ class Supervisor:
             else:
                 hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
                 seen, aim = self._lag_view(t, st, refs)
-                tau_aim = aim.tau_ref if hold else self._scale_corrected(t, seen, aim)
+                tau_aim = aim.tau_ref
+                if self.phase is Phase.STAGE1:
+                    tau_aim, aim = self._stage1_aim(t, seen, aim)
                 ux = self.ctl.tau.step(seen, tau_aim, aim.a, dt, self.ctl.saturated,
                                        schedule=not hold)
             e = self.ctl.tau.last_error
@@ -420,13 +422,17 @@ class Supervisor:
         return v_ref, ff.accel(p.a if p.stage == 1 else 0.0, p.v)
 
     def _plan_at(self, x: float) -> PlanPoint:
-        """The plan's point where its X is x [m] (>= x0), by Newton's method from x0."""
-        plan, at = self.plan, self._sampler.at
-        s = (x - plan.x0) / plan.v0
+        """The plan's point where its X is x [m] (>= x0)."""
+        return self._sampler.at(self._plan_time(x, (x - self.plan.x0) / self.plan.v0))
+
+    def _plan_time(self, x: float, guess_s: float) -> float:
+        """[s] the plan's time where its X is x [m] (>= x0), by Newton's method from
+        guess_s [s] (X is monotone in the plan's time)."""
+        plan, at, s = self.plan, self._sampler.at, guess_s
         for _ in range(3):
             p = at(min(max(s, 0.0), plan.duration))
             s -= (p.x - x) / max(p.v, 1e-3)
-        return at(min(max(s, 0.0), plan.duration))
+        return min(max(s, 0.0), plan.duration)
 
     def _v_ref(self, x: float) -> float:
         """[m/s] the approach's speed reference at X = x: the profile to (x0, v0), or, while a
@@ -511,7 +517,9 @@ class Supervisor:
         if plan is not self._sampler.plan:
             self._sampler = PlanSampler(plan)
         self.trigger = Trigger(t0, x, v, plan.x0, plan.v0, action)
-        self.ctl.tau.reset()
+        # What the approach's integral took up, a push the feed-forward misses, does not end
+        # at x0: stage 1's integral starts with it (docs/errata.md §10).
+        self.ctl.tau.reset(self.cfg.approach.ki_v * self._v_int)
         self._enter(Phase.STAGE1, t, action, x=x, v=v, plan_x0=plan.x0, plan_v0=plan.v0)
 
     def _refs(self, t: float) -> Refs:
@@ -532,11 +540,9 @@ class Supervisor:
         taken lead_s [s] ahead."""
         plan, ff = self.plan, self.response.ff
         s = min(max(t - self.trigger.t, 0.0), plan.duration)
-        here = self._sampler.at(s)
+        here, a = self._plan_ahead(s, lead_s)
         if self.t_stage2 is None:
             tau_ref = here.tau_ref
-            ahead = self._sampler.at(min(s + lead_s, plan.duration)) if lead_s else here
-            a = ff.accel(ahead.a if ahead.stage == 1 else 0.0, ahead.v)
         elif self.cfg.tau_gains.stage2_hold_speed and x is not None:
             tau_ref = min(x, 0.0) / self.v_hold
             a = ff.accel(0.0, self.v_hold)
@@ -559,19 +565,42 @@ class Supervisor:
         seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
         return seen, self._refs_at(t + horizon, x, self.response.ff.lead_s - horizon)
 
-    def _scale_corrected(self, t: float, seen: State, aim: Refs) -> float:
+    def _plan_ahead(self, s: float, lead_s: float) -> tuple[PlanPoint, float]:
+        """The plan's point at its time s [s], and the feed-forward [m/s^2] for its point
+        lead_s [s] later (its acceleration there while in stage 1, the drag at its speed)."""
+        here = self._sampler.at(s)
+        ahead = self._sampler.at(min(s + lead_s, self.plan.duration)) if lead_s else here
+        return here, self.response.ff.accel(ahead.a if ahead.stage == 1 else 0.0, ahead.v)
+
+    def _stage1_aim(self, t: float, seen: State, aim: Refs) -> tuple[float, Refs]:
+        """Stage 1's tau reference and feed-forward for the state seen. Early, the clock's,
+        scale-corrected; from three lags before the plan's switch to two, handed over to
+        the plan's point where the vehicle is (TauGains.end_by_position): a vehicle still
+        behind the plan in X then reaches the switch point at the plan's speed, and the
+        braking ends where the plan's does, not when (docs/errata.md §10)."""
+        lag = self.response.ff.lead_s
+        left = self.plan.t_switch - (t - self.trigger.t)
+        end = 1.0 - min(max((left - 2.0 * lag) / lag, 0.0), 1.0) if lag > 0.0 else 0.0
+        tau_ref = self._scale_corrected(seen, aim, 1.0 - end)
+        if end == 0.0 or not self.cfg.tau_gains.end_by_position or seen.x >= 0.0:
+            return tau_ref, aim
+        horizon = self.response.horizon_s
+        s = self._plan_time(seen.x, t + horizon - self.trigger.t)
+        here, a = self._plan_ahead(s, lag - horizon)
+        return ((1.0 - end) * tau_ref + end * here.tau_ref,
+                dataclasses.replace(aim, a=(1.0 - end) * aim.a + end * a))
+
+    def _scale_corrected(self, seen: State, aim: Refs, weight: float) -> float:
         """The tau reference corrected for the scale error c = X / X_plan: tau = X/Xdot is
         blind to it (c times the plan's X and Xdot keep the plan's tau), yet it reaches the
         stage-2 switch as c times the plan's speed there. Aiming at tau_ref c^-gamma brings
-        c back to 1 with time constant |tau| / gamma, never faster than twice the lag, and
-        fades out from three lags before the plan's switch to two: a catch-up that late
-        would reach the switch as speed (TauGains.scale_gain, docs/errata.md §10)."""
+        c back to 1 with time constant |tau| / gamma, never faster than twice the lag;
+        gamma is scaled by weight (stage 1's end fades it out: a catch-up that late would
+        reach the switch as speed; TauGains.scale_gain, docs/errata.md §10)."""
         gamma, lag = self.cfg.tau_gains.scale_gain, self.response.ff.lead_s
         if gamma <= 0.0 or lag <= 0.0 or aim.x is None or aim.x >= 0.0 or seen.x >= 0.0:
             return aim.tau_ref
-        left = self.plan.t_switch - (t - self.trigger.t)
-        fade = min(max((left - 2.0 * lag) / lag, 0.0), 1.0)
-        gamma = fade * min(gamma, -aim.tau_ref / (2.0 * lag))
+        gamma = weight * min(gamma, -aim.tau_ref / (2.0 * lag))
         c = min(max(seen.x / aim.x, 0.5), 2.0)
         return aim.tau_ref * c ** -gamma
 

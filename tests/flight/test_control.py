@@ -102,3 +102,13 @@ def test_a_growing_feed_forward_takes_back_only_what_the_integral_holds(held, st
     ctl.pid.integral = held / TauGains().ki
     ctl.give_back(step)
     assert TauGains().ki * ctl.pid.integral == pytest.approx(left, abs=1e-12)
+
+
+@pytest.mark.parametrize("held, starts", [(0.3, 0.3), (-0.4, -0.4), (2.5, 1.0), (-3.0, -1.0)])
+def test_a_reset_starts_the_integral_supplying_what_it_is_handed(held, starts):
+    """[m/s^2] handed over (the approach's integral at the trigger), within i_limit (1)."""
+    ctl = TauController(TauGains())
+    ctl.pid.integral, ctl.pid._prev = 5.0, 0.2
+    ctl.reset(held)
+    assert TauGains().ki * ctl.pid.integral == pytest.approx(starts, abs=1e-12)
+    assert ctl.pid._prev is None

@@ -91,9 +91,10 @@ def test_a_refit_hands_its_drag_over_from_the_integral_without_a_step(tmp_path):
 @pytest.mark.parametrize("push", [-0.3, 0.3])
 def test_stage_2_flies_the_push_stage_1_met_and_touches_on_the_plans_speed(tmp_path, push):
     """Air off the wall pushes 0.3 m/s^2 along X from x = -2.9 m on, past the trigger: the
-    approach's fit never met it. Fed forward unchanged, stage 2's speed loop is left
-    0.06 m/s off (0.942-0.944 against, 1.039-1.045 with it, the second above the
-    window); refitted from stage 1 at the switch, within 0.02 m/s of the plan's."""
+    approach's fit never met it. Refitted from stage 1 at the switch, the perch touches
+    within 0.02 m/s of the plan's. Left to the tau PID's integral alone, the push with the
+    vehicle leaves the window (1.009-1.011 m/s; against it, the integral takes it up:
+    0.984-0.988; with the paper's integral gain both were 0.06 m/s off)."""
     plan = case1("ipts")
     lo, hi = plan.limits.v_contact
     kept = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(stage2_refit=False))
@@ -103,8 +104,10 @@ def test_stage_2_flies_the_push_stage_1_met_and_touches_on_the_plans_speed(tmp_p
         old = Sim(uri).fly(plan, tmp_path / f"kept{seed}.jsonl", kept)
         assert res.outcome is old.outcome is EndReason.CONTACT
         assert lo <= res.true_contact_speed <= hi
-        assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.03)
-        assert abs(old.true_contact_speed - plan.v_contact) > 0.035
-        refit = next(e for e in read_log(tmp_path / f"refit{seed}.jsonl").events
-                     if e.kind == "bias-refit")
+        assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.02)
+        if push > 0.0:
+            assert old.true_contact_speed > hi
+        refit = next((e for e in read_log(tmp_path / f"refit{seed}.jsonl").events
+                      if e.kind == "bias-refit"), None)
+        assert refit is not None
         assert refit.values["bias_mps2"] == pytest.approx(push, abs=0.1)
