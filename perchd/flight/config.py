@@ -97,7 +97,8 @@ class TauGains:
         misses in stage 1 (ArduCopter SITL: 0.1-0.3 m/s^2 from the trigger on) the paper's
         integral takes up over seconds, and the vehicle falls 0.06-0.08 m behind the plan
         within stage 1's 1.5 s; with stage 1 ended by place (end_by_position) that lateness
-        is perch time (ArduCopter +2.4-3.3 %; +0.8-2.4 % at 6.0; docs/errata.md §10).  kd: [m/s^2 s]; paper 2500 units = 0.68,
+        is perch time (ArduCopter +2.4-3.3 %; +0.8-2.4 % at 6.0; docs/errata.md §10).
+    kd: [m/s^2 s]; paper 2500 units = 0.68,
         default 0.2 (734 units): the derivative of a tau ratio amplifies mocap noise, and
         with 1 mm noise 0.2 halves the scatter of the contact speed over seeds.
     i_limit: [m/s^2] anti-windup clamp of the integral term's contribution.
@@ -139,9 +140,9 @@ class TauGains:
     end_by_position: as the scale correction fades (three to two lags before the plan's
         switch), stage 1 aims at the plan's point where the vehicle is rather than where
         the clock is: tau_ref and the feed-forward of that point. A vehicle behind the plan
-        in X (every lagging one is) then reaches the switch point at the plan's speed
-        instead of c times it, and its braking ends where the plan's does; the time it is
-        behind shows in the perch time instead of the contact speed (docs/errata.md §10).
+        in X (every lagging one is) then reaches the switch point nearer the plan's speed
+        than c times it, and its braking ends where the plan's does; the time it is behind
+        shows in the perch time rather than the contact speed (docs/errata.md §10).
         Off: the clock's references to the switch.
     """
 

@@ -430,7 +430,8 @@ class Supervisor:
         guess_s [s] (X is monotone in the plan's time)."""
         plan, at, s = self.plan, self._sampler.at, guess_s
         for _ in range(3):
-            p = at(min(max(s, 0.0), plan.duration))
+            s = min(max(s, 0.0), plan.duration)
+            p = at(s)
             s -= (p.x - x) / max(p.v, 1e-3)
         return min(max(s, 0.0), plan.duration)
 
@@ -532,7 +533,13 @@ class Supervisor:
 
     def _compute_refs(self, t: float) -> Refs:
         if self.response.identified is None and self.cfg.tau_gains.identify:
+            before = self.response.ff
             self.response.identify(t)
+            # The integral handed over at the trigger may hold what the trigger's fit now
+            # feeds forward: it gives that back, as at every refit.
+            p = self._sampler.at(min(max(t - self.trigger.t, 0.0), self.plan.duration))
+            a = p.a if p.stage == 1 else 0.0
+            self.ctl.tau.give_back(self.response.ff.accel(a, p.v) - before.accel(a, p.v))
         return self._refs_at(t, self._x, self.response.ff.lead_s)
 
     def _refs_at(self, t: float, x: float | None, lead_s: float) -> Refs:
@@ -576,8 +583,8 @@ class Supervisor:
         """Stage 1's tau reference and feed-forward for the state seen. Early, the clock's,
         scale-corrected; from three lags before the plan's switch to two, handed over to
         the plan's point where the vehicle is (TauGains.end_by_position): a vehicle still
-        behind the plan in X then reaches the switch point at the plan's speed, and the
-        braking ends where the plan's does, not when (docs/errata.md §10)."""
+        behind the plan in X then reaches the switch point nearer the plan's speed, and
+        the braking ends where the plan's does, not when (docs/errata.md §10)."""
         lag = self.response.ff.lead_s
         left = self.plan.t_switch - (t - self.trigger.t)
         end = 1.0 - min(max((left - 2.0 * lag) / lag, 0.0), 1.0) if lag > 0.0 else 0.0

@@ -135,8 +135,8 @@ def test_the_braking_ends_where_the_plans_does_not_when():
     t = plan.t_switch - 0.05
     x = float(plan.x(t)) - 0.2
     seen = State(t, x, 1.2, 0, 0, 1, 0, 0, x / 1.2, 0, 0, 0, 1)
-    clock = Refs(float(plan.tau_ref(t)), float(plan.x(t)), float(plan.v(t)), 0.0)
-    by_clock, by_place = (aimer(on)._stage1_aim(t, seen, clock)[1].a for on in (False, True))
+    by_clock, by_place = (sup._stage1_aim(t, seen, sup._refs_at(t, x, 0.2))[1].a
+                          for sup in (aimer(False), aimer(True)))
     assert by_clock == 0.0
     assert by_place < -1.0
 
@@ -157,7 +157,7 @@ def test_the_hand_over_blends_the_clocks_aim_into_the_places():
     assert aim.a == pytest.approx(0.5 * -0.8 + 0.5 * feed_forward_at(sup, s), rel=1e-6)
 
 
-def test_a_vehicle_behind_the_plan_reaches_the_switch_at_the_plans_speed(tmp_path):
+def test_a_vehicle_behind_the_plan_reaches_the_switch_nearer_the_plans_speed(tmp_path):
     """0.3 s of lag and drag growing as v^2: the clock's references bring the vehicle to the
     switch 0.1 m behind and 0.21 m/s fast; the plan's point where it is, 0.06 m behind and
     0.12 m/s fast (its time behind goes to the perch time)."""
@@ -183,3 +183,21 @@ def test_stage_1_starts_with_what_the_approachs_integral_took_up():
     sup._start_plan(10.0, 10.0, plan.x0, plan.v0, plan, "flown as made")
     g = sup.cfg.tau_gains
     assert g.ki * sup.ctl.tau.pid.integral == pytest.approx(sup.cfg.approach.ki_v * 0.05)
+
+
+def test_what_the_triggers_fit_feeds_forward_the_handed_over_integral_gives_back():
+    """The approach's integral, handed over, held 0.4 m/s^2 of a drag the approach's model
+    lacked; the trigger's fit then feeds 0.2 /s x the plan's speed forward, and the integral
+    keeps only the rest."""
+    sup, plan = aimer(True), case1("ipts")
+    sup.response.ff = FeedForward(0.1)
+    sup.ctl.tau.reset(0.4)
+
+    def identify(t: float) -> None:
+        sup.response.identified = object()
+        sup.response.ff = FeedForward(0.1, drag_per_s=0.2)
+
+    sup.response.identify = identify
+    sup._compute_refs(0.0)
+    held = sup.cfg.tau_gains.ki * sup.ctl.tau.pid.integral
+    assert held == pytest.approx(0.4 - 0.2 * plan.v0, abs=1e-9)
