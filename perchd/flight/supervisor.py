@@ -533,14 +533,18 @@ class Supervisor:
 
     def _compute_refs(self, t: float) -> Refs:
         if self.response.identified is None and self.cfg.tau_gains.identify:
-            before = self.response.ff
-            self.response.identify(t)
-            # The integral handed over at the trigger may hold what the trigger's fit now
-            # feeds forward: it gives that back, as at every refit.
-            p = self._sampler.at(min(max(t - self.trigger.t, 0.0), self.plan.duration))
-            a = p.a if p.stage == 1 else 0.0
-            self.ctl.tau.give_back(self.response.ff.accel(a, p.v) - before.accel(a, p.v))
+            self._identify(t)
         return self._refs_at(t, self._x, self.response.ff.lead_s)
+
+    def _identify(self, t: float) -> None:
+        """The trigger's fit (VehicleResponse.identify). The integral handed over at the
+        trigger may hold what that fit now feeds forward: it gives that back, as at every
+        refit."""
+        before = self.response.ff
+        self.response.identify(t)
+        p = self._sampler.at(min(max(t - self.trigger.t, 0.0), self.plan.duration))
+        a = p.a if p.stage == 1 else 0.0
+        self.ctl.tau.give_back(self.response.ff.accel(a, p.v) - before.accel(a, p.v))
 
     def _refs_at(self, t: float, x: float | None, lead_s: float) -> Refs:
         """The references at time t [s] for the vehicle at X = x [m], with the feed-forward
