@@ -75,7 +75,10 @@ class CrtpResponder:
             with self._lock:
                 self.received.append(Datagram(time.monotonic(), data[0], data[1:]))
             if data[0] == ECHO and self._answering:
-                self.sock.sendto(data, addr)
+                try:
+                    self.sock.sendto(data, addr)
+                except OSError:
+                    return  # closed under us (a test killing the link)
 
     # -- what the vehicle saw ----------------------------------------------------------
     def of(self, header: int) -> list[Datagram]:
