@@ -43,6 +43,11 @@ class FeedForward:
         """[m/s^2] the feed-forward for the plan's a_plan [m/s^2], v_plan [m/s] lead_s ahead."""
         return a_plan + self.drag_per_s * v_plan - self.bias_mps2
 
+    def step_from(self, old: FeedForward, a_plan: float, v_plan: float) -> float:
+        """[m/s^2] what this feed-forward adds over `old` at the plan's a_plan, v_plan: the
+        step an integral that was taking it up gives back."""
+        return self.accel(a_plan, v_plan) - old.accel(a_plan, v_plan)
+
 
 def tau_error(tau_ref: float, tau: float | None) -> float:
     """e = 1 - tau_ref/tau (eq. 17). tau None (Xdot ~ 0) is the limit tau -> -inf: e = 1."""

@@ -91,7 +91,7 @@ class VehicleResponse:
                                          f"bias {self.ff.bias_mps2:.3f} m/s^2"))
             return 0.0
         ff = feed_forward(m)
-        step = ff.accel(0.0, v_hold) - self.ff.accel(0.0, v_hold)
+        step = ff.step_from(self.ff, 0.0, v_hold)
         self.ff, self.model = ff, m
         self._events.append(LogEvent(t, "bias-refit", (
             f"stage 2: bias {m.bias_mps2:.3f} m/s^2 from stage 1"), {

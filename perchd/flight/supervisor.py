@@ -544,7 +544,7 @@ class Supervisor:
         self.response.identify(t)
         p = self._sampler.at(min(max(t - self.trigger.t, 0.0), self.plan.duration))
         a = p.a if p.stage == 1 else 0.0
-        self.ctl.tau.give_back(self.response.ff.accel(a, p.v) - before.accel(a, p.v))
+        self.ctl.tau.give_back(self.response.ff.step_from(before, a, p.v))
 
     def _refs_at(self, t: float, x: float | None, lead_s: float) -> Refs:
         """The references at time t [s] for the vehicle at X = x [m], with the feed-forward
@@ -638,7 +638,7 @@ class Supervisor:
         if a.ki_v <= 0.0:
             return
         v_ref = self._v_ref(st.x)
-        step = ff.accel(self._a_app, v_ref) - self.response.ff.accel(self._a_app, v_ref)
+        step = ff.step_from(self.response.ff, self._a_app, v_ref)
         bound = a.i_limit_mps2 / a.ki_v
         self._v_int = min(max(self._v_int - step / a.ki_v, -bound), bound)
 
