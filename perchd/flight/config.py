@@ -144,6 +144,12 @@ class TauGains:
         than c times it, and its braking ends where the plan's does; the time it is behind
         shows in the perch time rather than the contact speed (docs/errata.md §10).
         Off: the clock's references to the switch.
+    switch_predicted: judge the stage-2 switch (tau reaching tau_s, docs/errata.md §9) on
+        the tau the tau PID acts on, predicted over the lag (`predict`), not the measured
+        one, which reaches tau_s a horizon later: the tau PID would fly that horizon past
+        stage 1's end on stage 1's references (ArduCopter SITL: perch time +1.8 % median,
+        2.35 % max, measured; docs/firmware.md, "The switch on the predicted tau"). Off:
+        the measured tau, as the paper's experiment.
     """
 
     kp_fast: float = from_paper_units(38750.0)
@@ -161,6 +167,7 @@ class TauGains:
     v_contact_margin_mps: float = 0.015
     scale_gain: float = 3.0
     end_by_position: bool = True
+    switch_predicted: bool = True
     identify: bool = True
     predict: bool = True
 

@@ -320,12 +320,8 @@ class Supervisor:
                 return self._ended(t, st)
         else:
             self.desk.note_late(t)
-        if self.phase is Phase.STAGE1 and self._tau_s is not None and st.tau is not None \
-                and st.tau >= self._tau_s:
-            self.t_stage2 = t
-            self._enter(Phase.STAGE2, t, "measured tau reached tau_s", tau=st.tau,
-                        since_trigger=t - self.trigger.t)
-            self._refit_stage2(t)
+        if self.phase is Phase.STAGE1:
+            self._switch(t, st)
         refs, ux, e, vz_ref = NO_REFS, 0.0, None, 0.0
         if self.phase in (Phase.STAGE1, Phase.STAGE2):
             refs = self._refs(t)
@@ -357,6 +353,26 @@ class Supervisor:
         sp = self.ctl.setpoint(u, t, st.pose_seq, self.phase)
         self._observe_response(t, st)
         return TickReport(self.phase, sp, None, False, refs, u, e)
+
+    def _switch(self, t: float, st: State) -> None:
+        """Stage 2 from the tick tau reaches tau_s (docs/errata.md §9): the measured tau, or
+        with TauGains.switch_predicted and a lag identified beyond ff_lead_s, the tau the
+        tau PID acts on, predicted over that excess: the switch is decided on the state
+        the controller flies, not a horizon after it has passed stage 1's end."""
+        if self._tau_s is None:
+            return
+        tau, horizon = st.tau, 0.0
+        if self.cfg.tau_gains.switch_predicted:
+            x, v, horizon = self.response.predicted(t, st.x, st.xdot)
+            if horizon > 0.0:
+                tau = x / v if v > self.cfg.estimator.min_speed_mps else None
+        if tau is None or tau < self._tau_s:
+            return
+        self.t_stage2 = t
+        self._enter(Phase.STAGE2, t, "predicted tau reached tau_s" if horizon > 0.0 else
+                    "measured tau reached tau_s", tau=tau, horizon_s=horizon,
+                    since_trigger=t - self.trigger.t)
+        self._refit_stage2(t)
 
     @property
     def v_hold(self) -> float:
