@@ -27,9 +27,8 @@ def fly(lag_s: float, drag: float, bias: float = 0.0, accel: float = 0.75,
     command holding position until the approach, then `accel` plus drag at the speed
     reached; X measured with noise_m [m] of noise, Xdot with 10 noise_m / s (about the
     estimator's velocity scatter on millimetre mocap noise). brake (seconds, decel, drag,
-    bias[, until]): then that many seconds braking at decel [m/s^2] while the vehicle meets
-    that drag and push (a perch's stage 1; the push only for the first `until` seconds),
-    its command still compensating the approach's. estimated: X and Xdot are instead
+    bias): then that many seconds braking at decel [m/s^2] while the vehicle meets that
+    drag and push (a perch's stage 1), its command still compensating the approach's. estimated: X and Xdot are instead
     perchd's estimator's, from mocap poses of X with noise_m of noise, as in flight.
     time_constant_s: the delayed command reaches the vehicle through a first-order lag."""
     rng = random.Random(seed)
@@ -44,8 +43,6 @@ def fly(lag_s: float, drag: float, bias: float = 0.0, accel: float = 0.75,
         since = (k - round(lag_s / DT) - n_app) * DT  # [s] into the braking, as flown
         braking = brake is not None and since >= 0.0
         true_drag, true_bias = (brake[2], brake[3]) if braking else (drag, bias)
-        if braking and len(brake) > 4 and since >= brake[4]:
-            true_bias = bias
         sent.append(u)
         if estimated:
             est.offer(Pose("cf", k + 1, t, (x + rng.gauss(0.0, noise_m), 0.0, 1.0), (0, 0, 0, 1)))
