@@ -37,6 +37,7 @@ class VehicleResponse:
         self.model: LagModel | None = None
         self.identified: LagFit | None = None
         self._events = events
+        self._prediction: tuple[tuple, tuple[float, float, float]] | None = None
 
     def record(self, t: float, u_x: float, x: float, xdot: float) -> None:
         """One tick: t [s], u_x [m/s^2] the command sent, x [m], xdot [m/s] measured."""
@@ -132,9 +133,14 @@ class VehicleResponse:
         that answers within the configured ff_lead_s (the paper's Crazyflie); of a lag
         identified beyond that, they see the state predicted that much ahead from the
         commands still in flight (LagIdentifier.predict), so the feedback, like the
-        feed-forward, acts where its command lands. Horizon 0: the measured state."""
+        feed-forward, acts where its command lands. Horizon 0: the measured state.
+        Asked twice in a tick (the stage-2 switch, then the tau PID), it is computed once
+        unless the model changed in between."""
         horizon = self.horizon_s
         if horizon == 0.0:
             return x, xdot, 0.0
-        px, pv = self.lagid.predict(t, x, xdot, self.model, horizon)
-        return px, pv, horizon
+        key = (t, x, xdot, self.model, horizon)
+        if self._prediction is None or self._prediction[0] != key:
+            px, pv = self.lagid.predict(t, x, xdot, self.model, horizon)
+            self._prediction = (key, (px, pv, horizon))
+        return self._prediction[1]
