@@ -76,6 +76,10 @@ def register_under(sim_parser: argparse.ArgumentParser) -> None:
                    help="PX4: a parameter set at boot (repeatable), e.g. SIH_KDV=0.1")
     p.add_argument("--ahead", type=float, default=4.5,
                    help="[m] PX4: the surface this far ahead of the hover point (default 4.5)")
+    p.add_argument("--heading", type=float, metavar="DEG",
+                   help="[deg] PX4: the compass heading (from north towards east) it turns to "
+                        "in Hold after its take-off; the surface lies ahead along it "
+                        "(default: the take-off's, north)")
     p.add_argument("--defaults", metavar="FILE", help="ArduCopter: the defaults .parm (default: "
                    "Tools/autotest/default_params/copter.parm of the binary's source tree)")
     p.add_argument("--frame", choices=("nwu", "enu"), default="nwu",
@@ -141,10 +145,15 @@ def arducopter_params(args: argparse.Namespace) -> ArduPilotParams:
 def px4_params(args: argparse.Namespace) -> Px4Params:
     if not 0.5 <= args.ahead <= 50.0:
         raise UriError(f"--ahead {args.ahead:g} m is outside 0.5..50 m")
+    if args.heading is not None and not -360.0 <= args.heading <= 360.0:
+        raise UriError(f"--heading {args.heading:g} deg is outside -360..360 deg")
+    if args.heading is not None and args.vision:
+        raise UriError("--heading turns PX4 after its own take-off; with --vision it waits "
+                       "on the ground (no take-off): leave --heading out")
     extra = tuple(px4_param(a) for a in args.px4_param)
     return Px4Params(args.px4, instance=args.instance, surface_ahead_m=args.ahead,
                      stock_params=args.stock_params, vision=args.vision,
-                     takeoff=not args.vision, extra_params=extra,
+                     takeoff=not args.vision, extra_params=extra, heading_deg=args.heading,
                      log=Path(args.fw_log) if args.fw_log else None)
 
 

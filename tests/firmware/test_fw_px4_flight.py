@@ -1,8 +1,9 @@
 """Opt-in (PERCHD_PX4 = a PX4 SITL build folder, docs/firmware.md): perchd against PX4 SIH
 over real MAVLink. PX4 takes off to its own Hold; then
 - the driver takes the vehicle over in the air without losing more than 0.1 m;
-- `perchd fly` perches on a surface placed ahead along the heading (figures printed with
-  -s and, with PERCHD_FW_REPORT=PATH, appended there as JSON lines);
+- `perchd fly` perches on a surface placed ahead along the heading, taking over in the air
+  and from the ground (figures printed with -s and, with PERCHD_FW_REPORT=PATH, appended
+  there as JSON lines);
 - a SIGKILLed `perchd fly` mid-approach goes no further than 0.5 m toward the wall and
   leaves PX4 holding or landing, never returning home;
 - ten `perchd fly` processes in a row connect to one PX4 boot with the documented URI.
@@ -55,6 +56,8 @@ AHEAD_M = 7.5
 """[m] surface ahead of the hover point: 4.5 m of run-up to the plan's x0 = -3 m (with 1.5 m,
 PX4's attitude lag left the approach at 1.1 of v0 = 1.5 m/s and the trigger refused), the
 hold 0.5 m inside the geofence's x_min = -8 m (at 8 m a hold swaying 0.2 m ended GEOFENCE)."""
+HEADING_DEG = "60"
+"""[deg] the compass heading PX4 turns to before an airborne perch: issue 20's trial."""
 CONFIG = f"""version = 1
 [vehicle]
 mass_kg = {SIH_MASS_KG}
@@ -171,10 +174,13 @@ def shut(proc: subprocess.Popen) -> None:
             proc.kill()
 
 
-@pytest.mark.parametrize("flight", [1, 2, 3])
+@pytest.mark.parametrize("flight", ["air-1", "air-2", "air-3", "ground"])
 def test_the_agent_perches_on_px4_sih(tmp_path, flight):
+    """In the air: PX4 turned to HEADING_DEG in Hold, taken over. From the ground: GPS off,
+    EKF2 on the mocap the driver forwards, perchd arms and takes off (`arm=1`)."""
     plan = json.loads(PLAN.read_text())
-    proc, mocap, driver, surface = harness(tmp_path)
+    start = ("--vision",) if flight == "ground" else ("--heading", HEADING_DEG)
+    proc, mocap, driver, surface = harness(tmp_path, *start)
     watch = YawWatch(mocap)
     try:
         done = subprocess.run(fly_argv(tmp_path, mocap, driver, surface), capture_output=True,

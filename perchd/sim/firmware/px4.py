@@ -37,6 +37,7 @@ from perchd.sim.firmware.harness import (
     Truth,
     contact_json,
     default_log,
+    fine_timer_slack,
     yaw_of,
 )
 from perchd.sim.world import Contact
@@ -58,16 +59,21 @@ VISION_PARAMS = {"EKF2_EV_CTRL": "11", "EKF2_HGT_REF": "3", "EKF2_GPS_CTRL": "0"
 GPS off (drivers/mavparams.py checks the first two); the noise floors down to the mocap's
 (drivers/mavvision.py: EKF2 takes the larger of its floor, 0.1 m and 0.1 rad by default,
 and the covariance sent)."""
-REFINE_GAIN = 0.05
-"""Share of the gap to the quantised fix a refined truth position takes up per sample: ~20
-samples (0.2 s at 100 Hz) average out the steps of HIL_STATE_QUATERNION's lat/lon."""
+REFINE_GAIN = 0.02
+"""Share of the gap to the quantised fix a refined truth position takes up per sample: ~50
+samples (0.5 s at 100 Hz) average out the steps of HIL_STATE_QUATERNION's lat/lon. At 0.05
+the fix's steps came through as speed: sd 0.005, up to 0.03 m/s in perchd's estimate on
+synthetic SIH truth, against 0.002 and 0.019 now (docs/firmware.md, "PX4 SIH")."""
 REFINE_MAX_DT_S = 0.02
 """[s] longest interval the truth velocity is integrated over: longer gaps are px4 held up
 (lockstep: its vehicle froze with it), not flight."""
 RESEND_AFTER_S = 0.025
 """[s] a truth sample older than this is sent again stamped now (Px4Vehicle.truth)."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
-BOOT_TIMEOUT_S, TAKEOFF_TIMEOUT_S = 30.0, 40.0
+BOOT_TIMEOUT_S, TAKEOFF_TIMEOUT_S, TURN_TIMEOUT_S = 30.0, 40.0, 30.0
+TURN_TOL_RAD, TURN_STEADY_S = math.radians(2.0), 1.0
+"""The turn in Hold is done once PX4's heading estimate has stayed this close to the heading
+asked for this long (PX4 steers its estimate, not the truth: docs/firmware.md, "PX4 SIH")."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,7 +85,9 @@ class Px4Params:
     driver's refusal or ?configure=1); extra_params: more PX4 parameters set at boot, e.g.
     (("SIH_KDV", "0.1"),) (SIH's linear drag, 1.0 N/(m/s) by default); vision: GPS off and
     EKF2 on the mocap perchd's driver forwards (VISION_PARAMS; no take-off then: without
-    mocap it has no position); log: PX4's console output."""
+    mocap it has no position); heading_deg [deg]: the compass heading (NED: from north
+    towards east) PX4 turns to in Hold after its take-off, before ready (None: the
+    take-off's, north on SIH); log: PX4's console output."""
 
     build: str
     instance: int = 0
@@ -89,6 +97,7 @@ class Px4Params:
     extra_params: tuple[tuple[str, str], ...] = ()
     log: Path | None = None
     vision: bool = False
+    heading_deg: float | None = None
 
 
 def enu_from_geodetic(lat_deg: float, lon_deg: float, alt_m: float,
@@ -111,9 +120,16 @@ def truth_from_hil(msg: Any, t: float, origin: tuple[float, float, float]) -> Tr
     -> Truth in perchd's world: ENU from `origin`, Z up, metres; t [s] of receipt
     (PX4 sends time_usec = 0)."""
     p = enu_from_geodetic(msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, origin)
-    v = (msg.vy * 0.01, msg.vx * 0.01, -msg.vz * 0.01)
+    v = (cm_s(msg.vy), cm_s(msg.vx), -cm_s(msg.vz))
     w = (msg.rollspeed, -msg.pitchspeed, -msg.yawspeed)
     return Truth(t, p, v, enu_quat(tuple(msg.attitude_quaternion)), w)
+
+
+def cm_s(c: int) -> float:
+    """[m/s] a HIL_STATE_QUATERNION velocity component: PX4 casts m/s x 100 to an integer,
+    which truncates towards zero, so a count c stands for [c, c + 1) cm/s away from zero;
+    the centre of that step, 0 for 0 (docs/firmware.md, "PX4 SIH")."""
+    return 0.01 * (c + 0.5 * ((c > 0) - (c < 0)))
 
 
 class PositionRefiner:
@@ -175,6 +191,8 @@ class Px4Vehicle(FirmwareVehicle):
         self._samples = 0
         self._truth_acked = False  # PX4 took the 100 Hz truth rate (25 Hz before)
         self._heading_errors: list[tuple[float, float]] = []  # (t [s], EKF - true [rad])
+        self._ekf_heading: float | None = None  # [rad] NED, PX4's estimate (ATTITUDE)
+        self._clock_pairs: list[tuple[float, float]] = []  # (arrival [s], PX4's time [s])
         self._ready_t: float | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -195,6 +213,8 @@ class Px4Vehicle(FirmwareVehicle):
                    cancel, "ground truth (HIL_STATE_QUATERNION) from PX4 SIH", self._ask_truth)
         if self.params.takeoff:
             self._take_off(cancel)
+            if self.params.heading_deg is not None:
+                self._turn(math.radians(self.params.heading_deg), cancel)
         truth = self._truth
         self._ready_t = truth.t
         self.start_heading = yaw_of(truth.q)
@@ -229,6 +249,7 @@ class Px4Vehicle(FirmwareVehicle):
                 "workdir": str(self.workdir), "truth_samples": self._samples,
                 "start_heading_rad": self.start_heading, "modes": self._modes_seen,
                 "heading_estimate_error_deg": self._heading_span_deg(),
+                "sim_clock_rate": self.sim_clock_rate(),
                 "surface": None if s is None else {"point": list(s.point), "normal": list(s.normal)},
                 "contact": contact_json(self._contact, 0.0)}
 
@@ -255,8 +276,10 @@ class Px4Vehicle(FirmwareVehicle):
         params.update(self.params.extra_params)
         env = ["PX4_SIMULATOR=sihsim", "PX4_SIM_MODEL=sihsim_quadx",
                *(f"PX4_PARAM_{k}={v}" for k, v in params.items())]
-        self._proc = procs.launch(["env", *env, str(self.binary), "-d", "-i", str(self.params.instance),
-                      "-w", str(self.workdir), str(self.etc)], self.log)
+        with fine_timer_slack():
+            self._proc = procs.launch(["env", *env, str(self.binary), "-d", "-i",
+                                       str(self.params.instance), "-w", str(self.workdir),
+                                       str(self.etc)], self.log)
 
     def _ask_truth(self) -> None:
         """HIL_STATE_QUATERNION at 100 Hz (sim time), and the display link's
@@ -276,6 +299,22 @@ class Px4Vehicle(FirmwareVehicle):
                 self._command(400, 1)
         self._wait(lambda: self._armed and self._mode == HOLD and self._truth.p[2] > 2.0,
                    TAKEOFF_TIMEOUT_S, cancel, "PX4's take-off to Hold above 2 m", send, 2.0)
+
+    def _turn(self, heading: float, cancel: threading.Event) -> None:
+        """DO_REPOSITION in Hold with only a yaw (radians on PX4; position and height
+        kept), until PX4's heading estimate has held within TURN_TOL_RAD of `heading`
+        [rad, NED] for TURN_STEADY_S."""
+        nan, since = float("nan"), None
+
+        def steady() -> bool:
+            nonlocal since
+            est, now = self._ekf_heading, time.monotonic()
+            near = est is not None and abs(math.remainder(est - heading, math.tau)) < TURN_TOL_RAD
+            since = (since or now) if near else None
+            return since is not None and now - since >= TURN_STEADY_S
+        self._wait(steady, TURN_TIMEOUT_S, cancel,
+                   f"PX4's turn to heading {math.degrees(heading):.0f} deg in Hold",
+                   lambda: self._command(192, -1, 0, 0, heading, nan, nan, nan), 2.0)
 
     def _command(self, command: int, *params: float) -> None:
         p = list(params) + [0.0] * (7 - len(params))
@@ -335,9 +374,23 @@ class Px4Vehicle(FirmwareVehicle):
     def _on_attitude(self, msg: Any) -> None:
         """PX4's heading estimate against the truth: SIH's EKF2 heading wanders ~10 deg
         during a flight, and PX4 steers it (docs/firmware.md, "PX4 SIH")."""
+        self._ekf_heading = msg.yaw
+        if self._ready_t is not None:
+            self._clock_pairs = [*self._clock_pairs[-6000:], (self.clock.now(),
+                                                             msg.time_boot_ms * 1e-3)]
         true_ned = math.pi / 2 - yaw_of(self._truth.q)  # ENU yaw -> NED heading
         error = math.remainder(msg.yaw - true_ned, math.tau)
         self._heading_errors = [*self._heading_errors[-600:], (self._truth.t, error)]
+
+    def sim_clock_rate(self) -> float | None:
+        """PX4's seconds per wall-clock second since ready, from ATTITUDE's time_boot_ms (SIH
+        runs in lockstep: its time is the simulation's) against arrival: below 1 the
+        vehicle lives slower than perchd's clock, and speeds perchd measures in wall time
+        are that much below SIH's own (docs/firmware.md, "PX4 SIH"). None: under 5 s."""
+        pairs = self._clock_pairs
+        if len(pairs) < 2 or pairs[-1][0] - pairs[0][0] < 5.0:
+            return None
+        return (pairs[-1][1] - pairs[0][1]) / (pairs[-1][0] - pairs[0][0])
 
     def heading_error_span(self, since: float) -> tuple[float, float] | None:
         """[rad] smallest and largest PX4 heading estimate - true heading since `since` [s]."""
