@@ -55,6 +55,10 @@ the contact speed (HIL_STATE_QUATERNION's are whole cm/s)."""
 CONTACT_TOL_MPS = 0.03
 """[m/s] on target: in the plan's window and this close to its contact speed (issues 15
 and 20)."""
+SIM_SPEED = os.environ.get("PERCHD_PX4_SIM_SPEED", "1.015")
+"""SIH's speed factor: on this 2-core machine its lockstep clock ran at 0.984-0.990 of the
+wall clock at 1 (with the harness's fine timer slack), 0.999-1.001 at 1.015; the summary
+prints the rate each flight reached (docs/firmware.md, "PX4 SIH")."""
 PX4_CONFIG = """version = 1
 [vehicle]
 mass_kg = 1.0
@@ -82,12 +86,13 @@ FIRMWARES = (
              config="version = 1\n" + STALE),
     Firmware("arducopter", "PERCHD_ARDUCOPTER", "--arducopter",
              config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text()),  # has it
-    Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5", "--heading", HEADING_DEG),
-             config=PX4_CONFIG),
+    Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5", "--heading", HEADING_DEG,
+                                            "--sim-speed", SIM_SPEED), config=PX4_CONFIG),
     # Issue 20's other start: on the ground, GPS off, EKF2 on the mocap perchd forwards;
-    # perchd arms and takes off (the hold 7.5 m out keeps inside the geofence, X >= -8 m).
-    Firmware("px4-ground", "PERCHD_PX4", "--px4", ("--vision", "--ahead", "7.5"),
-             config=PX4_CONFIG),
+    # perchd arms and takes off. The same 1.5 m run-up to x0 as in the air (with 4.5 m,
+    # 4 of 10 reached x0 0.11-0.2 m/s fast and the trigger refused: docs/firmware.md).
+    Firmware("px4-ground", "PERCHD_PX4", "--px4", ("--vision", "--ahead", "4.5",
+                                                   "--sim-speed", SIM_SPEED), config=PX4_CONFIG),
 )
 
 

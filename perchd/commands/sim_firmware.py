@@ -80,6 +80,10 @@ def register_under(sim_parser: argparse.ArgumentParser) -> None:
                    help="[deg] PX4: the compass heading (from north towards east) it turns to "
                         "in Hold after its take-off; the surface lies ahead along it "
                         "(default: the take-off's, north)")
+    p.add_argument("--sim-speed", type=float, default=1.0, metavar="F",
+                   help="PX4: SIH's speed factor (PX4_SIM_SPEED_FACTOR): above 1 makes up "
+                        "for its clock falling behind the wall clock on a loaded machine; the "
+                        "summary's sim_clock_rate says how far it did (default 1)")
     p.add_argument("--defaults", metavar="FILE", help="ArduCopter: the defaults .parm (default: "
                    "Tools/autotest/default_params/copter.parm of the binary's source tree)")
     p.add_argument("--frame", choices=("nwu", "enu"), default="nwu",
@@ -150,10 +154,13 @@ def px4_params(args: argparse.Namespace) -> Px4Params:
     if args.heading is not None and args.vision:
         raise UriError("--heading turns PX4 after its own take-off; with --vision it waits "
                        "on the ground (no take-off): leave --heading out")
+    if not 0.5 <= args.sim_speed <= 2.0:
+        raise UriError(f"--sim-speed {args.sim_speed:g} is outside 0.5..2")
     extra = tuple(px4_param(a) for a in args.px4_param)
     return Px4Params(args.px4, instance=args.instance, surface_ahead_m=args.ahead,
                      stock_params=args.stock_params, vision=args.vision,
                      takeoff=not args.vision, extra_params=extra, heading_deg=args.heading,
+                     sim_speed=args.sim_speed,
                      log=Path(args.fw_log) if args.fw_log else None)
 
 

@@ -87,7 +87,9 @@ class Px4Params:
     EKF2 on the mocap perchd's driver forwards (VISION_PARAMS; no take-off then: without
     mocap it has no position); heading_deg [deg]: the compass heading (NED: from north
     towards east) PX4 turns to in Hold after its take-off, before ready (None: the
-    take-off's, north on SIH); log: PX4's console output."""
+    take-off's, north on SIH); sim_speed: SIH's PX4_SIM_SPEED_FACTOR, above 1 to make up
+    for its lockstep loop falling behind the wall clock on a loaded machine (the summary's
+    sim_clock_rate says how far it did); log: PX4's console output."""
 
     build: str
     instance: int = 0
@@ -98,6 +100,7 @@ class Px4Params:
     log: Path | None = None
     vision: bool = False
     heading_deg: float | None = None
+    sim_speed: float = 1.0
 
 
 def enu_from_geodetic(lat_deg: float, lon_deg: float, alt_m: float,
@@ -275,6 +278,7 @@ class Px4Vehicle(FirmwareVehicle):
         params.update(VISION_PARAMS if self.params.vision else {})
         params.update(self.params.extra_params)
         env = ["PX4_SIMULATOR=sihsim", "PX4_SIM_MODEL=sihsim_quadx",
+               f"PX4_SIM_SPEED_FACTOR={self.params.sim_speed:g}",
                *(f"PX4_PARAM_{k}={v}" for k, v in params.items())]
         with fine_timer_slack():
             self._proc = procs.launch(["env", *env, str(self.binary), "-d", "-i",
