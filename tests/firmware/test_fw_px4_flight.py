@@ -255,7 +255,9 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
     # the 0.5 m target is not met at 0.45 m/s (measured 0.59-1.05 m): docs/safety.md
     assert further <= 1.2
     assert "OFFBOARD" in modes
-    after = modes[len(modes) - 1 - modes[::-1].index("OFFBOARD") + 1:]
+    # What PX4 did when the agent died follows its take-over. Landed and disarmed, PX4 may
+    # report the mode last chosen, OFFBOARD, again (seen once in the vision boot's blind land).
+    after = modes[modes.index("OFFBOARD") + 1:]
     assert after and after[0] in ("AUTO.LAND", "AUTO.LOITER"), modes
     assert "AUTO.RTL" not in modes
 
