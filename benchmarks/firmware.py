@@ -57,7 +57,7 @@ CONTACT_TOL_MPS = 0.03
 and 20)."""
 SIM_SPEED = os.environ.get("PERCHD_PX4_SIM_SPEED", "1.015")
 """SIH's speed factor: on this 2-core machine its lockstep clock ran at 0.984-0.990 of the
-wall clock at 1 (with the harness's fine timer slack), 0.999-1.001 at 1.015; the summary
+wall clock at 1 (with the harness's fine timer slack), 0.992-1.005 at 1.015; the summary
 prints the rate each flight reached (docs/firmware.md, "PX4 SIH")."""
 PX4_CONFIG = """version = 1
 [vehicle]
