@@ -14,7 +14,8 @@ perch time (median, % error against the plan), the true heading's largest depart
 the start heading (PX4: the harness's, at take-over; else the first of the flight) between the
 flight's first and last control tick, the speed at the trigger against the plan's v0, the
 lag and drag the flight identified (flight/lagid.py), PX4's simulation clock against the
-wall clock; beside it the same N flights in
+wall clock and the push its attitude estimate put on the vehicle in the 0.5 s before
+contact; beside it the same N flights in
 perchd's simulator (sim:// with the same mocap noise, seeds 0..N-1: its Crazyflie plant and
 the default flight config).
 
@@ -153,7 +154,8 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
         "agent_contact_speed": fly.get("contact_speed"), "perch_time": fly.get("perch_time"),
         "trigger_v": (fly.get("trigger") or {}).get("v"),
         "yaw_dev_deg": math.degrees(heading_error(yaws, heading)) if yaws else None,
-        "lag": lag_event(tmp / "flight.jsonl"), "sim_clock_rate": sim.get("sim_clock_rate")}
+        "lag": lag_event(tmp / "flight.jsonl"), "sim_clock_rate": sim.get("sim_clock_rate"),
+        "attitude_push": sim.get("attitude_push_mps2")}
 
 
 def fly_sim(noise: float, seed: int, tmp: Path) -> dict:
@@ -178,6 +180,7 @@ def summary(flights: list[dict], plan: dict) -> dict:
     lags = [f["lag"].get("lag_s") for f in flights if f["lag"].get("lag_s") is not None]
     drags = [f["lag"].get("drag_per_s") for f in flights if f["lag"].get("drag_per_s") is not None]
     rates = [f["sim_clock_rate"] for f in flights if f.get("sim_clock_rate") is not None]
+    pushes = [f["attitude_push"] for f in flights if f.get("attitude_push") is not None]
     med = statistics.median
     return {
         "flights": len(flights), "perched": len(ok),
@@ -196,7 +199,8 @@ def summary(flights: list[dict], plan: dict) -> dict:
         "trigger_v_err_median": med(trig) if trig else None,
         "trigger_v_err_maxabs": max(map(abs, trig), default=None),
         "lag_s": [round(x, 3) for x in lags], "drag_per_s": [round(x, 3) for x in drags],
-        "sim_clock_rate": [round(x, 4) for x in rates]}
+        "sim_clock_rate": [round(x, 4) for x in rates],
+        "attitude_push_mps2": [round(x, 3) for x in pushes]}
 
 
 def fmt(v, spec: str) -> str:
@@ -221,6 +225,9 @@ def print_row(name: str, s: dict, plan: dict) -> None:
     if s["sim_clock_rate"]:
         print(f"            simulation clock {min(s['sim_clock_rate'])}.."
               f"{max(s['sim_clock_rate'])} s per wall-clock s")
+    if s["attitude_push_mps2"]:
+        print(f"            the autopilot's attitude estimate's push in stage 2 "
+              f"{min(s['attitude_push_mps2'])}..{max(s['attitude_push_mps2'])} m/s^2")
     if set(s["outcomes"]) - {"CONTACT"}:
         print(f"            outcomes: {', '.join(s['outcomes'])}")
 

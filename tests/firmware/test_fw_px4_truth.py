@@ -271,3 +271,25 @@ def test_px4_is_turned_in_hold_until_its_heading_estimate_has_held_there(tmp_pat
     command, params = vehicle._conn.sent[0]
     assert command == 192 and params[3] == pytest.approx(math.radians(60.0))
     assert all(math.isnan(p) for p in params[4:7])
+
+
+def test_the_push_px4s_attitude_estimate_puts_on_the_vehicle_is_averaged_before_contact(
+        tmp_path):
+    """Truly level, facing the surface (east), while PX4's estimate says 0.02 rad nose down
+    (thrust leaning toward the wall): PX4 believes it pushes g sin 0.02 more than it does,
+    -0.196 m/s^2 along the normal. Only the 0.5 s before contact count."""
+    from perchd.core.clock import ManualClock
+    from perchd.sim.world import Contact
+
+    clock = ManualClock(99.0)
+    vehicle = Px4Vehicle(Px4Params(fake_build(tmp_path)), clock)
+    vehicle.surface = surface_ahead((0.0, 0.0, 0.0), 0.0, 5.0)
+    for t, pitch in ((99.0, 0.05), (100.0, -0.02), (100.1, -0.02)):
+        clock.sleep_until(t)
+        vehicle._on_truth(hil_east(0.0, 0.0))
+        vehicle._on_attitude(SimpleNamespace(roll=0.0, pitch=pitch, yaw=math.pi / 2,
+                                             time_boot_ms=0))
+    assert vehicle.attitude_push() is None  # no contact yet
+    vehicle._contact = Contact(100.2, 1.0, (5.0, 0.0, 2.5))
+    assert vehicle.summary()["attitude_push_mps2"] == pytest.approx(-9.81 * math.sin(0.02),
+                                                                    rel=1e-3)

@@ -27,7 +27,9 @@ from typing import Any
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.extras import require
-from perchd.core.ned import world_quat
+from perchd.core.ned import rotate, world_quat, world_vec
+from perchd.core.vehicle import G_M_S2
+from perchd.flight.frame import body_z
 from perchd.core.types import Quat, Vec3
 from perchd.sim.firmware.cf2 import Surface
 from perchd.sim.firmware.harness import (
@@ -67,6 +69,8 @@ synthetic SIH truth, against 0.002 and 0.019 now (docs/firmware.md, "PX4 SIH")."
 REFINE_MAX_DT_S = 0.02
 """[s] longest interval the truth velocity is integrated over: longer gaps are px4 held up
 (lockstep: its vehicle froze with it), not flight."""
+PUSH_WINDOW_S = 0.5
+"""[s] the summary's attitude_push_mps2 averages this long before contact: stage 2."""
 RESEND_AFTER_S = 0.025
 """[s] a truth sample older than this is sent again stamped now (Px4Vehicle.truth)."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
@@ -196,6 +200,7 @@ class Px4Vehicle(FirmwareVehicle):
         self._heading_errors: list[tuple[float, float]] = []  # (t [s], EKF - true [rad])
         self._ekf_heading: float | None = None  # [rad] NED, PX4's estimate (ATTITUDE)
         self._clock_pairs: list[tuple[float, float]] = []  # (arrival [s], PX4's time [s])
+        self._pushes: list[tuple[float, float]] = []  # (t [s], attitude push [m/s^2])
         self._ready_t: float | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -253,6 +258,7 @@ class Px4Vehicle(FirmwareVehicle):
                 "start_heading_rad": self.start_heading, "modes": self._modes_seen,
                 "heading_estimate_error_deg": self._heading_span_deg(),
                 "sim_clock_rate": self.sim_clock_rate(),
+                "attitude_push_mps2": self.attitude_push(),
                 "surface": None if s is None else {"point": list(s.point), "normal": list(s.normal)},
                 "contact": contact_json(self._contact, 0.0)}
 
@@ -291,7 +297,7 @@ class Px4Vehicle(FirmwareVehicle):
         if self._conn.clients:
             self._command(511, 115, 10000)
             self._command(511, 93, -1)
-            self._command(511, 30, 100000)  # ATTITUDE at 10 Hz: its heading estimate
+            self._command(511, 30, 20000)  # ATTITUDE at 50 Hz: its attitude estimate
 
     def _take_off(self, cancel: threading.Event) -> None:
         """NAV_TAKEOFF then ARM (PX4's own take-off to MIS_TAKEOFF_ALT); ready once PX4
@@ -382,9 +388,30 @@ class Px4Vehicle(FirmwareVehicle):
         if self._ready_t is not None:
             self._clock_pairs = [*self._clock_pairs[-6000:], (self.clock.now(),
                                                              msg.time_boot_ms * 1e-3)]
+        if self.surface is not None:
+            self._pushes = [*self._pushes[-3000:], (self._truth.t, self._push(msg))]
         true_ned = math.pi / 2 - yaw_of(self._truth.q)  # ENU yaw -> NED heading
         error = math.remainder(msg.yaw - true_ned, math.tau)
         self._heading_errors = [*self._heading_errors[-600:], (self._truth.t, error)]
+
+    def _push(self, msg: Any) -> float:
+        """[m/s^2] along the surface normal, g times the true thrust direction less the one
+        PX4's attitude estimate (ATTITUDE) holds: what PX4, flying its estimate, puts on
+        the vehicle beyond what it was sent (docs/firmware.md, "The harness's clock, the
+        heading and the ground start")."""
+        est = world_vec(tuple(-c for c in body_z(msg.roll, msg.pitch, msg.yaw)), "enu")
+        x, y, z, w = self._truth.q
+        true = rotate((w, x, y, z), (0.0, 0.0, 1.0))
+        n = self.surface.normal
+        return G_M_S2 * sum((true[i] - est[i]) * n[i] for i in range(3)) / math.hypot(*n)
+
+    def attitude_push(self) -> float | None:
+        """[m/s^2] the mean push (_push) over the PUSH_WINDOW_S before contact; None without
+        a contact or ATTITUDE then."""
+        c = self._contact
+        pushes = [] if c is None else [
+            p for t, p in self._pushes if c.t - PUSH_WINDOW_S <= t <= c.t]
+        return sum(pushes) / len(pushes) if pushes else None
 
     def sim_clock_rate(self) -> float | None:
         """PX4's seconds per wall-clock second since ready, from ATTITUDE's time_boot_ms (SIH
