@@ -20,6 +20,7 @@ import shutil
 import tempfile
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -28,9 +29,9 @@ from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.ned import rotate, world_quat, world_vec
+from perchd.core.types import Quat, Vec3
 from perchd.core.vehicle import G_M_S2
 from perchd.flight.frame import body_z
-from perchd.core.types import Quat, Vec3
 from perchd.sim.firmware.cf2 import Surface
 from perchd.sim.firmware.harness import (
     FirmwareVehicle,
@@ -69,8 +70,9 @@ synthetic SIH truth, against 0.002 and 0.019 now (docs/firmware.md, "PX4 SIH")."
 REFINE_MAX_DT_S = 0.02
 """[s] longest interval the truth velocity is integrated over: longer gaps are px4 held up
 (lockstep: its vehicle froze with it), not flight."""
-PUSH_WINDOW_S = 0.5
-"""[s] the summary's attitude_push_mps2 averages this long before contact: stage 2."""
+PUSH_WINDOW_S, PUSH_KEEP = 0.5, 100
+"""[s] the summary's attitude_push_mps2 averages this long before contact (stage 2), of the
+last PUSH_KEEP ATTITUDE messages (2 s at 50 Hz)."""
 RESEND_AFTER_S = 0.025
 """[s] a truth sample older than this is sent again stamped now (Px4Vehicle.truth)."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
@@ -199,8 +201,10 @@ class Px4Vehicle(FirmwareVehicle):
         self._truth_acked = False  # PX4 took the 100 Hz truth rate (25 Hz before)
         self._heading_errors: list[tuple[float, float]] = []  # (t [s], EKF - true [rad])
         self._ekf_heading: float | None = None  # [rad] NED, PX4's estimate (ATTITUDE)
-        self._clock_pairs: list[tuple[float, float]] = []  # (arrival [s], PX4's time [s])
-        self._pushes: list[tuple[float, float]] = []  # (t [s], attitude push [m/s^2])
+        # (arrival [s], PX4's time [s]) of the first ATTITUDE since ready and of the last
+        self._clock_span: tuple[tuple[float, float], tuple[float, float]] | None = None
+        # (t [s], attitude push [m/s^2]) up to contact, PUSH_KEEP of them
+        self._pushes: deque[tuple[float, float]] = deque(maxlen=PUSH_KEEP)
         self._ready_t: float | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -386,10 +390,10 @@ class Px4Vehicle(FirmwareVehicle):
         during a flight, and PX4 steers it (docs/firmware.md, "PX4 SIH")."""
         self._ekf_heading = msg.yaw
         if self._ready_t is not None:
-            self._clock_pairs = [*self._clock_pairs[-6000:], (self.clock.now(),
-                                                             msg.time_boot_ms * 1e-3)]
-        if self.surface is not None:
-            self._pushes = [*self._pushes[-3000:], (self._truth.t, self._push(msg))]
+            pair = (self.clock.now(), msg.time_boot_ms * 1e-3)
+            self._clock_span = (self._clock_span[0] if self._clock_span else pair, pair)
+        if self.surface is not None and self._contact is None:
+            self._pushes.append((self._truth.t, self._push(msg)))
         true_ned = math.pi / 2 - yaw_of(self._truth.q)  # ENU yaw -> NED heading
         error = math.remainder(msg.yaw - true_ned, math.tau)
         self._heading_errors = [*self._heading_errors[-600:], (self._truth.t, error)]
@@ -410,7 +414,7 @@ class Px4Vehicle(FirmwareVehicle):
         a contact or ATTITUDE then."""
         c = self._contact
         pushes = [] if c is None else [
-            p for t, p in self._pushes if c.t - PUSH_WINDOW_S <= t <= c.t]
+            p for t, p in list(self._pushes) if c.t - PUSH_WINDOW_S <= t <= c.t]
         return sum(pushes) / len(pushes) if pushes else None
 
     def sim_clock_rate(self) -> float | None:
@@ -418,10 +422,11 @@ class Px4Vehicle(FirmwareVehicle):
         runs in lockstep: its time is the simulation's) against arrival: below 1 the
         vehicle lives slower than perchd's clock, and speeds perchd measures in wall time
         are that much below SIH's own (docs/firmware.md, "PX4 SIH"). None: under 5 s."""
-        pairs = self._clock_pairs
-        if len(pairs) < 2 or pairs[-1][0] - pairs[0][0] < 5.0:
+        span = self._clock_span
+        if span is None or span[1][0] - span[0][0] < 5.0:
             return None
-        return (pairs[-1][1] - pairs[0][1]) / (pairs[-1][0] - pairs[0][0])
+        (wall0, px40), (wall1, px41) = span
+        return (px41 - px40) / (wall1 - wall0)
 
     def heading_error_span(self, since: float) -> tuple[float, float] | None:
         """[rad] smallest and largest PX4 heading estimate - true heading since `since` [s]."""
