@@ -406,8 +406,7 @@ class Px4Vehicle(FirmwareVehicle):
         est = world_vec(tuple(-c for c in body_z(msg.roll, msg.pitch, msg.yaw)), "enu")
         x, y, z, w = self._truth.q
         true = rotate((w, x, y, z), (0.0, 0.0, 1.0))
-        n = self.surface.normal
-        return G_M_S2 * sum((true[i] - est[i]) * n[i] for i in range(3)) / math.hypot(*n)
+        return G_M_S2 * self.surface.speed([true[i] - est[i] for i in range(3)])
 
     def attitude_push(self) -> float | None:
         """[m/s^2] the mean push (_push) over the PUSH_WINDOW_S before contact; None without
