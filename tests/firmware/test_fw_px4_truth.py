@@ -139,7 +139,8 @@ def test_the_cli_takes_px4_or_cf2_not_both(tmp_path):
 
 @pytest.mark.parametrize(("extra", "said"), [
     (["--heading", "400"], "--heading 400 deg is outside -360..360 deg"),
-    (["--heading", "60", "--vision"], "with --vision it waits on the ground")])
+    (["--heading", "60", "--vision"], "with --vision it waits on the ground"),
+    (["--sim-speed", "3"], "--sim-speed 3 is outside 0.5..2")])
 def test_a_heading_px4_cannot_turn_to_is_one_line_and_exit_2(tmp_path, extra, said):
     run = subprocess.run([sys.executable, "-m", "perchd", "sim", "firmware", "--px4",
                           fake_build(tmp_path), *extra], capture_output=True, text=True, cwd=ROOT)
