@@ -198,6 +198,9 @@ class LagIdGains:
         ms from flight to flight where the positions' scattered by 0.06 s (docs/firmware.md,
         "The attitude the mocap measures"). With stage2_refit, stage 2 flies the lag of
         stage 1's attitude alone (VehicleResponse.refit_stage2).
+    drag_from_attitude: with from_attitude, fit the drag to the acceleration the measured
+        lean makes rather than the one the setpoints ask for (LagIdentifier.lean_drag):
+        an autopilot's attitude estimate that errs with speed reads as drag otherwise.
     """
 
     window_s: float = 8.0
@@ -210,6 +213,7 @@ class LagIdGains:
     rms_max_mps: float = 0.1
     stage2_refit: bool = True
     from_attitude: bool = True
+    drag_from_attitude: bool = True
 
 
 @dataclass(frozen=True)

@@ -56,6 +56,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.signal import lfilter
 
+from perchd.core.vehicle import G_M_S2
 from perchd.flight.config import LagIdGains
 
 FIT_POINTS = 200
@@ -89,7 +90,8 @@ class LagModel:
     measured; samples: ticks fitted; speed_span_mps [m/s] the speed range they covered;
     time_constant_s [s] T, the part of the lag that is a first-order lag; from_attitude:
     delay and T were fitted to the attitude the mocap measured (LagIdentifier.lean_response),
-    not to the positions."""
+    not to the positions; drag_from_attitude: the drag to the acceleration that attitude
+    makes (LagIdentifier.lean_drag), not to the commands'."""
 
     lag_s: float
     drag_per_s: float
@@ -99,6 +101,7 @@ class LagModel:
     speed_span_mps: float
     time_constant_s: float = 0.0
     from_attitude: bool = False
+    drag_from_attitude: bool = False
 
     @property
     def delay_s(self) -> float:
@@ -178,7 +181,9 @@ class LagIdentifier:
                                 f"the {c.speed_span_min_mps:g} m/s needed to fit the lag")
         lean = self.lean_response() if c.from_attitude else None
         if lean is not None:
-            m = replace(_model_at(t, u, x, v, *lean, span, c), from_attitude=True)
+            drag = self.lean_drag(t, x) if c.drag_from_attitude else None
+            m = replace(_model_at(t, u, x, v, *lean, span, c, drag), from_attitude=True,
+                        drag_from_attitude=drag is not None)
             fit = _checked(m, c)
             if fit.model is not None:
                 return fit  # refused at the attitude's lag: the positions' own may serve
@@ -190,6 +195,25 @@ class LagIdentifier:
             return LagFit(None, f"the best lag is at the bound {c.lag_max_s:g} s or beyond")
         delay = _refine(delays, mse[j], int(i))
         return _checked(_model_at(t, u, x, v, delay, float(taus[j]), span, c), c)
+
+    def lean_drag(self, t: np.ndarray, x: np.ndarray) -> float | None:
+        """[1/s] the drag fitted to the positions x [m] at the ticks t [s] against the
+        acceleration the lean the mocap measured makes (g tan of it, the height held), a
+        constant push beside it; None without leans or outside 0..drag_max_per_s. An
+        autopilot flies its own attitude estimate, and PX4 SIH's leaned further than sent
+        the faster it flew: fitted to the commands, that reads as less drag (0.88-0.98 /s
+        where SIH's is 1.0) and stage 2, slower than stage 1, meets less push than stage
+        1's refit carries into it (docs/firmware.md, "The drag the attitude makes")."""
+        if len(self._lean) < 20:
+            return None
+        tm, lean = (np.array(col) for col in list(zip(*self._lean))[2:])
+        # Each tick's acceleration is held to the next (_integrals): the lean at the
+        # interval's midpoint (5 ms off moved the drag found by 5 %).
+        mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
+        s = np.clip(np.interp(mid, tm, lean), -0.9, 0.9)
+        a = G_M_S2 * s / np.sqrt(1.0 - s * s)
+        drag = float(_solve(t, a[None, :], x, np.zeros(1))[1][0, 0, 0])
+        return drag if 0.0 <= drag <= self.cfg.drag_max_per_s else None
 
     def refit_bias(self, base: LagModel, since_t: float) -> LagFit:
         """The bias again, base's lag and drag kept, from the ticks since since_t [s]: what
@@ -207,8 +231,10 @@ class LagIdentifier:
             return LagFit(None, f"{n} ticks since {since_t:.3f} s, too few to fit")
         # The ticks before since_t stay in: the commands still in flight at since_t.
         span = float(v[first:].max() - v[first:].min())
-        return _checked(_model_at(t, u, x, v, base.delay_s, base.time_constant_s, span,
-                                  self.cfg, base.drag_per_s, first), self.cfg)
+        m = _model_at(t, u, x, v, base.delay_s, base.time_constant_s, span, self.cfg,
+                      base.drag_per_s, first)
+        return _checked(replace(m, from_attitude=base.from_attitude,
+                                drag_from_attitude=base.drag_from_attitude), self.cfg)
 
     def predict(self, t: float, x: float, xdot: float, model: LagModel,
                 horizon_s: float) -> tuple[float, float]:

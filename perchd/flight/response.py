@@ -70,9 +70,10 @@ class VehicleResponse:
         self.ff = feed_forward(m)
         self._events.append(LogEvent(t, "lag-identified", (
             f"lag {m.lag_s:.3f} s ({m.time_constant_s:.3f} s of it first-order) from the "
-            f"{'attitude' if m.from_attitude else 'positions'}, drag {m.drag_per_s:.3f} 1/s"), {
+            f"{'attitude' if m.from_attitude else 'positions'}, drag {m.drag_per_s:.3f} 1/s "
+            f"from the {'lean measured' if m.drag_from_attitude else 'commands'}"), {
                 "lag_s": m.lag_s, "time_constant_s": m.time_constant_s,
-                "from_attitude": m.from_attitude,
+                "from_attitude": m.from_attitude, "drag_from_attitude": m.drag_from_attitude,
                 "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
                 "rms_mps": m.rms_mps, "samples": m.samples,
                 "speed_span_mps": m.speed_span_mps}))

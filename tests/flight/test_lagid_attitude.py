@@ -32,13 +32,16 @@ def lean_command(t: float) -> float:
 def fly(delay_s: float, tc_s: float, noise: float = 0.0, offset: float = 0.0,
         seen_as: float = 1.0, drag: float = 0.25, seconds: float = 4.5, seed: int = 0,
         cfg: LagIdGains | None = None,
-        then: tuple[float, float, float] | None = None) -> LagIdentifier:
+        then: tuple[float, float, float] | None = None,
+        lean_per_mps: float = 0.0) -> LagIdentifier:
     """Record a flight whose lean answers the lean sent `delay_s` [s] late through a
     first-order lag `tc_s` [s] (integrated in 1 ms steps), Xddot = g lean - drag Xdot.
     The mocap measures each tick's lean 4 ms before the tick, with `noise` added, `offset`
     (the markers' trim) and scaled by seen_as (-1: a rigid body turned half round; 0: one
     whose X sees none of the lean). then (t, delay, tc): from t [s] on the response is that
-    one (a shaping that answers the brake's swings sooner)."""
+    one (a shaping that answers the brake's swings sooner). lean_per_mps: the vehicle holds
+    this much more lean per m/s of speed than it answers (an autopilot whose attitude
+    estimate errs the more the faster it flies; the mocap sees the lean held)."""
     rng = random.Random(seed)
     ident = LagIdentifier(cfg or LagIdGains())
     sent: list[float] = []
@@ -55,11 +58,12 @@ def fly(delay_s: float, tc_s: float, noise: float = 0.0, offset: float = 0.0,
         ident.record_lean(t, sent[-1], measured_at,
                           seen_as * seen + offset + rng.gauss(0.0, noise))
         for n in range(10):  # to the next tick, the command sent at t held from t
-            history.append(lean)
+            held = lean + lean_per_mps * v
+            history.append(held)
             late = math.floor((t + n * DT / 10 - delay_s) / DT + 1e-9)
             cmd = sent[max(late, 0)]
             lean += (cmd - lean) * (1.0 - math.exp(-DT / 10 / tc_s)) if tc_s > 0 else cmd - lean
-            v += (G * lean - drag * v) * DT / 10
+            v += (G * held - drag * v) * DT / 10
             x += v * DT / 10
     return ident
 
@@ -174,6 +178,22 @@ def test_the_fit_flies_the_attitudes_lag_and_fits_drag_to_the_positions():
     assert fit.model.drag_per_s == pytest.approx(0.25, abs=0.01)
 
 
+@pytest.mark.parametrize("from_lean", [True, False])
+def test_the_drag_is_fitted_to_the_lean_held_not_the_one_sent(from_lean):
+    """A vehicle that leans 0.003 more per m/s than it is sent meets the drag 0.25 /s
+    with up to g x 0.003 = 0.029 /s less net of that lean: fitted to the commands, the
+    drag reads low (0.230; stage 2, slower than stage 1, then meets less push than the
+    refit carries); fitted to the lean measured, it is the drag."""
+    fit = fly(0.11, 0.24, lean_per_mps=0.003, noise=math.radians(0.1),
+              cfg=LagIdGains(drag_from_attitude=from_lean)).fit()
+    assert fit.model is not None and fit.model.from_attitude, fit.why
+    assert fit.model.drag_from_attitude is from_lean
+    if from_lean:
+        assert fit.model.drag_per_s == pytest.approx(0.25, abs=0.005)
+    else:
+        assert fit.model.drag_per_s < 0.25 - 0.5 * G * 0.003
+
+
 def test_the_positions_lag_is_fitted_when_the_attitude_is_not_used():
     for ident in (fly(0.11, 0.24, seen_as=0.0),
                   fly(0.11, 0.24, cfg=LagIdGains(from_attitude=False))):
@@ -196,3 +216,14 @@ def test_the_estimator_measures_the_lean_the_setpoint_would_send(normal, angles)
     est.offer(Pose("cf", 1, 0.0, (0.0, 0.0, 1.0), quaternion(*angles)))
     sent = frame.rotate_in(body_z(*angles))[0]
     assert est.state(0.0).lean_x == pytest.approx(sent, abs=1e-12)
+
+
+def test_the_stage_2_refit_keeps_the_attitudes_lag_and_says_so():
+    """The bias refitted at the switch (3.4 s) from stage 1 (since 3 s) keeps the trigger's
+    lag and drag, and the model still says its lag came from the attitude."""
+    ident = fly(0.11, 0.24, seconds=3.4)
+    base = ident.fit().model
+    assert base is not None and base.from_attitude
+    m = ident.refit_bias(base, 3.0).model
+    assert m is not None and m.from_attitude and m.drag_from_attitude
+    assert (m.lag_s, m.drag_per_s) == (base.lag_s, base.drag_per_s)
