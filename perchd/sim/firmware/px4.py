@@ -67,11 +67,9 @@ REFINE_GAIN = 0.02
 samples (0.5 s at 100 Hz) average out the steps of HIL_STATE_QUATERNION's lat/lon. At 0.05
 the fix's steps came through as speed: sd 0.005, up to 0.03 m/s in perchd's estimate on
 synthetic SIH truth, against 0.002 and 0.019 now (docs/firmware.md, "PX4 SIH")."""
-REFINE_MAX_DT_S = 0.04
+REFINE_MAX_DT_S = 0.02
 """[s] longest interval the truth velocity is integrated over: longer gaps are px4 held up
-(lockstep: its vehicle froze with it), not flight. One PX4 boot in ten streams its truth in
-bursts, 38 % of the gaps 20-31 ms: at 20 ms that boot's speed read 30 % low (docs/firmware.md,
-"The drag the attitude makes")."""
+(lockstep: its vehicle froze with it), not flight."""
 PUSH_WINDOW_S, PUSH_KEEP = 0.5, 100
 """[s] the summary's attitude_push_mps2 averages this long before contact (stage 2), of the
 last PUSH_KEEP ATTITUDE messages (2 s at 50 Hz)."""
