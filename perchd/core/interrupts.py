@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import sys
+import threading
 from typing import Callable, Iterator
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -39,14 +40,17 @@ class Caught:
 
 @contextlib.contextmanager
 def catching(on_signal: Callable[[], None]) -> Iterator[Caught]:
-    """SIGINT and SIGTERM call `on_signal` (in the main thread, so it must only set flags)
-    while the block runs; the previous handlers come back after it."""
+    """SIGINT and SIGTERM call `on_signal` (it must only set flags) while the block runs;
+    the previous handlers come back after it. on_signal runs on a thread of its own: a
+    handler runs in the main thread wherever the signal finds it, and `Event.set` there
+    deadlocked `perchd sim` about one time in eight, the main thread interrupted inside
+    `Event.wait` holding the lock `set` takes."""
     caught = Caught()
 
     def handler(signum: int, _frame: object) -> None:
         if caught.signum is None:
             caught.signum = signum
-        on_signal()
+        threading.Thread(target=on_signal, name="perchd-signal", daemon=True).start()
     previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
     try:
         yield caught
