@@ -67,11 +67,13 @@ from typing import Any, Callable
 
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
+from perchd.core.ned import ned_vec, quaternion_wxyz
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, split_query
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
+from perchd.drivers.mavbrake import WILL_PERIOD_S, VelocityTracker, brake_for
 from perchd.drivers.mavparams import (
     ARDUPILOT,
     PX4,
@@ -79,7 +81,12 @@ from perchd.drivers.mavparams import (
     check_params,
     rules_for,
 )
-from perchd.drivers.mavsentinel import CMD_DO_SET_MODE, CUSTOM_MODE_ENABLED, Sentinel
+from perchd.drivers.mavsentinel import (
+    CMD_DO_SET_MODE,
+    CUSTOM_MODE_ENABLED,
+    IGNORE_BODY_RATES,
+    Sentinel,
+)
 from perchd.drivers.mavvision import timesync_reply, vision_estimate
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
@@ -106,7 +113,6 @@ ARDUPILOT_GUIDED_NOGPS, ARDUPILOT_LAND = 20, 9
 PX4_OFFBOARD = (6, 0)  # (main mode, sub mode)
 PX4_AUTO_LAND = (4, 6)
 HOVER_PARAM = {ARDUPILOT: "MOT_THST_HOVER", PX4: "MPC_THR_HOVER"}
-IGNORE_BODY_RATES = 0b0000_0111
 ATTITUDE_MSG_ID, LOCAL_POSITION_NED_MSG_ID, ATTITUDE_TARGET_MSG_ID = 30, 32, 83
 EXTENDED_SYS_STATE_MSG_ID = 245
 STATUS_HZ = 10.0
@@ -194,15 +200,6 @@ def source_port(opts: Uri, device: str) -> int | None:
     if not device.startswith("udpout:") or port != int(port):
         raise UriError(f"{opts.raw}: sport= is a whole port number, for udpout: links only")
     return int(port)
-
-
-def quaternion_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """Unit quaternion (w, x, y, z) of Z-Y-X Euler angles [rad]."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
 
 
 def ned_attitude(sp: Setpoint, yaw0: float = 0.0) -> tuple[float, float, float, float]:
@@ -334,6 +331,8 @@ class MavlinkDriver(DriverBase):
         self._poses: PoseFeed = no_poses  # engage()'s pose feed, read while it waits
         self._pumped_seq: int | None = None  # the newest pose engage() forwarded
         self._sentinel: Sentinel | None = None  # lands the vehicle if this process dies
+        self._velocity = VelocityTracker()  # from the mocap, for the sentinel's brake
+        self._will_at = 0.0  # time.monotonic() of the brake last left with the sentinel
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -388,12 +387,26 @@ class MavlinkDriver(DriverBase):
         if not getattr(pose, "valid", True) or self._conn is None:
             return
         self._track_yaw0(pose)
+        self._renew_will(pose)
         if self.vision and self.yaw0 is not None:
             v = vision_estimate(pose, self.yaw0)
             with self._lock:
                 self._conn.mav.vision_position_estimate_send(v.usec, *v.ned, *v.rpy,
                                                              v.covariance)
             self.vision_sent += 1
+
+    def _renew_will(self, pose: Any) -> None:
+        """Every WILL_PERIOD_S while perchd flies, the brake the sentinel is to fly should
+        this process die: against the mocap's velocity (drivers/mavbrake.py)."""
+        v = self._velocity.update(pose.t, pose.p)
+        now = time.monotonic()
+        if (v is None or self._sentinel is None or self._stopped or self.yaw0 is None
+                or self.model is None or now - self._will_at < WILL_PERIOD_S):
+            return
+        self._will_at = now
+        heading = self._level_yaw if self._level_yaw is not None else self._yaw_ned or 0.0
+        self._sentinel.will(brake_for(ned_vec(v, self.yaw0), heading,
+                                      self.model.hover_fraction, now))
 
     def _track_yaw0(self, pose: Any) -> None:
         """yaw0=auto: each pose with the autopilot's newest heading measures the offset

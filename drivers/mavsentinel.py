@@ -7,12 +7,15 @@ went 0.70 m further toward the wall, tilted for the timeout, then braking in Lan
 sentinel holds a copy of the driver's link (the same socket: the vehicle hears the partner
 it knows) and one end of a socket pair whose other end only the driver holds. When that
 closes without a release while perchd flies the vehicle (the kernel closes it on SIGKILL,
-the OOM killer, a crash), the sentinel commands the autopilot's LAND at once and repeats it
-LAND_REPEATS times, LAND_REPEAT_S apart (a lost datagram would leave the vehicle flying).
+the OOM killer, a crash), the sentinel first flies the brake the agent left (drivers/
+mavbrake.py: leaning against the velocity until it is gone) and then commands the
+autopilot's LAND, repeated LAND_REPEATS times, LAND_REPEAT_S apart (a lost datagram would
+leave the vehicle flying).
 
-Wire (SOCK_SEQPACKET, one byte per message), driver -> sentinel: b"F" perchd flies the
-vehicle (its offboard mode was acknowledged); b"D" it does not any more (the driver has
-commanded LAND itself); b"R" release: exit without acting.
+Wire (SOCK_SEQPACKET), driver -> sentinel: b"F" perchd flies the vehicle (its offboard mode
+was acknowledged); b"D" it does not any more (the driver has commanded LAND itself); b"B"
+and a packed Brake: the brake to fly first, renewed from the mocap; b"R" release: exit
+without acting.
 
 Run as `python -m perchd.drivers.mavsentinel CTL_FD LINK_FD DEST SSYS SCOMP SYS COMP MAIN
 SUB` by drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a
@@ -23,61 +26,180 @@ as DO_SET_MODE's param2 and param3.
 from __future__ import annotations
 
 import logging
+import math
 import os
+import select
 import signal
 import socket
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from perchd.drivers import childproc
+from perchd.drivers.mavbrake import (
+    BRAKE_ROUNDS,
+    LEVEL_MAX_S,
+    PACKED_SIZE,
+    WILL_MAX_AGE_S,
+    Brake,
+)
 
 LAND_REPEATS = 10
 LAND_REPEAT_S = 0.1
 """LAND goes out at once and then every LAND_REPEAT_S, LAND_REPEATS times in all (1 s)."""
-CMD_DO_SET_MODE = 176
+BRAKE_PERIOD_S = 0.02
+"""[s] the brake's attitude target is repeated this often while it is flown."""
+IGNORE_BODY_RATES = 0b0000_0111  # SET_ATTITUDE_TARGET: the attitude alone
+CMD_DO_SET_MODE, CMD_SET_MESSAGE_INTERVAL = 176, 511
+LOCAL_POSITION_NED_ID = 32
+VELOCITY_INTERVAL_US = 20000
+"""LOCAL_POSITION_NED at 50 Hz while braking (the driver asks for 10)."""
 CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
 log = logging.getLogger("perchd.drivers.mavsentinel")
 
 
-def land_frame(source: tuple[int, int], target: tuple[int, int], main: int, sub: int
-               ) -> bytes:
-    """COMMAND_LONG DO_SET_MODE to the LAND mode from `source` (the driver's system and
-    component), framed in the MAVLink version pymavlink speaks here (the driver's own)."""
+def command_frame(source: tuple[int, int], target: tuple[int, int], command: int,
+                  *params: float) -> bytes:
+    """COMMAND_LONG from `source` (the driver's system and component), framed in the
+    MAVLink version pymavlink speaks here (the driver's own)."""
     from pymavlink import mavutil
     mav = mavutil.mavlink.MAVLink(None, *source)
-    msg = mav.command_long_encode(*target, CMD_DO_SET_MODE, 0, CUSTOM_MODE_ENABLED, main,
-                                  sub, 0, 0, 0, 0)
+    p = (*params, *[0.0] * (7 - len(params)))
+    return mav.command_long_encode(*target, command, 0, *p).pack(mav)
+
+
+def land_frame(source: tuple[int, int], target: tuple[int, int], main: int, sub: int
+               ) -> bytes:
+    """DO_SET_MODE to the LAND mode."""
+    return command_frame(source, target, CMD_DO_SET_MODE, CUSTOM_MODE_ENABLED, main, sub)
+
+
+def attitude_frame(source: tuple[int, int], target: tuple[int, int],
+                   q: tuple[float, float, float, float], thrust: float) -> bytes:
+    """SET_ATTITUDE_TARGET of an attitude (w, x, y, z; FRD in NED) and normalised thrust."""
+    from pymavlink import mavutil
+    mav = mavutil.mavlink.MAVLink(None, *source)
+    msg = mav.set_attitude_target_encode(0, *target, IGNORE_BODY_RATES, list(q), 0.0, 0.0,
+                                         0.0, thrust)
     return msg.pack(mav)
 
 
-def agent_died_flying(ctl: socket.socket) -> bool:
-    """Wait for the driver: True when its end closed while it flew the vehicle, False on a
-    release or when it closed with the vehicle not (or no longer) its to fly."""
-    flying = False
+@dataclass(frozen=True)
+class Death:
+    """The agent died flying the vehicle; brake: the newest it left, if any."""
+
+    brake: Brake | None = None
+
+
+def agent_died_flying(ctl: socket.socket) -> Death | None:
+    """Wait for the driver: a Death when its end closed while it flew the vehicle, None on
+    a release or when it closed with the vehicle not (or no longer) its to fly."""
+    flying, brake = False, None
     while True:
         try:
-            msg = ctl.recv(16)
+            msg = ctl.recv(64)
         except OSError:
             msg = b""
         if not msg:
-            return flying
+            return Death(brake) if flying else None
         if msg == b"R":
-            return False
+            return None
         if msg in (b"F", b"D"):
             flying = msg == b"F"
+        elif msg[:1] == b"B" and len(msg) == 1 + PACKED_SIZE:
+            brake = Brake.unpack(msg[1:])
 
 
-def send_land(link_fd: int, dest: str, frame: bytes) -> None:
-    if dest == "-":
-        os.write(link_fd, frame)
+def fly_brake(link: Link, source: tuple[int, int], target: tuple[int, int],
+              brake: Brake) -> None:
+    """Fly the brake if it is fresh (one left before the agent's mocap stopped is not):
+    its lean for its duration, then level until the autopilot's own velocity says the
+    vehicle has stopped (drivers/mavbrake.py)."""
+    if brake.duration_s <= 0.0:
         return
-    with socket.socket(fileno=os.dup(link_fd)) as sock:
-        for addr in dest.split(","):
-            host, _, port = addr.rpartition(":")
-            sock.sendto(frame, (host, int(port)))
+    if time.monotonic() - brake.t_s > WILL_MAX_AGE_S:
+        sys.stderr.write("perchd mavsentinel: the brake left is stale: LAND at once\n")
+        return
+    link.send(command_frame(source, target, CMD_SET_MESSAGE_INTERVAL, LOCAL_POSITION_NED_ID,
+                            VELOCITY_INTERVAL_US))
+    for _ in range(BRAKE_ROUNDS):
+        v = brake_round(link, source, target, brake)
+        if v is None or brake.stopped(v):
+            return
+        brake = brake.again(v)
+
+
+def brake_round(link: Link, source: tuple[int, int], target: tuple[int, int], brake: Brake
+                ) -> tuple[float, float, float] | None:
+    """Lean for the brake's duration, then level until stopped (LEVEL_MAX_S at most):
+    the autopilot's newest velocity [m/s, NED] then, None if it sent none."""
+    leaned = hold(link, attitude_frame(source, target, brake.q_ned, brake.thrust),
+                  brake.duration_s)
+    heard: list[tuple[float, float, float]] = []
+
+    def stopped() -> bool:
+        v = link.newest_velocity(target[0])
+        heard.extend([v] if v is not None else [])
+        return bool(heard) and brake.stopped(heard[-1])
+    level = hold(link, attitude_frame(source, target, *brake.level), LEVEL_MAX_S, stopped)
+    v = heard[-1] if heard else None
+    why = ("no velocity heard" if v is None else "stopped" if brake.stopped(v)
+           else f"still at {math.hypot(*v[:2]):.2f} m/s")
+    sys.stderr.write(f"perchd mavsentinel: braked {leaned:.2f} s against "
+                     f"{math.hypot(*brake.v_ne):.2f} m/s, level {level:.2f} s ({why})\n")
+    return v
+
+
+def hold(link: Link, frame: bytes, longest_s: float, done=lambda: False) -> float:
+    """Send `frame` every BRAKE_PERIOD_S for longest_s [s] or until done(); [s] held."""
+    start = time.monotonic()
+    while time.monotonic() - start < longest_s and not done():
+        link.send(frame)
+        time.sleep(BRAKE_PERIOD_S)
+    return time.monotonic() - start
+
+
+class Link:
+    """The dead agent's link to the vehicle, from the sentinel's side: `fd` and DEST
+    (module docstring); what the vehicle sent since is read without blocking."""
+
+    def __init__(self, fd: int, dest: str) -> None:
+        self.fd, self.dest = fd, dest
+        from pymavlink import mavutil
+        self._parser = mavutil.mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+
+    def send(self, frame: bytes) -> None:
+        if self.dest == "-":
+            os.write(self.fd, frame)
+            return
+        with socket.socket(fileno=os.dup(self.fd)) as sock:
+            for addr in self.dest.split(","):
+                host, _, port = addr.rpartition(":")
+                sock.sendto(frame, (host, int(port)))
+
+    def newest_velocity(self, system: int) -> tuple[float, float, float] | None:
+        """[m/s, NED] of the newest LOCAL_POSITION_NED from `system` waiting on the link."""
+        newest = None
+        for msg in self._parser.parse_buffer(self._drain()) or []:
+            if msg.get_type() == "LOCAL_POSITION_NED" and msg.get_srcSystem() == system:
+                newest = (msg.vx, msg.vy, msg.vz)
+        return newest
+
+    def _drain(self) -> bytes:
+        chunks = []
+        while select.select([self.fd], [], [], 0.0)[0]:
+            try:
+                chunk = os.read(self.fd, 65536)
+            except BlockingIOError:
+                break
+            if not chunk:
+                break
+            chunks.append(chunk)
+        return b"".join(chunks)
 
 
 def main(argv: list[str]) -> int:
@@ -88,17 +210,21 @@ def main(argv: list[str]) -> int:
     ctl_fd, link_fd, dest = int(argv[0]), int(argv[1]), argv[2]
     source, target, mode = (tuple(map(int, argv[i:i + 2])) for i in (3, 5, 7))
     frame = land_frame(source, target, *mode)
-    if not agent_died_flying(socket.socket(fileno=ctl_fd)):
+    death = agent_died_flying(socket.socket(fileno=ctl_fd))
+    if death is None:
         return 0
-    sys.stderr.write("perchd mavsentinel: the agent died flying the vehicle: LAND\n")
-    for i in range(LAND_REPEATS):
-        try:
-            send_land(link_fd, dest, frame)
-        except OSError as err:  # the link itself is gone: nothing more to do
-            sys.stderr.write(f"perchd mavsentinel: LAND not sent: {err}\n")
-            return 1
-        if i + 1 < LAND_REPEATS:
-            time.sleep(LAND_REPEAT_S)
+    sys.stderr.write("perchd mavsentinel: the agent died flying the vehicle: brake, LAND\n")
+    link = Link(link_fd, dest)
+    try:
+        if death.brake is not None:
+            fly_brake(link, source, target, death.brake)
+        for i in range(LAND_REPEATS):
+            link.send(frame)
+            if i + 1 < LAND_REPEATS:
+                time.sleep(LAND_REPEAT_S)
+    except OSError as err:  # the link itself is gone: nothing more to do
+        sys.stderr.write(f"perchd mavsentinel: LAND not sent: {err}\n")
+        return 1
     return 0
 
 
@@ -141,6 +267,10 @@ class Sentinel:
         if on != self._flying:
             self._flying = on
             self._send(b"F" if on else b"D")
+
+    def will(self, brake: Brake) -> None:
+        """The brake to fly first should the agent die now (drivers/mavbrake.py)."""
+        self._send(b"B" + brake.pack())
 
     def release(self) -> None:
         """Normal end: the sentinel exits without a word to the vehicle."""

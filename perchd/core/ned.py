@@ -82,6 +82,14 @@ def ned_quat(q_world_xyzw: Quat, frame: str | float) -> QuatWXYZ:
     return _canonical(q)
 
 
+def quaternion_wxyz(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (w, x, y, z) of Z-Y-X Euler angles [rad]."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+
 
 def euler_zyx(q: Quat) -> Vec3:
     """(roll, pitch, yaw) [rad] of an (x, y, z, w) quaternion, Z-Y-X order (docs/contracts.md §3)."""

@@ -4,6 +4,8 @@ vehicle not yet taken and one handed back say nothing."""
 
 from __future__ import annotations
 
+import itertools
+import math
 import socket
 import subprocess
 import sys
@@ -12,9 +14,18 @@ import threading
 import time
 
 import pytest
-from mavlink_double import ARDUPILOT, PX4, VehicleDouble, connected
+from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble, connected
+from perchd.drivers.mavbrake import (
+    BRAKE_ACCEL_MPS2,
+    BRAKE_DONE_MPS,
+    BRAKE_ROUNDS,
+    LEVEL_MAX_S,
+)
+from perchd.drivers.mavlink import HOVER_PARAM
 from perchd.drivers.mavsentinel import LAND_REPEATS, Sentinel, agent_died_flying
 from pymavlink import mavutil
+
+from perchd.core.ned import euler_zyx
 
 LAND = {ARDUPILOT: 9, PX4: (4 << 16) | (6 << 24)}  # the double's custom_mode for LAND
 
@@ -33,20 +44,27 @@ def airborne():
         vehicle.die()
 
 
-def agent(uri: str, engage: bool) -> subprocess.Popen:
+def agent(uri: str, engage: bool, speed: float | None = None, poses_for_s: float = 1e9
+          ) -> subprocess.Popen:
     """A process that connects perchd's driver to `uri` (engaging it when asked), says
-    "ready" and then streams a pitched setpoint at 100 Hz until it is killed."""
+    "ready" and then streams a pitched setpoint at 100 Hz until it is killed; with a
+    `speed` [m/s], mocap poses moving along world X (north: yaw0 = 0) go to the driver
+    beside it, for the first poses_for_s [s]."""
     code = textwrap.dedent(f"""
         import time
         from perchd.core.runtime import Runtime
-        from perchd.core.types import Phase, Setpoint
+        from perchd.core.types import Phase, Pose, Setpoint
         from perchd.drivers.base import open_driver
-        d = open_driver({uri!r} + "?mass=0.5", Runtime.real())
+        d = open_driver({uri!r} + "?mass=0.5&vision=0", Runtime.real())
         d.connect()
         if {engage}:
             d.engage()
         print("ready", flush=True)
+        t0, i = time.monotonic(), 0
         while True:
+            now, i = time.monotonic(), i + 1
+            if {speed} is not None and now - t0 < {poses_for_s}:
+                d.observe_pose(Pose("v", i, now, ({speed} * now, 0.0, 1.0), (0, 0, 0, 1)))
             d.send(Setpoint(0.0, 0.0, 0.2, 0.0, 5.0, 1, Phase.STAGE1))
             time.sleep(0.01)
     """)
@@ -56,15 +74,27 @@ def agent(uri: str, engage: bool) -> subprocess.Popen:
     return proc
 
 
-def modes_after_kill(vehicle: VehicleDouble, engage: bool = True) -> list[tuple[float, int]]:
-    """(seconds after the SIGKILL, custom mode) of every mode the vehicle was switched to."""
-    proc = agent(vehicle.uri, engage)
-    time.sleep(0.3)
+def modes_after_kill(vehicle: VehicleDouble, engage: bool = True, flown_s: float = 0.3,
+                     **poses: float) -> list[tuple[float, int]]:
+    """(seconds after the SIGKILL, custom mode) of every mode the vehicle was switched to;
+    the agent is killed flown_s [s] after it says ready."""
+    killed = kill_agent(vehicle, engage, flown_s, **poses)
+    return [(t - killed, mode) for t, mode in vehicle.modes if t > killed]
+
+
+def kill_agent(vehicle: VehicleDouble, engage: bool, flown_s: float, then=None,
+               **poses: float) -> float:
+    """time.monotonic() of the SIGKILL; returns once the sentinel has had time to act;
+    then(): called right after the kill."""
+    proc = agent(vehicle.uri, engage, **poses)
+    time.sleep(flown_s)
     killed = time.monotonic()
     proc.kill()
+    if then is not None:
+        then()
     proc.wait()
     time.sleep(LAND_REPEATS * 0.1 + 0.5)
-    return [(t - killed, mode) for t, mode in vehicle.modes if t > killed]
+    return killed
 
 
 @pytest.mark.parametrize("autopilot", [ARDUPILOT, PX4], ids=["ardupilot", "px4"])
@@ -77,6 +107,85 @@ def test_a_killed_agent_has_the_vehicle_landing_within_a_tenth_of_a_second(airbo
     assert after[0][0] < 0.1
     assert {mode for _, mode in after} == {LAND[autopilot]}
     assert len(after) == LAND_REPEATS  # repeated: a datagram may be lost
+
+
+@pytest.mark.parametrize("autopilot", [ARDUPILOT, PX4], ids=["ardupilot", "px4"])
+def test_a_vehicle_killed_at_speed_is_braked_levelled_then_landed(airborne, autopilot):
+    """At 0.9 m/s north the sentinel first leans it back (nose up, level in roll, at the
+    heading flown) at BRAKE_ACCEL_MPS2 for 0.3 s (0.9 / 3), then holds it level at the
+    hover thrust for LEVEL_MAX_S (this vehicle sends no velocity of its own to end that
+    sooner), then commands LAND."""
+    vehicle = airborne(autopilot)
+    killed = kill_agent(vehicle, True, 0.5, speed=0.9)
+    land = next(t for t, _ in vehicle.modes if t > killed)
+    sent = [t for t in vehicle.targets if killed + 0.005 < t.t < land]
+    lean = [t for t in sent if t.q != (1.0, 0.0, 0.0, 0.0)]
+    level = sent[len(lean):]
+    assert len(lean) >= 10 and all(t.q == lean[0].q for t in lean)
+    assert lean[-1].t - killed == pytest.approx(0.3, abs=0.05)
+    w, x, y, z = lean[0].q
+    roll, pitch, yaw = euler_zyx((x, y, z, w))
+    assert pitch == pytest.approx(math.atan2(BRAKE_ACCEL_MPS2, 9.81), abs=1e-5)
+    assert (roll, yaw) == pytest.approx((0.0, 0.0), abs=1e-5)
+    hover = SAFE_PARAMS[autopilot][HOVER_PARAM[autopilot]]
+    assert len(level) >= 10 and all(t.thrust == pytest.approx(hover) for t in level)
+    assert land - lean[-1].t == pytest.approx(LEVEL_MAX_S, abs=0.06)
+    assert {mode for t, mode in vehicle.modes if t > killed} == {LAND[autopilot]}
+
+
+def nose_up(q: tuple[float, float, float, float]) -> float:
+    """[rad] NED pitch of a (w, x, y, z) attitude."""
+    w, x, y, z = q
+    return euler_zyx((x, y, z, w))[1]
+
+
+def land_after_braking(vehicle: VehicleDouble, slowed_after_s: float) -> float:
+    """[s] from the kill at 0.9 m/s to the first LAND, the vehicle's own velocity (north)
+    0.9 m/s until slowed_after_s after the kill, then BRAKE_DONE_MPS / 2."""
+    vehicle.velocity_ned = (0.9, 0.0, 0.0)
+
+    def slow() -> None:
+        vehicle.velocity_ned = (BRAKE_DONE_MPS / 2, 0.0, 0.0)
+    killed = kill_agent(vehicle, True, 0.5, lambda: threading.Timer(slowed_after_s, slow).start(),
+                        speed=0.9)
+    deadline = time.monotonic() + 3.0
+    while not any(t > killed for t, _ in vehicle.modes) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return next(t - killed for t, _ in vehicle.modes if t > killed)
+
+
+def test_the_level_phase_ends_when_the_vehicle_says_it_has_stopped(airborne):
+    """PX4's LAND lands where its own braking would end from the speed it has: LAND waits
+    for the vehicle's velocity, and for no longer."""
+    assert 0.45 <= land_after_braking(airborne(PX4), 0.45) <= 0.45 + 0.1
+
+
+def test_a_vehicle_still_moving_is_braked_again_against_its_own_velocity(airborne):
+    """The mocap's 0.9 m/s was too little (the vehicle says 0.9 still after the level
+    phase): a second lean against that, and LAND once it says stopped."""
+    vehicle = airborne(PX4)
+    land = land_after_braking(vehicle, 1.0)  # in the second lean, which is flown whole
+    assert 1.1 <= land <= 1.2
+    leans = [t.t for t in vehicle.targets if nose_up(t.q) > 0.25]  # the agent's is down
+    starts = [b for a, b in itertools.pairwise(leans) if b - a > 0.2]
+    assert len(starts) == 1 and starts[0] - leans[0] == pytest.approx(0.8, abs=0.05)
+
+
+def test_braking_ends_after_its_rounds_whatever_the_vehicle_says(airborne):
+    rounds = BRAKE_ROUNDS * (0.3 + LEVEL_MAX_S)
+    assert rounds <= land_after_braking(airborne(PX4), 9.0) <= rounds + 0.2
+
+
+def test_the_lean_is_flown_whole_whatever_the_vehicle_says(airborne):
+    """The lean takes off the velocity measured; the attitude's lag delays the stop, so a
+    velocity that reads stopped early (a lag of its own) does not cut the lean short."""
+    assert 0.3 <= land_after_braking(airborne(PX4), 0.1) <= 0.3 + 0.1
+
+
+def test_a_brake_left_before_the_mocap_stopped_is_not_flown(airborne):
+    """Poses stopped 0.5 s before the kill: the velocity is not known, LAND at once."""
+    after = modes_after_kill(airborne(PX4), flown_s=0.6, speed=0.9, poses_for_s=0.1)
+    assert after and after[0][0] < 0.1
 
 
 def test_a_vehicle_not_yet_taken_is_left_alone(airborne):

@@ -127,6 +127,10 @@ class VehicleDouble:
         self.modes: list[tuple[float, int]] = []
         self.gcs_heartbeats: list[float] = []
         self.attitude_interval: float | None = None
+        self.velocity_ned: tuple[float, float, float] | None = None
+        """[m/s] LOCAL_POSITION_NED's velocity, streamed when asked for; None: not sent."""
+        self.position_interval: float | None = None
+        self._next_position = 0.0
         self._sending = True
         self._alive = True
         self._next_heartbeat = 0.0
@@ -154,6 +158,10 @@ class VehicleDouble:
                 self._next_target = now + self.target_interval
                 applied = self.applied_thrust(now)
                 self._send(lambda m: m.attitude_target_send(0, 0, [1, 0, 0, 0], 0, 0, 0, applied))
+            if self.position_interval and self.velocity_ned and now >= self._next_position:
+                self._next_position = now + self.position_interval
+                v = self.velocity_ned
+                self._send(lambda m: m.local_position_ned_send(0, 0, 0, -1, *v))
             if self.timesync and now >= self._next_timesync:
                 self._next_timesync = now + 0.1
                 self._send(lambda m: m.timesync_send(0, int(now * 1e9)))
@@ -238,6 +246,8 @@ class VehicleDouble:
             self.attitude_interval = p[1] / 1e6 if p[1] > 0 else None
         elif command == 511 and int(p[0]) == 83:
             self.target_interval = p[1] / 1e6 if p[1] > 0 else None
+        elif command == 511 and int(p[0]) == 32:
+            self.position_interval = p[1] / 1e6 if p[1] > 0 else None
         elif command == 511 and int(p[0]) == 245:
             self.sys_state_interval = p[1] / 1e6 if p[1] > 0 else None
         if self.prompt:
