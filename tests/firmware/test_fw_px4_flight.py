@@ -252,7 +252,7 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
             "toward_wall_m_by_0_25_s": [round(d, 3) for t, d, _ in after][::25][:16],
             "height_at_kill_m": at_kill[2], "final_height_m": after[-1][2],
             "load": os.getloadavg()})
-    # the sentinel's brake, then Land: 0.22-0.44 m over nine kills at 0.44-0.51 m/s
+    # the sentinel's brake, then Land: 0.22-0.46 m over twelve kills at 0.46-0.51 m/s
     # (docs/safety.md, "The brake"); Land alone had gone 0.36-0.63 m
     assert further <= 0.5
     assert "OFFBOARD" in modes
