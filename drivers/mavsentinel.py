@@ -215,9 +215,12 @@ def main(argv: list[str]) -> int:
         return 0
     sys.stderr.write("perchd mavsentinel: the agent died flying the vehicle: brake, LAND\n")
     link = Link(link_fd, dest)
-    try:
-        if death.brake is not None:
+    if death.brake is not None:
+        try:
             fly_brake(link, source, target, death.brake)
+        except Exception as err:  # noqa: BLE001 - whatever failed, LAND must still go out
+            sys.stderr.write(f"perchd mavsentinel: brake abandoned ({err!r}): LAND\n")
+    try:
         for i in range(LAND_REPEATS):
             link.send(frame)
             if i + 1 < LAND_REPEATS:

@@ -265,3 +265,38 @@ def test_over_a_udpin_link_the_land_goes_to_the_vehicle_heard():
     msgs = [parser.parse_char(vehicle.recv(512)) for _ in range(LAND_REPEATS)]
     conn.close()
     assert all(m.command == 176 and (m.param2, m.param3) == (4, 6) for m in msgs)
+
+
+def test_a_brake_that_fails_still_ends_in_land(monkeypatch):
+    """The brake is the sentinel's first act, LAND its duty: an error in the one must not
+    cost the other."""
+    import signal
+
+    from perchd.drivers import mavsentinel
+    from perchd.drivers.mavbrake import brake_for
+
+    def broken(*_: object) -> None:
+        raise RuntimeError("a brake that cannot be flown")
+    monkeypatch.setattr(mavsentinel, "fly_brake", broken)
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle.bind(("127.0.0.1", 0))
+    vehicle.settimeout(2.0)
+    link = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    ours.send(b"F")
+    ours.send(b"B" + brake_for((1.0, 0.0, 0.0), 0.0, 0.4, time.monotonic()).pack())
+    ours.close()
+    dest = f"127.0.0.1:{vehicle.getsockname()[1]}"
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT)}
+    try:
+        argv = [str(theirs.detach()), str(link.fileno()), dest, "255", "190", "1", "1", "4", "6"]
+        assert mavsentinel.main(argv) == 0
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    parser = mavutil.mavlink.MAVLink(None)
+    msgs = [parser.parse_char(vehicle.recv(512)) for _ in range(LAND_REPEATS)]
+    link.close()
+    vehicle.close()
+    assert all(m.command == 176 and (m.param2, m.param3) == (4, 6) for m in msgs)
+
