@@ -292,12 +292,12 @@ class MocapSyncLoop(_Loop):
             missed = 0
             if pose is None:  # no frame in time: tick anyway (the stale-mocap rule runs)
                 release = start
-                newest = self.source.latest()
-                seq = seq if newest is None else newest.seq  # follows a restarted sender
+                pose = self.source.latest()  # what the tick will read, if anything
             else:
                 release = pose.t + pose.latency  # its arrival on the agent's clock
+            if pose is not None:  # frames that came while the wait was held count too
                 missed = max(0, pose.seq - seq - 1) if seq != NO_SEQ else 0
-                seq = pose.seq
+                seq = pose.seq  # follows a restarted sender
             go_on, end, compute = self._timed(tick, k, start)
             self._record(k, release, start, compute, end > start + self.period, missed)
             if not go_on:

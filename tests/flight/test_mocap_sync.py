@@ -71,6 +71,35 @@ def test_without_poses_it_still_ticks_every_one_and_a_half_periods():
     assert source.latest() is None
 
 
+class HeldSource:
+    """Pose 1; then a wait held 3 s (a hung call, as sim://?stall= makes) that times out
+    while frames 2-301 arrive; then one frame at a time."""
+
+    def __init__(self, clock: ManualClock) -> None:
+        self.clock, self.newest, self.waits = clock, 0, 0
+
+    def wait(self, after_seq: int, timeout: float) -> Pose | None:
+        self.waits += 1
+        if self.waits == 2:
+            self.clock.advance(3.0)
+            self.newest = 301
+            return None
+        self.newest += 1
+        return self.latest()
+
+    def latest(self) -> Pose | None:
+        t = self.clock.now()
+        return Pose("b", self.newest, t, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+
+
+def test_frames_that_arrive_while_a_wait_is_held_are_counted_missed():
+    """The tick after a held wait reads frame 301: 2-300 were skipped (before, a timed-out
+    wait took the newest number without counting them: CI once saw 3 missed for 300)."""
+    clock = ManualClock(0.0)
+    loop = MocapSyncLoop(clock, 100.0, HeldSource(clock))
+    assert loop.run(lambda k, t: k < 3).summary("mocap").missed == 299
+
+
 def test_make_loop_builds_the_mode_the_config_names():
     rt, source = sim_source()
     assert isinstance(make_loop("fixed", rt.clock, 100.0, source), FixedRateLoop)
