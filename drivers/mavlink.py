@@ -83,8 +83,10 @@ from perchd.drivers.mavparams import (
 )
 from perchd.drivers.mavsentinel import (
     CMD_DO_SET_MODE,
+    CMD_SET_MESSAGE_INTERVAL,
     CUSTOM_MODE_ENABLED,
     IGNORE_BODY_RATES,
+    LOCAL_POSITION_NED_ID,
     Sentinel,
 )
 from perchd.drivers.mavvision import timesync_reply, vision_estimate
@@ -113,13 +115,13 @@ ARDUPILOT_GUIDED_NOGPS, ARDUPILOT_LAND = 20, 9
 PX4_OFFBOARD = (6, 0)  # (main mode, sub mode)
 PX4_AUTO_LAND = (4, 6)
 HOVER_PARAM = {ARDUPILOT: "MOT_THST_HOVER", PX4: "MPC_THR_HOVER"}
-ATTITUDE_MSG_ID, LOCAL_POSITION_NED_MSG_ID, ATTITUDE_TARGET_MSG_ID = 30, 32, 83
+ATTITUDE_MSG_ID, ATTITUDE_TARGET_MSG_ID = 30, 83
 EXTENDED_SYS_STATE_MSG_ID = 245
 STATUS_HZ = 10.0
 """[Hz] LOCAL_POSITION_NED (the autopilot's own estimate: does it take the mocap?) and
 ATTITUDE_TARGET (the thrust it applies: spooled up?) asked for: a spool-up seen 0.1 s late
 costs nothing, and every message parsed is Python time beside the control loop."""
-CMD_ARM, CMD_SET_MESSAGE_INTERVAL = 400, 511
+CMD_ARM = 400
 MAV_RESULT_ACCEPTED, MAV_RESULT_IN_PROGRESS = 0, 5
 LANDED_ON_GROUND = 1  # MAV_LANDED_STATE
 SPOOL_FRACTION = 0.25
@@ -470,7 +472,7 @@ class MavlinkDriver(DriverBase):
             raise LinkError(f"{self.uri}: autopilot type {self.autopilot} is neither ArduPilot nor PX4")
         self._command(CMD_SET_MESSAGE_INTERVAL, ATTITUDE_MSG_ID, 1e6 / self.stream_hz)
         self._command(CMD_SET_MESSAGE_INTERVAL, EXTENDED_SYS_STATE_MSG_ID, 1e5)  # landed state
-        for msg_id in (ATTITUDE_TARGET_MSG_ID, LOCAL_POSITION_NED_MSG_ID):
+        for msg_id in (ATTITUDE_TARGET_MSG_ID, LOCAL_POSITION_NED_ID):
             self._command(CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / STATUS_HZ)
         if self.autopilot == ARDUPILOT:
             options = int(self._param("GUID_OPTIONS"))
