@@ -125,21 +125,29 @@ def lag_event(log: Path) -> dict:
     return event(log)
 
 
-def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
-                 config_add: str = "") -> dict:
-    proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
+def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str],
+             config_add: str = "", driver_add: str = "") -> list[str]:
+    """`perchd fly` against a started harness, as a user flies it; its flight log is
+    tmp/flight.jsonl. config_add: TOML appended to the flight config; driver_add: URI
+    parameters appended to the driver's."""
+    driver += ("&" if "?" in driver else "?") + driver_add if driver_add else ""
     config: list[str] = []
     if fw.config is not None or config_add.strip():
         (tmp / "flight.toml").write_text((fw.config or "version = 1\n") + config_add)
         config = ["--config", str(tmp / "flight.toml")]
+    return [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
+            mocap, *config, *surface, "--log", str(tmp / "flight.jsonl"),
+            "--state", str(tmp / "vehicles.json"), "--json"]
+
+
+def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
+                 config_add: str = "", driver_add: str = "") -> dict:
+    proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
     from fwharness import YawWatch, flight_window, heading_error
     watch = YawWatch(mocap)
     try:
-        done = subprocess.run(
-            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
-             mocap, *config, *surface, "--log", str(tmp / "flight.jsonl"),
-             "--state", str(tmp / "vehicles.json"), "--json"],
-            capture_output=True, text=True, timeout=180, env=ENV)
+        done = subprocess.run(fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add),
+                              capture_output=True, text=True, timeout=180, env=ENV)
     finally:
         watch.close()
         sim = stop_harness(proc)
@@ -242,6 +250,9 @@ def main() -> int:
     ap.add_argument("--config-add", default="", metavar="TOML",
                     help="TOML tables appended to every firmware flight's config, e.g. "
                          "'[tau_gains]\\npredict = false' (the sim:// flights keep the default)")
+    ap.add_argument("--driver-add", default="", metavar="PARAMS",
+                    help="URI parameters appended to every firmware flight's driver, "
+                         "e.g. 'tilt=0'")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     args = ap.parse_args()
     if args.flights < 1 or not 0.0 <= args.noise <= 0.1:
@@ -264,7 +275,8 @@ def main() -> int:
             tmp = root / fw.name / str(i)
             tmp.mkdir(parents=True, exist_ok=True)
             runs["firmware"].append(fly_firmware(fw, binary, args.noise, i, tmp,
-                                                 args.config_add.replace("\\n", "\n") + "\n"))
+                                                 args.config_add.replace("\\n", "\n") + "\n",
+                                                 args.driver_add))
             runs["sim"].append(fly_sim(args.noise, i, tmp))
             if not args.json:
                 f = runs["firmware"][-1]

@@ -25,6 +25,10 @@ first partner (PX4) answers only that one: give it a fixed one with `sport=` (or
   instead of refusing to fly.
 - vision=0: do not forward mocap to the autopilot nor check its external-navigation setup
   (a vehicle that has its own position source, e.g. GPS outdoors or in SITL).
+- tilt=0: send the setpoints as they are. By default (tilt=1) each is rotated by the change
+  in the autopilot's tilt error, its attitude estimate (ATTITUDE) less the mocap's
+  (drivers/mavtilt.py): the autopilot flies its estimate, and an estimate a degree off
+  leans the vehicle a degree off what perchd asked for.
 
 connect() changes nothing on the vehicle: it hears its heartbeat, asks for the messages the
 driver reads and checks its parameters (drivers/mavparams.py): a vehicle that would keep
@@ -89,6 +93,7 @@ from perchd.drivers.mavsentinel import (
     LOCAL_POSITION_NED_ID,
     Sentinel,
 )
+from perchd.drivers.mavtilt import NO_TILT, Tilt, TiltCorrection
 from perchd.drivers.mavvision import timesync_reply, vision_estimate
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
@@ -178,7 +183,8 @@ def open_mavlink(uri: Uri, runtime: Runtime) -> "MavlinkDriver":
         yaw0=heading_offset(opts),
         configure=bool_param(opts, "configure"),
         sport=source_port(opts, device),
-        vision=bool_param(opts, "vision", True))
+        vision=bool_param(opts, "vision", True),
+        tilt=bool_param(opts, "tilt", True))
 
 
 def heading_offset(opts: Uri) -> float | None:
@@ -204,9 +210,12 @@ def source_port(opts: Uri, device: str) -> int | None:
     return int(port)
 
 
-def ned_attitude(sp: Setpoint, yaw0: float = 0.0) -> tuple[float, float, float, float]:
-    """perchd's Z-up attitude as the FRD-in-NED quaternion an autopilot takes."""
-    return quaternion_wxyz(sp.roll, -sp.pitch, ned_yaw(sp.yaw, yaw0))
+def ned_attitude(sp: Setpoint, yaw0: float = 0.0, tilt: Tilt = NO_TILT
+                 ) -> tuple[float, float, float, float]:
+    """perchd's Z-up attitude as the FRD-in-NED quaternion an autopilot takes, its roll and
+    pitch moved by `tilt` (FRD in NED)."""
+    return quaternion_wxyz(sp.roll + tilt.roll_rad, -sp.pitch + tilt.pitch_rad,
+                           ned_yaw(sp.yaw, yaw0))
 
 
 def ned_yaw(yaw: float, yaw0: float) -> float:
@@ -280,7 +289,7 @@ class MavlinkDriver(DriverBase):
     def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float | None,
                  hover: float | None, arm: bool, timeout: float, stream_hz: float,
                  wait: float, yaw0: float | None = 0.0, configure: bool = False,
-                 sport: int | None = None, vision: bool = True) -> None:
+                 sport: int | None = None, vision: bool = True, tilt: bool = True) -> None:
         self.uri = uri
         self.device = device
         self.clock = runtime.clock
@@ -298,6 +307,7 @@ class MavlinkDriver(DriverBase):
         self.sport = sport
         self.vision = vision
         self.vision_sent = 0  # VISION_POSITION_ESTIMATEs sent
+        self.tilt: TiltCorrection | None = TiltCorrection() if tilt else None
         self._ap_thrust: float | None = None  # ATTITUDE_TARGET thrust the vehicle applies
         self.ekf_position_ned: tuple[float, float, float] | None = None
         """[m] the autopilot's own position estimate (LOCAL_POSITION_NED), newest."""
@@ -382,7 +392,9 @@ class MavlinkDriver(DriverBase):
         if self.yaw0 is None:  # auto, and no pose yet: it faces where it is told to
             self._align_heading((self._yaw_ned or 0.0) + setpoint.yaw)
         self._level_yaw = ned_yaw(setpoint.yaw, self.yaw0)
-        self._send_target(ned_attitude(setpoint, self.yaw0), self.model.fraction(setpoint.thrust))
+        tilt = NO_TILT if self.tilt is None else self.tilt.correction(self.clock.now())
+        self._send_target(ned_attitude(setpoint, self.yaw0, tilt),
+                          self.model.fraction(setpoint.thrust))
 
     def observe_pose(self, pose: Any) -> None:
         """Each pose goes to the autopilot's EKF (drivers/mavvision.py) unless vision=0."""
@@ -390,8 +402,12 @@ class MavlinkDriver(DriverBase):
             return
         self._track_yaw0(pose)
         self._renew_will(pose)
-        if self.vision and self.yaw0 is not None:
-            v = vision_estimate(pose, self.yaw0)
+        if self.yaw0 is None:
+            return
+        v = vision_estimate(pose, self.yaw0)
+        if self.tilt is not None:
+            self.tilt.on_pose(pose.t, v.rpy[0], v.rpy[1])
+        if self.vision:
             with self._lock:
                 self._conn.mav.vision_position_estimate_send(v.usec, *v.ned, *v.rpy,
                                                              v.covariance)
@@ -700,6 +716,9 @@ class MavlinkDriver(DriverBase):
             self._acks[msg.command] = msg.result
         elif kind == "ATTITUDE":
             self._yaw_ned = float(msg.yaw)
+            if self.tilt is not None:
+                self.tilt.on_estimate(msg.time_boot_ms * 1e-3, self._heard, float(msg.roll),
+                                      float(msg.pitch))
         elif kind == "EXTENDED_SYS_STATE":
             self._landed_state = int(msg.landed_state)
         elif kind == "LOCAL_POSITION_NED":

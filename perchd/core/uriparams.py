@@ -84,7 +84,9 @@ PARAMS: dict[tuple[str, str], tuple[tuple[str, str, str, str], ...]] = {
         ("yaw0", "deg", "0", "autopilot heading of world X, or auto (measured from the poses)"),
         ("configure", "", "0", "1: set the autopilot's parameters perchd needs (docs/safety.md)"),
         ("sport", "", "any", "fixed local UDP source port of a udpout: link"),
-        ("vision", "", "1", "0: neither forward mocap to the autopilot nor check its EKF set-up")),
+        ("vision", "", "1", "0: neither forward mocap to the autopilot nor check its EKF set-up"),
+        ("tilt", "", "1", "0: do not lean setpoints by the change in the autopilot's tilt "
+                          "error (its attitude estimate less the mocap's)")),
     ("driver", "zmq"): (
         ("vehicle", "", "cf1", "vehicle name in setpoints"),
         ("bind", "", "0", "1: bind instead of connect"),

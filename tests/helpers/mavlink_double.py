@@ -12,7 +12,9 @@ It behaves like the slice of ArduPilot or PX4 the driver talks to:
   param2/param3 as main/sub mode and refuses OFFBOARD (MAV_RESULT_DENIED) unless attitude
   targets have streamed for more than 1 s and the last is under 0.5 s old;
 - COMMAND_LONG COMPONENT_ARM_DISARM (400), SET_MESSAGE_INTERVAL (511) for ATTITUDE and
-  EXTENDED_SYS_STATE, acknowledged; those are then streamed at the asked rate;
+  EXTENDED_SYS_STATE, acknowledged; those are then streamed at the asked rate; ATTITUDE
+  holds its attitude estimate (roll, pitch, yaw: settable) and its boot time, time.monotonic()
+  less boot_s;
 - SET_ATTITUDE_TARGET recorded with its arrival time; ATTITUDE_TARGET (83) streamed when
   asked, its thrust the one applied: 0 until spool_s after the first positive thrust once
   armed on the ground (ArduCopter's MOT_SAFE_TIME + MOT_SPOOL_TIME), then the last target's;
@@ -99,6 +101,8 @@ class VehicleDouble:
         self.vision_to_arm = vision_to_arm
         self.prompt, self.heartbeat_s = prompt, heartbeat_s
         self.yaw = math.radians(yaw_deg)  # [rad] NED heading
+        self.roll = self.pitch = 0.0  # [rad] its attitude estimate's, FRD in NED (ATTITUDE)
+        self.boot_s = 0.0  # [s] time.monotonic() at its boot: ATTITUDE's time_boot_ms
         self.landed_state = 2 if airborne else 1  # MAV_LANDED_STATE_IN_AIR / ON_GROUND
         self.partner = None  # lock_partner: the first address heard
         self.conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=1,
@@ -152,7 +156,8 @@ class VehicleDouble:
                 self._heartbeat()
             if self.attitude_interval and now >= self._next_attitude:
                 self._next_attitude = now + self.attitude_interval
-                self._send(lambda m: m.attitude_send(int(now * 1000) & 0xFFFFFFFF, 0, 0,
+                boot_ms = int((now - self.boot_s) * 1000) & 0xFFFFFFFF
+                self._send(lambda m: m.attitude_send(boot_ms, self.roll, self.pitch,
                                                      self.yaw, 0, 0, 0))
             if self.target_interval and now >= self._next_target:
                 self._next_target = now + self.target_interval
