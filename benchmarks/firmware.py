@@ -147,6 +147,7 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
     watch = YawWatch(mocap)
     try:
         done = subprocess.run(fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add),
+                              check=False,
                               capture_output=True, text=True, timeout=180, env=ENV)
     finally:
         watch.close()
@@ -240,20 +241,38 @@ def print_row(name: str, s: dict, plan: dict) -> None:
         print(f"            outcomes: {', '.join(s['outcomes'])}")
 
 
+def add_selection(ap: argparse.ArgumentParser, what: str) -> None:
+    """--only, --keep and --json, as every firmware benchmark takes them."""
+    ap.add_argument("--only", nargs="*", choices=[f.name for f in FIRMWARES],
+                    help="these firmwares only")
+    ap.add_argument("--keep", metavar="DIR", help=f"keep each {what}'s logs under DIR")
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def selected(only: list[str] | None):
+    """(firmware, its binary) for each firmware asked for whose environment variable names
+    a binary; one line on stderr for each skipped."""
+    for fw in FIRMWARES:
+        binary = os.environ.get(fw.env, "")
+        if only and fw.name not in only:
+            continue
+        if not binary:
+            print(f"{fw.name}: skipped ({fw.env} is not set)", file=sys.stderr)
+            continue
+        yield fw, binary
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flights", type=int, default=10, help="flights per firmware (10)")
     ap.add_argument("--noise", type=float, default=0.001, help="[m] mocap noise std (0.001)")
-    ap.add_argument("--only", nargs="*", choices=[f.name for f in FIRMWARES],
-                    help="these firmwares only")
-    ap.add_argument("--keep", metavar="DIR", help="keep each flight's logs under DIR")
+    add_selection(ap, "flight")
     ap.add_argument("--config-add", default="", metavar="TOML",
                     help="TOML tables appended to every firmware flight's config, e.g. "
                          "'[tau_gains]\\npredict = false' (the sim:// flights keep the default)")
     ap.add_argument("--driver-add", default="", metavar="PARAMS",
                     help="URI parameters appended to every firmware flight's driver, "
                          "e.g. 'tilt=0'")
-    ap.add_argument("--json", action="store_true", help="print one JSON object")
     args = ap.parse_args()
     if args.flights < 1 or not 0.0 <= args.noise <= 0.1:
         print("benchmarks/firmware.py: --flights must be >= 1 and --noise 0..0.1 m",
@@ -263,13 +282,7 @@ def main() -> int:
     out: dict = {"plan": {"duration": plan["duration"], "v_contact": plan["v_contact"],
                           "v0": plan["v0"]}, "noise_m": args.noise, "firmwares": {}}
     root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="perchd-fwbench-"))
-    for fw in FIRMWARES:
-        if args.only and fw.name not in args.only:
-            continue
-        binary = os.environ.get(fw.env, "")
-        if not binary:
-            print(f"{fw.name}: skipped ({fw.env} is not set)", file=sys.stderr)
-            continue
+    for fw, binary in selected(args.only):
         runs: dict[str, list[dict]] = {"firmware": [], "sim": []}
         for i in range(args.flights):
             tmp = root / fw.name / str(i)

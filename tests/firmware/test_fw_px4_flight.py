@@ -27,11 +27,13 @@ from fwharness import (
     ENV,
     PLAN,
     YawWatch,
+    after_kill,
     flight_window,
     heading_error,
+    kill_at_speed,
     lag_event,
-    log_rows,
     start_placed,
+    surface_normal,
 )
 from perchd.drivers.base import open_driver
 
@@ -145,11 +147,6 @@ def harness(tmp: Path, *extra: str) -> tuple[subprocess.Popen, str, str, list[st
                         str(tmp / "px4.log"), *extra, env=ENV)
 
 
-def surface_normal(surface: list[str]) -> tuple[float, float, float]:
-    n = [float(c) for c in surface[surface.index("--normal") + 1:][:3]]
-    return (n[0], n[1], n[2])
-
-
 def fly_argv(tmp: Path, mocap: str, driver: str, surface: list[str]) -> list[str]:
     config = tmp / "px4.toml"
     config.write_text(CONFIG)
@@ -229,32 +226,20 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
     try:
         fly = subprocess.Popen(fly_argv(tmp_path, mocap, driver, surface), env=ENV,
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        log = tmp_path / "flight.jsonl"
-        assert wait_for_speed(log, KILL_SPEED_MPS, 90.0), "the approach never got up to speed"
-        fly.send_signal(signal.SIGKILL)
-        killed = time.monotonic()
-        fly.wait()
+        killed = kill_at_speed(fly, tmp_path / "flight.jsonl", KILL_SPEED_MPS, 90.0)
+        assert killed is not None, "the approach never got up to speed"
         time.sleep(8.0)  # COM_OF_LOSS_T, then PX4's own action
         sim = stop(proc)
     finally:
         watch.close()
         shut(proc)
     modes = sim["modes"]
-    n = surface_normal(surface)
-    at_kill = min(watch.positions, key=lambda s: abs(s[0] - killed))[1]
-    after = [(t - killed, sum((p[i] - at_kill[i]) * n[i] for i in range(3)), p[2])
-             for t, p in watch.positions if t >= killed]
-    further = max(d for _, d, _ in after)
-    before = min(watch.positions, key=lambda s: abs(s[0] - (killed - 0.2)))
-    speed = sum((at_kill[i] - before[1][i]) * n[i] for i in range(3)) / 0.2
-    report({"test": "px4-sigkill", "boot": boot, "modes": modes, "further_toward_wall_m": further,
-            "speed_at_kill_mps": speed,
-            "toward_wall_m_by_0_25_s": [round(d, 3) for t, d, _ in after][::25][:16],
-            "height_at_kill_m": at_kill[2], "final_height_m": after[-1][2],
+    figures = after_kill(watch.positions, killed, surface_normal(surface))
+    report({"test": "px4-sigkill", "boot": boot, "modes": modes, **figures,
             "load": os.getloadavg()})
     # the sentinel's brake, then Land: 0.22-0.46 m over twelve kills at 0.46-0.51 m/s
     # (docs/safety.md, "The brake"); Land alone had gone 0.36-0.63 m
-    assert further <= 0.5
+    assert figures["further_toward_wall_m"] <= 0.5
     assert "OFFBOARD" in modes
     # What PX4 did when the agent died follows its take-over. Landed and disarmed, PX4 may
     # report the mode last chosen, OFFBOARD, again (seen once in the vision boot's blind land).
@@ -265,15 +250,6 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
 
 KILL_SPEED_MPS = 0.5
 """[m/s] mid-approach: killed once the flight log shows this speed toward the wall."""
-
-
-def wait_for_speed(log: Path, speed: float, timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if any(r["phase"] == "approach" and r["xdot"] >= speed for r in log_rows(log)[-3:]):
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def wait_for_phase(log: Path, phase: str, timeout_s: float) -> bool:

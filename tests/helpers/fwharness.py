@@ -122,3 +122,46 @@ def flight_window(log: Path) -> tuple[float, float]:
 def heading_error(yaws: list[float], heading: float) -> float:
     """[rad] largest |yaw - heading|."""
     return max(abs(math.remainder(y - heading, math.tau)) for y in yaws)
+
+
+def kill_at_speed(fly: subprocess.Popen, log: Path, speed_mps: float,
+                  timeout_s: float) -> float | None:
+    """SIGKILL `perchd fly` once its flight log shows the approach at speed_mps toward the
+    wall: time.monotonic() of the kill. None when the flight ended or never got there
+    within timeout_s (it is killed then all the same)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and fly.poll() is None:
+        if any(r["phase"] == "approach" and r["xdot"] >= speed_mps for r in log_rows(log)[-3:]):
+            fly.send_signal(signal.SIGKILL)
+            killed = time.monotonic()
+            fly.wait()
+            return killed
+        time.sleep(0.02)
+    fly.kill()
+    fly.wait()
+    return None
+
+
+def surface_normal(surface: list[str]) -> tuple[float, float, float]:
+    """The unit normal of `perchd fly`'s --normal option (its default, 1 0 0, without one)."""
+    if "--normal" not in surface:
+        return (1.0, 0.0, 0.0)
+    n = [float(c) for c in surface[surface.index("--normal") + 1:][:3]]
+    size = math.sqrt(sum(c * c for c in n))
+    return (n[0] / size, n[1] / size, n[2] / size)
+
+
+def after_kill(positions: list[tuple[float, tuple[float, float, float]]], killed: float,
+               normal: tuple[float, float, float]) -> dict:
+    """From the mocap's positions [(time.monotonic() s, p m)] (YawWatch.positions): how far
+    the vehicle went on toward the wall after the kill (the largest displacement along the
+    normal), its speed along the normal over the 0.2 s before it, and its height after."""
+    def along(a, b) -> float:
+        return sum((b[i] - a[i]) * normal[i] for i in range(3))
+    at_kill = min(positions, key=lambda s: abs(s[0] - killed))[1]
+    before = min(positions, key=lambda s: abs(s[0] - (killed - 0.2)))[1]
+    after = [(t - killed, along(at_kill, p), p[2]) for t, p in positions if t >= killed]
+    return {"further_toward_wall_m": max(d for _, d, _ in after),
+            "speed_at_kill_mps": along(before, at_kill) / 0.2,
+            "toward_wall_m_by_0_25_s": [round(d, 3) for _, d, _ in after][::25][:16],
+            "height_at_kill_m": at_kill[2], "final_height_m": after[-1][2]}
