@@ -357,6 +357,8 @@ class MavlinkDriver(DriverBase):
         if self.device.startswith("udpout:"):
             watch_refusals(self._conn, self._on_refused)
         self._stopped = self._engaged = False
+        if self.tilt is not None:  # another link, maybe another boot: its clock learnt anew
+            self.tilt = TiltCorrection()
         self._tickers = [Ticker(0.0, self._receive, "mavlink-receive").start(),
                          Ticker(KEEPALIVE_S / 2, self._keepalive, "mavlink-keepalive").start()]
         try:
@@ -397,7 +399,8 @@ class MavlinkDriver(DriverBase):
                           self.model.fraction(setpoint.thrust))
 
     def observe_pose(self, pose: Any) -> None:
-        """Each pose goes to the autopilot's EKF (drivers/mavvision.py) unless vision=0."""
+        """Each pose goes to the autopilot's EKF (drivers/mavvision.py) unless vision=0, and
+        is paired with its attitude estimates for the tilt correction unless tilt=0."""
         if not getattr(pose, "valid", True) or self._conn is None:
             return
         self._track_yaw0(pose)

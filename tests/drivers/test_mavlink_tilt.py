@@ -129,3 +129,20 @@ def test_the_driver_leans_each_setpoint_by_the_change_in_the_autopilots_tilt_err
     finally:
         drv.close()
         v.close()
+
+
+def test_a_new_connection_learns_the_autopilots_clock_anew():
+    """Another connect() may reach another boot of the autopilot: nothing paired before it
+    carries over."""
+    v = VehicleDouble(PX4)
+    v.boot_s = time.monotonic() - 100.0
+    drv = connected(v, "&yaw0=auto", engage=False)
+    try:
+        stream_poses(drv, 1.3, 0)
+        assert drv.tilt.paired > 0
+        drv.close()
+        drv.connect()
+        assert drv.tilt.paired == 0
+    finally:
+        drv.close()
+        v.close()
