@@ -405,7 +405,7 @@ class MavlinkDriver(DriverBase):
             return
         self._track_yaw0(pose)
         self._renew_will(pose)
-        if self.yaw0 is None:
+        if self.yaw0 is None or not (self.vision or self.tilt):
             return
         v = vision_estimate(pose, self.yaw0)
         if self.tilt is not None:
