@@ -55,9 +55,17 @@ def test_an_exception_inside_the_block_still_stops_them():
 
 
 def perchd_bench(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "perchd", "bench", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    """`perchd bench ARGS`, SIGINT handled in it whatever this process inherited: a runner
+    that starts the tests in the background (`cmd &` from a script) passes them SIGINT
+    ignored, which exec keeps, and Python then installs no KeyboardInterrupt handler; a
+    handled one is reset to the default at exec."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return subprocess.Popen([sys.executable, "-m", "perchd", "bench", *args],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env={**os.environ, "PYTHONPATH": str(ROOT)})
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @pytest.mark.slow
