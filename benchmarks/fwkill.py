@@ -75,13 +75,12 @@ def kill_once(fw: Firmware, binary: str, speed: float, tmp: Path) -> dict:
     finally:
         watch.close()
         sim = stop_harness(proc)
-    said = [ln.strip() for ln in (tmp / "fly.err").read_text().splitlines()
-            if "mavsentinel" in ln]
+    said = (tmp / "fly.err").read_text()
     if killed is None:
-        return {"killed": False, "said": (tmp / "fly.err").read_text()[-300:]}
+        return {"killed": False, "said": said[-300:]}
     return {"killed": True, **after_kill(watch.positions, killed, surface_normal(surface)),
             "modes_after": modes_after(sim), "motors_off_s": motors_off_after(sim, killed),
-            "sentinel": said}
+            "sentinel": [ln.strip() for ln in said.splitlines() if "mavsentinel" in ln]}
 
 
 def summary(kills: list[dict]) -> dict:

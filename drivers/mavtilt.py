@@ -124,11 +124,13 @@ class TiltCorrection:
                     clamp(self._fast.pitch_rad - self._slow.pitch_rad))
 
     def _mocap_at(self, t: float) -> Tilt | None:
-        """The mocap's angles interpolated at t; None outside the poses kept."""
-        after = next((i for i, p in enumerate(self._poses) if p[0] >= t), None)
-        if not after:  # before the first pose kept, or after the newest
+        """The mocap's angles interpolated at t; None outside the poses kept. Searched from
+        the newest: an estimate is paired within a pose or two of it."""
+        before = next((i for i in range(len(self._poses) - 1, -1, -1)
+                       if self._poses[i][0] < t), None)
+        if before is None or before == len(self._poses) - 1:  # not inside the poses kept
             return None
-        (t0, r0, p0), (t1, r1, p1) = self._poses[after - 1], self._poses[after]
+        (t0, r0, p0), (t1, r1, p1) = self._poses[before], self._poses[before + 1]
         f = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
         return Tilt(r0 + f * math.remainder(r1 - r0, math.tau), p0 + f * (p1 - p0))
 
