@@ -61,6 +61,11 @@ class Driver(Protocol):
         the session and again by flight.run.fly(); raises ConfigError, one line naming both
         values, when the URI's own mass= disagrees (nothing has been armed or flown yet)."""
 
+    def bind_mocap(self, uri: str) -> None:
+        """The flight's mocap URI, before connect(): a driver whose helper outlives the
+        agent (the MAVLink sentinel) opens it there to keep the vehicle's own estimator fed
+        after the agent dies."""
+
     def thrust_ceiling_n(self) -> float | None:
         """[N] the most collective thrust the vehicle flies, in this driver's newtons (None:
         no ceiling known); the flight's saturation uses min(config, this)."""
@@ -87,6 +92,9 @@ class DriverBase:
 
     def bind_mass(self, mass_kg: float) -> None:
         """Links that pass newtons through have no use for the mass."""
+
+    def bind_mocap(self, uri: str) -> None:
+        """Links with nothing outliving the agent have no use for the mocap's URI."""
 
     def thrust_ceiling_n(self) -> float | None:
         return None

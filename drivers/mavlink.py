@@ -40,7 +40,8 @@ heading, the offboard mode, arming (arm=1), the spool-up; the flight's poses go 
 meanwhile. Until then perchd's heartbeat is all the vehicle hears, and a failsafe before
 it commands nothing (the vehicle is not perchd's to land). From the acknowledged mode switch
 on, a sentinel process (drivers/mavsentinel.py) holds a copy of the link and commands LAND
-the moment this process dies, until the vehicle leaves the offboard mode.
+the moment this process dies, until the vehicle leaves the offboard mode; with vision on it
+relays the flight's mocap (bind_mocap) to the EKF until the landing is over.
 Each pose the flight uses goes to the autopilot as VISION_POSITION_ESTIMATE
 (drivers/mavvision.py), so its own failsafe can hold or land in place; an EKF on mocap alone
 refuses to arm until it has some, so engage() asks again every ARM_RETRY_S within `wait`.
@@ -92,9 +93,10 @@ from perchd.drivers.mavsentinel import (
     IGNORE_BODY_RATES,
     LOCAL_POSITION_NED_ID,
     Sentinel,
+    px4_custom_mode,
 )
 from perchd.drivers.mavtilt import NO_TILT, Tilt, TiltCorrection
-from perchd.drivers.mavvision import timesync_reply, vision_estimate
+from perchd.drivers.mavvision import timesync_reply, vision_estimate, vision_message
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
 
@@ -281,10 +283,6 @@ def bind_source_port(conn: Any, port: int, uri: str) -> None:
         raise LinkError(f"{uri}: cannot bind source port {port}: {err.strerror or err}") from None
 
 
-def px4_custom_mode(main: int, sub: int) -> int:
-    return (main << 16) | (sub << 24)
-
-
 class MavlinkDriver(DriverBase):
     def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float | None,
                  hover: float | None, arm: bool, timeout: float, stream_hz: float,
@@ -345,6 +343,8 @@ class MavlinkDriver(DriverBase):
         self._sentinel: Sentinel | None = None  # lands the vehicle if this process dies
         self._velocity = VelocityTracker()  # from the mocap, for the sentinel's brake
         self._will_at = 0.0  # time.monotonic() of the brake last left with the sentinel
+        self._yaw0_told: float | None = None  # the yaw0 the sentinel last heard
+        self.mocap_uri: str | None = None  # the flight's mocap, relayed after a death
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -412,8 +412,7 @@ class MavlinkDriver(DriverBase):
             self.tilt.on_pose(pose.t, v.rpy[0], v.rpy[1])
         if self.vision:
             with self._lock:
-                self._conn.mav.vision_position_estimate_send(v.usec, *v.ned, *v.rpy,
-                                                             v.covariance)
+                self._conn.mav.send(vision_message(self._conn.mav, v))
             self.vision_sent += 1
 
     def _renew_will(self, pose: Any) -> None:
@@ -428,6 +427,9 @@ class MavlinkDriver(DriverBase):
         heading = self._level_yaw if self._level_yaw is not None else self._yaw_ned or 0.0
         self._sentinel.will(brake_for(ned_vec(v, self.yaw0), heading,
                                       self.model.hover_fraction, now))
+        if self.yaw0 != self._yaw0_told:
+            self._yaw0_told = self.yaw0
+            self._sentinel.yaw0(self.yaw0)
 
     def _track_yaw0(self, pose: Any) -> None:
         """yaw0=auto: each pose with the autopilot's newest heading measures the offset
@@ -475,6 +477,11 @@ class MavlinkDriver(DriverBase):
         self.mass_kg = agreed_mass(self.uri, self.uri_mass, mass_kg)
         if self.model is not None:
             self.model = NormalisedThrust(self.mass_kg, self.model.hover_fraction)
+
+    def bind_mocap(self, uri: str) -> None:
+        """The flight's mocap URI: with vision on, the sentinel relays it to the EKF after
+        a death (drivers/mavrelay.py)."""
+        self.mocap_uri = uri
 
     def thrust_ceiling_n(self) -> float | None:
         """[N] full normalised thrust (1.0) in this model; known once connected."""
@@ -551,7 +558,9 @@ class MavlinkDriver(DriverBase):
         lands the vehicle if this process dies."""
         if self._sentinel is None:
             try:
-                self._sentinel = Sentinel(self._conn, self._target, self._land_mode())
+                mocap = self.mocap_uri if self.vision else None
+                self._sentinel = Sentinel(self._conn, self._target, self._land_mode(), mocap)
+                self._yaw0_told = None
             except (OSError, ValueError) as err:
                 log.warning("%s: no MAVLink sentinel (%s): if this process dies, only the "
                             "autopilot's own failsafe acts", self.uri, err)

@@ -10,17 +10,20 @@ closes without a release while perchd flies the vehicle (the kernel closes it on
 the OOM killer, a crash), the sentinel first flies the brake the agent left (drivers/
 mavbrake.py: leaning against the velocity until it is gone) and then commands the
 autopilot's LAND, repeated LAND_REPEATS times, LAND_REPEAT_S apart (a lost datagram would
-leave the vehicle flying).
+leave the vehicle flying). Given the flight's mocap URI, it also keeps the mocap flowing to
+the autopilot's EKF from the death until the landing is over (drivers/mavrelay.py), and
+answers the autopilot's TIMESYNC meanwhile.
 
 Wire (SOCK_SEQPACKET), driver -> sentinel: b"F" perchd flies the vehicle (its offboard mode
 was acknowledged); b"D" it does not any more (the driver has commanded LAND itself); b"B"
-and a packed Brake: the brake to fly first, renewed from the mocap; b"R" release: exit
+and a packed Brake: the brake to fly first, renewed from the mocap; b"Y" and a float64:
+yaw0 [rad], the NED heading of world X the mocap is relayed in; b"R" release: exit
 without acting.
 
 Run as `python -m perchd.drivers.mavsentinel CTL_FD LINK_FD DEST SSYS SCOMP SYS COMP MAIN
-SUB` by drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a
+SUB MOCAP` by drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a
 stream; SSYS, SCOMP the driver's own ids; SYS, COMP the vehicle's; MAIN, SUB the LAND mode
-as DO_SET_MODE's param2 and param3.
+as DO_SET_MODE's param2 and param3; MOCAP the mocap URI to relay, "-" for none.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import os
 import select
 import signal
 import socket
+import struct
 import sys
 import threading
 import time
@@ -45,6 +49,10 @@ from perchd.drivers.mavbrake import (
     WILL_MAX_AGE_S,
     Brake,
 )
+from perchd.drivers.mavrelay import DISARMED_GRACE_S, RELAY_MAX_S, VisionRelay
+from perchd.drivers.mavvision import timesync_reply
+
+from perchd.core.types import Vec3
 
 LAND_REPEATS = 10
 LAND_REPEAT_S = 0.1
@@ -57,6 +65,13 @@ LOCAL_POSITION_NED_ID = 32
 VELOCITY_INTERVAL_US = 20000
 """LOCAL_POSITION_NED at 50 Hz while braking (the driver asks for 10)."""
 CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+PX4_AUTOPILOT = 12  # MAV_AUTOPILOT_PX4
+VEHICLE_SILENT_S = 2.0
+"""[s] the relay ends when the vehicle has not been heard this long: it is gone, or another
+process (a restarted agent) now receives on the link."""
+FOLLOW_PERIOD_S = 0.05
+"""[s] while relaying, the link is read this often (TIMESYNC answered, heartbeats read)."""
+YAW0_WIRE = "<d"
 
 log = logging.getLogger("perchd.drivers.mavsentinel")
 
@@ -69,6 +84,16 @@ def command_frame(source: tuple[int, int], target: tuple[int, int], command: int
     mav = mavutil.mavlink.MAVLink(None, *source)
     p = (*params, *[0.0] * (7 - len(params)))
     return mav.command_long_encode(*target, command, 0, *p).pack(mav)
+
+
+def px4_custom_mode(main: int, sub: int) -> int:
+    """PX4's HEARTBEAT custom_mode of a (main, sub) mode."""
+    return (main << 16) | (sub << 24)
+
+
+def custom_mode(autopilot: int, main: int, sub: int) -> int:
+    """The HEARTBEAT custom_mode the autopilot shows in DO_SET_MODE's (main, sub) mode."""
+    return px4_custom_mode(main, sub) if autopilot == PX4_AUTOPILOT else main
 
 
 def land_frame(source: tuple[int, int], target: tuple[int, int], main: int, sub: int
@@ -89,28 +114,32 @@ def attitude_frame(source: tuple[int, int], target: tuple[int, int],
 
 @dataclass(frozen=True)
 class Death:
-    """The agent died flying the vehicle; brake: the newest it left, if any."""
+    """The agent died flying the vehicle; brake: the newest it left, if any; yaw0 [rad]:
+    the newest NED heading of world X it told, if any (the relay's frame)."""
 
     brake: Brake | None = None
+    yaw0: float | None = None
 
 
 def agent_died_flying(ctl: socket.socket) -> Death | None:
     """Wait for the driver: a Death when its end closed while it flew the vehicle, None on
     a release or when it closed with the vehicle not (or no longer) its to fly."""
-    flying, brake = False, None
+    flying, brake, yaw0 = False, None, None
     while True:
         try:
             msg = ctl.recv(64)
         except OSError:
             msg = b""
         if not msg:
-            return Death(brake) if flying else None
+            return Death(brake, yaw0) if flying else None
         if msg == b"R":
             return None
         if msg in (b"F", b"D"):
             flying = msg == b"F"
         elif msg[:1] == b"B" and len(msg) == 1 + PACKED_SIZE:
             brake = Brake.unpack(msg[1:])
+        elif msg[:1] == b"Y" and len(msg) == 1 + struct.calcsize(YAW0_WIRE):
+            (yaw0,) = struct.unpack(YAW0_WIRE, msg[1:])
 
 
 def fly_brake(link: Link, source: tuple[int, int], target: tuple[int, int],
@@ -141,7 +170,7 @@ def brake_round(link: Link, source: tuple[int, int], target: tuple[int, int], br
     heard: list[tuple[float, float, float]] = []
 
     def stopped() -> bool:
-        v = link.newest_velocity(target[0])
+        v = link.poll()
         heard.extend([v] if v is not None else [])
         return bool(heard) and brake.stopped(heard[-1])
     level = hold(link, attitude_frame(source, target, *brake.level), LEVEL_MAX_S, stopped)
@@ -164,29 +193,50 @@ def hold(link: Link, frame: bytes, longest_s: float, done=lambda: False) -> floa
 
 class Link:
     """The dead agent's link to the vehicle, from the sentinel's side: `fd` and DEST
-    (module docstring); what the vehicle sent since is read without blocking."""
+    (module docstring), the driver's ids `source` and the vehicle's `target`; sends may
+    come from two threads (the relay's and the main one); what the vehicle sent since is
+    read without blocking (poll)."""
 
-    def __init__(self, fd: int, dest: str) -> None:
-        self.fd, self.dest = fd, dest
+    def __init__(self, fd: int, dest: str, source: tuple[int, int], target: tuple[int, int]
+                 ) -> None:
+        self.fd, self.dest, self.target = fd, dest, target
         from pymavlink import mavutil
         self._parser = mavutil.mavlink.MAVLink(None)
         self._parser.robust_parsing = True
+        self._mav = mavutil.mavlink.MAVLink(None, *source)
+        self._lock = threading.Lock()
+        self.heard_s: float | None = None  # time.monotonic() of the vehicle's last message
+        self.armed: bool | None = None  # from its heartbeat, once heard
+        self.mode: int | None = None  # custom_mode from its heartbeat, once heard
+        self.autopilot: int | None = None
 
     def send(self, frame: bytes) -> None:
-        if self.dest == "-":
-            os.write(self.fd, frame)
-            return
-        with socket.socket(fileno=os.dup(self.fd)) as sock:
-            for addr in self.dest.split(","):
-                host, _, port = addr.rpartition(":")
-                sock.sendto(frame, (host, int(port)))
+        with self._lock:
+            if self.dest == "-":
+                os.write(self.fd, frame)
+                return
+            with socket.socket(fileno=os.dup(self.fd)) as sock:
+                for addr in self.dest.split(","):
+                    host, _, port = addr.rpartition(":")
+                    sock.sendto(frame, (host, int(port)))
 
-    def newest_velocity(self, system: int) -> tuple[float, float, float] | None:
-        """[m/s, NED] of the newest LOCAL_POSITION_NED from `system` waiting on the link."""
+    def poll(self) -> Vec3 | None:
+        """Read what the vehicle sent since: its heartbeat's state kept, its TIMESYNC
+        requests answered (on time.monotonic(), the clock the relayed poses are stamped
+        on, as the driver answered them); [m/s, NED] of its newest LOCAL_POSITION_NED."""
         newest = None
         for msg in self._parser.parse_buffer(self._drain()) or []:
-            if msg.get_type() == "LOCAL_POSITION_NED" and msg.get_srcSystem() == system:
+            if msg.get_srcSystem() != self.target[0]:
+                continue
+            self.heard_s, kind = time.monotonic(), msg.get_type()
+            if kind == "LOCAL_POSITION_NED":
                 newest = (msg.vx, msg.vy, msg.vz)
+            elif kind == "HEARTBEAT" and msg.get_srcComponent() == self.target[1]:
+                self.armed, self.mode = bool(msg.base_mode & 128), msg.custom_mode
+                self.autopilot = msg.autopilot
+            elif kind == "TIMESYNC" and msg.tc1 == 0:
+                reply = self._mav.timesync_encode(*timesync_reply(msg.ts1, time.monotonic()))
+                self.send(reply.pack(self._mav))
         return newest
 
     def _drain(self) -> bytes:
@@ -194,32 +244,44 @@ class Link:
         while select.select([self.fd], [], [], 0.0)[0]:
             try:
                 chunk = os.read(self.fd, 65536)
-            except BlockingIOError:
-                break
+            except (BlockingIOError, ConnectionRefusedError):  # refused: the vehicle's
+                break  # port closed (a udpout link is connected); its silence ends the relay
             if not chunk:
                 break
             chunks.append(chunk)
         return b"".join(chunks)
 
 
-def main(argv: list[str]) -> int:
-    # The agent's Ctrl-C, a service stop and systemd's watchdog signal reach the whole
-    # group: the sentinel outlives them and acts only on its socket's closing.
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT):
-        signal.signal(sig, signal.SIG_IGN)
-    ctl_fd, link_fd, dest = int(argv[0]), int(argv[1]), argv[2]
-    source, target, mode = (tuple(map(int, argv[i:i + 2])) for i in (3, 5, 7))
-    frame = land_frame(source, target, *mode)
-    death = agent_died_flying(socket.socket(fileno=ctl_fd))
-    if death is None:
-        return 0
-    sys.stderr.write("perchd mavsentinel: the agent died flying the vehicle: brake, LAND\n")
-    link = Link(link_fd, dest)
-    if death.brake is not None:
+def follow_landing(link: Link, relay: VisionRelay, land: tuple[int, int], died_s: float
+                   ) -> str:
+    """Relay until the landing is over: the vehicle disarmed (DISARMED_GRACE_S later), left
+    the LAND mode it showed (a pilot or a new agent has it), went silent for
+    VEHICLE_SILENT_S, or RELAY_MAX_S after the death; why it ended."""
+    landing_seen, disarmed_s = False, None
+    while True:
         try:
-            fly_brake(link, source, target, death.brake)
-        except Exception as err:  # noqa: BLE001 - whatever failed, LAND must still go out
-            sys.stderr.write(f"perchd mavsentinel: brake abandoned ({err!r}): LAND\n")
+            link.poll()
+        except OSError as err:  # a TIMESYNC answer refused: the vehicle's port is closed
+            return f"the link is gone ({err})"
+        now = time.monotonic()
+        landing = link.mode is not None and link.autopilot is not None and \
+            link.mode == custom_mode(link.autopilot, *land)
+        if landing_seen and not landing:
+            return f"the vehicle left LAND (custom mode {link.mode})"
+        landing_seen = landing_seen or landing
+        if link.armed is False:
+            disarmed_s = now if disarmed_s is None else disarmed_s
+            if now - disarmed_s >= DISARMED_GRACE_S:
+                return "the vehicle disarmed"
+        if now - (link.heard_s or died_s) > VEHICLE_SILENT_S:
+            return f"the vehicle silent for {VEHICLE_SILENT_S:g} s"
+        if now - died_s > RELAY_MAX_S:
+            return f"{RELAY_MAX_S:g} s after the death"
+        time.sleep(FOLLOW_PERIOD_S)
+
+
+def land(link: Link, frame: bytes) -> int:
+    """LAND_REPEATS times, LAND_REPEAT_S apart; 1 when the link itself is gone."""
     try:
         for i in range(LAND_REPEATS):
             link.send(frame)
@@ -229,6 +291,48 @@ def main(argv: list[str]) -> int:
         sys.stderr.write(f"perchd mavsentinel: LAND not sent: {err}\n")
         return 1
     return 0
+
+
+def prepared_relay(mocap: str, source: tuple[int, int], link: Link) -> VisionRelay | None:
+    """The relay of the mocap URI (opened, not started), or None: none given, or it cannot
+    be opened (said on stderr: the brake and LAND still act)."""
+    if mocap == "-":
+        return None
+    try:
+        return VisionRelay(mocap, source, link.send)
+    except Exception as err:  # noqa: BLE001 - a relay that cannot be must not cost the LAND
+        sys.stderr.write(f"perchd mavsentinel: no mocap relay ({err})\n")
+        return None
+
+
+def main(argv: list[str]) -> int:
+    # The agent's Ctrl-C, a service stop and systemd's watchdog signal reach the whole
+    # group: the sentinel outlives them and acts only on its socket's closing.
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT):
+        signal.signal(sig, signal.SIG_IGN)
+    ctl_fd, link_fd, dest = int(argv[0]), int(argv[1]), argv[2]
+    source, target, mode = (tuple(map(int, argv[i:i + 2])) for i in (3, 5, 7))
+    link = Link(link_fd, dest, source, target)
+    relay = prepared_relay(argv[9], source, link)
+    death = agent_died_flying(socket.socket(fileno=ctl_fd))
+    if death is None:
+        return 0
+    died_s = time.monotonic()
+    sys.stderr.write("perchd mavsentinel: the agent died flying the vehicle: brake, LAND\n")
+    relaying = relay is not None and death.yaw0 is not None
+    if relaying:
+        relay.start(death.yaw0)
+    if death.brake is not None:
+        try:
+            fly_brake(link, source, target, death.brake)
+        except Exception as err:  # noqa: BLE001 - whatever failed, LAND must still go out
+            sys.stderr.write(f"perchd mavsentinel: brake abandoned ({err!r}): LAND\n")
+    rc = land(link, land_frame(source, target, *mode))
+    if relaying:
+        why = "the link is gone" if rc else follow_landing(link, relay, mode, died_s)
+        relay.stop()
+        sys.stderr.write(f"perchd mavsentinel: mocap relay ended: {why}\n")
+    return rc
 
 
 def link_endpoint(conn: Any) -> tuple[int, str]:
@@ -249,15 +353,17 @@ def link_endpoint(conn: Any) -> tuple[int, str]:
 
 class Sentinel:
     """The driver's side: starts the sentinel on the connection `conn` for the vehicle
-    `target` (system, component) with its LAND `mode` (main, sub); flying(True/False)
-    tells it whether perchd flies the vehicle; release() ends it without acting."""
+    `target` (system, component) with its LAND `mode` (main, sub) and the `mocap` URI to
+    relay after a death (None: none); flying(True/False) tells it whether perchd flies the
+    vehicle; release() ends it without acting."""
 
-    def __init__(self, conn: Any, target: tuple[int, int], mode: tuple[int, int]) -> None:
+    def __init__(self, conn: Any, target: tuple[int, int], mode: tuple[int, int],
+                 mocap: str | None = None) -> None:
         link_fd, dest = link_endpoint(conn)
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         source = (conn.mav.srcSystem, conn.mav.srcComponent)
         argv = [str(theirs.fileno()), str(link_fd), dest,
-                *map(str, (*source, *target, *mode))]
+                *map(str, (*source, *target, *mode)), mocap or "-"]
         try:
             self._proc = childproc.start("perchd.drivers.mavsentinel", argv,
                                          (theirs.fileno(), link_fd))
@@ -274,6 +380,10 @@ class Sentinel:
     def will(self, brake: Brake) -> None:
         """The brake to fly first should the agent die now (drivers/mavbrake.py)."""
         self._send(b"B" + brake.pack())
+
+    def yaw0(self, yaw0: float) -> None:
+        """[rad] the NED heading of world X, the frame the mocap is to be relayed in."""
+        self._send(b"Y" + struct.pack(YAW0_WIRE, yaw0))
 
     def release(self) -> None:
         """Normal end: the sentinel exits without a word to the vehicle."""

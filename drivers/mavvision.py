@@ -16,7 +16,9 @@ VISION_POSITION_ESTIMATE as a NED position with Z-Y-X angles and a covariance.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
+from typing import Any
 
 from perchd.core.ned import euler_zyx, ned_quat, ned_vec
 from perchd.core.types import Pose, Vec3
@@ -56,6 +58,15 @@ def vision_estimate(pose: Pose, yaw0: float) -> VisionEstimate:
     w, x, y, z = ned_quat(pose.q, yaw0)
     return VisionEstimate(int(round(pose.t * 1e6)), ned_vec(pose.p, yaw0),
                           euler_zyx((x, y, z, w)), COVARIANCE)
+
+
+def vision_message(mav: Any, v: VisionEstimate) -> Any:
+    """VISION_POSITION_ESTIMATE of `v` from pymavlink's encoder `mav`, in the protocol it
+    speaks: MAVLink 1 has no covariance (an extension field)."""
+    fields = (v.usec, *v.ned, *v.rpy)
+    if getattr(sys.modules[type(mav).__module__], "WIRE_PROTOCOL_VERSION", "1.0") == "2.0":
+        return mav.vision_position_estimate_encode(*fields, list(v.covariance))
+    return mav.vision_position_estimate_encode(*fields)
 
 
 def timesync_reply(ts1_ns: int, now_s: float) -> tuple[int, int]:

@@ -82,6 +82,7 @@ def _connect(runtime: Runtime, world: SimWorld | None, driver_uri: str,
     driver = open_driver(driver_uri, runtime)
     if mass_kg is not None:
         driver.bind_mass(mass_kg)
+    driver.bind_mocap(mocap_uri)
     source = open_source(mocap_uri, runtime)
     source.start()
     try:

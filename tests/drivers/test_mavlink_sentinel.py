@@ -8,13 +8,19 @@ import itertools
 import math
 import socket
 import subprocess
-import sys
 import textwrap
 import threading
 import time
 
 import pytest
-from mavlink_double import ARDUPILOT, PX4, SAFE_PARAMS, VehicleDouble, connected
+from mavlink_double import (
+    ARDUPILOT,
+    PX4,
+    SAFE_PARAMS,
+    VehicleDouble,
+    agent_process,
+    connected,
+)
 from perchd.drivers.mavbrake import (
     BRAKE_ACCEL_MPS2,
     BRAKE_DONE_MPS,
@@ -68,10 +74,7 @@ def agent(uri: str, engage: bool, speed: float | None = None, poses_for_s: float
             d.send(Setpoint(0.0, 0.0, 0.2, 0.0, 5.0, 1, Phase.STAGE1))
             time.sleep(0.01)
     """)
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
-                            stderr=subprocess.DEVNULL)
-    assert proc.stdout.readline().strip() == "ready"
-    return proc
+    return agent_process(code)
 
 
 def modes_after_kill(vehicle: VehicleDouble, engage: bool = True, flown_s: float = 0.3,
@@ -289,7 +292,7 @@ def test_a_brake_that_fails_still_ends_in_land(monkeypatch):
     dest = f"127.0.0.1:{vehicle.getsockname()[1]}"
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT)}
     try:
-        argv = [str(theirs.detach()), str(link.fileno()), dest, "255", "190", "1", "1", "4", "6"]
+        argv = [str(theirs.detach()), str(link.fileno()), dest, "255", "190", "1", "1", "4", "6", "-"]
         assert mavsentinel.main(argv) == 0
     finally:
         for sig, handler in saved.items():

@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import math
 import struct
+import subprocess
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -69,6 +71,15 @@ def connected(vehicle: "VehicleDouble", query: str = "", mass_kg: float = 0.5,
             drv.close()
             raise
     return drv
+
+
+def agent_process(code: str) -> subprocess.Popen:
+    """A Python process running `code`, returned once it prints "ready" (an agent that has
+    taken the vehicle, for the tests that kill it)."""
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
+                            stderr=subprocess.DEVNULL)
+    assert proc.stdout.readline().strip() == "ready"
+    return proc
 
 
 def bytewise(value: float) -> float:

@@ -1,6 +1,7 @@
-"""A vehicle standing still, as mocap: a ZMQ pose publisher (docs/contracts.md §3) sending
-one body's pose at 100 Hz on the monotonic clock, with 0.5 mm of noise (a real tracker is
-never bit-still), until close()."""
+"""A vehicle standing still (or moving at a constant `velocity` [m/s] from its first pose),
+as mocap: a ZMQ pose publisher (docs/contracts.md §3) sending one body's pose at 100 Hz on
+the monotonic clock, with 0.5 mm of noise (a real tracker is never bit-still), until
+close(); `published` maps each pose's stamp [us] to its position."""
 
 from __future__ import annotations
 
@@ -14,21 +15,26 @@ from perchd.mocap.zmq import ZmqPosePublisher
 
 class StillPoses:
     def __init__(self, p: tuple[float, float, float] = (-4.5, 0.0, 1.0), body: str = "cf1",
-                 rate_hz: float = 100.0) -> None:
+                 rate_hz: float = 100.0,
+                 velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         self.pub = ZmqPosePublisher("tcp://127.0.0.1:0")
         self.uri = self.pub.uri(body)
         self.p, self.body, self.period = p, body, 1.0 / rate_hz
         self.sent = 0
+        self.velocity = velocity
+        self.published: dict[int, tuple[float, ...]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="still-poses", daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
-        rng = random.Random(0)
+        rng, t0 = random.Random(0), time.monotonic()
         while not self._stop.wait(self.period):
-            self.sent += 1
-            p = tuple(c + rng.gauss(0.0, 0.0005) for c in self.p)
-            self.pub.publish(Pose(self.body, self.sent, time.monotonic(), p, (0.0, 0.0, 0.0, 1.0)))
+            self.sent, t = self.sent + 1, time.monotonic()
+            p = tuple(c + v * (t - t0) + rng.gauss(0.0, 0.0005)
+                      for c, v in zip(self.p, self.velocity, strict=True))
+            self.published[round(t * 1e6)] = p
+            self.pub.publish(Pose(self.body, self.sent, t, p, (0.0, 0.0, 0.0, 1.0)))
 
     def close(self) -> None:
         self._stop.set()

@@ -1,0 +1,86 @@
+"""The mocap kept flowing to the autopilot after the agent dies (docs/safety.md, "When the
+agent dies").
+
+An EKF on mocap alone (PX4 EKF2_EV_CTRL, ArduPilot ExternalNav) loses its only position
+source with the agent: the sentinel's brake stops the vehicle, and then the autopilot's
+Land holds a dead-reckoned position that drifts (PX4 SIH: 1.0-1.4 m further toward the
+wall, creeping at ~0.2 m/s). So the sentinel (drivers/mavsentinel.py) opens the flight's
+own mocap URI the moment the agent dies and sends each pose on as VISION_POSITION_ESTIMATE,
+as the driver did (drivers/mavvision.py: the same frame, yaw0 as the driver last had it,
+the same stamps on the same monotonic clock, whose TIMESYNC the sentinel answers), until
+the vehicle has disarmed or RELAY_MAX_S has passed.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Callable
+
+from perchd.drivers.mavvision import vision_estimate, vision_message
+
+from perchd.core.runtime import Runtime
+
+RELAY_MAX_S = 120.0
+"""[s] the longest the mocap is relayed after the agent's death (a landing takes seconds;
+a vehicle still armed after this is someone else's)."""
+DISARMED_GRACE_S = 1.0
+"""[s] relayed on after the vehicle is seen disarmed (its EKF may log or settle)."""
+WAIT_S = 0.1
+"""[s] the relay thread looks for its stop this often when no pose comes."""
+
+
+class VisionRelay:
+    """Poses of the mocap URI `mocap` to `send` as VISION_POSITION_ESTIMATE frames from
+    `source` (system, component), in NED by yaw0 [rad] (drivers/mavvision.py). The source
+    is opened (not started) on construction, so a death costs no imports; start() begins
+    the relay on its own thread, stop() ends it and closes the source."""
+
+    def __init__(self, mocap: str, source: tuple[int, int], send: Callable[[bytes], None]
+                 ) -> None:
+        from pymavlink import mavutil
+
+        from perchd.mocap.base import open_source
+        self.poses = open_source(mocap, Runtime.real())
+        self._mav = mavutil.mavlink.MAVLink(None, *source)
+        self._send = send
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.sent = 0
+
+    def start(self, yaw0: float) -> None:
+        self._thread = threading.Thread(target=self._run, args=(yaw0,), name="vision-relay",
+                                        daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+
+    def frame(self, pose: object, yaw0: float) -> bytes:
+        return vision_message(self._mav, vision_estimate(pose, yaw0)).pack(self._mav)
+
+    def _run(self, yaw0: float) -> None:
+        try:
+            self.poses.start()
+        except Exception as err:  # noqa: BLE001 - the brake and LAND go on without it
+            sys.stderr.write(f"perchd mavsentinel: the mocap cannot be relayed: {err}\n")
+            return
+        seq = -1
+        try:
+            while not self._stop.is_set():
+                pose = self.poses.wait(seq, WAIT_S)
+                if pose is None:
+                    newest = self.poses.latest()
+                    seq = -1 if newest is not None and newest.seq < seq else seq  # restarted
+                    continue
+                seq = pose.seq
+                if getattr(pose, "valid", True):
+                    self._send(self.frame(pose, yaw0))
+                    self.sent += 1
+        except OSError as err:  # the link is gone: nothing more to relay to
+            sys.stderr.write(f"perchd mavsentinel: mocap relay ended: {err}\n")
+        finally:
+            self.poses.close()
+            sys.stderr.write(f"perchd mavsentinel: relayed {self.sent} mocap poses\n")

@@ -1,0 +1,166 @@
+"""The mocap relayed after the agent's death (drivers/mavrelay.py): an agent killed while it
+flies a vehicle on mocap alone leaves its sentinel sending the flight's own mocap on to the
+EKF, in the agent's frame and stamps, with TIMESYNC answered, until the landing is over.
+Real processes, ZMQ and MAVLink on loopback."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import textwrap
+import time
+
+import pytest
+from mavlink_double import PX4, VehicleDouble, agent_process
+from perchd.drivers.mavrelay import DISARMED_GRACE_S
+from perchd.drivers.mavsentinel import FOLLOW_PERIOD_S, LAND_REPEATS, VEHICLE_SILENT_S
+from perchd.drivers.mavvision import POS_STD_M
+from still_poses import StillPoses
+
+from perchd.sim.session import open_links
+
+YAW0_DEG = 60.0
+SPEED_MPS = 0.5
+RATE_HZ = 100.0
+POSCTL = 3 << 16  # PX4 POSITION: the pilot takes the vehicle
+
+
+def agent(vehicle_uri: str, mocap_uri: str, query: str = "") -> subprocess.Popen:
+    """`perchd fly`'s driver wiring in a process of its own: mocap bound, connected,
+    engaged on the poses, then each new pose observed and a pitched setpoint sent at 100 Hz
+    until it is killed; says "ready" once engaged."""
+    code = textwrap.dedent(f"""
+        import time
+        from perchd.core.runtime import Runtime
+        from perchd.core.types import Phase, Setpoint
+        from perchd.drivers.base import open_driver
+        from perchd.mocap.base import open_source
+        rt = Runtime.real()
+        d = open_driver({vehicle_uri!r} + "?mass=0.5&yaw0={YAW0_DEG}" + {query!r}, rt)
+        d.bind_mocap({mocap_uri!r})
+        source = open_source({mocap_uri!r}, rt)
+        source.start()
+        d.connect()
+        d.engage(source.latest)
+        print("ready", flush=True)
+        seq = None
+        while True:
+            pose = source.latest()
+            if pose is not None and pose.seq != seq:
+                seq = pose.seq
+                d.observe_pose(pose)
+            d.send(Setpoint(0.0, 0.0, 0.2, 0.0, 5.0, 1, Phase.STAGE1))
+            time.sleep(0.01)
+    """)
+    return agent_process(code)
+
+
+def ned(p: tuple[float, ...], yaw0_deg: float) -> tuple[float, float, float]:
+    """World (Z up) to NED with world X at heading yaw0: world Y is 90 deg to its left."""
+    c, s = math.cos(math.radians(yaw0_deg)), math.sin(math.radians(yaw0_deg))
+    x, y, z = p
+    return (x * c + y * s, x * s - y * c, -z)
+
+
+@pytest.fixture
+def flown():
+    """A PX4 double in the air (MAVLink 2, TIMESYNC requests on), mocap moving at SPEED_MPS along
+    world X, and an agent flying it on that mocap, killed after 0.6 s; yields (vehicle,
+    mocap, time.monotonic() of the kill)."""
+    vehicle = VehicleDouble(PX4, airborne=True, timesync=True, mavlink2=True)
+    mocap = StillPoses(p=(-3.0, 0.2, 1.0), body="v", rate_hz=RATE_HZ,
+                       velocity=(SPEED_MPS, 0.0, 0.0))
+    proc = agent(vehicle.uri, mocap.uri)
+    try:
+        time.sleep(0.6)
+        killed = time.monotonic()
+        proc.kill()
+        proc.wait()
+        yield vehicle, mocap, killed
+    finally:
+        proc.kill()
+        mocap.close()
+        vehicle.die()
+
+
+def visions_between(vehicle: VehicleDouble, start: float, end: float) -> list:
+    return [msg for t, msg in list(vehicle.visions) if start < t <= end]
+
+
+def test_after_the_kill_the_mocap_goes_on_to_the_ekf_in_the_agents_frame(flown):
+    """Through the brake and the LAND: each pose relayed carries its stamp and its
+    position in NED at the agent's yaw0, re-derived here from the pose published."""
+    vehicle, mocap, killed = flown
+    time.sleep(1.5)
+    relayed = visions_between(vehicle, killed + 0.2, killed + 1.5)
+    assert len(relayed) >= 0.5 * 1.3 * RATE_HZ  # a loaded machine may lose some
+    stamps = sorted(mocap.published)
+    for msg in relayed:
+        usec = min(stamps, key=lambda s: abs(s - msg.usec))
+        assert abs(usec - msg.usec) <= 2
+        assert (msg.x, msg.y, msg.z) == pytest.approx(ned(mocap.published[usec], YAW0_DEG),
+                                                      abs=1e-5)
+        assert msg.yaw == pytest.approx(math.radians(YAW0_DEG), abs=1e-6)
+        assert msg.covariance[0] == pytest.approx(POS_STD_M ** 2)
+    assert [m.usec for m in relayed] == sorted({m.usec for m in relayed})
+    replies = [(t, tc1) for t, tc1, _ in list(vehicle.timesync_replies) if t > killed + 0.2]
+    assert len(replies) >= 5
+    assert all(abs(tc1 * 1e-9 - t) < 0.05 for t, tc1 in replies)  # the monotonic clock
+
+
+@pytest.mark.parametrize("ending", ["disarmed", "pilot", "silent"])
+def test_the_relay_ends_with_the_landing(flown, ending):
+    """Disarmed (after DISARMED_GRACE_S), taken by a pilot or a new agent (at once), or
+    the vehicle silent for VEHICLE_SILENT_S: the relay stops."""
+    vehicle, _, killed = flown
+    vehicle.wait_for(lambda: any(t > killed for t, _ in vehicle.modes), 3.0)
+    time.sleep(LAND_REPEATS * 0.1 + 0.2)
+    assert visions_between(vehicle, time.monotonic() - 0.2, time.monotonic())
+    ended = time.monotonic()
+    if ending == "disarmed":
+        vehicle.armed = False
+        vehicle.switch_mode_by_pilot(vehicle.custom_mode)  # its heartbeat, at once
+        after = DISARMED_GRACE_S
+    elif ending == "pilot":
+        vehicle.switch_mode_by_pilot(POSCTL)
+        after = 0.0
+    else:
+        vehicle.mute()
+        after = VEHICLE_SILENT_S
+    time.sleep(after + 1.0)
+    last = max(t for t, _ in list(vehicle.visions))
+    assert last - ended == pytest.approx(after, abs=2 * FOLLOW_PERIOD_S + 0.25)
+    time.sleep(0.3)
+    assert max(t for t, _ in list(vehicle.visions)) == last
+
+
+def test_with_vision_off_nothing_is_relayed():
+    vehicle = VehicleDouble(PX4, airborne=True)
+    mocap = StillPoses(body="v")
+    proc = agent(vehicle.uri, mocap.uri, "&vision=0")
+    try:
+        time.sleep(0.3)
+        killed = time.monotonic()
+        proc.kill()
+        proc.wait()
+        time.sleep(1.0)
+        assert vehicle.modes, "the sentinel did not act"
+        assert not visions_between(vehicle, killed - 1.0, killed + 1.0)
+    finally:
+        mocap.close()
+        vehicle.die()
+
+
+def test_the_flights_links_hand_the_driver_its_mocap():
+    """`perchd fly` and `perchd serve` open their links through open_links: the driver
+    knows the mocap URI before it connects, so its sentinel can relay it."""
+    vehicle, mocap = VehicleDouble(PX4), StillPoses(body="v")
+    try:
+        links = open_links(f"{vehicle.uri}?mass=0.5", mocap.uri)
+        try:
+            assert links.driver.mocap_uri == mocap.uri
+        finally:
+            links.close()
+    finally:
+        mocap.close()
+        vehicle.die()
