@@ -5,14 +5,19 @@ The firmware holds the last thrust, levelled, for 2 s after the last setpoint
 (COMMANDER_WDT_TIMEOUT_SHUTDOWN): a dead agent mid-approach would climb and then drop.
 So the link lives in this process, and when the agent goes (EOF on the socket: the kernel
 closes it on SIGKILL; or no message for SILENT_S) it flies a bounded descent itself:
-level, thrust from the last vertical component down to DESCENT_FRACTION of it, for
-DESCENT_S, then the stop setpoint, then it closes the link and exits.
+first the brake the driver left (a lean against the mocap's velocity for |v| / a, the
+MAVLink sentinel's, drivers/mavbrake.py), then level, thrust from the last vertical
+component down to DESCENT_FRACTION of it, for DESCENT_S, then the stop setpoint, then it
+closes the link and exits.
 
 Wire (a SOCK_SEQPACKET pair, one message per packet, little-endian):
   driver -> keeper: b"S" <fffHH> roll deg, pitch deg, yaw rate deg/s (cflib conventions),
                     thrust units, hold units (the thrust whose vertical part the last
                     command had, i.e. the level thrust that holds height);
-                    b"P" <7f> extpose (x, y, z, qx, qy, qz, qw); b"A" alive; b"X" stop;
+                    b"P" <7f> extpose (x, y, z, qx, qy, qz, qw); b"B" <ffffd> the brake:
+                    roll deg, pitch deg (cflib conventions), duration s, the thrust
+                    units' factor that holds height at that tilt, time.monotonic() when
+                    measured; b"A" alive; b"X" stop;
                     b"U" leave the stop (the next flight's take-over; ignored once the
                     agent is gone); b"C" close (the keeper exits).
   keeper -> driver: b"R" link open; b"E" message: cflib could not open it; b"H" <dd> seconds since the vehicle was last heard
@@ -35,8 +40,12 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
+from perchd.drivers.mavbrake import WILL_MAX_AGE_S
+from perchd.drivers.thrust import CF_UNITS_MAX
+
 CMD = struct.Struct("<fffHH")
 POSE = struct.Struct("<7f")
+BRAKE = struct.Struct("<ffffd")
 STATUS = struct.Struct("<dd")
 
 PING_S = 0.02
@@ -60,19 +69,44 @@ ECHO_HEADER = 0xFC
 
 
 @dataclass(frozen=True)
+class Lean:
+    """The brake (drivers/mavbrake.py): roll_deg, pitch_deg in cflib's conventions, held
+    for duration_s [s], level thrust units times thrust_factor (the driver's thrust model:
+    the units are not linear in force); measured (time.monotonic()) at t_s [s]."""
+
+    roll_deg: float
+    pitch_deg: float
+    duration_s: float
+    thrust_factor: float
+    t_s: float
+
+    def command(self, level_units: int) -> tuple[float, float, float, int]:
+        """send_setpoint arguments: the lean, with the thrust whose vertical part is
+        level_units' (the descent's at that moment)."""
+        units = min(int(level_units * self.thrust_factor), CF_UNITS_MAX)
+        return self.roll_deg, self.pitch_deg, 0.0, units
+
+
+NO_LEAN = Lean(0.0, 0.0, 0.0, 1.0, 0.0)
+
+
+@dataclass(frozen=True)
 class Descent:
-    """The keeper's own flight after the agent is gone."""
+    """The keeper's own flight after the agent is gone: its thrust ramps down from the
+    death on, leaning first (the brake, its tilt compensated), then level."""
 
     t0: float  # [s] time.monotonic() when the agent was found gone
     hold_units: int  # level thrust that held height at the last command
+    lean: Lean = NO_LEAN
 
-    def thrust(self, now: float) -> int | None:
-        """Thrust units at `now`, None once the descent is over (send the stop)."""
+    def command(self, now: float) -> tuple[float, float, float, int] | None:
+        """send_setpoint arguments at `now`, None once the descent is over (send the stop)."""
         t = now - self.t0
-        if t >= DESCENT_S or self.hold_units <= 0:
+        if t >= self.lean.duration_s + DESCENT_S or self.hold_units <= 0:
             return None
         low = DESCENT_FRACTION * self.hold_units
-        return int(self.hold_units - (self.hold_units - low) * min(1.0, t / RAMP_S))
+        level = int(self.hold_units - (self.hold_units - low) * min(1.0, t / RAMP_S))
+        return self.lean.command(level) if t < self.lean.duration_s else (0.0, 0.0, 0.0, level)
 
 
 class _LinkPort:
@@ -104,6 +138,7 @@ class Keeper:
         self.last_msg = time.monotonic()  # last message from the driver
         self.stop_until: float | None = None  # set once stopped
         self.descent: Descent | None = None
+        self.lean = NO_LEAN  # the newest brake the driver left
         self.agent_gone = False
         self.running = True
         self.status_lock = threading.Lock()
@@ -169,6 +204,8 @@ class Keeper:
             roll, pitch, yawrate, thrust, hold = CMD.unpack(body)
             self.hold_units = hold
             self.send_cmd((roll, pitch, yawrate, thrust))
+        elif kind == b"B" and len(body) == BRAKE.size:
+            self.lean = Lean(*BRAKE.unpack(body))
         elif kind == b"P" and self.stop_until is None:
             vals = POSE.unpack(body)
             self.loc.send_extpose(list(vals[:3]), list(vals[3:]))
@@ -182,10 +219,12 @@ class Keeper:
             self.running = False
 
     def agent_lost(self, now: float) -> None:
-        """EOF or silence: descend unless already stopped (then only the repeats remain)."""
+        """EOF or silence: brake and descend unless already stopped (then only the repeats
+        remain). A brake older than WILL_MAX_AGE_S is not flown: the mocap had stopped."""
         self.agent_gone = True
         if self.stop_until is None and self.descent is None:
-            self.descent = Descent(now, self.hold_units)
+            fresh = time.monotonic() - self.lean.t_s <= WILL_MAX_AGE_S
+            self.descent = Descent(now, self.hold_units, self.lean if fresh else NO_LEAN)
 
     def tick(self, now: float) -> None:
         """Every PING_S: ping, report, and keep the vehicle commanded."""
@@ -200,12 +239,12 @@ class Keeper:
             elif self.agent_gone:
                 self.running = False  # stopped, repeated, nobody left to tell
         elif self.descent is not None:
-            thrust = self.descent.thrust(now)
-            if thrust is None:
+            cmd = self.descent.command(now)
+            if cmd is None:
                 self.stop()
                 self.running = False  # the stop went twice; the agent is gone
             else:
-                self.send_cmd((0.0, 0.0, 0.0, thrust))
+                self.send_cmd(cmd)
         elif now - self.last_sent >= KEEPALIVE_S:
             # levelled at the hold thrust: the tilted thrust, levelled, would climb
             self.send_cmd((0.0, 0.0, 0.0, self.hold_units))

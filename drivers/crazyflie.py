@@ -2,7 +2,8 @@
 link (software-in-the-loop, and the tests' CRTP responder).
 
 The link lives in a child process, the keeper (drivers/cflink.py): when this process dies
-it flies a bounded descent and stops the motors (docs/safety.md, "When the agent dies").
+it flies the brake this driver keeps renewing from the mocap, a bounded descent, and stops
+the motors (docs/safety.md, "When the agent dies").
 It speaks the low-level CRTP link (cflib.crtp.get_link_driver) with cflib's own
 Commander and Localization encoders, not the full `Crazyflie` object: that one downloads the
 log/param TOCs and memories on connect, which the attitude stream does not need.
@@ -40,11 +41,13 @@ from dataclasses import dataclass
 
 from perchd.drivers import cflink, childproc
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
+from perchd.drivers.mavbrake import WILL_PERIOD_S, VelocityTracker, lean_for
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.drivers.ticker import Ticker
 
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
+from perchd.core.ned import ned_vec
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Uri
@@ -140,6 +143,9 @@ class CrazyflieDriver(DriverBase):
         self._wire = threading.Lock()  # "stopped?" and the send that follows, as one step
         self.failsafe_reasons: list[EndReason] = []
         self.uri_mass: float | None = None  # [kg] the URI's mass=, checked by bind_mass
+        self._velocity = VelocityTracker()  # from the mocap, for the keeper's brake
+        self._will_at = 0.0  # time.monotonic() of the brake last left with the keeper
+        self._hold_n = 0.0  # [N] the last setpoint's vertical thrust (the keeper's hold)
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -159,7 +165,8 @@ class CrazyflieDriver(DriverBase):
         if self._stopped or self._sock is None:
             return  # after a failsafe nothing may re-arm thrust
         roll, pitch, yawrate, units = self.command(setpoint)
-        hold = self.model.units(setpoint.thrust * math.cos(setpoint.roll) * math.cos(setpoint.pitch))
+        self._hold_n = setpoint.thrust * math.cos(setpoint.roll) * math.cos(setpoint.pitch)
+        hold = self.model.units(self._hold_n)
         with self._wire:
             if not self._stopped:  # a failsafe from another thread may have come between
                 self._send(b"S" + cflink.CMD.pack(roll, pitch, yawrate, units, hold))
@@ -233,8 +240,24 @@ class CrazyflieDriver(DriverBase):
         if not pose.valid:
             return
         self._yaw = yaw_of(pose.q)
+        self._renew_will(pose)
         if self.extpose and not self._stopped:
             self._send(b"P" + cflink.POSE.pack(*pose.p, *pose.q))
+
+    def _renew_will(self, pose: Pose) -> None:
+        """Every WILL_PERIOD_S, the brake the keeper is to fly should this process die:
+        against the mocap's velocity (drivers/mavbrake.py; world X taken as north, so FRD
+        roll is the world's and its pitch the world's negated: cflib's degrees)."""
+        v, now = self._velocity.update(pose.t, pose.p), time.monotonic()
+        if v is None or self._stopped or now - self._will_at < WILL_PERIOD_S:
+            return
+        self._will_at = now
+        roll, pitch, duration = lean_for(ned_vec(v, 0.0), -self._yaw)
+        level = self.model.units(self._hold_n)
+        factor = self.model.units(self._hold_n / (math.cos(roll) * math.cos(pitch))) / level \
+            if level > 0 else 1.0
+        self._send(b"B" + cflink.BRAKE.pack(math.degrees(roll), -math.degrees(pitch),
+                                            duration, factor, now))
 
     # -- the keeper ------------------------------------------------------------------
     def _start_keeper(self) -> None:

@@ -87,21 +87,27 @@ WIRE = "<10fd"  # q (4), thrust, duration, v_ne (2), heading, hover; t_s
 PACKED_SIZE = struct.calcsize(WIRE)
 
 
-def brake_for(v_ned: Vec3, heading_ned: float, hover_fraction: float, t_s: float) -> Brake:
-    """The lean that decelerates the horizontal NED velocity v_ned [m/s] at the heading
-    [rad], thrust holding height; level for no time when slower than BRAKE_MIN_MPS."""
-    speed, v_ne = math.hypot(v_ned[0], v_ned[1]), (v_ned[0], v_ned[1])
+def lean_for(v_ned: Vec3, heading_ned: float) -> tuple[float, float, float]:
+    """(roll, pitch [rad], FRD in NED; duration [s]) of the lean that decelerates the
+    horizontal NED velocity v_ned [m/s] at BRAKE_ACCEL_MPS2 at the heading [rad]; level for
+    no time when slower than BRAKE_MIN_MPS."""
+    speed = math.hypot(v_ned[0], v_ned[1])
     if speed < BRAKE_MIN_MPS:
-        return Brake(quaternion_wxyz(0.0, 0.0, heading_ned), hover_fraction, 0.0, v_ne,
-                     heading_ned, hover_fraction, t_s)
+        return 0.0, 0.0, 0.0
     a_n, a_e = (-BRAKE_ACCEL_MPS2 * c / speed for c in v_ned[:2])
     cy, sy = math.cos(heading_ned), math.sin(heading_ned)
     forward, right = a_n * cy + a_e * sy, -a_n * sy + a_e * cy
     pitch = -math.atan2(forward, G)  # FRD: nose down (negative) accelerates forward
-    roll = math.atan2(right * math.cos(pitch), G)
+    return math.atan2(right * math.cos(pitch), G), pitch, speed / BRAKE_ACCEL_MPS2
+
+
+def brake_for(v_ned: Vec3, heading_ned: float, hover_fraction: float, t_s: float) -> Brake:
+    """The lean that decelerates the horizontal NED velocity v_ned [m/s] at the heading
+    [rad] (lean_for), thrust holding height."""
+    roll, pitch, duration = lean_for(v_ned, heading_ned)
     thrust = min(hover_fraction / (math.cos(roll) * math.cos(pitch)), 1.0)
-    return Brake(quaternion_wxyz(roll, pitch, heading_ned), thrust,
-                 speed / BRAKE_ACCEL_MPS2, v_ne, heading_ned, hover_fraction, t_s)
+    return Brake(quaternion_wxyz(roll, pitch, heading_ned), thrust, duration,
+                 (v_ned[0], v_ned[1]), heading_ned, hover_fraction, t_s)
 
 
 class VelocityTracker:

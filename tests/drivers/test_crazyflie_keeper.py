@@ -4,6 +4,7 @@ responder; a keeper that dies is a named lost link (docs/safety.md, "When the ag
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import signal
@@ -17,6 +18,7 @@ import pytest
 from crtp_responder import CrtpResponder
 from perchd.drivers import cflink
 from perchd.drivers.base import open_driver
+from perchd.drivers.mavbrake import BRAKE_ACCEL_MPS2
 from perchd.drivers.thrust import CrazyflieThrust
 from ticks import level
 
@@ -32,12 +34,16 @@ AGENT = textwrap.dedent(f"""
     import sys, time
     from perchd.drivers.base import open_driver
     from perchd.core.runtime import Runtime
-    from perchd.core.types import Phase, Setpoint
+    from perchd.core.types import Phase, Pose, Setpoint
     cf = open_driver(sys.argv[1], Runtime.real())
+    speed = float(sys.argv[2]) if len(sys.argv) > 2 else None
     cf.connect()
     print(cf._keeper.pid, flush=True)
     k = 0
     while True:  # 100 Hz, as the loop streams
+        if speed is not None:  # mocap along world X, yaw 0
+            now = time.monotonic()
+            cf.observe_pose(Pose("cf", k, now, (speed * now, 0.0, 1.0), (0, 0, 0, 1)))
         cf.send(Setpoint(k * 0.01, 0.0, {PITCH}, 0.0, {THRUST_N}, k, Phase.STAGE1))
         if k == 30:
             print("streaming", flush=True)
@@ -53,9 +59,10 @@ def responder():
     r.close()
 
 
-def start_agent(uri: str) -> tuple[subprocess.Popen, int]:
-    """A process that owns a driver and streams a tilted stage-1 setpoint; its keeper's pid."""
-    agent = subprocess.Popen([sys.executable, "-c", AGENT, uri], stdout=subprocess.PIPE,
+def start_agent(uri: str, *speed: str) -> tuple[subprocess.Popen, int]:
+    """A process that owns a driver and streams a tilted stage-1 setpoint (with a `speed`
+    [m/s], mocap moving along world X beside it); its keeper's pid."""
+    agent = subprocess.Popen([sys.executable, "-c", AGENT, uri, *speed], stdout=subprocess.PIPE,
                              text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
     keeper_pid = int(agent.stdout.readline())
     assert agent.stdout.readline().strip() == "streaming"
@@ -70,10 +77,11 @@ def gone(pid: int) -> bool:
         return True
 
 
-def check_descent_then_stop(responder: CrtpResponder, t_dead: float, keeper_pid: int) -> None:
+def check_descent_then_stop(responder: CrtpResponder, t_dead: float, keeper_pid: int,
+                            lean_s: float = 0.0) -> None:
     hold = CrazyflieThrust().units(THRUST_N * math.cos(PITCH))
     last = CrazyflieThrust().units(THRUST_N)
-    assert responder.wait_for(lambda: responder.stops(), timeout=cflink.DESCENT_S + 1.5)
+    assert responder.wait_for(lambda: responder.stops(), timeout=lean_s + cflink.DESCENT_S + 1.5)
     stop_t = responder.stops()[0].t
     after = [s for s in responder.setpoints() if t_dead < s.t < stop_t]
     tail = [s for s in after if (s.roll_deg, s.wire_pitch_deg) == (0.0, 0.0)]
@@ -82,7 +90,7 @@ def check_descent_then_stop(responder: CrtpResponder, t_dead: float, keeper_pid:
     assert all(0 < t <= hold < last for t in thrusts)  # never the tilted thrust, level
     assert thrusts == sorted(thrusts, reverse=True)  # decreasing ...
     assert thrusts[-1] == int(cflink.DESCENT_FRACTION * hold)  # ... to below the hold
-    assert stop_t - t_dead <= cflink.DESCENT_S + 0.3  # motors stop in bounded time
+    assert stop_t - t_dead <= lean_s + cflink.DESCENT_S + 0.3  # motors stop in bounded time
     assert not [s for s in responder.setpoints() if s.t > stop_t]  # nothing re-arms
     deadline = time.monotonic() + 2.0
     while not gone(keeper_pid) and time.monotonic() < deadline:
@@ -97,6 +105,31 @@ def test_sigkill_of_the_agent_gets_a_level_descent_then_the_stop(responder):
     agent.wait()
     check_descent_then_stop(responder, t_dead, keeper_pid)
     print(f"\nstop {responder.stops()[0].t - t_dead:.3f} s after SIGKILL")
+
+
+def test_an_agent_killed_at_speed_has_the_keeper_brake_before_the_descent(responder):
+    """At 0.9 m/s along world X the keeper first leans the vehicle back at BRAKE_ACCEL_MPS2
+    (nose up on the wire, level in roll) for 0.3 s (0.9 / 3), its thrust the descent's
+    tilt-compensated through the thrust model, then descends level and stops, as without
+    a brake but 0.3 s later."""
+    agent, keeper_pid = start_agent(responder.uri, "0.9")
+    time.sleep(0.3)
+    agent.kill()
+    t_dead = time.monotonic()
+    agent.wait()
+    check_descent_then_stop(responder, t_dead, keeper_pid, lean_s=0.3)
+    after = [s for s in responder.setpoints() if s.t > t_dead + 0.005]
+    lean = list(itertools.takewhile(lambda s: s.wire_pitch_deg != 0.0, after))
+    assert len(lean) >= 10 and lean[-1].t - t_dead == pytest.approx(0.3, abs=0.05)
+    pitch, model = math.atan2(BRAKE_ACCEL_MPS2, 9.81), CrazyflieThrust()
+    hold_n = THRUST_N * math.cos(PITCH)
+    hold = model.units(hold_n)
+    factor = model.units(hold_n / math.cos(pitch)) / hold
+    assert all(s.wire_pitch_deg == pytest.approx(math.degrees(pitch), abs=1e-3)
+               and s.roll_deg == 0.0 for s in lean)
+    thrusts = [s.thrust for s in lean]  # the descent's ramp, tilt-compensated
+    assert int(hold * factor) >= thrusts[0] > hold and thrusts == sorted(thrusts, reverse=True)
+    assert thrusts[-1] == int(int(cflink.DESCENT_FRACTION * hold) * factor)
 
 
 def test_a_hung_agent_is_a_dead_agent_after_the_keepers_silence_limit(responder):
