@@ -5,10 +5,10 @@ The firmware holds the last thrust, levelled, for 2 s after the last setpoint
 (COMMANDER_WDT_TIMEOUT_SHUTDOWN): a dead agent mid-approach would climb and then drop.
 So the link lives in this process, and when the agent goes (EOF on the socket: the kernel
 closes it on SIGKILL; or no message for SILENT_S) it flies a bounded descent itself:
-first the brake the driver left (a lean against the mocap's velocity for |v| / a, the
-MAVLink sentinel's, drivers/mavbrake.py), then level, thrust from the last vertical
-component down to DESCENT_FRACTION of it, for DESCENT_S, then the stop setpoint, then it
-closes the link and exits.
+thrust from the last vertical component down to DESCENT_FRACTION of it, for DESCENT_S, then
+the stop setpoint, then it closes the link and exits; during its first |v| / a (at most
+LEAN_MAX_S) it leans against the velocity the driver last measured (the brake the driver
+keeps renewing, the MAVLink sentinel's: drivers/mavbrake.py), level after that.
 
 Wire (a SOCK_SEQPACKET pair, one message per packet, little-endian):
   driver -> keeper: b"S" <fffHH> roll deg, pitch deg, yaw rate deg/s (cflib conventions),
@@ -60,6 +60,8 @@ DESCENT_S = 1.0
 """[s] of descent before the stop: at 0.85 g net down, ~0.7 m lower (docs/safety.md)."""
 DESCENT_FRACTION = 0.85
 """descent thrust as a fraction of the hold thrust (units)."""
+LEAN_MAX_S = 0.5
+"""[s] the longest brake, half the descent: at the 1.5 m/s of a perch's approach, all of it."""
 FAILSAFE_REPEAT_S = 3.0
 """[s] the stop is repeated with every ping this long: one sent into a dead link is lost."""
 PING_TAG = b"pd"
@@ -93,7 +95,8 @@ NO_LEAN = Lean(0.0, 0.0, 0.0, 1.0, 0.0)
 @dataclass(frozen=True)
 class Descent:
     """The keeper's own flight after the agent is gone: its thrust ramps down from the
-    death on, leaning first (the brake, its tilt compensated), then level."""
+    death on, for DESCENT_S in all, leaning first (the brake, its tilt compensated, for at
+    most LEAN_MAX_S), then level."""
 
     t0: float  # [s] time.monotonic() when the agent was found gone
     hold_units: int  # level thrust that held height at the last command
@@ -102,11 +105,12 @@ class Descent:
     def command(self, now: float) -> tuple[float, float, float, int] | None:
         """send_setpoint arguments at `now`, None once the descent is over (send the stop)."""
         t = now - self.t0
-        if t >= self.lean.duration_s + DESCENT_S or self.hold_units <= 0:
+        if t >= DESCENT_S or self.hold_units <= 0:
             return None
         low = DESCENT_FRACTION * self.hold_units
         level = int(self.hold_units - (self.hold_units - low) * min(1.0, t / RAMP_S))
-        return self.lean.command(level) if t < self.lean.duration_s else (0.0, 0.0, 0.0, level)
+        leaning = t < min(self.lean.duration_s, LEAN_MAX_S)
+        return self.lean.command(level) if leaning else (0.0, 0.0, 0.0, level)
 
 
 class _LinkPort:
@@ -281,9 +285,9 @@ class Keeper:
 
 
 def main(argv: list[str]) -> int:
-    # the agent's Ctrl-C, a service stop and systemd's watchdog signal reach the whole
-    # group: the keeper outlives them by design and ends when the agent's socket closes
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT):
+    # the agent's Ctrl-C, a service stop, systemd's watchdog signal and a terminal's hang-up
+    # reach the whole group: the keeper outlives them and ends when the agent's socket closes
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     sock = socket.socket(fileno=int(argv[0]))
     keeper = Keeper(sock, argv[1], float(argv[2]))

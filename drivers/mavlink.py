@@ -559,7 +559,8 @@ class MavlinkDriver(DriverBase):
         if self._sentinel is None:
             try:
                 mocap = self.mocap_uri if self.vision else None
-                self._sentinel = Sentinel(self._conn, self._target, self._land_mode(), mocap)
+                self._sentinel = Sentinel(self._conn, self._target, self._land_mode(), mocap,
+                                          self._flight_mode or 0)
                 self._yaw0_told = None
             except (OSError, ValueError) as err:
                 log.warning("%s: no MAVLink sentinel (%s): if this process dies, only the "

@@ -5,21 +5,23 @@ An EKF on mocap alone (PX4 EKF2_EV_CTRL, ArduPilot ExternalNav) loses its only p
 source with the agent: the sentinel's brake stops the vehicle, and then the autopilot's
 Land holds a dead-reckoned position that drifts (PX4 SIH: 1.0-1.4 m further toward the
 wall, creeping at ~0.2 m/s). So the sentinel (drivers/mavsentinel.py) opens the flight's
-own mocap URI the moment the agent dies and sends each pose on as VISION_POSITION_ESTIMATE,
-as the driver did (drivers/mavvision.py: the same frame, yaw0 as the driver last had it,
-the same stamps on the same monotonic clock, whose TIMESYNC the sentinel answers), until
-the vehicle has disarmed or RELAY_MAX_S has passed.
+own mocap URI when it starts (its sockets only once the agent has died: the agent's own
+source is never competed with) and from the death on sends each pose as
+VISION_POSITION_ESTIMATE, as the driver did (drivers/mavvision.py: the same frame, yaw0 as
+the driver last told it, the same stamps on the same monotonic clock, whose TIMESYNC the
+sentinel answers), until the landing is over (mavsentinel.follow_landing).
 """
 
 from __future__ import annotations
 
-import sys
 import threading
 from collections.abc import Callable
 
+from perchd.drivers.childproc import say
 from perchd.drivers.mavvision import vision_estimate, vision_message
 
 from perchd.core.runtime import Runtime
+from perchd.core.types import Pose
 
 RELAY_MAX_S = 120.0
 """[s] the longest the mocap is relayed after the agent's death (a landing takes seconds;
@@ -58,14 +60,18 @@ class VisionRelay:
         if self._thread is not None:
             self._thread.join(2.0)
 
-    def frame(self, pose: object, yaw0: float) -> bytes:
+    @property
+    def alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def frame(self, pose: Pose, yaw0: float) -> bytes:
         return vision_message(self._mav, vision_estimate(pose, yaw0)).pack(self._mav)
 
     def _run(self, yaw0: float) -> None:
         try:
             self.poses.start()
         except Exception as err:  # noqa: BLE001 - the brake and LAND go on without it
-            sys.stderr.write(f"perchd mavsentinel: the mocap cannot be relayed: {err}\n")
+            say("mavsentinel", f"the mocap cannot be relayed: {err}")
             return
         seq = -1
         try:
@@ -76,11 +82,17 @@ class VisionRelay:
                     seq = -1 if newest is not None and newest.seq < seq else seq  # restarted
                     continue
                 seq = pose.seq
-                if getattr(pose, "valid", True):
-                    self._send(self.frame(pose, yaw0))
-                    self.sent += 1
+                if pose.valid:
+                    self._relay(self.frame(pose, yaw0))
         except OSError as err:  # the link is gone: nothing more to relay to
-            sys.stderr.write(f"perchd mavsentinel: mocap relay ended: {err}\n")
+            say("mavsentinel", f"mocap relay ended: {err}")
         finally:
             self.poses.close()
-            sys.stderr.write(f"perchd mavsentinel: relayed {self.sent} mocap poses\n")
+            say("mavsentinel", f"relayed {self.sent} mocap poses")
+
+    def _relay(self, frame: bytes) -> None:
+        try:
+            self._send(frame)
+            self.sent += 1
+        except (BlockingIOError, InterruptedError):
+            pass  # a full send buffer costs this pose, not the relay

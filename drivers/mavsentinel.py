@@ -21,9 +21,10 @@ yaw0 [rad], the NED heading of world X the mocap is relayed in; b"R" release: ex
 without acting.
 
 Run as `python -m perchd.drivers.mavsentinel CTL_FD LINK_FD DEST SSYS SCOMP SYS COMP MAIN
-SUB MOCAP` by drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a
+SUB MOCAP FLIGHT` by drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a
 stream; SSYS, SCOMP the driver's own ids; SYS, COMP the vehicle's; MAIN, SUB the LAND mode
-as DO_SET_MODE's param2 and param3; MOCAP the mocap URI to relay, "-" for none.
+as DO_SET_MODE's param2 and param3; MOCAP the mocap URI to relay, "-" for none; FLIGHT the
+custom_mode of the offboard mode perchd flies in.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from perchd.drivers import childproc
+from perchd.drivers.childproc import say
 from perchd.drivers.mavbrake import (
     BRAKE_ROUNDS,
     LEVEL_MAX_S,
@@ -65,7 +67,6 @@ LOCAL_POSITION_NED_ID = 32
 VELOCITY_INTERVAL_US = 20000
 """LOCAL_POSITION_NED at 50 Hz while braking (the driver asks for 10)."""
 CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-PX4_AUTOPILOT = 12  # MAV_AUTOPILOT_PX4
 VEHICLE_SILENT_S = 2.0
 """[s] the relay ends when the vehicle has not been heard this long: it is gone, or another
 process (a restarted agent) now receives on the link."""
@@ -89,11 +90,6 @@ def command_frame(source: tuple[int, int], target: tuple[int, int], command: int
 def px4_custom_mode(main: int, sub: int) -> int:
     """PX4's HEARTBEAT custom_mode of a (main, sub) mode."""
     return (main << 16) | (sub << 24)
-
-
-def custom_mode(autopilot: int, main: int, sub: int) -> int:
-    """The HEARTBEAT custom_mode the autopilot shows in DO_SET_MODE's (main, sub) mode."""
-    return px4_custom_mode(main, sub) if autopilot == PX4_AUTOPILOT else main
 
 
 def land_frame(source: tuple[int, int], target: tuple[int, int], main: int, sub: int
@@ -150,7 +146,7 @@ def fly_brake(link: Link, source: tuple[int, int], target: tuple[int, int],
     if brake.duration_s <= 0.0:
         return
     if time.monotonic() - brake.t_s > WILL_MAX_AGE_S:
-        sys.stderr.write("perchd mavsentinel: the brake left is stale: LAND at once\n")
+        say("mavsentinel", "the brake left is stale: LAND at once")
         return
     link.send(command_frame(source, target, CMD_SET_MESSAGE_INTERVAL, LOCAL_POSITION_NED_ID,
                             VELOCITY_INTERVAL_US))
@@ -177,8 +173,8 @@ def brake_round(link: Link, source: tuple[int, int], target: tuple[int, int], br
     v = heard[-1] if heard else None
     why = ("no velocity heard" if v is None else "stopped" if brake.stopped(v)
            else f"still at {math.hypot(*v[:2]):.2f} m/s")
-    sys.stderr.write(f"perchd mavsentinel: braked {leaned:.2f} s against "
-                     f"{math.hypot(*brake.v_ne):.2f} m/s, level {level:.2f} s ({why})\n")
+    say("mavsentinel", f"braked {leaned:.2f} s against {math.hypot(*brake.v_ne):.2f} m/s, "
+                       f"level {level:.2f} s ({why})")
     return v
 
 
@@ -208,7 +204,6 @@ class Link:
         self.heard_s: float | None = None  # time.monotonic() of the vehicle's last message
         self.armed: bool | None = None  # from its heartbeat, once heard
         self.mode: int | None = None  # custom_mode from its heartbeat, once heard
-        self.autopilot: int | None = None
 
     def send(self, frame: bytes) -> None:
         with self._lock:
@@ -233,7 +228,6 @@ class Link:
                 newest = (msg.vx, msg.vy, msg.vz)
             elif kind == "HEARTBEAT" and msg.get_srcComponent() == self.target[1]:
                 self.armed, self.mode = bool(msg.base_mode & 128), msg.custom_mode
-                self.autopilot = msg.autopilot
             elif kind == "TIMESYNC" and msg.tc1 == 0:
                 reply = self._mav.timesync_encode(*timesync_reply(msg.ts1, time.monotonic()))
                 self.send(reply.pack(self._mav))
@@ -252,45 +246,50 @@ class Link:
         return b"".join(chunks)
 
 
-def follow_landing(link: Link, relay: VisionRelay, land: tuple[int, int], died_s: float
-                   ) -> str:
-    """Relay until the landing is over: the vehicle disarmed (DISARMED_GRACE_S later), left
-    the LAND mode it showed (a pilot or a new agent has it), went silent for
-    VEHICLE_SILENT_S, or RELAY_MAX_S after the death; why it ended."""
-    landing_seen, disarmed_s = False, None
+def follow_landing(link: Link, relay: VisionRelay, flight_mode: int, died_s: float) -> str:
+    """Relay until the landing is over: the vehicle disarmed (DISARMED_GRACE_S later), or
+    back in the offboard mode `flight_mode` after it left it (a new agent has it: two
+    streams must not feed one EKF), or silent for VEHICLE_SILENT_S, or the relay stopped,
+    or RELAY_MAX_S after the death; why it ended. A pilot's mode keeps the relay going: a
+    vehicle on mocap alone has no other position."""
+    left_flight, disarmed_s = False, None
     while True:
         try:
             link.poll()
         except OSError as err:  # a TIMESYNC answer refused: the vehicle's port is closed
             return f"the link is gone ({err})"
         now = time.monotonic()
-        landing = link.mode is not None and link.autopilot is not None and \
-            link.mode == custom_mode(link.autopilot, *land)
-        if landing_seen and not landing:
-            return f"the vehicle left LAND (custom mode {link.mode})"
-        landing_seen = landing_seen or landing
-        if link.armed is False:
-            disarmed_s = now if disarmed_s is None else disarmed_s
-            if now - disarmed_s >= DISARMED_GRACE_S:
-                return "the vehicle disarmed"
+        left_flight = left_flight or (link.mode is not None and link.mode != flight_mode)
+        if left_flight and link.mode == flight_mode:
+            return f"the vehicle is back in the offboard mode (custom mode {flight_mode})"
+        disarmed_s = (disarmed_s or now) if link.armed is False else None
+        if disarmed_s is not None and now - disarmed_s >= DISARMED_GRACE_S:
+            return "the vehicle disarmed"
         if now - (link.heard_s or died_s) > VEHICLE_SILENT_S:
             return f"the vehicle silent for {VEHICLE_SILENT_S:g} s"
+        if not relay.alive:
+            return "the mocap relay stopped"
         if now - died_s > RELAY_MAX_S:
             return f"{RELAY_MAX_S:g} s after the death"
-        time.sleep(FOLLOW_PERIOD_S)
+        select.select([link.fd], [], [], FOLLOW_PERIOD_S)  # TIMESYNC answered on arrival
 
 
 def land(link: Link, frame: bytes) -> int:
-    """LAND_REPEATS times, LAND_REPEAT_S apart; 1 when the link itself is gone."""
-    try:
-        for i in range(LAND_REPEATS):
+    """LAND_REPEATS times, LAND_REPEAT_S apart; 1 when the link itself is gone (or not one
+    went out). A full send buffer costs one repeat, not the rest."""
+    sent = 0
+    for i in range(LAND_REPEATS):
+        try:
             link.send(frame)
-            if i + 1 < LAND_REPEATS:
-                time.sleep(LAND_REPEAT_S)
-    except OSError as err:  # the link itself is gone: nothing more to do
-        sys.stderr.write(f"perchd mavsentinel: LAND not sent: {err}\n")
-        return 1
-    return 0
+            sent += 1
+        except (BlockingIOError, InterruptedError):
+            pass
+        except OSError as err:  # the link itself is gone: nothing more to do
+            say("mavsentinel", f"LAND not sent: {err}")
+            return 1
+        if i + 1 < LAND_REPEATS:
+            time.sleep(LAND_REPEAT_S)
+    return 0 if sent else 1
 
 
 def prepared_relay(mocap: str, source: tuple[int, int], link: Link) -> VisionRelay | None:
@@ -301,14 +300,29 @@ def prepared_relay(mocap: str, source: tuple[int, int], link: Link) -> VisionRel
     try:
         return VisionRelay(mocap, source, link.send)
     except Exception as err:  # noqa: BLE001 - a relay that cannot be must not cost the LAND
-        sys.stderr.write(f"perchd mavsentinel: no mocap relay ({err})\n")
+        say("mavsentinel", f"no mocap relay ({err})")
         return None
 
 
+def start_relay(relay: VisionRelay | None, yaw0: float | None) -> bool:
+    """Start the relay at the death; False (said) when there is none to start."""
+    if relay is None:
+        return False
+    if yaw0 is None:
+        say("mavsentinel", "no mocap relayed: the agent never told its yaw0 (no pose moved)")
+        return False
+    try:
+        relay.start(yaw0)
+    except Exception as err:  # noqa: BLE001 - the brake and LAND come first
+        say("mavsentinel", f"mocap relay not started ({err!r})")
+        return False
+    return True
+
+
 def main(argv: list[str]) -> int:
-    # The agent's Ctrl-C, a service stop and systemd's watchdog signal reach the whole
-    # group: the sentinel outlives them and acts only on its socket's closing.
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT):
+    # The agent's Ctrl-C, a service stop, systemd's watchdog signal and a terminal's hang-up
+    # reach the whole group: the sentinel outlives them and acts only on its socket's closing.
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     ctl_fd, link_fd, dest = int(argv[0]), int(argv[1]), argv[2]
     source, target, mode = (tuple(map(int, argv[i:i + 2])) for i in (3, 5, 7))
@@ -318,20 +332,21 @@ def main(argv: list[str]) -> int:
     if death is None:
         return 0
     died_s = time.monotonic()
-    sys.stderr.write("perchd mavsentinel: the agent died flying the vehicle: brake, LAND\n")
-    relaying = relay is not None and death.yaw0 is not None
-    if relaying:
-        relay.start(death.yaw0)
+    say("mavsentinel", "the agent died flying the vehicle: brake, LAND")
+    relaying = start_relay(relay, death.yaw0)
     if death.brake is not None:
         try:
             fly_brake(link, source, target, death.brake)
         except Exception as err:  # noqa: BLE001 - whatever failed, LAND must still go out
-            sys.stderr.write(f"perchd mavsentinel: brake abandoned ({err!r}): LAND\n")
+            say("mavsentinel", f"brake abandoned ({err!r}): LAND")
     rc = land(link, land_frame(source, target, *mode))
     if relaying:
-        why = "the link is gone" if rc else follow_landing(link, relay, mode, died_s)
-        relay.stop()
-        sys.stderr.write(f"perchd mavsentinel: mocap relay ended: {why}\n")
+        try:
+            why = "the link is gone" if rc else follow_landing(link, relay, int(argv[10]),
+                                                              died_s)
+        finally:
+            relay.stop()
+        say("mavsentinel", f"mocap relay ended: {why}")
     return rc
 
 
@@ -353,17 +368,17 @@ def link_endpoint(conn: Any) -> tuple[int, str]:
 
 class Sentinel:
     """The driver's side: starts the sentinel on the connection `conn` for the vehicle
-    `target` (system, component) with its LAND `mode` (main, sub) and the `mocap` URI to
-    relay after a death (None: none); flying(True/False) tells it whether perchd flies the
+    `target` (system, component) with its LAND `mode` (main, sub), the `mocap` URI to
+    relay after a death (None: none) and the offboard `flight_mode` (custom_mode); flying(True/False) tells it whether perchd flies the
     vehicle; release() ends it without acting."""
 
     def __init__(self, conn: Any, target: tuple[int, int], mode: tuple[int, int],
-                 mocap: str | None = None) -> None:
+                 mocap: str | None = None, flight_mode: int = 0) -> None:
         link_fd, dest = link_endpoint(conn)
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         source = (conn.mav.srcSystem, conn.mav.srcComponent)
         argv = [str(theirs.fileno()), str(link_fd), dest,
-                *map(str, (*source, *target, *mode)), mocap or "-"]
+                *map(str, (*source, *target, *mode)), mocap or "-", str(flight_mode)]
         try:
             self._proc = childproc.start("perchd.drivers.mavsentinel", argv,
                                          (theirs.fileno(), link_fd))

@@ -16,7 +16,6 @@ VISION_POSITION_ESTIMATE as a NED position with Z-Y-X angles and a covariance.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,6 +27,7 @@ POS_STD_M = 0.01
 above it so the EKF still weighs its IMU)."""
 ANG_STD_RAD = 0.02
 """[rad] a mocap attitude's standard deviation."""
+MAVLINK2_MARKER = 253  # a MAVLink 2 frame's first byte
 COV_DIAGONAL = (0, 6, 11, 15, 18, 20)
 """Indices of x, y, z, roll, pitch, yaw in MAVLink's upper-triangle 6 x 6 covariance."""
 
@@ -64,7 +64,7 @@ def vision_message(mav: Any, v: VisionEstimate) -> Any:
     """VISION_POSITION_ESTIMATE of `v` from pymavlink's encoder `mav`, in the protocol it
     speaks: MAVLink 1 has no covariance (an extension field)."""
     fields = (v.usec, *v.ned, *v.rpy)
-    if getattr(sys.modules[type(mav).__module__], "WIRE_PROTOCOL_VERSION", "1.0") == "2.0":
+    if mav.protocol_marker == MAVLINK2_MARKER:
         return mav.vision_position_estimate_encode(*fields, list(v.covariance))
     return mav.vision_position_estimate_encode(*fields)
 

@@ -18,7 +18,7 @@ from perchd.service.config import load_config
 from perchd.service.failsafe import Outcome, failsafe
 
 DEFAULT_TIMEOUT_S = 5.0
-"""[s] the whole command's bound: well inside the units' TimeoutStopSec=10."""
+"""[s] the whole command's bound: well inside the units' TimeoutStopSec=30."""
 SERVICE_VARS = ("SERVICE_RESULT", "EXIT_CODE", "EXIT_STATUS")
 """What systemd tells ExecStopPost= about the main process's end (systemd.exec(5))."""
 
