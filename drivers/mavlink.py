@@ -470,7 +470,9 @@ class MavlinkDriver(DriverBase):
             return
         if not self._stopped and self._engaged:
             self._land()
-        self._release()
+        # an EKF on mocap alone would dead-reckon the rest of the landing (docs/safety.md,
+        # "The mocap relayed after the death"): the sentinel relays it until the end
+        self._release(handover=self._engaged and self._armed and self.vision)
 
     def bind_mass(self, mass_kg: float) -> None:
         """The flight's mass for the thrust model (rebuilt if connect() already made it)."""
@@ -765,10 +767,13 @@ class MavlinkDriver(DriverBase):
                 self._flight_mode is not None and self._mode == self._flight_mode)
             self._armed = bool(msg.base_mode & 128)  # MAV_MODE_FLAG_SAFETY_ARMED
 
-    def _release(self) -> None:
+    def _release(self, handover: bool = False) -> None:
         sentinel, self._sentinel = self._sentinel, None
         if sentinel is not None:
-            sentinel.release()
+            if handover:
+                sentinel.hand_over()
+            else:
+                sentinel.release()
         for ticker in self._tickers:
             ticker.stop()
         conn, self._conn = self._conn, None

@@ -18,7 +18,8 @@ Wire (SOCK_SEQPACKET), driver -> sentinel: b"F" perchd flies the vehicle (its of
 was acknowledged); b"D" it does not any more (the driver has commanded LAND itself); b"B"
 and a packed Brake: the brake to fly first, renewed from the mocap; b"Y" and a float64:
 yaw0 [rad], the NED heading of world X the mocap is relayed in; b"R" release: exit
-without acting.
+without acting; b"L" hand-over: the agent ends with the vehicle landing (its own LAND):
+relay the mocap until the landing is over, command nothing.
 
 Run as `python -m perchd.drivers.mavsentinel CTL_FD LINK_FD DEST SSYS SCOMP SYS COMP MAIN
 SUB MOCAP FLIGHT` by drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a
@@ -110,11 +111,14 @@ def attitude_frame(source: tuple[int, int], target: tuple[int, int],
 
 @dataclass(frozen=True)
 class Death:
-    """The agent died flying the vehicle; brake: the newest it left, if any; yaw0 [rad]:
-    the newest NED heading of world X it told, if any (the relay's frame)."""
+    """The agent died flying the vehicle, or handed over a landing one (handover: it
+    commanded LAND itself, so only the relay is left to do); brake: the newest it left,
+    if any; yaw0 [rad]: the newest NED heading of world X it told, if any (the relay's
+    frame)."""
 
     brake: Brake | None = None
     yaw0: float | None = None
+    handover: bool = False
 
 
 def agent_died_flying(ctl: socket.socket) -> Death | None:
@@ -130,6 +134,8 @@ def agent_died_flying(ctl: socket.socket) -> Death | None:
             return Death(brake, yaw0) if flying else None
         if msg == b"R":
             return None
+        if msg == b"L":
+            return Death(None, yaw0, handover=True)
         if msg in (b"F", b"D"):
             flying = msg == b"F"
         elif msg[:1] == b"B" and len(msg) == 1 + PACKED_SIZE:
@@ -319,6 +325,17 @@ def start_relay(relay: VisionRelay | None, yaw0: float | None) -> bool:
     return True
 
 
+def brake_and_land(link: Link, source: tuple[int, int], target: tuple[int, int],
+                   mode: tuple[int, int], brake: Brake | None) -> int:
+    """The brake left, if any, then LAND (land's result)."""
+    if brake is not None:
+        try:
+            fly_brake(link, source, target, brake)
+        except Exception as err:  # noqa: BLE001 - whatever failed, LAND must still go out
+            say("mavsentinel", f"brake abandoned ({err!r}): LAND")
+    return land(link, land_frame(source, target, *mode))
+
+
 def main(argv: list[str]) -> int:
     # The agent's Ctrl-C, a service stop, systemd's watchdog signal and a terminal's hang-up
     # reach the whole group: the sentinel outlives them and acts only on its socket's closing.
@@ -332,14 +349,10 @@ def main(argv: list[str]) -> int:
     if death is None:
         return 0
     died_s = time.monotonic()
-    say("mavsentinel", "the agent died flying the vehicle: brake, LAND")
+    say("mavsentinel", "the agent handed over its landing vehicle: relaying the mocap"
+        if death.handover else "the agent died flying the vehicle: brake, LAND")
     relaying = start_relay(relay, death.yaw0)
-    if death.brake is not None:
-        try:
-            fly_brake(link, source, target, death.brake)
-        except Exception as err:  # noqa: BLE001 - whatever failed, LAND must still go out
-            say("mavsentinel", f"brake abandoned ({err!r}): LAND")
-    rc = land(link, land_frame(source, target, *mode))
+    rc = 0 if death.handover else brake_and_land(link, source, target, mode, death.brake)
     if relaying:
         try:
             why = "the link is gone" if rc else follow_landing(link, relay, int(argv[10]),
@@ -400,14 +413,22 @@ class Sentinel:
         """[rad] the NED heading of world X, the frame the mocap is to be relayed in."""
         self._send(b"Y" + struct.pack(YAW0_WIRE, yaw0))
 
+    def hand_over(self) -> None:
+        """The agent ends with the vehicle landing: the sentinel relays the mocap until the
+        landing is over (module docstring), then exits on its own."""
+        self._end(b"L", RELAY_MAX_S + 5.0)
+
     def release(self) -> None:
         """Normal end: the sentinel exits without a word to the vehicle."""
-        self._send(b"R")
+        self._end(b"R", 2.0)
+
+    def _end(self, last: bytes, reap_s: float) -> None:
+        self._send(last)
         with self._lock:
             sock, self._sock = self._sock, None
         if sock is not None:
             sock.close()
-        childproc.reap_later(self._proc, 2.0, "mavsentinel-reap")
+        childproc.reap_later(self._proc, reap_s, "mavsentinel-reap")
 
     def _send(self, msg: bytes) -> None:
         with self._lock:

@@ -24,12 +24,15 @@ SPEED_MPS = 0.5
 RATE_HZ = 100.0
 POSCTL = 3 << 16  # PX4 POSITION: the pilot takes the vehicle
 OFFBOARD = 6 << 16  # PX4 OFFBOARD: a new agent takes it
+LAND_PX4 = (4 << 16) | (6 << 24)  # PX4 AUTO.LAND
 
 
-def agent(vehicle_uri: str, mocap_uri: str, query: str = "") -> subprocess.Popen:
+def agent(vehicle_uri: str, mocap_uri: str, query: str = "", fly_s: float = 1e9
+          ) -> subprocess.Popen:
     """`perchd fly`'s driver wiring in a process of its own: mocap bound, connected,
     engaged on the poses, then each new pose observed and a pitched setpoint sent at 100 Hz
-    until it is killed; says "ready" once engaged."""
+    until it is killed, or for fly_s [s] and then closed (the driver's own LAND) and
+    exited; says "ready" once engaged."""
     code = textwrap.dedent(f"""
         import time
         from perchd.core.runtime import Runtime
@@ -44,14 +47,16 @@ def agent(vehicle_uri: str, mocap_uri: str, query: str = "") -> subprocess.Popen
         d.connect()
         d.engage(source.latest)
         print("ready", flush=True)
-        seq = None
-        while True:
+        seq, end = None, time.monotonic() + {fly_s}
+        while time.monotonic() < end:
             pose = source.latest()
             if pose is not None and pose.seq != seq:
                 seq = pose.seq
                 d.observe_pose(pose)
             d.send(Setpoint(0.0, 0.0, 0.2, 0.0, 5.0, 1, Phase.STAGE1))
             time.sleep(0.01)
+        d.close()
+        source.close()
     """)
     return agent_process(code)
 
@@ -171,3 +176,29 @@ def test_the_flights_links_hand_the_driver_its_mocap():
     finally:
         mocap.close()
         vehicle.die()
+
+
+def test_an_agent_that_ends_normally_hands_its_landing_vehicle_to_the_relay():
+    """A flight's end lands the vehicle with the driver's own LAND, and `perchd fly` exits
+    while it descends: the sentinel relays the mocap on until the vehicle has disarmed,
+    commanding nothing itself."""
+    vehicle = VehicleDouble(PX4, airborne=True, mavlink2=True)
+    mocap = StillPoses(body="v")
+    try:
+        proc = agent(vehicle.uri, mocap.uri, fly_s=0.5)
+        assert proc.wait(10) == 0
+        exited = time.monotonic()
+        time.sleep(1.0)
+        assert len(visions_between(vehicle, exited + 0.2, exited + 1.0)) >= 0.5 * 0.8 * RATE_HZ
+        assert [mode for _, mode in vehicle.modes][-2:] == [LAND_PX4] * 2  # the driver's
+        assert all(t < exited for t, _ in vehicle.modes)  # none from the sentinel
+        vehicle.armed = False
+        vehicle.switch_mode_by_pilot(vehicle.custom_mode)
+        time.sleep(DISARMED_GRACE_S + 0.5)
+        last = max(t for t, _ in list(vehicle.visions))
+        time.sleep(0.3)
+        assert max(t for t, _ in list(vehicle.visions)) == last  # ended after the disarm
+    finally:
+        mocap.close()
+        vehicle.die()
+
