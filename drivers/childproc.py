@@ -6,6 +6,7 @@ write a line to the agent's stderr."""
 from __future__ import annotations
 
 import os
+import stat
 import subprocess
 import sys
 import threading
@@ -31,6 +32,23 @@ def say(who: str, text: str) -> None:
         sys.stderr.flush()
     except (OSError, ValueError):
         pass
+
+
+def let_go_of_pipes() -> None:
+    """Point stdout and stderr at /dev/null where they are pipes: whoever reads the agent's
+    output through one (`perchd fly ... | tee`, a test's communicate()) waits for its EOF,
+    which a helper still running (the sentinel's relay) would hold back. A terminal, a file
+    or the journal stays."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in (1, 2):
+            try:
+                if stat.S_ISFIFO(os.fstat(fd).st_mode):
+                    os.dup2(null, fd)
+            except OSError:
+                pass  # closed already: nothing held
+    finally:
+        os.close(null)
 
 
 def reap_later(proc: subprocess.Popen, timeout_s: float, name: str) -> None:

@@ -354,6 +354,8 @@ def main(argv: list[str]) -> int:
     relaying = start_relay(relay, death.yaw0)
     rc = 0 if death.handover else brake_and_land(link, source, target, mode, death.brake)
     if relaying:
+        say("mavsentinel", "relaying the mocap until the landing is over")
+        childproc.let_go_of_pipes()  # a pipe's reader is not kept waiting for the landing
         try:
             why = "the link is gone" if rc else follow_landing(link, relay, int(argv[10]),
                                                               died_s)
