@@ -93,7 +93,6 @@ from perchd.drivers.mavsentinel import (
     IGNORE_BODY_RATES,
     LOCAL_POSITION_NED_ID,
     Sentinel,
-    px4_custom_mode,
 )
 from perchd.drivers.mavtilt import NO_TILT, Tilt, TiltCorrection
 from perchd.drivers.mavvision import timesync_reply, vision_estimate, vision_message
@@ -281,6 +280,10 @@ def bind_source_port(conn: Any, port: int, uri: str) -> None:
     except OSError as err:
         conn.close()
         raise LinkError(f"{uri}: cannot bind source port {port}: {err.strerror or err}") from None
+
+
+def px4_custom_mode(main: int, sub: int) -> int:
+    return (main << 16) | (sub << 24)
 
 
 class MavlinkDriver(DriverBase):

@@ -88,11 +88,6 @@ def command_frame(source: tuple[int, int], target: tuple[int, int], command: int
     return mav.command_long_encode(*target, command, 0, *p).pack(mav)
 
 
-def px4_custom_mode(main: int, sub: int) -> int:
-    """PX4's HEARTBEAT custom_mode of a (main, sub) mode."""
-    return (main << 16) | (sub << 24)
-
-
 def land_frame(source: tuple[int, int], target: tuple[int, int], main: int, sub: int
                ) -> bytes:
     """DO_SET_MODE to the LAND mode."""
