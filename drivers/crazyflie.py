@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 from perchd.drivers import cflink, childproc
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
-from perchd.drivers.mavbrake import WILL_PERIOD_S, VelocityTracker, lean_for
+from perchd.drivers.mavbrake import WillSchedule, lean_for
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.drivers.ticker import Ticker
 
@@ -143,8 +143,7 @@ class CrazyflieDriver(DriverBase):
         self._wire = threading.Lock()  # "stopped?" and the send that follows, as one step
         self.failsafe_reasons: list[EndReason] = []
         self.uri_mass: float | None = None  # [kg] the URI's mass=, checked by bind_mass
-        self._velocity = VelocityTracker()  # from the mocap, for the keeper's brake
-        self._will_at = 0.0  # time.monotonic() of the brake last left with the keeper
+        self._will = WillSchedule()  # the keeper's brake, renewed from the mocap
         self._hold_n = 0.0  # [N] the last setpoint's vertical thrust (the keeper's hold)
 
     # -- Driver protocol ---------------------------------------------------------------
@@ -248,10 +247,10 @@ class CrazyflieDriver(DriverBase):
         """Every WILL_PERIOD_S, the brake the keeper is to fly should this process die:
         against the mocap's velocity (drivers/mavbrake.py; world X taken as north, so FRD
         roll is the world's and its pitch the world's negated: cflib's degrees)."""
-        v, now = self._velocity.update(pose.t, pose.p), time.monotonic()
-        if v is None or self._stopped or now - self._will_at < WILL_PERIOD_S:
+        now = time.monotonic()
+        v = self._will.due(pose, now)
+        if v is None or self._stopped:
             return
-        self._will_at = now
         roll, pitch, duration = lean_for(ned_vec(v, 0.0), -self._yaw)
         level = self.model.units(self._hold_n)
         factor = self.model.units(self._hold_n / (math.cos(roll) * math.cos(pitch))) / level \

@@ -22,7 +22,7 @@ import struct
 from dataclasses import dataclass
 
 from perchd.core.ned import quaternion_wxyz
-from perchd.core.types import Vec3
+from perchd.core.types import Pose, Vec3
 
 G = 9.81
 BRAKE_ACCEL_MPS2 = 3.0
@@ -108,6 +108,23 @@ def brake_for(v_ned: Vec3, heading_ned: float, hover_fraction: float, t_s: float
     thrust = min(hover_fraction / (math.cos(roll) * math.cos(pitch)), 1.0)
     return Brake(quaternion_wxyz(roll, pitch, heading_ned), thrust, duration,
                  (v_ned[0], v_ned[1]), heading_ned, hover_fraction, t_s)
+
+
+class WillSchedule:
+    """When a driver's helper (the MAVLink sentinel, the Crazyflie keeper) is due a fresh
+    brake: fed every pose, it gives the mocap's velocity once per WILL_PERIOD_S."""
+
+    def __init__(self) -> None:
+        self._velocity = VelocityTracker()
+        self._at = 0.0  # time.monotonic() of the last will
+
+    def due(self, pose: Pose, now: float) -> Vec3 | None:
+        """[m/s] the velocity to brake against when a will is due at `now` [s], else None."""
+        v = self._velocity.update(pose.t, pose.p)
+        if v is None or now - self._at < WILL_PERIOD_S:
+            return None
+        self._at = now
+        return v
 
 
 class VelocityTracker:

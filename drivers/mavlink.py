@@ -78,7 +78,7 @@ from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, split_query
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
-from perchd.drivers.mavbrake import WILL_PERIOD_S, VelocityTracker, brake_for
+from perchd.drivers.mavbrake import WillSchedule, brake_for
 from perchd.drivers.mavparams import (
     ARDUPILOT,
     PX4,
@@ -344,8 +344,7 @@ class MavlinkDriver(DriverBase):
         self._poses: PoseFeed = no_poses  # engage()'s pose feed, read while it waits
         self._pumped_seq: int | None = None  # the newest pose engage() forwarded
         self._sentinel: Sentinel | None = None  # lands the vehicle if this process dies
-        self._velocity = VelocityTracker()  # from the mocap, for the sentinel's brake
-        self._will_at = 0.0  # time.monotonic() of the brake last left with the sentinel
+        self._will = WillSchedule()  # the sentinel's brake, renewed from the mocap
         self._yaw0_told: float | None = None  # the yaw0 the sentinel last heard
         self.mocap_uri: str | None = None  # the flight's mocap, relayed after a death
 
@@ -421,12 +420,11 @@ class MavlinkDriver(DriverBase):
     def _renew_will(self, pose: Any) -> None:
         """Every WILL_PERIOD_S while perchd flies, the brake the sentinel is to fly should
         this process die: against the mocap's velocity (drivers/mavbrake.py)."""
-        v = self._velocity.update(pose.t, pose.p)
         now = time.monotonic()
+        v = self._will.due(pose, now)
         if (v is None or self._sentinel is None or self._stopped or self.yaw0 is None
-                or self.model is None or now - self._will_at < WILL_PERIOD_S):
+                or self.model is None):
             return
-        self._will_at = now
         heading = self._level_yaw if self._level_yaw is not None else self._yaw_ned or 0.0
         self._sentinel.will(brake_for(ned_vec(v, self.yaw0), heading,
                                       self.model.hover_fraction, now))

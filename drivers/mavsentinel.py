@@ -310,7 +310,7 @@ def start_relay(relay: VisionRelay | None, yaw0: float | None) -> bool:
     if relay is None:
         return False
     if yaw0 is None:
-        say("mavsentinel", "no mocap relayed: the agent never told its yaw0 (no pose moved)")
+        say("mavsentinel", "no mocap relayed: the agent never told its yaw0 (no brake left)")
         return False
     try:
         relay.start(yaw0)
