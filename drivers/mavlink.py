@@ -347,6 +347,7 @@ class MavlinkDriver(DriverBase):
         self._will = WillSchedule()  # the sentinel's brake, renewed from the mocap
         self._yaw0_told: float | None = None  # the yaw0 the sentinel last heard
         self.mocap_uri: str | None = None  # the flight's mocap, relayed after a death
+        self._vision_seq: int | None = None  # the newest pose sent to the EKF: each goes once
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -401,8 +402,8 @@ class MavlinkDriver(DriverBase):
                           self.model.fraction(setpoint.thrust))
 
     def observe_pose(self, pose: Any) -> None:
-        """Each pose goes to the autopilot's EKF (drivers/mavvision.py) unless vision=0, and
-        is paired with its attitude estimates for the tilt correction unless tilt=0."""
+        """Each pose goes to the autopilot's EKF once (drivers/mavvision.py) unless vision=0,
+        and is paired with its attitude estimates for the tilt correction unless tilt=0."""
         if not getattr(pose, "valid", True) or self._conn is None:
             return
         self._track_yaw0(pose)
@@ -412,7 +413,8 @@ class MavlinkDriver(DriverBase):
         v = vision_estimate(pose, self.yaw0)
         if self.tilt is not None:
             self.tilt.on_pose(pose.t, v.rpy[0], v.rpy[1])
-        if self.vision:
+        if self.vision and pose.seq != self._vision_seq:  # the loop may see a pose twice
+            self._vision_seq = pose.seq
             with self._lock:
                 self._conn.mav.send(vision_message(self._conn.mav, v))
             self.vision_sent += 1

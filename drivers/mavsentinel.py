@@ -12,7 +12,9 @@ mavbrake.py: leaning against the velocity until it is gone) and then commands th
 autopilot's LAND, repeated LAND_REPEATS times, LAND_REPEAT_S apart (a lost datagram would
 leave the vehicle flying). Given the flight's mocap URI, it also keeps the mocap flowing to
 the autopilot's EKF from the death until the landing is over (drivers/mavrelay.py), and
-answers the autopilot's TIMESYNC meanwhile.
+answers the autopilot's TIMESYNC meanwhile. An agent that dies with the vehicle no longer
+its own (between a service's flights: landing in its failsafe's LAND, or a pilot's) gets the
+relay alone: nothing is commanded, and the EKF keeps the mocap it was being fed.
 
 Wire (SOCK_SEQPACKET), driver -> sentinel: b"F" perchd flies the vehicle (its offboard mode
 was acknowledged); b"D" it does not any more (the driver has commanded LAND itself); b"B"
@@ -106,33 +108,39 @@ def attitude_frame(source: tuple[int, int], target: tuple[int, int],
 
 @dataclass(frozen=True)
 class Death:
-    """The agent died flying the vehicle, or handed over a landing one (handover: it
-    commanded LAND itself, so only the relay is left to do); brake: the newest it left,
-    if any; yaw0 [rad]: the newest NED heading of world X it told, if any (the relay's
-    frame)."""
+    """The agent died flying the vehicle, or handed over a landing one, or died after the
+    vehicle stopped being its own (handover: the LAND, if any, was its own, so only the
+    relay is left to do); brake: the newest it left, if any; yaw0 [rad]: the newest NED
+    heading of world X it told, if any (the relay's frame); said: the line it gets."""
 
     brake: Brake | None = None
     yaw0: float | None = None
     handover: bool = False
+    said: str = "the agent died flying the vehicle: brake, LAND"
 
 
 def agent_died_flying(ctl: socket.socket) -> Death | None:
-    """Wait for the driver: a Death when its end closed while it flew the vehicle, None on
-    a release or when it closed with the vehicle not (or no longer) its to fly."""
-    flying, brake, yaw0 = False, None, None
+    """Wait for the driver: a Death when it handed over, or its end closed after it had
+    flown the vehicle (flying it still, or not); None on a release or a death before."""
+    flying, flown, brake, yaw0 = False, False, None, None
     while True:
         try:
             msg = ctl.recv(64)
         except OSError:
             msg = b""
+        if not msg and flying:
+            return Death(brake, yaw0)
         if not msg:
-            return Death(brake, yaw0) if flying else None
+            return Death(None, yaw0, handover=True, said="the agent died between flights: "
+                         "relaying the mocap, commanding nothing") if flown else None
         if msg == b"R":
             return None
         if msg == b"L":
-            return Death(None, yaw0, handover=True)
+            return Death(None, yaw0, handover=True,
+                         said="the agent handed over its landing vehicle: relaying the mocap")
         if msg in (b"F", b"D"):
             flying = msg == b"F"
+            flown = flown or flying
         elif msg[:1] == b"B" and len(msg) == 1 + PACKED_SIZE:
             brake = Brake.unpack(msg[1:])
         elif msg[:1] == b"Y" and len(msg) == 1 + struct.calcsize(YAW0_WIRE):
@@ -341,11 +349,10 @@ def main(argv: list[str]) -> int:
     link = Link(link_fd, dest, source, target)
     relay = prepared_relay(argv[9], source, link)
     death = agent_died_flying(socket.socket(fileno=ctl_fd))
-    if death is None:
-        return 0
+    if death is None or (death.handover and relay is None):
+        return 0  # nothing to command, nothing to relay
     died_s = time.monotonic()
-    say("mavsentinel", "the agent handed over its landing vehicle: relaying the mocap"
-        if death.handover else "the agent died flying the vehicle: brake, LAND")
+    say("mavsentinel", death.said)
     relaying = start_relay(relay, death.yaw0)
     rc = 0 if death.handover else brake_and_land(link, source, target, mode, death.brake)
     if relaying:

@@ -57,6 +57,7 @@ from perchd.service.config import (
     load_config,
 )
 from perchd.service.control_socket import ControlServer
+from perchd.service.idle_feed import IdleFeed
 from perchd.service.sdnotify import Notifier
 from perchd.sim.session import Session, open_links
 from perchd.tau import load_plan
@@ -77,7 +78,8 @@ def say(msg: str) -> None:
 
 class Links:
     """The service's connected driver and pose source. Simulated links (sim:// on both) fly
-    a fresh simulated world per flight, paced in real time."""
+    a fresh simulated world per flight, paced in real time; real ones keep feeding the
+    driver the mocap between flights (service/idle_feed.py)."""
 
     def __init__(self, service: ServiceConfig, surface: SurfaceConfig | None = None,
                  mass_kg: float | None = None) -> None:
@@ -86,6 +88,17 @@ class Links:
         self.driver_uri, self.mocap_uri = service.driver, service.mocap_uri()
         self.session: Session | None = self._open()
         self.simulated = self.session.world is not None
+        self.feed = None if self.simulated else IdleFeed(self.source, self.driver)
+        self.between_flights()
+
+    def flight_starts(self) -> None:
+        """The flight's loop feeds the driver from here on."""
+        if self.feed is not None:
+            self.feed.pause()
+
+    def between_flights(self) -> None:
+        if self.feed is not None:
+            self.feed.resume()
 
     def _open(self) -> Session:
         return open_links(self.driver_uri, self.mocap_uri, self.surface, MonotonicClock(),
@@ -116,6 +129,8 @@ class Links:
             return False
 
     def close(self) -> None:
+        if self.feed is not None:  # before the driver's close: it hands over to its sentinel
+            self.feed.close()
         session, self.session = self.session, None
         if session is not None:
             session.close()
@@ -141,6 +156,7 @@ class FlightJob(threading.Thread):
         key = f"{svc.vehicle} {svc.driver}"  # the vehicle and the calibration it flies with
         try:
             flight = store.with_learned_guess(key, self.cfg.flight)
+            self.links.flight_starts()
             res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
                       self.log, flight, self.abort, self.on_tick, world=self.links.session.world,
                       header={"plan_file": str(self.plan_path), "vehicle": self.cfg.service.vehicle,
@@ -153,6 +169,7 @@ class FlightJob(threading.Thread):
             self.result = {"outcome": why.name, "log": str(self.log),
                            "detail": f"{type(err).__name__}: {err}"}
         finally:
+            self.links.between_flights()  # at once: a failsafe's LAND may be descending
             os.write(self.wake_fd, FLIGHT_DONE)
 
     def on_tick(self, st: Any) -> None:

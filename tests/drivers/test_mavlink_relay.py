@@ -27,16 +27,17 @@ OFFBOARD = 6 << 16  # PX4 OFFBOARD: a new agent takes it
 LAND_PX4 = (4 << 16) | (6 << 24)  # PX4 AUTO.LAND
 
 
-def agent(vehicle_uri: str, mocap_uri: str, query: str = "", fly_s: float = 1e9
-          ) -> subprocess.Popen:
+def agent(vehicle_uri: str, mocap_uri: str, query: str = "", fly_s: float = 1e9,
+          serving: bool = False) -> subprocess.Popen:
     """`perchd fly`'s driver wiring in a process of its own: mocap bound, connected,
     engaged on the poses, then each new pose observed and a pitched setpoint sent at 100 Hz
     until it is killed, or for fly_s [s] and then closed (the driver's own LAND) and
-    exited; says "ready" once engaged."""
+    exited; says "ready" once engaged. serving: after fly_s, as `perchd serve` between
+    flights: the driver's failsafe, then only the poses observed until it is killed."""
     code = textwrap.dedent(f"""
         import time
         from perchd.core.runtime import Runtime
-        from perchd.core.types import Phase, Setpoint
+        from perchd.core.types import EndReason, Phase, Setpoint
         from perchd.drivers.base import open_driver
         from perchd.mocap.base import open_source
         rt = Runtime.real()
@@ -55,6 +56,14 @@ def agent(vehicle_uri: str, mocap_uri: str, query: str = "", fly_s: float = 1e9
                 d.observe_pose(pose)
             d.send(Setpoint(0.0, 0.0, 0.2, 0.0, 5.0, 1, Phase.STAGE1))
             time.sleep(0.01)
+        if {serving}:
+            d.failsafe(EndReason.OPERATOR_ABORT)
+            print("between flights", flush=True)
+            while True:
+                pose = source.wait(seq, 0.05)
+                if pose is not None:
+                    seq = pose.seq
+                    d.observe_pose(pose)
         d.close()
         source.close()
     """)
@@ -202,3 +211,28 @@ def test_an_agent_that_ends_normally_hands_its_landing_vehicle_to_the_relay():
         mocap.close()
         vehicle.die()
 
+
+
+def test_an_agent_killed_between_flights_leaves_the_relay_and_no_command():
+    """`perchd serve` after a flight's failsafe: the vehicle descends in the driver's LAND
+    while the service feeds it the mocap (perchd/service/idle_feed.py). Killed then, the
+    agent's sentinel relays the mocap and commands nothing: the vehicle is no longer
+    perchd's to fly, and the EKF keeps its position."""
+    vehicle = VehicleDouble(PX4, airborne=True, mavlink2=True)
+    mocap = StillPoses(body="v")
+    proc = agent(vehicle.uri, mocap.uri, fly_s=0.5, serving=True)
+    try:
+        assert proc.stdout.readline().strip() == "between flights"
+        assert vehicle.wait_for(lambda: vehicle.custom_mode == LAND_PX4, 2.0)
+        time.sleep(1.5)  # the keep-alive has seen the LAND taken: not flying any more
+        killed = time.monotonic()
+        proc.kill()
+        proc.wait()
+        time.sleep(1.0)
+        assert len(visions_between(vehicle, killed + 0.2, killed + 1.0)) >= 0.5 * 0.8 * RATE_HZ
+        assert all(t < killed for t, _ in vehicle.modes)  # no brake, no LAND from it
+        assert all(t < killed for t in (x.t for x in vehicle.targets))
+    finally:
+        proc.kill()
+        mocap.close()
+        vehicle.die()

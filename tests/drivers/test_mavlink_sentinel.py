@@ -205,20 +205,24 @@ def test_a_normal_close_lands_once_and_the_sentinel_adds_nothing(airborne):
     assert after == [LAND[ARDUPILOT]] * 2  # the driver's own close(): LAND, twice
 
 
-def died_flying(*messages: bytes) -> bool:
+def died(*messages: bytes) -> str:
+    """What the sentinel does when the driver's end closes after `messages`."""
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     for msg in messages:
         ours.send(msg)
     ours.close()
-    return agent_died_flying(theirs)
+    death = agent_died_flying(theirs)
+    return "nothing" if death is None else "relay" if death.handover else "land"
 
 
-def test_the_sentinel_acts_only_on_a_death_while_flying():
-    assert died_flying(b"F")
-    assert died_flying(b"D", b"F")
-    assert not died_flying()
-    assert not died_flying(b"F", b"D")  # LAND taken, or the pilot's mode: not ours
-    assert not died_flying(b"F", b"R")
+def test_the_sentinel_lands_only_on_a_death_while_flying():
+    assert died(b"F") == "land"
+    assert died(b"D", b"F") == "land"
+    assert died() == "nothing"  # never flown: not ours
+    assert died(b"D") == "nothing"
+    assert died(b"F", b"D") == "relay"  # LAND taken, or the pilot's mode: only the mocap
+    assert died(b"F", b"R") == "nothing"
+    assert died(b"F", b"L") == "relay"
 
 
 def test_over_a_stream_link_the_land_command_is_one_whole_frame():

@@ -90,3 +90,33 @@ def test_a_flight_engages_and_after_its_failsafe_land_stays_across_a_restart(
         again.stop()
         again.kill()
     assert vehicle.custom_mode == LAND
+
+
+def visions_within(v: VehicleDouble, seconds: float) -> int:
+    start = time.monotonic()
+    v.wait_for(lambda: False, timeout=seconds)
+    return sum(1 for t, _ in v.visions if t > start)
+
+
+def test_the_mocap_reaches_the_vehicle_between_flights_each_pose_once(tmp_path, notify,
+                                                                       vehicle, poses):
+    """An EKF on mocap alone needs it while a failsafe's LAND descends after the flight,
+    and before the next (docs/safety.md "Between flights")."""
+    s = serve(tmp_path, notify, vehicle, poses)
+    rate = 1.0 / poses.period
+    try:
+        assert visions_within(vehicle, 1.0) >= 0.6 * rate  # idle, before any flight
+        assert ctl(s.sock, "fly", str(PLAN))["ok"]
+        s.wait_phase({"hold", "approach"})
+        assert ctl(s.sock, "abort")["aborting"]
+        assert vehicle.wait_for(lambda: vehicle.custom_mode == LAND)
+        deadline = time.monotonic() + 5
+        while ctl(s.sock, "status")["state"] == "flying" and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert visions_within(vehicle, 1.0) >= 0.6 * rate  # the landing, after the flight
+    finally:
+        s.proc.send_signal(signal.SIGTERM)
+        s.stop()
+        s.kill()
+    stamps = [m.usec for _, m in vehicle.visions]
+    assert stamps == sorted(set(stamps))  # one feeder at a time, each pose once
