@@ -30,19 +30,21 @@ ROOT = Path(__file__).parents[2]
 HOVER_N = 0.030 * 9.81  # the default thrust model's vehicle
 PITCH, THRUST_N = 0.2, 1.15 * HOVER_N  # mid-approach: tilted, more than the weight
 AGENT = textwrap.dedent(f"""
-    import sys, time
+    import math, sys, time
     from perchd.drivers.base import open_driver
     from perchd.core.runtime import Runtime
     from perchd.core.types import Phase, Pose, Setpoint
     cf = open_driver(sys.argv[1], Runtime.real())
     speed = float(sys.argv[2]) if len(sys.argv) > 2 else None
+    yaw = float(sys.argv[3]) if len(sys.argv) > 3 else 0.0
+    q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
     cf.connect()
     print(cf._keeper.pid, flush=True)
     k = 0
     while True:  # 100 Hz, as the loop streams
-        if speed is not None:  # mocap along world X, yaw 0
+        if speed is not None:  # mocap along world X, the body yawed by yaw [rad]
             now = time.monotonic()
-            cf.observe_pose(Pose("cf", k, now, (speed * now, 0.0, 1.0), (0, 0, 0, 1)))
+            cf.observe_pose(Pose("cf", k, now, (speed * now, 0.0, 1.0), q))
         cf.send(Setpoint(k * 0.01, 0.0, {PITCH}, 0.0, {THRUST_N}, k, Phase.STAGE1))
         if k == 30:
             print("streaming", flush=True)
@@ -105,26 +107,39 @@ def test_sigkill_of_the_agent_gets_a_level_descent_then_the_stop(responder):
     print(f"\nstop {responder.stops()[0].t - t_dead:.3f} s after SIGKILL")
 
 
-def test_an_agent_killed_at_speed_has_the_keeper_brake_before_the_descent(responder):
-    """At 0.9 m/s along world X the keeper first leans the vehicle back at BRAKE_ACCEL_MPS2
-    (nose up on the wire, level in roll) for 0.3 s (0.9 / 3), its thrust the descent's
-    tilt-compensated through the thrust model, then descends level and stops, as without
-    a brake and as soon."""
-    agent, keeper_pid = start_agent(responder.uri, "0.9")
+def expected_lean(yaw_deg: float) -> tuple[float, float]:
+    """[rad] (roll, pitch) on cflib's wire that decelerates a body yawed yaw_deg (world
+    Z up) flying along world +X at BRAKE_ACCEL_MPS2: the acceleration wanted is along world
+    -X; split into the body's forward and right, nose up (positive on the wire) brakes
+    forward, right side down (positive roll) pushes right."""
+    yaw = math.radians(yaw_deg)
+    forward = -BRAKE_ACCEL_MPS2 * math.cos(yaw)
+    right = -BRAKE_ACCEL_MPS2 * math.sin(yaw)  # world -X seen from a body facing +Y: left
+    pitch = math.atan2(-forward, 9.81)
+    return math.atan2(right * math.cos(pitch), 9.81), pitch
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 90.0, -150.0])
+def test_an_agent_killed_at_speed_has_the_keeper_brake_before_the_descent(responder, yaw_deg):
+    """At 0.9 m/s along world X the keeper first leans the vehicle against it at
+    BRAKE_ACCEL_MPS2 for 0.3 s (0.9 / 3): facing along X, nose up on the wire and level in
+    roll; facing +Y, a roll to its left; facing back and aside, both. Its thrust is the
+    descent's, tilt-compensated through the thrust model; then it descends level and
+    stops, as without a brake and as soon."""
+    agent, keeper_pid = start_agent(responder.uri, "0.9", str(math.radians(yaw_deg)))
     time.sleep(0.3)
     agent.kill()
     t_dead = time.monotonic()
     agent.wait()
     check_descent_then_stop(responder, t_dead, keeper_pid)
-    pitch, model = math.atan2(BRAKE_ACCEL_MPS2, 9.81), CrazyflieThrust()
+    (roll, pitch), model = expected_lean(yaw_deg), CrazyflieThrust()
     lean = [s for s in responder.setpoints()  # the agent's own last ones pitch the other way
-            if s.t > t_dead and abs(s.wire_pitch_deg - math.degrees(pitch)) < 0.01]
+            if s.t > t_dead and abs(s.wire_pitch_deg - math.degrees(pitch)) < 0.01
+            and abs(s.roll_deg - math.degrees(roll)) < 0.01]
     assert len(lean) >= 8 and lean[-1].t - t_dead == pytest.approx(0.3, abs=0.08)
     hold_n = THRUST_N * math.cos(PITCH)
     hold = model.units(hold_n)
-    factor = model.units(hold_n / math.cos(pitch)) / hold
-    assert all(s.wire_pitch_deg == pytest.approx(math.degrees(pitch), abs=1e-3)
-               and s.roll_deg == 0.0 for s in lean)
+    factor = model.units(hold_n / (math.cos(roll) * math.cos(pitch))) / hold
     thrusts = [s.thrust for s in lean]  # the descent's ramp, tilt-compensated
     assert int(hold * factor) >= thrusts[0] > hold and thrusts == sorted(thrusts, reverse=True)
     assert thrusts[-1] == int(int(cflink.DESCENT_FRACTION * hold) * factor)

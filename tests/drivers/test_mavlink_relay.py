@@ -28,12 +28,13 @@ LAND_PX4 = (4 << 16) | (6 << 24)  # PX4 AUTO.LAND
 
 
 def agent(vehicle_uri: str, mocap_uri: str, query: str = "", fly_s: float = 1e9,
-          serving: bool = False) -> subprocess.Popen:
+          serving: bool = False, relayed: str | None = None) -> subprocess.Popen:
     """`perchd fly`'s driver wiring in a process of its own: mocap bound, connected,
     engaged on the poses, then each new pose observed and a pitched setpoint sent at 100 Hz
     until it is killed, or for fly_s [s] and then closed (the driver's own LAND) and
     exited; says "ready" once engaged. serving: after fly_s, as `perchd serve` between
-    flights: the driver's failsafe, then only the poses observed until it is killed."""
+    flights: the driver's failsafe, then only the poses observed until it is killed.
+    relayed: the mocap URI the driver is told to relay, if not the one it flies on."""
     code = textwrap.dedent(f"""
         import time
         from perchd.core.runtime import Runtime
@@ -42,7 +43,7 @@ def agent(vehicle_uri: str, mocap_uri: str, query: str = "", fly_s: float = 1e9,
         from perchd.mocap.base import open_source
         rt = Runtime.real()
         d = open_driver({vehicle_uri!r} + "?mass=0.5&yaw0={YAW0_DEG}" + {query!r}, rt)
-        d.bind_mocap({mocap_uri!r})
+        d.bind_mocap({relayed or mocap_uri!r})
         source = open_source({mocap_uri!r}, rt)
         source.start()
         d.connect()
@@ -234,5 +235,54 @@ def test_an_agent_killed_between_flights_leaves_the_relay_and_no_command():
         assert all(t < killed for t in (x.t for x in vehicle.targets))
     finally:
         proc.kill()
+        mocap.close()
+        vehicle.die()
+
+
+def killed_agent(vehicle: VehicleDouble, mocap: StillPoses, **kw) -> float:
+    """An agent flying `vehicle` on `mocap`, SIGKILLed after 0.6 s: time.monotonic() then."""
+    proc = agent(vehicle.uri, mocap.uri, **kw)
+    try:
+        time.sleep(0.6)
+        killed = time.monotonic()
+        proc.kill()
+        proc.wait()
+        return killed
+    finally:
+        proc.kill()
+
+
+def test_a_mavlink1_link_gets_the_relay_too():
+    """Over MAVLink 1 (no covariance field) each pose is relayed all the same, at its
+    position in NED by yaw0."""
+    vehicle = VehicleDouble(PX4, airborne=True)
+    mocap = StillPoses(p=(-3.0, 0.2, 1.0), body="v", rate_hz=RATE_HZ)
+    try:
+        killed = killed_agent(vehicle, mocap)
+        time.sleep(3.0)
+        relayed = visions_between(vehicle, killed + 0.2, killed + 3.0)
+        assert len(relayed) >= 0.5 * 2.8 * RATE_HZ
+        assert all(m.get_msgbuf()[0] == 0xFE for m in relayed)  # MAVLink 1 frames
+        assert all((m.x, m.y, m.z) == pytest.approx(ned((-3.0, 0.2, 1.0), YAW0_DEG), abs=0.01)
+                   for m in relayed)
+        assert [mode for t, mode in vehicle.modes if t > killed][:1] == [LAND_PX4]
+    finally:
+        mocap.close()
+        vehicle.die()
+
+
+def test_a_mocap_the_sentinel_cannot_start_costs_the_relay_not_the_land():
+    """The relay's source fails to start at the death (a NatNet server that does not
+    answer): the brake and LAND are flown as ever, and nothing is relayed."""
+    vehicle = VehicleDouble(PX4, airborne=True, mavlink2=True)
+    mocap = StillPoses(body="v", rate_hz=RATE_HZ)
+    silent = "natnet://127.0.0.1:9?body=v&transport=unicast&timeout=0.5"
+    try:
+        killed = killed_agent(vehicle, mocap, relayed=silent)
+        assert vehicle.wait_for(lambda: [m for t, m in vehicle.modes if t > killed], 3.0)
+        time.sleep(2.0)
+        assert next(m for t, m in vehicle.modes if t > killed) == LAND_PX4
+        assert not visions_between(vehicle, killed + 0.1, time.monotonic())
+    finally:
         mocap.close()
         vehicle.die()

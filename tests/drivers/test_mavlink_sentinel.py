@@ -28,7 +28,13 @@ from perchd.drivers.mavbrake import (
     LEVEL_MAX_S,
 )
 from perchd.drivers.mavlink import HOVER_PARAM
-from perchd.drivers.mavsentinel import LAND_REPEATS, Sentinel, agent_died_flying
+from perchd.drivers.mavrelay import RELAY_MAX_S
+from perchd.drivers.mavsentinel import (
+    LAND_REPEATS,
+    Sentinel,
+    agent_died_flying,
+    follow_landing,
+)
 from pymavlink import mavutil
 
 from perchd.core.ned import euler_zyx
@@ -307,3 +313,32 @@ def test_a_brake_that_fails_still_ends_in_land(monkeypatch):
     vehicle.close()
     assert all(m.command == 176 and (m.param2, m.param3) == (4, 6) for m in msgs)
 
+
+
+class HeardLink:
+    """The follow phase's view of a vehicle heard just now, armed, in a pilot's mode: the
+    link's state the sentinel reads (a socket for its select)."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.fd = self.sock.fileno()
+        self.mode, self.armed, self.heard_s = 3 << 16, True, time.monotonic()
+
+    def poll(self) -> None:
+        self.heard_s = time.monotonic()
+
+
+class LiveRelay:
+    alive = True
+
+
+def test_the_relay_ends_relay_max_s_after_the_death_whatever_the_vehicle_does():
+    """A vehicle still armed RELAY_MAX_S after the death is someone else's: the relay ends."""
+    link = HeardLink()
+    try:
+        start = time.monotonic()
+        assert follow_landing(link, LiveRelay(), 6 << 16, start - RELAY_MAX_S + 0.3) == \
+            f"{RELAY_MAX_S:g} s after the death"
+        assert 0.25 <= time.monotonic() - start <= 1.0
+    finally:
+        link.sock.close()

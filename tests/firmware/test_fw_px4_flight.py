@@ -32,10 +32,12 @@ from fwharness import (
     heading_error,
     kill_at_speed,
     lag_event,
+    log_rows,
     start_placed,
     surface_normal,
 )
 from perchd.drivers.base import open_driver
+from svc import NotifyListener, Serve, ctl
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import Phase, Pose, Setpoint
@@ -304,3 +306,59 @@ def test_the_readme_form_is_refused_before_any_mode_change(tmp_path):
             "stderr": done.stderr.strip().splitlines()[-1:], "modes": sim["modes"]})
     assert done.returncode != 0 and "EKF2_EV_CTRL=0 (wanted" in done.stderr
     assert "OFFBOARD" not in sim["modes"]
+
+
+def test_a_service_abort_on_mocap_alone_lands_where_it_stopped(tmp_path):
+    """`perchd serve` flying PX4 SIH from the ground on mocap alone (GPS off, SIH's own
+    drag), aborted mid-approach: the driver's failsafe LAND, then the service between flights
+    feeds EKF2 the mocap through the landing (docs/safety.md, "Between flights"). Before,
+    nothing fed it once the flight had ended: Land dead-reckoned, as after a death without
+    the relay (1.3 m on)."""
+    proc, mocap, driver, surface = harness(tmp_path, "--vision", "--ahead", "7.5",
+                                           "--px4-param", "SIH_KDV=1.0")
+    point, normal = surface[surface.index("--surface") + 1:][:3], surface_normal(surface)
+    tables = (CONFIG.split("\n", 1)[1] + "[surface]\n"
+              f"point = [{', '.join(point)}]\nnormal = [{', '.join(map(str, normal))}]\n")
+    watch = YawWatch(mocap)
+    notify = NotifyListener(tmp_path / "notify")
+    svc = Serve(tmp_path, notify, tables=tables, driver=driver, mocap=mocap)
+    try:
+        notify.wait_for("READY=1", 60.0)
+        assert ctl(svc.sock, "fly", str(PLAN))["ok"]
+        log = Path(ctl(svc.sock, "status")["log"])
+        aborted = abort_at_speed(svc, log, KILL_SPEED_MPS, 90.0)
+        assert aborted is not None, "the approach never got up to speed"
+        time.sleep(8.0)
+        idle = ctl(svc.sock, "status")
+        sim = stop(proc)
+    finally:
+        watch.close()
+        svc.proc.send_signal(signal.SIGTERM)
+        svc.stop(40.0)
+        notify.close()
+        shut(proc)
+    figures = after_kill(watch.positions, aborted, normal)
+    stopped = [p for t, p in watch.positions if t >= aborted + 2.0]  # Land has braked
+    creep = max(sum((p[i] - stopped[0][i]) * normal[i] for i in range(3)) for p in stopped)
+    report({"test": "px4-serve-abort", "modes": sim["modes"], **figures,
+            "creep_toward_wall_after_2_s_m": creep, "last": idle["last"]["outcome"],
+            "load": os.getloadavg()})
+    assert idle["state"] == "idle" and idle["last"]["outcome"] == "OPERATOR_ABORT"
+    assert "AUTO.LAND" in sim["modes"] and "AUTO.RTL" not in sim["modes"]
+    # measured 0.00 m in four runs (Land settles back from its overshoot); with nothing fed
+    # between flights 0.07-0.16 m on toward the wall (docs/safety.md, "Between flights")
+    assert creep <= 0.05
+    assert figures["further_toward_wall_m"] <= 0.8  # Land's own braking, no brake first
+
+
+def abort_at_speed(svc, log: Path, speed_mps: float, timeout_s: float) -> float | None:
+    """`perchd ctl abort` once the flight log shows the approach at speed_mps toward the
+    wall: time.monotonic() of the request; None when it never got there."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if any(r["phase"] == "approach" and r["xdot"] >= speed_mps for r in log_rows(log)[-3:]):
+            asked = time.monotonic()
+            assert ctl(svc.sock, "abort")["aborting"]
+            return asked
+        time.sleep(0.02)
+    return None
