@@ -89,14 +89,14 @@ class Links:
         self.session: Session | None = self._open()
         self.simulated = self.session.world is not None
         self.feed = None if self.simulated else IdleFeed(self.source, self.driver)
-        self.between_flights()
+        self.resume_feed()
 
-    def flight_starts(self) -> None:
-        """The flight's loop feeds the driver from here on."""
+    def pause_feed(self) -> None:
+        """Someone else feeds the driver from here on: a flight's loop, or new links."""
         if self.feed is not None:
             self.feed.pause()
 
-    def between_flights(self) -> None:
+    def resume_feed(self) -> None:
         if self.feed is not None:
             self.feed.resume()
 
@@ -156,7 +156,7 @@ class FlightJob(threading.Thread):
         key = f"{svc.vehicle} {svc.driver}"  # the vehicle and the calibration it flies with
         try:
             flight = store.with_learned_guess(key, self.cfg.flight)
-            self.links.flight_starts()
+            self.links.pause_feed()
             res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
                       self.log, flight, self.abort, self.on_tick, world=self.links.session.world,
                       header={"plan_file": str(self.plan_path), "vehicle": self.cfg.service.vehicle,
@@ -169,7 +169,7 @@ class FlightJob(threading.Thread):
             self.result = {"outcome": why.name, "log": str(self.log),
                            "detail": f"{type(err).__name__}: {err}"}
         finally:
-            self.links.between_flights()  # at once: a failsafe's LAND may be descending
+            self.links.resume_feed()  # at once: a failsafe's LAND may be descending
             os.write(self.wake_fd, FLIGHT_DONE)
 
     def on_tick(self, st: Any) -> None:
@@ -332,9 +332,7 @@ class Daemon:
             moved = self.links.simulated and new.flight.surface != self.links.surface
             if moved or (new.service.driver, new.service.mocap_uri()) != (self.links.driver_uri,
                                                                           self.links.mocap_uri):
-                links = Links(new.service, new.flight.surface, new.flight.vehicle.mass_kg)
-                self.links.close()
-                self.links = links
+                self.links = self._replace_links(new)
         except PerchdError as err:
             say(f"SIGHUP: config not reloaded, keeping the old one: {err}")
             return f"{idle}, reload failed: {err}"
@@ -342,6 +340,18 @@ class Daemon:
         self.server.peers = peers
         say(f"SIGHUP: reloaded {self.config_path}")
         return f"{new.service.vehicle}: idle, config reloaded"
+
+    def _replace_links(self, new: Config) -> Links:
+        """New links connected before the old close (a refusal keeps the old ones, feeding
+        again); one feed to a vehicle at a time."""
+        self.links.pause_feed()
+        try:
+            links = Links(new.service, new.flight.surface, new.flight.vehicle.mass_kg)
+        except BaseException:
+            self.links.resume_feed()
+            raise
+        self.links.close()
+        return links
 
     def _restart_only(self, new: Config, key: str) -> Config:
         """`new` with [service] `key` kept as it is: it changes only on restart."""
