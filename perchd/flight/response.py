@@ -80,25 +80,29 @@ class VehicleResponse:
 
     def refit_stage2(self, t: float, since_t: float, v_hold: float) -> float:
         """At the stage-2 switch: the bias again from stage 1 (since since_t [s]), lag and
-        drag kept, fed forward from here on if it predicts stage 1's end better
-        (LagIdentifier.refit_bias). Returns the step [m/s^2] this adds at the held
-        speed v_hold [m/s] (0 when refused, logged, or nothing was identified)."""
+        drag kept, its departure from the approach's flown from here on by
+        LagIdGains.stage2_refit_share (LagIdentifier.refit_bias). Returns the step [m/s^2]
+        this adds at the held speed v_hold [m/s] (0 when refused, logged, or nothing was
+        identified)."""
         if self.model is None or not self.cfg.stage2_refit:
             return 0.0
         self._relag(t, since_t)
         fit = self.lagid.refit_bias(self.model, since_t)
-        m = fit.model
-        if m is None:
+        if fit.model is None:
             self._events.append(LogEvent(t, "bias-unrefitted", f"{fit.why}: stage 2 keeps "
                                          f"bias {self.ff.bias_mps2:.3f} m/s^2"))
             return 0.0
+        fitted, share = fit.model.bias_mps2, self.cfg.stage2_refit_share
+        m = replace(fit.model, bias_mps2=self.model.bias_mps2
+                    + share * (fitted - self.model.bias_mps2))
         ff = feed_forward(m)
         step = ff.step_from(self.ff, 0.0, v_hold)
         self.ff, self.model = ff, m
         self._events.append(LogEvent(t, "bias-refit", (
-            f"stage 2: bias {m.bias_mps2:.3f} m/s^2 from stage 1"), {
-                "bias_mps2": m.bias_mps2, "rms_mps": m.rms_mps, "samples": m.samples,
-                "step_mps2": step}))
+            f"stage 2: bias {m.bias_mps2:.3f} m/s^2 from stage 1 ({share:g} of "
+            f"{fitted:.3f})"), {
+                "bias_mps2": m.bias_mps2, "fitted_mps2": fitted, "rms_mps": m.rms_mps,
+                "samples": m.samples, "step_mps2": step}))
         return step
 
     def _relag(self, t: float, since_t: float) -> None:

@@ -111,3 +111,20 @@ def test_stage_2_flies_the_push_stage_1_met_and_touches_on_the_plans_speed(tmp_p
                       if e.kind == "bias-refit"), None)
         assert refit is not None
         assert refit.values["bias_mps2"] == pytest.approx(push, abs=0.1)
+
+
+@pytest.mark.parametrize("share", [0.0, 0.5])
+def test_stage_2_flies_the_share_of_stage_1s_push_it_is_given(tmp_path, share):
+    """`[lag_id] stage2_refit_share`: the bias stage 2 flies is the approach's plus that
+    share of the refit's departure from it (docs/firmware.md, "How much of stage 1's push
+    stage 2 meets"); the event keeps the refit whole beside it."""
+    cfg = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(stage2_refit_share=share))
+    log = tmp_path / "share.jsonl"
+    res = Sim("sim://?draught=-2.9,0.3&noise=0.001&seed=0").fly(case1("ipts"), log, cfg)
+    assert res.outcome is EndReason.CONTACT
+    events = read_log(log).events
+    approach = next(e for e in events if e.kind == "lag-identified").values["bias_mps2"]
+    refit = next(e for e in events if e.kind == "bias-refit").values
+    assert refit["fitted_mps2"] == pytest.approx(0.3, abs=0.1)  # the draught, met in stage 1
+    assert refit["bias_mps2"] == pytest.approx(
+        approach + share * (refit["fitted_mps2"] - approach), abs=1e-9)
