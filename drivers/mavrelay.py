@@ -22,6 +22,7 @@ from perchd.drivers.mavvision import vision_estimate, vision_message
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
+from perchd.mocap.base import next_pose
 
 RELAY_MAX_S = 120.0
 """[s] the longest the mocap is relayed after the agent's death (a landing takes seconds;
@@ -42,7 +43,7 @@ class VisionRelay:
                  ) -> None:
         from pymavlink import mavutil
 
-        from perchd.mocap.base import open_source
+        from perchd.mocap.base import open_source  # the source's own modules: at start-up
         self.poses = open_source(mocap, Runtime.real())
         self._mav = mavutil.mavlink.MAVLink(None, *source)
         self._send = send
@@ -76,13 +77,8 @@ class VisionRelay:
         seq = -1
         try:
             while not self._stop.is_set():
-                pose = self.poses.wait(seq, WAIT_S)
-                if pose is None:
-                    newest = self.poses.latest()
-                    seq = -1 if newest is not None and newest.seq < seq else seq  # restarted
-                    continue
-                seq = pose.seq
-                if pose.valid:
+                pose, seq = next_pose(self.poses, seq, WAIT_S)
+                if pose is not None and pose.valid:
                     self._relay(self.frame(pose, yaw0))
         except OSError as err:  # the link is gone: nothing more to relay to
             say("mavsentinel", f"mocap relay ended: {err}")

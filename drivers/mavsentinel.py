@@ -119,7 +119,7 @@ class Death:
     said: str = "the agent died flying the vehicle: brake, LAND"
 
 
-def agent_died_flying(ctl: socket.socket) -> Death | None:
+def agent_death(ctl: socket.socket) -> Death | None:
     """Wait for the driver: a Death when it handed over, or its end closed after it had
     flown the vehicle (flying it still, or not); None on a release or a death before."""
     flying, flown, brake, yaw0 = False, False, None, None
@@ -348,7 +348,7 @@ def main(argv: list[str]) -> int:
     source, target, mode = (tuple(map(int, argv[i:i + 2])) for i in (3, 5, 7))
     link = Link(link_fd, dest, source, target)
     relay = prepared_relay(argv[9], source, link)
-    death = agent_died_flying(socket.socket(fileno=ctl_fd))
+    death = agent_death(socket.socket(fileno=ctl_fd))
     if death is None or (death.handover and relay is None):
         return 0  # nothing to command, nothing to relay
     died_s = time.monotonic()

@@ -16,12 +16,12 @@ import logging
 import threading
 
 from perchd.drivers.base import Driver
-from perchd.mocap.base import PoseSource
+from perchd.mocap.base import PoseSource, next_pose
 
 log = logging.getLogger(__name__)
 
 WAIT_S = 0.05
-"""[s] longest wait for a pose; pause() returns within it."""
+"""[s] longest wait for a pose; pause() returns within it and one observe_pose call."""
 
 
 class IdleFeed:
@@ -50,23 +50,27 @@ class IdleFeed:
 
     def close(self) -> None:
         self._closed.set()
-        self.pause()
+        self._idle.set()  # wakes the thread to see it closed (it feeds nothing once closed)
+        with self._turn:
+            pass
         self._thread.join(1.0)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
 
     def _run(self) -> None:
         while not self._closed.is_set():
-            if not self._idle.wait(WAIT_S):
-                continue
+            self._idle.wait()  # paused through a flight: no wake-ups beside its loop
             with self._turn:
-                if self._idle.is_set():
+                if self._idle.is_set() and not self._closed.is_set():
                     self._feed_one()
 
     def _feed_one(self) -> None:
-        pose = self.source.wait(self._seq, WAIT_S)
-        if pose is None:
-            return
-        self._seq = pose.seq
         try:
+            pose, self._seq = next_pose(self.source, self._seq, WAIT_S)
+            if pose is None:
+                return
             self.driver.observe_pose(pose)
         except Exception as err:  # noqa: BLE001 - the next pose tries again; said once per kind
             why = f"{type(err).__name__}: {err}"
@@ -74,4 +78,4 @@ class IdleFeed:
                 log.warning("between flights, a pose did not reach the driver: %s", why)
             self._failed = why
             return
-        self.fed += 1
+        self.fed, self._failed = self.fed + 1, ""

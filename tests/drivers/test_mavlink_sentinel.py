@@ -32,7 +32,7 @@ from perchd.drivers.mavrelay import RELAY_MAX_S
 from perchd.drivers.mavsentinel import (
     LAND_REPEATS,
     Sentinel,
-    agent_died_flying,
+    agent_death,
     follow_landing,
 )
 from pymavlink import mavutil
@@ -217,7 +217,7 @@ def died(*messages: bytes) -> str:
     for msg in messages:
         ours.send(msg)
     ours.close()
-    death = agent_died_flying(theirs)
+    death = agent_death(theirs)
     return "nothing" if death is None else "relay" if death.handover else "land"
 
 

@@ -80,7 +80,31 @@ def test_a_pose_the_driver_refuses_is_said_once_and_the_next_ones_still_go(caplo
         lines = [r.getMessage() for r in caplog.records if "did not reach" in r.getMessage()]
         said = "between flights, a pose did not reach the driver: OSError: send buffer full"
         assert lines == [said]
-        assert feed.fed == len(rec.seqs)
+        feed.pause()
+        assert feed.fed == len(rec.seqs) and feed.alive
+    finally:
+        feed.close()
+        source.close()
+        poses.close()
+
+
+def test_a_sender_that_restarts_its_numbering_is_followed_at_once():
+    """Motive or a bridge restarted: its poses come numbered from 1 again. The feed goes
+    on with them instead of waiting for the numbers to pass the old ones."""
+    poses = StillPoses(rate_hz=RATE_HZ)
+    poses.sent = 100_000  # a sender long running
+    source = open_source(poses.uri, Runtime.real())
+    source.start()
+    rec = Recorder()
+    feed = IdleFeed(source, rec)
+    try:
+        feed.resume()
+        assert min(fed_during(rec, 0.5)) > 100_000
+        poses.sent = 0  # restarted: it numbers from 1 again
+        time.sleep(0.6)  # the source follows a lower numbering after some poses
+        after = fed_during(rec, 0.5)
+        assert len(after) >= 0.3 * RATE_HZ
+        assert max(after) < 200  # the new numbering's, handed over
     finally:
         feed.close()
         source.close()

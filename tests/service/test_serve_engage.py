@@ -44,6 +44,19 @@ def serve(tmp_path, notify, v: VehicleDouble, poses: StillPoses) -> Serve:
     return s
 
 
+def fly_and_abort(s: Serve, v: VehicleDouble) -> None:
+    """A flight engaged, aborted in its hold or approach: the failsafe's LAND, then idle."""
+    assert ctl(s.sock, "fly", str(PLAN))["ok"]
+    assert v.wait_for(lambda: v.custom_mode == GUIDED_NOGPS and v.targets)
+    s.wait_phase({"hold", "approach"})
+    assert ctl(s.sock, "abort")["aborting"]
+    assert v.wait_for(lambda: v.custom_mode == LAND)
+    deadline = time.monotonic() + 5
+    while ctl(s.sock, "status")["state"] == "flying" and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert ctl(s.sock, "status")["state"] == "idle"
+
+
 def test_an_idle_service_sends_no_mode_change_and_no_attitude_target(tmp_path, notify,
                                                                       vehicle, poses):
     s = serve(tmp_path, notify, vehicle, poses)
@@ -63,14 +76,7 @@ def test_a_flight_engages_and_after_its_failsafe_land_stays_across_a_restart(
         tmp_path, notify, vehicle, poses):
     s = serve(tmp_path, notify, vehicle, poses)
     try:
-        assert ctl(s.sock, "fly", str(PLAN))["ok"]
-        assert vehicle.wait_for(lambda: vehicle.custom_mode == GUIDED_NOGPS and vehicle.targets)
-        s.wait_phase({"hold", "approach"})
-        assert ctl(s.sock, "abort")["aborting"]
-        assert vehicle.wait_for(lambda: vehicle.custom_mode == LAND)
-        deadline = time.monotonic() + 5
-        while ctl(s.sock, "status")["state"] == "flying" and time.monotonic() < deadline:
-            time.sleep(0.05)
+        fly_and_abort(s, vehicle)
         landed = time.monotonic()
         vehicle.wait_for(lambda: False, timeout=1.0)
         assert taken(vehicle, landed) == [] and vehicle.custom_mode == LAND  # idle again
@@ -106,13 +112,7 @@ def test_the_mocap_reaches_the_vehicle_between_flights_each_pose_once(tmp_path, 
     rate = 1.0 / poses.period
     try:
         assert visions_within(vehicle, 1.0) >= 0.6 * rate  # idle, before any flight
-        assert ctl(s.sock, "fly", str(PLAN))["ok"]
-        s.wait_phase({"hold", "approach"})
-        assert ctl(s.sock, "abort")["aborting"]
-        assert vehicle.wait_for(lambda: vehicle.custom_mode == LAND)
-        deadline = time.monotonic() + 5
-        while ctl(s.sock, "status")["state"] == "flying" and time.monotonic() < deadline:
-            time.sleep(0.05)
+        fly_and_abort(s, vehicle)
         assert visions_within(vehicle, 1.0) >= 0.6 * rate  # the landing, after the flight
     finally:
         s.proc.send_signal(signal.SIGTERM)
