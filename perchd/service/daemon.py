@@ -342,8 +342,9 @@ class Daemon:
         return f"{new.service.vehicle}: idle, config reloaded"
 
     def _replace_links(self, new: Config) -> Links:
-        """New links connected before the old close (a refusal keeps the old ones, feeding
-        again); one feed to a vehicle at a time."""
+        """New links connected before the old close, the old feed paused meanwhile (a
+        refusal keeps the old ones, feeding again). A landing the old driver hands to its
+        sentinel is relayed beside the new feed: docs/safety.md, "Between flights"."""
         self.links.pause_feed()
         try:
             links = Links(new.service, new.flight.surface, new.flight.vehicle.mass_kg)
