@@ -52,8 +52,10 @@ class Driver(Protocol):
         """Every pose the flight uses, before the setpoint computed from it: drivers that
         feed the vehicle's own estimator (Crazyflie extpose) or steer yaw use it."""
 
-    def close(self) -> None:
-        """Release the link; a vehicle left flying gets the failsafe first."""
+    def close(self, hand_over: bool = True) -> None:
+        """Release the link; a vehicle left flying gets the failsafe first. hand_over=False:
+        new links to the same vehicle take over at once, so nothing of this driver's
+        outlives it (the MAVLink sentinel is released, not handed the landing)."""
 
     def bind_mass(self, mass_kg: float) -> None:
         """The flight's vehicle mass [kg], FlightConfig.vehicle.mass_kg: the one mass.

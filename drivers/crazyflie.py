@@ -202,7 +202,7 @@ class CrazyflieDriver(DriverBase):
             return LinkHealth(False, age, f"connection lost: silent for {age:.3f} s")
         return LinkHealth(True, age, rtt_s=st.rtt_s if st else None)
 
-    def close(self) -> None:
+    def close(self, hand_over: bool = True) -> None:  # nothing outlives the link
         if self._sock is None:
             return
         if not self._stopped:

@@ -55,7 +55,7 @@ class LoopbackDriver(DriverBase):
         weight may (the hover learner finds out, flight/hover.py)."""
         return self.world.plant.params.thrust_max_n
 
-    def close(self) -> None:
+    def close(self, hand_over: bool = True) -> None:  # nothing outlives the link
         if self._connected and not self._stopped:  # motors off, like every driver's close
             self.world.command(Setpoint.stop(self.world.clock.now()))
             self._stopped = True

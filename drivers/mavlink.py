@@ -468,14 +468,15 @@ class MavlinkDriver(DriverBase):
             return LinkHealth(False, age, f"vehicle left the offboard mode (custom mode {self._mode})")
         return LinkHealth(True, age)
 
-    def close(self) -> None:
+    def close(self, hand_over: bool = True) -> None:
         if self._conn is None:
             return
         if not self._stopped and self._engaged:
             self._land()
         # an EKF on mocap alone would dead-reckon the rest of the landing (docs/safety.md,
-        # "The mocap relayed after the death"): the sentinel relays it until the end
-        self._release(handover=self._engaged and self._armed and self.vision)
+        # "The mocap relayed after the death"): the sentinel relays it until the end,
+        # unless new links to this vehicle feed it from now on
+        self._release(handover=hand_over and self._engaged and self._armed and self.vision)
 
     def bind_mass(self, mass_kg: float) -> None:
         """The flight's mass for the thrust model (rebuilt if connect() already made it)."""

@@ -139,7 +139,7 @@ class ZmqSetpointDriver(DriverBase):
             return LinkHealth(False, 0.0, "connection lost: no subscriber to 'setpoint' left")
         return LinkHealth(True, 0.0)
 
-    def close(self) -> None:
+    def close(self, hand_over: bool = True) -> None:  # nothing outlives the link
         if self._sock is None:
             return
         if not self._stopped:

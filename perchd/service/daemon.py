@@ -128,12 +128,13 @@ class Links:
         except Exception:  # noqa: BLE001 - a link that cannot say is not healthy
             return False
 
-    def close(self) -> None:
+    def close(self, hand_over: bool = True) -> None:
+        """hand_over: Driver.close's (False when new links to the same vehicle feed it)."""
         if self.feed is not None:  # before the driver's close: it hands over to its sentinel
             self.feed.close()
         session, self.session = self.session, None
         if session is not None:
-            session.close()
+            session.close(hand_over)
 
 
 class FlightJob(threading.Thread):
@@ -343,15 +344,16 @@ class Daemon:
 
     def _replace_links(self, new: Config) -> Links:
         """New links connected before the old close, the old feed paused meanwhile (a
-        refusal keeps the old ones, feeding again). A landing the old driver hands to its
-        sentinel is relayed beside the new feed: docs/safety.md, "Between flights"."""
+        refusal keeps the old ones, feeding again). The same vehicle's landing is not
+        handed to the old driver's sentinel: the new feed has it (docs/safety.md, "Between
+        flights")."""
         self.links.pause_feed()
         try:
             links = Links(new.service, new.flight.surface, new.flight.vehicle.mass_kg)
         except BaseException:
             self.links.resume_feed()
             raise
-        self.links.close()
+        self.links.close(hand_over=links.driver_uri != self.links.driver_uri)
         return links
 
     def _restart_only(self, new: Config, key: str) -> Config:

@@ -52,9 +52,10 @@ class Session:
         finally:
             self.close()
 
-    def close(self) -> None:
+    def close(self, hand_over: bool = True) -> None:
+        """Driver, then source; hand_over: Driver.close's."""
         try:
-            self.driver.close()
+            self.driver.close(hand_over)
         finally:
             self.source.close()
 

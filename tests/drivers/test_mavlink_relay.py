@@ -285,3 +285,30 @@ def test_a_mocap_the_sentinel_cannot_start_costs_the_relay_not_the_land():
     finally:
         mocap.close()
         vehicle.die()
+
+
+def test_a_close_without_hand_over_leaves_nothing_relaying():
+    """`perchd serve` replacing its links to the same vehicle (a reload): the new links feed
+    it, so the old driver's close releases its sentinel instead of handing it the landing.
+    The default close of the same flight hands over (the test above)."""
+    vehicle = VehicleDouble(PX4, airborne=True, mavlink2=True)
+    mocap = StillPoses(body="v", rate_hz=RATE_HZ)
+    links = open_links(f"{vehicle.uri}?mass=0.5&yaw0={YAW0_DEG}", mocap.uri)
+    try:
+        links.driver.engage(links.source.latest)
+        end, seq = time.monotonic() + 0.5, -1
+        while time.monotonic() < end:
+            pose = links.source.wait(seq, 0.05)
+            if pose is not None:
+                seq = pose.seq
+                links.driver.observe_pose(pose)
+        assert vehicle.armed and visions_between(vehicle, end - 0.3, end)
+        links.close(hand_over=False)
+        closed = time.monotonic()
+        time.sleep(1.5)
+        assert not visions_between(vehicle, closed + 0.2, closed + 1.5)
+        assert [mode for _, mode in vehicle.modes][-2:] == [LAND_PX4] * 2  # its own LAND
+    finally:
+        links.close()
+        mocap.close()
+        vehicle.die()
