@@ -79,6 +79,19 @@ def ned(p: tuple[float, ...], yaw0_deg: float) -> tuple[float, float, float]:
     return (x * c + y * s, x * s - y * c, -z)
 
 
+def killed_agent(vehicle: VehicleDouble, mocap: StillPoses, **kw) -> float:
+    """An agent flying `vehicle` on `mocap`, SIGKILLed after 0.6 s: time.monotonic() then."""
+    proc = agent(vehicle.uri, mocap.uri, **kw)
+    try:
+        time.sleep(0.6)
+        killed = time.monotonic()
+        proc.kill()
+        proc.wait()
+        return killed
+    finally:
+        proc.kill()
+
+
 @pytest.fixture(params=["zmq", "natnet"])
 def flown(request):
     """A PX4 double in the air (MAVLink 2, TIMESYNC requests on), mocap (ZMQ, or NatNet
@@ -87,15 +100,9 @@ def flown(request):
     vehicle = VehicleDouble(PX4, airborne=True, timesync=True, mavlink2=True)
     mocap = StillPoses(p=(-3.0, 0.2, 1.0), body="v", rate_hz=RATE_HZ,
                        velocity=(SPEED_MPS, 0.0, 0.0), natnet=request.param == "natnet")
-    proc = agent(vehicle.uri, mocap.uri)
     try:
-        time.sleep(0.6)
-        killed = time.monotonic()
-        proc.kill()
-        proc.wait()
-        yield vehicle, mocap, killed
+        yield vehicle, mocap, killed_agent(vehicle, mocap)
     finally:
-        proc.kill()
         mocap.close()
         vehicle.die()
 
@@ -238,19 +245,6 @@ def test_an_agent_killed_between_flights_leaves_the_relay_and_no_command():
         proc.kill()
         mocap.close()
         vehicle.die()
-
-
-def killed_agent(vehicle: VehicleDouble, mocap: StillPoses, **kw) -> float:
-    """An agent flying `vehicle` on `mocap`, SIGKILLed after 0.6 s: time.monotonic() then."""
-    proc = agent(vehicle.uri, mocap.uri, **kw)
-    try:
-        time.sleep(0.6)
-        killed = time.monotonic()
-        proc.kill()
-        proc.wait()
-        return killed
-    finally:
-        proc.kill()
 
 
 def test_a_mavlink1_encoder_relays_each_pose_without_the_covariance():
