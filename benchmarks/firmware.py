@@ -7,7 +7,9 @@ cf2; PERCHD_ARDUCOPTER: ArduCopter SITL; PERCHD_PX4: a PX4 SITL build folder; th
 skipped with one line), N flights (default 10) of plans/case1-ipts-n3.json, each as a user
 flies it: `perchd sim firmware ... --noise M` (the harness, perchd/sim/firmware, docs/firmware.md)
 and `perchd fly` with the harness's mocap and driver URIs, no mass or hover in the URI (the
-flight config names the vehicle, the hold learns its hover thrust). Printed per firmware:
+flight config names the vehicle, the hold learns its hover thrust), one vehicle memory
+(`--state`) per firmware as a lab's vehicle flown N times has (its first flight knows nothing;
+`--fresh-state`: every flight a first). Printed per firmware:
 flights perched / flown (in the plan's window; on target: in it and within 0.03 m/s of the
 plan's contact), the true contact speed (median, min, max) against the plan's,
 perch time (median, % error against the plan), the true heading's largest departure from
@@ -126,10 +128,12 @@ def lag_event(log: Path) -> dict:
 
 
 def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str],
-             config_add: str = "", driver_add: str = "") -> list[str]:
+             config_add: str = "", driver_add: str = "", state: Path | None = None
+             ) -> list[str]:
     """`perchd fly` against a started harness, as a user flies it; its flight log is
     tmp/flight.jsonl. config_add: TOML appended to the flight config; driver_add: URI
-    parameters appended to the driver's."""
+    parameters appended to the driver's; state: the vehicle memory (default tmp's own, a
+    vehicle flown for the first time)."""
     driver += ("&" if "?" in driver else "?") + driver_add if driver_add else ""
     config: list[str] = []
     if fw.config is not None or config_add.strip():
@@ -137,16 +141,18 @@ def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str
         config = ["--config", str(tmp / "flight.toml")]
     return [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
             mocap, *config, *surface, "--log", str(tmp / "flight.jsonl"),
-            "--state", str(tmp / "vehicles.json"), "--json"]
+            "--state", str(state or tmp / "vehicles.json"), "--vehicle", fw.name, "--json"]
 
 
 def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
-                 config_add: str = "", driver_add: str = "") -> dict:
+                 config_add: str = "", driver_add: str = "", state: Path | None = None
+                 ) -> dict:
     proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
     from fwharness import YawWatch, flight_window, heading_error
     watch = YawWatch(mocap)
     try:
-        done = subprocess.run(fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add),
+        done = subprocess.run(fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add,
+                                       state),
                               check=False,
                               capture_output=True, text=True, timeout=180, env=ENV)
     finally:
@@ -163,8 +169,19 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
         "agent_contact_speed": fly.get("contact_speed"), "perch_time": fly.get("perch_time"),
         "trigger_v": (fly.get("trigger") or {}).get("v"),
         "yaw_dev_deg": math.degrees(heading_error(yaws, heading)) if yaws else None,
-        "lag": lag_event(tmp / "flight.jsonl"), "sim_clock_rate": sim.get("sim_clock_rate"),
+        "lag": lag_event(tmp / "flight.jsonl"), "stage2": bias_refit(tmp / "flight.jsonl"),
+        "sim_clock_rate": sim.get("sim_clock_rate"),
         "attitude_push": sim.get("attitude_push_mps2")}
+
+
+def bias_refit(log: Path) -> dict:
+    """The flight's bias-refit event's values (docs/contracts.md, flight log); {} without."""
+    if not log.exists():
+        return {}
+    for line in log.read_text().splitlines():
+        if '"kind":"bias-refit"' in line:
+            return json.loads(line)["event"]["values"]
+    return {}
 
 
 def fly_sim(noise: float, seed: int, tmp: Path) -> dict:
@@ -273,6 +290,9 @@ def main() -> int:
     ap.add_argument("--driver-add", default="", metavar="PARAMS",
                     help="URI parameters appended to every firmware flight's driver, "
                          "e.g. 'tilt=0'")
+    ap.add_argument("--fresh-state", action="store_true",
+                    help="every flight a vehicle flown for the first time (default: one "
+                         "vehicle memory per firmware, empty at its first flight)")
     args = ap.parse_args()
     if args.flights < 1 or not 0.0 <= args.noise <= 0.1:
         print("benchmarks/firmware.py: --flights must be >= 1 and --noise 0..0.1 m",
@@ -284,19 +304,24 @@ def main() -> int:
     root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="perchd-fwbench-"))
     for fw, binary in selected(args.only):
         runs: dict[str, list[dict]] = {"firmware": [], "sim": []}
+        state = None if args.fresh_state else root / fw.name / "vehicles.json"
+        if state is not None:
+            state.unlink(missing_ok=True)
         for i in range(args.flights):
             tmp = root / fw.name / str(i)
             tmp.mkdir(parents=True, exist_ok=True)
             runs["firmware"].append(fly_firmware(fw, binary, args.noise, i, tmp,
                                                  args.config_add.replace("\\n", "\n") + "\n",
-                                                 args.driver_add))
+                                                 args.driver_add, state))
             runs["sim"].append(fly_sim(args.noise, i, tmp))
             if not args.json:
                 f = runs["firmware"][-1]
                 print(f"{fw.name} flight {i + 1}: {f['outcome']} contact "
                       f"{fmt(f['contact_speed'], '.3f')} m/s, perch time "
                       f"{fmt(f['perch_time'], '.3f')} s, lag {fmt(f['lag'].get('lag_s'), '.3f')} s "
-                      f"drag {fmt(f['lag'].get('drag_per_s'), '.3f')} 1/s", file=sys.stderr)
+                      f"drag {fmt(f['lag'].get('drag_per_s'), '.3f')} 1/s, stage 1's push "
+                      f"{fmt(f['stage2'].get('departure_mps2'), '+.3f')} m/s^2 pooled with "
+                      f"{f['stage2'].get('prior_flights', 0)} earlier flights'", file=sys.stderr)
         out["firmwares"][fw.name] = {
             "load_avg": os.getloadavg(), "firmware": summary(runs["firmware"], plan),
             "sim": summary(runs["sim"], plan), "flights": runs}

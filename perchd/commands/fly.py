@@ -1,13 +1,14 @@
 """`perchd fly P.json --driver URI --mocap URI [--config F] [--surface X Y Z]
-[--normal NX NY NZ] [--log F] [--state F] [--json]`: fly one perch and report it
+[--normal NX NY NZ] [--log F] [--state F] [--vehicle NAME] [--json]`: fly one perch and report it
 (docs/contracts.md §2).
 
 `--log F.mcap` writes the flight log beside it as F.jsonl while flying and, when the flight
 ends, F.mcap from it (`perchd log export`, needs perchd[mcap]); docs/contracts.md §5.
 `--foxglove [HOST:]PORT` serves the same channels live (perchd.logs.foxglove, perchd[foxglove]).
 
-The hover thrust the hold learns is kept per vehicle (the driver URI) in --state (default
-$XDG_STATE_HOME/perchd/vehicles.json, flight/vehiclestate.py) and is the next flight's guess.
+The hover thrust the hold learns and stage 1's push beyond the approach's bias are kept per
+vehicle (--vehicle NAME, default the driver URI) in --state (default $XDG_STATE_HOME/perchd/vehicles.json,
+flight/vehiclestate.py): the next flight's hover guess and stage-2 prior.
 
 While flying, a one-line status on stderr (phase, X, Xdot, tau vs tau_ref); afterwards a
 summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise;
@@ -80,9 +81,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                  "F.mcap: the log is written as F.jsonl beside it during the "
                                  "flight and exported to F.mcap at its end (perchd[mcap])")
     p.add_argument("--force", action="store_true", help="overwrite an existing --log file(s)")
-    p.add_argument("--state", help="per-vehicle memory of learned hover thrusts (JSON; default "
-                                   "$XDG_STATE_HOME/perchd/vehicles.json, i.e. "
-                                   "~/.local/state/perchd/vehicles.json)")
+    p.add_argument("--state", help="per-vehicle memory of learned hover thrusts and stage-2 "
+                                   "priors (JSON; default $XDG_STATE_HOME/perchd/vehicles.json, "
+                                   "i.e. ~/.local/state/perchd/vehicles.json)")
+    p.add_argument("--vehicle", metavar="NAME",
+                   help="the vehicle's name in --state (default: the driver URI; name it when "
+                        "its URI changes between flights, e.g. an ephemeral port)")
     p.add_argument("--realtime", nargs="?", type=int, const=realtime.DEFAULT_PRIORITY,
                    default=0, metavar="PRIO",
                    help="run the agent under SCHED_FIFO at priority PRIO (1..99, default "
@@ -217,7 +221,8 @@ def write_mcap(log: Path, out: Path, force: bool) -> bool:
 def run(args: argparse.Namespace) -> int:
     plan = load_plan(args.plan)
     store = VehicleStore(Path(args.state) if args.state else default_path(), _warn)
-    cfg = store.with_learned_guess(args.driver, load_config(args))
+    key = args.vehicle or args.driver
+    cfg = store.with_learned_guess(key, load_config(args))
     mcap = mcap_path(args)
     if mcap is not None:
         args.log = str(mcap.with_suffix(".jsonl"))
@@ -237,8 +242,7 @@ def run(args: argparse.Namespace) -> int:
             status.close()
             if view is not None:
                 view.close()
-    if res.hover_n is not None:
-        store.remember(args.driver, res.hover_n, cfg)
+    store.remember(key, cfg, res.hover_n, res.stage2_departure_mps2)
     out = res.to_json()
     if mcap is not None and write_mcap(log, mcap, args.force):
         out["mcap"] = str(mcap)

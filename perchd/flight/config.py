@@ -196,7 +196,18 @@ class LagIdGains:
         part only, and differently from flight to flight: on PX4 SIH the contact followed
         the refit's step (r 0.91 over 40 flights) and touched 0.961-0.999 m/s with all of
         it, 0.975-0.999 with half; ArduCopter needs its mean (docs/firmware.md, "How much
-        of stage 1's push stage 2 meets").
+        of stage 1's push stage 2 meets"). It multiplies the departure pooled with the
+        vehicle's earlier flights (stage2_prior_mps2).
+    stage2_prior_mps2: [m/s^2] the mean departure of stage 1's push from the approach's
+        bias over this vehicle's earlier flights (the state file fills it, flight/
+        vehiclestate.py; None: none known). What carries into stage 2 is the vehicle's own
+        mean (ArduCopter SITL -0.12, PX4 SIH -0.01, the Crazyflie firmware -0.03), while a
+        flight's scatter about it (0.01-0.035 sd) little or not; so stage 2 flies this flight's
+        departure pooled with the earlier ones, each flight one sample of that mean: (n
+        prior + own) / (n + 1) (VehicleResponse.refit_stage2, docs/errata.md §10).
+    stage2_prior_flights: n, how many flights stage2_prior_mps2 is the mean of (0..100;
+        the state file keeps at most vehiclestate.MEMORY_FLIGHTS, so a vehicle that changes
+        is followed).
     from_attitude: take the delay and the first-order lag from the attitude the mocap
         measures, answering the setpoints' (LagIdentifier.lean_response), drag and bias
         from the positions as before; the positions' own lag fit when the lean swept too
@@ -219,6 +230,8 @@ class LagIdGains:
     rms_max_mps: float = 0.1
     stage2_refit: bool = True
     stage2_refit_share: float = 1.0
+    stage2_prior_mps2: float | None = None
+    stage2_prior_flights: int = 0
     from_attitude: bool = True
     drag_from_attitude: bool = True
 
@@ -481,6 +494,8 @@ def validate(cfg: FlightConfig) -> None:
         ("lag_id.lag_max_s", cfg.lag_id.lag_max_s, 2.0 * cfg.lag_id.lag_step_s, 2.0),
         ("lag_id.time_constant_max_s", cfg.lag_id.time_constant_max_s, 0.0, 1.0),
         ("lag_id.stage2_refit_share", cfg.lag_id.stage2_refit_share, 0.0, 1.0),
+        ("lag_id.stage2_prior_mps2", cfg.lag_id.stage2_prior_mps2 or 0.0, -5.0, 5.0),
+        ("lag_id.stage2_prior_flights", cfg.lag_id.stage2_prior_flights, 0, 100),
         *((f"surface.point[{i}]", c, -MAX_COORD_M, MAX_COORD_M)
           for i, c in enumerate(cfg.surface.point)),
         *((f"surface.normal[{i}]", c, -1e6, 1e6) for i, c in enumerate(cfg.surface.normal)),

@@ -28,7 +28,9 @@ def feed_forward(m: LagModel) -> FeedForward:
 
 class VehicleResponse:
     """ff: the feed-forward flown now; model: the latest accepted fit (None: none yet or
-    refused); identified: the trigger's fit, once made. events: where fits are logged."""
+    refused); identified: the trigger's fit, once made; departure_mps2: stage 1's refit
+    bias less the approach's, once refitted (the vehicle's state file keeps it). events:
+    where fits are logged."""
 
     def __init__(self, gains: TauGains, cfg: LagIdGains, events: list[LogEvent]) -> None:
         self.gains, self.cfg = gains, cfg
@@ -36,6 +38,7 @@ class VehicleResponse:
         self.ff = FeedForward(gains.ff_lead_s)
         self.model: LagModel | None = None
         self.identified: LagFit | None = None
+        self.departure_mps2: float | None = None  # stage 1's bias less the approach's
         self._events = events
         self._prediction: tuple[tuple, tuple[float, float, float]] | None = None
 
@@ -80,10 +83,10 @@ class VehicleResponse:
 
     def refit_stage2(self, t: float, since_t: float, v_hold: float) -> float:
         """At the stage-2 switch: the bias again from stage 1 (since since_t [s]), lag and
-        drag kept, its departure from the approach's flown from here on by
-        LagIdGains.stage2_refit_share (LagIdentifier.refit_bias). Returns the step [m/s^2]
-        this adds at the held speed v_hold [m/s] (0 when refused, logged, or nothing was
-        identified)."""
+        drag kept. Its departure from the approach's, pooled with the vehicle's earlier
+        flights' (LagIdGains.stage2_prior_mps2) and scaled by stage2_refit_share, is flown
+        from here on (LagIdentifier.refit_bias). Returns the step [m/s^2] this adds at the
+        held speed v_hold [m/s] (0 when refused, logged, or nothing was identified)."""
         if self.model is None or not self.cfg.stage2_refit:
             return 0.0
         self._relag(t, since_t)
@@ -92,18 +95,31 @@ class VehicleResponse:
             self._events.append(LogEvent(t, "bias-unrefitted", f"{fit.why}: stage 2 keeps "
                                          f"bias {self.ff.bias_mps2:.3f} m/s^2"))
             return 0.0
-        fitted, share = fit.model.bias_mps2, self.cfg.stage2_refit_share
-        m = replace(fit.model, bias_mps2=self.model.bias_mps2
-                    + share * (fitted - self.model.bias_mps2))
+        fitted, approach = fit.model.bias_mps2, self.model.bias_mps2
+        self.departure_mps2 = fitted - approach
+        pooled, n = self._pooled(self.departure_mps2)
+        share = self.cfg.stage2_refit_share
+        m = replace(fit.model, bias_mps2=approach + share * pooled)
         ff = feed_forward(m)
         step = ff.step_from(self.ff, 0.0, v_hold)
         self.ff, self.model = ff, m
         self._events.append(LogEvent(t, "bias-refit", (
-            f"stage 2: bias {m.bias_mps2:.3f} m/s^2 from stage 1 ({share:g} of "
-            f"{fitted:.3f})"), {
-                "bias_mps2": m.bias_mps2, "fitted_mps2": fitted, "rms_mps": m.rms_mps,
-                "samples": m.samples, "step_mps2": step}))
+            f"stage 2: bias {m.bias_mps2:.3f} m/s^2 = the approach's {approach:.3f} + "
+            f"{share:g} x {pooled:+.3f} (stage 1's {self.departure_mps2:+.3f} pooled with "
+            f"{n} earlier flights')"), {
+                "bias_mps2": m.bias_mps2, "fitted_mps2": fitted,
+                "departure_mps2": self.departure_mps2, "pooled_mps2": pooled,
+                "prior_flights": n, "rms_mps": m.rms_mps, "samples": m.samples,
+                "step_mps2": step}))
         return step
+
+    def _pooled(self, departure: float) -> tuple[float, int]:
+        """(the departure [m/s^2] stage 2 flies, n): this flight's pooled with the mean of
+        n earlier flights', each flight one sample of the vehicle's (LagIdGains)."""
+        prior, n = self.cfg.stage2_prior_mps2, self.cfg.stage2_prior_flights
+        if prior is None or n <= 0:
+            return departure, 0
+        return (n * prior + departure) / (n + 1), n
 
     def _relag(self, t: float, since_t: float) -> None:
         """A lag taken from the attitude is taken again from stage 1's alone (drag and bias

@@ -62,7 +62,8 @@ class FlightResult:
     simulator's own figures when flying in simulation (None otherwise); log: the log path;
     loop: timing statistics; failsafe_sent: driver.failsafe was called; hover_n [N]: the
     hover thrust the hold learned (None if it did not settle or learning is off),
-    hover_guess_n [N] the guess it started from."""
+    hover_guess_n [N] the guess it started from; stage2_departure_mps2 [m/s^2]: stage 1's
+    bias refit less the approach's (None without one), which the next flights pool."""
 
     outcome: EndReason
     detail: str
@@ -78,6 +79,7 @@ class FlightResult:
     failsafe_sent: bool
     hover_n: float | None = None
     hover_guess_n: float | None = None
+    stage2_departure_mps2: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The `perchd fly --json` object (docs/contracts.md §2 keys first)."""
@@ -89,7 +91,8 @@ class FlightResult:
                 "true_perch_time": self.true_perch_time,
                 "trigger": jsonable(self.trigger), "loop": jsonable(self.loop),
                 "failsafe_sent": self.failsafe_sent, "hover_n": self.hover_n,
-                "hover_guess_n": self.hover_guess_n}
+                "hover_guess_n": self.hover_guess_n,
+                "stage2_departure_mps2": self.stage2_departure_mps2}
 
 
 def plan_summary(plan: Plan) -> dict[str, Any]:
@@ -302,5 +305,6 @@ def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult
         sup.end or EndReason.SOFTWARE_ERROR, sup.end_detail,
         contact.speed if contact else None, perch, float(sup.plan.duration),
         float(sup.plan.v_contact), trig, true_speed, true_perch, log_path,
-        run.loop.summary(), run.failsafe_sent, sup.hover_learned_n, sup.hover.guess_n)
+        run.loop.summary(), run.failsafe_sent, sup.hover_learned_n, sup.hover.guess_n,
+        sup.response.departure_mps2)
 

@@ -88,3 +88,28 @@ def test_the_summary_reports_errors_against_the_plan(tmp_path):
     text = summary_text(res)
     assert text.splitlines()[0] == "outcome: CONTACT (contact with the surface): " + res.detail
     assert f"{res.contact_speed - res.v_contact_plan:+.3f} m/s" in text
+
+
+def test_the_next_flight_of_a_vehicle_pools_stage_1s_push_with_the_last(tmp_path, capsys):
+    """--state keeps per vehicle (--vehicle, else the driver URI) the mean of stage 1's push
+    beyond the approach's bias; the next flight's stage 2 pools its own with it
+    (docs/errata.md §10). The two flights' URIs differ (another seed), as a harness's
+    ephemeral port does; the name is what keys the memory."""
+    state, flown = tmp_path / "vehicles.json", []
+    for seed in range(2):
+        log = tmp_path / f"f{seed}.jsonl"
+        driver = f"sim://?draught=-2.9,0.2&noise=0.001&seed={seed}"
+        assert main(["fly", str(plan_file(tmp_path)), "--driver", driver, "--mocap", "sim://",
+                     "--log", str(log), "--state", str(state), "--vehicle", "lab-1",
+                     "--json"]) == 0
+        res = json.loads(capsys.readouterr().out)
+        refit = next(e for e in read_log(log).events if e.kind == "bias-refit").values
+        assert refit["departure_mps2"] == res["stage2_departure_mps2"]
+        flown.append((res["stage2_departure_mps2"], refit))
+    (first, _), (second, refit) = flown
+    assert refit["prior_flights"] == 1
+    assert refit["pooled_mps2"] == pytest.approx((first + second) / 2, abs=1e-12)
+    kept = json.loads(state.read_text())["vehicles"]
+    assert list(kept) == ["lab-1"] and kept["lab-1"]["stage2_flights"] == 2
+    assert kept["lab-1"]["stage2_departure_mps2"] == pytest.approx((first + second) / 2,
+                                                                   abs=1e-12)

@@ -113,18 +113,40 @@ def test_stage_2_flies_the_push_stage_1_met_and_touches_on_the_plans_speed(tmp_p
         assert refit.values["bias_mps2"] == pytest.approx(push, abs=0.1)
 
 
+def pushed_in_stage_1(tmp_path, lag_id: LagIdGains):
+    """A perch whose air pushes 0.3 m/s^2 from just past the trigger on, flown with lag_id:
+    (its result, the approach's bias, the bias-refit event's values)."""
+    log = tmp_path / "pushed.jsonl"
+    cfg = dataclasses.replace(FlightConfig(), lag_id=lag_id)
+    res = Sim("sim://?draught=-2.9,0.3&noise=0.001&seed=0").fly(case1("ipts"), log, cfg)
+    assert res.outcome is EndReason.CONTACT
+    events = read_log(log).events
+    approach = next(e for e in events if e.kind == "lag-identified").values["bias_mps2"]
+    return res, approach, next(e for e in events if e.kind == "bias-refit").values
+
+
 @pytest.mark.parametrize("share", [0.0, 0.5])
 def test_stage_2_flies_the_share_of_stage_1s_push_it_is_given(tmp_path, share):
     """`[lag_id] stage2_refit_share`: the bias stage 2 flies is the approach's plus that
     share of the refit's departure from it (docs/firmware.md, "How much of stage 1's push
     stage 2 meets"); the event keeps the refit whole beside it."""
-    cfg = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(stage2_refit_share=share))
-    log = tmp_path / "share.jsonl"
-    res = Sim("sim://?draught=-2.9,0.3&noise=0.001&seed=0").fly(case1("ipts"), log, cfg)
-    assert res.outcome is EndReason.CONTACT
-    events = read_log(log).events
-    approach = next(e for e in events if e.kind == "lag-identified").values["bias_mps2"]
-    refit = next(e for e in events if e.kind == "bias-refit").values
+    _, approach, refit = pushed_in_stage_1(tmp_path, LagIdGains(stage2_refit_share=share))
     assert refit["fitted_mps2"] == pytest.approx(0.3, abs=0.1)  # the draught, met in stage 1
     assert refit["bias_mps2"] == pytest.approx(
         approach + share * (refit["fitted_mps2"] - approach), abs=1e-9)
+
+
+@pytest.mark.parametrize("prior", [0.0, 0.3])
+def test_stage_2_pools_stage_1s_push_with_the_vehicles_earlier_flights(tmp_path, prior):
+    """`[lag_id] stage2_prior_mps2` over 9 earlier flights (the state file's): this flight's
+    departure from the approach's bias counts as a tenth sample of the vehicle's mean
+    (docs/errata.md §10). With a prior of none, a push met in this stage 1 alone is flown
+    a tenth; with a prior that saw it every time, whole. The result carries the departure
+    for the state file."""
+    res, approach, refit = pushed_in_stage_1(tmp_path, LagIdGains(
+        stage2_prior_mps2=prior, stage2_prior_flights=9))
+    own = refit["fitted_mps2"] - approach
+    assert own == pytest.approx(0.3, abs=0.1)
+    assert res.stage2_departure_mps2 == pytest.approx(own, abs=1e-12)
+    assert refit["prior_flights"] == 9
+    assert refit["bias_mps2"] == pytest.approx(approach + (9 * prior + own) / 10, abs=1e-9)

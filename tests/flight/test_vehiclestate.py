@@ -1,14 +1,20 @@
-"""Issue 13 B: the learned hover is kept per vehicle; an unwritable store is one warning."""
+"""Issue 13 B: the learned hover is kept per vehicle, and (issue 20) stage 1's push beyond the
+approach's bias; an unwritable store is one warning."""
 
 from __future__ import annotations
 
-from perchd.flight.config import FlightConfig
-from perchd.flight.vehiclestate import VehicleStore
+import dataclasses
+import json
+
+import pytest
+
+from perchd.flight.config import FlightConfig, LagIdGains
+from perchd.flight.vehiclestate import MEMORY_FLIGHTS, VehicleStore
 
 
 def test_a_learned_hover_is_the_next_flights_guess(tmp_path):
     store = VehicleStore(tmp_path / "state" / "vehicles.json", print)
-    store.remember("udp://x", 0.327, FlightConfig())
+    store.remember("udp://x", FlightConfig(), 0.327)
     cfg = store.with_learned_guess("udp://x", FlightConfig())
     assert abs(cfg.vehicle.hover_thrust_n - 0.327) < 1e-9
     assert store.with_learned_guess("udp://other", FlightConfig()).vehicle.hover_thrust_n is None
@@ -18,6 +24,50 @@ def test_an_unwritable_store_is_one_warning_not_a_crash(tmp_path):
     (tmp_path / "file").write_text("")
     said: list[str] = []
     store = VehicleStore(tmp_path / "file" / "vehicles.json", said.append)
-    store.remember("udp://x", 0.327, FlightConfig())
+    store.remember("udp://x", FlightConfig(), 0.327)
     assert len(said) == 1 and "not kept" in said[0] and "\n" not in said[0]
     assert store.with_learned_guess("udp://x", FlightConfig()) == FlightConfig()
+
+
+def test_the_stage_2_departure_is_the_mean_of_the_flights_and_the_next_ones_prior(tmp_path):
+    store = VehicleStore(tmp_path / "vehicles.json", print)
+    for d in (-0.10, -0.13, -0.12):
+        store.remember("tcp:5762", FlightConfig(), departure_mps2=d)
+    mean, n = store.stage2_departure("tcp:5762")
+    assert n == 3 and mean == pytest.approx(-0.35 / 3, abs=1e-12)
+    lag = store.with_learned_guess("tcp:5762", FlightConfig()).lag_id
+    assert (lag.stage2_prior_mps2, lag.stage2_prior_flights) == (pytest.approx(mean), 3)
+    given = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(stage2_prior_mps2=0.0))
+    assert store.with_learned_guess("tcp:5762", given).lag_id.stage2_prior_mps2 == 0.0
+
+
+def test_a_vehicle_that_changes_is_followed_within_about_ten_flights(tmp_path):
+    """After MEMORY_FLIGHTS flights every new one weighs a tenth: ten flights at -0.1 after
+    ten at 0 leave 1 - 0.9^10 of the change."""
+    store = VehicleStore(tmp_path / "vehicles.json", print)
+    for d in [0.0] * 10 + [-0.1] * 10:
+        store.remember("udp://x", FlightConfig(), departure_mps2=d)
+    mean, n = store.stage2_departure("udp://x")
+    assert n == MEMORY_FLIGHTS == 10
+    assert mean == pytest.approx(-0.1 * (1 - 0.9 ** 10), abs=1e-12)
+
+
+def test_the_hover_and_the_departure_are_kept_beside_each_other(tmp_path):
+    store = VehicleStore(tmp_path / "vehicles.json", print)
+    store.remember("udp://x", FlightConfig(), departure_mps2=-0.05)
+    store.remember("udp://x", FlightConfig(), hover_n=0.327)
+    store.remember("udp://x", FlightConfig())  # nothing learned: nothing written
+    assert store.hover_ratio("udp://x") == pytest.approx(0.327 / (0.03 * 9.81))
+    assert store.stage2_departure("udp://x") == (pytest.approx(-0.05), 1)
+
+
+@pytest.mark.parametrize("rec", [{"stage2_departure_mps2": "x", "stage2_flights": 2},
+                                 {"stage2_departure_mps2": -0.1, "stage2_flights": 0},
+                                 {"stage2_departure_mps2": float("nan"), "stage2_flights": 1},
+                                 {"stage2_departure_mps2": -0.1}, []])
+def test_a_malformed_departure_is_no_memory(tmp_path, rec):
+    path = tmp_path / "vehicles.json"
+    path.write_text(json.dumps({"schema": "perchd.vehicles/1", "vehicles": {"k": rec}}))
+    store = VehicleStore(path, print)
+    assert store.stage2_departure("k") is None
+    assert store.with_learned_guess("k", FlightConfig()) == FlightConfig()
