@@ -1,14 +1,15 @@
 """`perchd fly P.json --driver URI --mocap URI [--config F] [--surface X Y Z]
-[--normal NX NY NZ] [--log F] [--state F] [--vehicle NAME] [--json]`: fly one perch and report it
-(docs/contracts.md §2).
+[--normal NX NY NZ] [--log F] [--state F] [--vehicle NAME] [--json]`: fly one perch and
+report it (docs/contracts.md §2).
 
 `--log F.mcap` writes the flight log beside it as F.jsonl while flying and, when the flight
 ends, F.mcap from it (`perchd log export`, needs perchd[mcap]); docs/contracts.md §5.
 `--foxglove [HOST:]PORT` serves the same channels live (perchd.logs.foxglove, perchd[foxglove]).
 
 The hover thrust the hold learns and stage 1's push beyond the approach's bias are kept per
-vehicle (--vehicle NAME, default the driver URI) in --state (default $XDG_STATE_HOME/perchd/vehicles.json,
-flight/vehiclestate.py): the next flight's hover guess and stage-2 prior.
+vehicle (--vehicle NAME, default the driver URI) in --state (default
+$XDG_STATE_HOME/perchd/vehicles.json, flight/vehiclestate.py): the next flight's hover guess
+and stage-2 prior.
 
 While flying, a one-line status on stderr (phase, X, Xdot, tau vs tau_ref); afterwards a
 summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise;

@@ -201,13 +201,14 @@ class LagIdGains:
     stage2_prior_mps2: [m/s^2] the mean departure of stage 1's push from the approach's
         bias over this vehicle's earlier flights (the state file fills it, flight/
         vehiclestate.py; None: none known). What carries into stage 2 is the vehicle's own
-        mean (ArduCopter SITL -0.12, PX4 SIH -0.01, the Crazyflie firmware -0.03), while a
-        flight's scatter about it (0.01-0.035 sd) little or not; so stage 2 flies this flight's
-        departure pooled with the earlier ones, each flight one sample of that mean: (n
-        prior + own) / (n + 1) (VehicleResponse.refit_stage2, docs/errata.md §10).
-    stage2_prior_flights: n, how many flights stage2_prior_mps2 is the mean of (0..100;
-        the state file keeps at most vehiclestate.MEMORY_FLIGHTS, so a vehicle that changes
-        is followed).
+        mean (ArduCopter SITL -0.115, PX4 SIH -0.005, the Crazyflie firmware -0.037), while
+        a flight's scatter about it (sd 0.015-0.033) carries little or none; so stage 2
+        flies this flight's departure pooled with the earlier ones, each flight one sample
+        of that mean: (n prior + own) / (n + 1) (VehicleResponse.refit_stage2,
+        docs/firmware.md, "Each vehicle's own mean").
+    stage2_prior_flights: n, how many flights stage2_prior_mps2 is the mean of (1..100
+        with it, 0 without; the state file keeps at most vehiclestate.MEMORY_FLIGHTS, so a
+        vehicle that changes is followed).
     from_attitude: take the delay and the first-order lag from the attitude the mocap
         measures, answering the setpoints' (LagIdentifier.lean_response), drag and bias
         from the positions as before; the positions' own lag fit when the lean swept too
@@ -506,6 +507,10 @@ def validate(cfg: FlightConfig) -> None:
         if not lo <= value <= hi:
             side = f"below {lo:g} by {lo - value:g}" if value < lo else f"above {hi:g} by {value - hi:g}"
             raise ConfigError(f"{name} = {value:g} is {side}")
+    lag = cfg.lag_id
+    if (lag.stage2_prior_mps2 is None) != (lag.stage2_prior_flights == 0):
+        raise ConfigError("lag_id.stage2_prior_mps2 and lag_id.stage2_prior_flights go "
+                          "together: the mean and how many flights it is of (>= 1)")
     if cfg.trigger.library is not None and cfg.trigger.policy is not TriggerPolicy.REPLAN:
         raise ConfigError(f"trigger.library is used by policy 'replan' only, "
                           f"not {cfg.trigger.policy.value!r}")

@@ -27,6 +27,12 @@ def test_defaults_are_a_30_g_crazyflie_at_100_hz_with_25_degree_tilt():
     ({"lag_id": LagIdGains(lag_step_s=0.0)}, "lag_id.lag_step_s = 0 is below 0.005 by 0.005"),
     ({"lag_id": LagIdGains(time_constant_max_s=-1.0)},
      "lag_id.time_constant_max_s = -1 is below 0 by 1"),
+    ({"lag_id": LagIdGains(stage2_prior_mps2=-0.1, stage2_prior_flights=101)},
+     "lag_id.stage2_prior_flights = 101 is above 100 by 1"),
+    ({"lag_id": LagIdGains(stage2_prior_mps2=-0.1)},
+     "lag_id.stage2_prior_mps2 and lag_id.stage2_prior_flights go together"),
+    ({"lag_id": LagIdGains(stage2_prior_flights=3)},
+     "lag_id.stage2_prior_mps2 and lag_id.stage2_prior_flights go together"),
 ])
 def test_a_field_out_of_range_is_one_error_naming_it_and_by_how_much(kwargs, message):
     with pytest.raises(ConfigError, match=message):

@@ -37,7 +37,8 @@ def test_the_stage_2_departure_is_the_mean_of_the_flights_and_the_next_ones_prio
     assert n == 3 and mean == pytest.approx(-0.35 / 3, abs=1e-12)
     lag = store.with_learned_guess("tcp:5762", FlightConfig()).lag_id
     assert (lag.stage2_prior_mps2, lag.stage2_prior_flights) == (pytest.approx(mean), 3)
-    given = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(stage2_prior_mps2=0.0))
+    given = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(
+        stage2_prior_mps2=0.0, stage2_prior_flights=5))
     assert store.with_learned_guess("tcp:5762", given).lag_id.stage2_prior_mps2 == 0.0
 
 
