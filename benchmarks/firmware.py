@@ -132,8 +132,9 @@ def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str
              ) -> list[str]:
     """`perchd fly` against a started harness, as a user flies it; its flight log is
     tmp/flight.jsonl. config_add: TOML appended to the flight config; driver_add: URI
-    parameters appended to the driver's; state: the vehicle memory (default tmp's own, a
-    vehicle flown for the first time)."""
+    parameters appended to the driver's; state: the vehicle memory shared by the flights,
+    named after the firmware (the harness's ports are ephemeral); None: tmp's own, a
+    vehicle flown for the first time."""
     driver += ("&" if "?" in driver else "?") + driver_add if driver_add else ""
     config: list[str] = []
     if fw.config is not None or config_add.strip():
@@ -141,7 +142,8 @@ def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str
         config = ["--config", str(tmp / "flight.toml")]
     return [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
             mocap, *config, *surface, "--log", str(tmp / "flight.jsonl"),
-            "--state", str(state or tmp / "vehicles.json"), "--vehicle", fw.name, "--json"]
+            "--state", str(state or tmp / "vehicles.json"),
+            *(("--vehicle", fw.name) if state else ()), "--json"]
 
 
 def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
@@ -175,13 +177,8 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
 
 
 def bias_refit(log: Path) -> dict:
-    """The flight's bias-refit event's values (docs/contracts.md, flight log); {} without."""
-    if not log.exists():
-        return {}
-    for line in log.read_text().splitlines():
-        if '"kind":"bias-refit"' in line:
-            return json.loads(line)["event"]["values"]
-    return {}
+    from fwharness import first_event
+    return first_event(log, "bias-refit")
 
 
 def fly_sim(noise: float, seed: int, tmp: Path) -> dict:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -14,8 +13,9 @@ if str(HELPERS) not in sys.path:
     sys.path.insert(0, str(HELPERS))
 
 
-@pytest.fixture(autouse=True, scope="session")
-def _vehicle_state_in_a_temporary_folder(tmp_path_factory):
-    """`perchd fly` keeps each vehicle's learned hover thrust under XDG_STATE_HOME: tests
-    (and the processes they start) keep theirs out of the user's home."""
-    os.environ["XDG_STATE_HOME"] = str(tmp_path_factory.mktemp("xdg-state"))
+@pytest.fixture(autouse=True)
+def _vehicle_state_in_a_temporary_folder(tmp_path_factory, monkeypatch):
+    """`perchd fly` keeps what it learns of each vehicle (hover thrust, stage 1's push)
+    under XDG_STATE_HOME: each test (and the processes it starts) keeps its own, out of the
+    user's home and of the other tests' flights."""
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path_factory.mktemp("xdg-state")))

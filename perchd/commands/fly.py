@@ -243,7 +243,7 @@ def run(args: argparse.Namespace) -> int:
             status.close()
             if view is not None:
                 view.close()
-    store.remember(key, cfg, res.hover_n, res.stage2_departure_mps2)
+    store.remember_flight(key, cfg, res)
     out = res.to_json()
     if mcap is not None and write_mcap(log, mcap, args.force):
         out["mcap"] = str(mcap)

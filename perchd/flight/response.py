@@ -105,8 +105,8 @@ class VehicleResponse:
         self.ff, self.model = ff, m
         self._events.append(LogEvent(t, "bias-refit", (
             f"stage 2: bias {m.bias_mps2:.3f} m/s^2 = the approach's {approach:.3f} + "
-            f"{share:g} x {pooled:+.3f} (stage 1's {self.departure_mps2:+.3f} pooled with "
-            f"{n} earlier flights')"), {
+            f"{share:g} x {pooled:+.3f} (stage 1's {self.departure_mps2:+.3f}"
+            + (f" pooled with {n} earlier flight{'s' if n > 1 else ''})" if n else ")")), {
                 "bias_mps2": m.bias_mps2, "fitted_mps2": fitted,
                 "departure_mps2": self.departure_mps2, "pooled_mps2": pooled,
                 "prior_flights": n, "rms_mps": m.rms_mps, "samples": m.samples,
@@ -116,10 +116,11 @@ class VehicleResponse:
     def _pooled(self, departure: float) -> tuple[float, int]:
         """(the departure [m/s^2] stage 2 flies, n): this flight's pooled with the mean of
         n earlier flights', each flight one sample of the vehicle's (LagIdGains)."""
-        prior, n = self.cfg.stage2_prior_mps2, self.cfg.stage2_prior_flights
-        if prior is None or n <= 0:
+        c = self.cfg
+        if not c.stage2_pool or c.stage2_prior_mps2 is None or c.stage2_prior_flights <= 0:
             return departure, 0
-        return (n * prior + departure) / (n + 1), n
+        n = c.stage2_prior_flights
+        return (n * c.stage2_prior_mps2 + departure) / (n + 1), n
 
     def _relag(self, t: float, since_t: float) -> None:
         """A lag taken from the attitude is taken again from stage 1's alone (drag and bias

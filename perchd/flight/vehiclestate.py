@@ -1,15 +1,17 @@
 """What one flight learns about its vehicle, kept for the next: a small JSON file,
 `{"schema": "perchd.vehicles/1", "vehicles": {KEY: {"hover_ratio": R, "hover_n": N,
 "mass_kg": M, "stage2_departure_mps2": D, "stage2_flights": K}}}`, keyed by the vehicle
-(`perchd fly`: the driver URI; the service: its vehicle name and driver URI).
+(`perchd fly`: --vehicle NAME, else the driver URI; the service: its vehicle name and
+driver URI).
 
 The hover is kept as a ratio to the configured weight (hover_n / (mass_kg * g)): with the
 drivers' thrust calibrated by the flight's mass (Driver.bind_mass) that ratio is what the
-vehicle carries over if the configured mass changes. The stage-2 departure is the running
-mean of the flights' stage-1 push beyond the approach's bias (LagIdGains.stage2_prior_mps2)
-over the last K of them, K at most MEMORY_FLIGHTS. Reading or writing never fails a flight:
-a missing, unreadable or malformed file or field is no memory, an unwritable file one
-warning line.
+vehicle carries over if the configured mass changes. The stage-2 departure is stage 1's
+push beyond the approach's bias (LagIdGains.stage2_prior_mps2), from flights that touched
+the surface: the mean of the first MEMORY_FLIGHTS, then an exponential mean weighing each
+new flight 1/MEMORY_FLIGHTS. Reading or writing never fails a flight: a missing,
+unreadable or malformed file or field is no memory, an unwritable file or a push beyond
+STAGE2_PRIOR_MAX_MPS2 one warning line.
 """
 
 from __future__ import annotations
@@ -19,14 +21,18 @@ import math
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from perchd.flight.config import FlightConfig
+from perchd.core.types import EndReason
+from perchd.flight.config import STAGE2_PRIOR_MAX_MPS2, FlightConfig
+
+if TYPE_CHECKING:
+    from perchd.flight.run import FlightResult
 
 SCHEMA = "perchd.vehicles/1"
 MEMORY_FLIGHTS = 10
-"""The stage-2 departure is the mean of at most this many flights: a vehicle that changes
-(a new propeller, a payload) is followed within about as many."""
+"""The stage-2 departure stands for at most this many flights: a vehicle that changes (a new
+propeller, a payload) is followed within about as many."""
 
 
 def default_path() -> Path:
@@ -51,19 +57,21 @@ class VehicleStore:
             and isinstance(doc.get("vehicles"), dict)
         return doc["vehicles"] if ok else {}
 
-    def _record(self, key: str) -> dict:
-        rec = self._read().get(key)
+    def _record(self, key: str, vehicles: dict | None = None) -> dict:
+        rec = (self._read() if vehicles is None else vehicles).get(key)
         return rec if isinstance(rec, dict) else {}
 
     def hover_ratio(self, key: str) -> float | None:
         ratio = self._record(key).get("hover_ratio")
         return float(ratio) if _number(ratio) and 0.1 < ratio < 10 else None
 
-    def stage2_departure(self, key: str) -> tuple[float, int] | None:
-        """(the mean departure [m/s^2], how many flights) or None."""
-        rec = self._record(key)
+    def stage2_departure(self, key: str, vehicles: dict | None = None
+                         ) -> tuple[float, int] | None:
+        """(the mean departure [m/s^2], how many flights it stands for) or None."""
+        rec = self._record(key, vehicles)
         mean, n = rec.get("stage2_departure_mps2"), rec.get("stage2_flights")
-        ok = _number(mean) and abs(mean) < 5.0 and isinstance(n, int) and n >= 1
+        ok = (_number(mean) and abs(mean) <= STAGE2_PRIOR_MAX_MPS2
+              and isinstance(n, int) and not isinstance(n, bool) and n >= 1)
         return (float(mean), min(n, MEMORY_FLIGHTS)) if ok else None
 
     def with_learned_guess(self, key: str, cfg: FlightConfig) -> FlightConfig:
@@ -80,19 +88,30 @@ class VehicleStore:
                                               stage2_prior_flights=departure[1]))
         return cfg
 
+    def remember_flight(self, key: str, cfg: FlightConfig, res: FlightResult) -> None:
+        """Keep what a flight learned: its hover, and its stage-1 push if it touched (an
+        aborted flight's stage 1 may have met what ended it)."""
+        touched = res.outcome is EndReason.CONTACT
+        self.remember(key, cfg, res.hover_n, res.stage2_departure_mps2 if touched else None)
+
     def remember(self, key: str, cfg: FlightConfig, hover_n: float | None = None,
                  departure_mps2: float | None = None) -> None:
         """Keep what this flight learned (None: nothing of that kind) beside the rest."""
+        if departure_mps2 is not None and abs(departure_mps2) > STAGE2_PRIOR_MAX_MPS2:
+            self.warn(f"warning: stage 1's push {departure_mps2:+.3f} m/s^2 beyond the "
+                      f"approach's not kept: beyond +-{STAGE2_PRIOR_MAX_MPS2:g} m/s^2 it met "
+                      "something passing, not the vehicle")
+            departure_mps2 = None
         if hover_n is None and departure_mps2 is None:
             return
         vehicles = self._read()
-        rec = self._record(key)
+        rec = self._record(key, vehicles)
         if hover_n is not None:
             v = cfg.vehicle
             rec.update(hover_ratio=hover_n / (v.mass_kg * v.g), hover_n=hover_n,
                        mass_kg=v.mass_kg)
         if departure_mps2 is not None:
-            mean, n = self.stage2_departure(key) or (0.0, 0)
+            mean, n = self.stage2_departure(key, vehicles) or (0.0, 0)
             k = min(n + 1, MEMORY_FLIGHTS)
             rec.update(stage2_departure_mps2=mean + (departure_mps2 - mean) / k,
                        stage2_flights=k)
@@ -115,4 +134,10 @@ class VehicleStore:
 
 
 def _number(x: object) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+    """A finite JSON number (not a bool; an integer too large for a float is none)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False

@@ -163,7 +163,7 @@ class FlightJob(threading.Thread):
                       header={"plan_file": str(self.plan_path), "vehicle": self.cfg.service.vehicle,
                               "mocap": self.links.mocap_uri, "service": True})
             self.result = res.to_json()
-            store.remember(key, flight, res.hover_n, res.stage2_departure_mps2)
+            store.remember_flight(key, flight, res)
         except BaseException as err:  # fly has already sent the failsafe and closed the log
             why = EndReason.LOST_LINK if isinstance(err, LinkError) else EndReason.SOFTWARE_ERROR
             self.result = {"outcome": why.name, "log": str(self.log),

@@ -29,6 +29,8 @@ def test_defaults_are_a_30_g_crazyflie_at_100_hz_with_25_degree_tilt():
      "lag_id.time_constant_max_s = -1 is below 0 by 1"),
     ({"lag_id": LagIdGains(stage2_prior_mps2=-0.1, stage2_prior_flights=101)},
      "lag_id.stage2_prior_flights = 101 is above 100 by 1"),
+    ({"lag_id": LagIdGains(stage2_prior_mps2=0.6, stage2_prior_flights=3)},
+     "lag_id.stage2_prior_mps2 = 0.6 is above 0.5 by 0.1"),
     ({"lag_id": LagIdGains(stage2_prior_mps2=-0.1)},
      "lag_id.stage2_prior_mps2 and lag_id.stage2_prior_flights go together"),
     ({"lag_id": LagIdGains(stage2_prior_flights=3)},

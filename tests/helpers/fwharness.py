@@ -56,12 +56,17 @@ def log_rows(log: Path) -> list[dict]:
 
 
 def lag_event(log: Path) -> dict:
-    """The flight's lag-identified (or -unidentified) event from its log as {"kind": ...,
-    **values} (docs/contracts.md, flight log); {} without one."""
+    """The flight's lag-identified (or -unidentified) event (first_event)."""
+    return first_event(log, "lag-")
+
+
+def first_event(log: Path, kind: str) -> dict:
+    """The log's first event whose kind starts with `kind`, as {"kind": ..., **values}
+    (docs/contracts.md, flight log); {} without one."""
     if not log.exists():
         return {}
     for line in log.read_text().splitlines():
-        if '"kind":"lag-' in line:
+        if f'"kind":"{kind}' in line:
             ev = json.loads(line)["event"]
             return {"kind": ev["kind"], **ev["values"]}
     return {}
