@@ -150,7 +150,7 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
                  config_add: str = "", driver_add: str = "", state: Path | None = None
                  ) -> dict:
     proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
-    from fwharness import YawWatch, flight_window, heading_error
+    from fwharness import YawWatch, first_event, flight_window, heading_error
     watch = YawWatch(mocap)
     try:
         done = subprocess.run(fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add,
@@ -171,14 +171,10 @@ def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
         "agent_contact_speed": fly.get("contact_speed"), "perch_time": fly.get("perch_time"),
         "trigger_v": (fly.get("trigger") or {}).get("v"),
         "yaw_dev_deg": math.degrees(heading_error(yaws, heading)) if yaws else None,
-        "lag": lag_event(tmp / "flight.jsonl"), "stage2": bias_refit(tmp / "flight.jsonl"),
+        "lag": lag_event(tmp / "flight.jsonl"),
+        "stage2": first_event(tmp / "flight.jsonl", "bias-refit"),
         "sim_clock_rate": sim.get("sim_clock_rate"),
         "attitude_push": sim.get("attitude_push_mps2")}
-
-
-def bias_refit(log: Path) -> dict:
-    from fwharness import first_event
-    return first_event(log, "bias-refit")
 
 
 def fly_sim(noise: float, seed: int, tmp: Path) -> dict:

@@ -98,20 +98,26 @@ class VehicleResponse:
         fitted, approach = fit.model.bias_mps2, self.model.bias_mps2
         self.departure_mps2 = fitted - approach
         pooled, n = self._pooled(self.departure_mps2)
-        share = self.cfg.stage2_refit_share
-        m = replace(fit.model, bias_mps2=approach + share * pooled)
+        m = replace(fit.model, bias_mps2=approach + self.cfg.stage2_refit_share * pooled)
         ff = feed_forward(m)
         step = ff.step_from(self.ff, 0.0, v_hold)
         self.ff, self.model = ff, m
+        self._log_refit(t, approach, fitted, (pooled, n), step)
+        return step
+
+    def _log_refit(self, t: float, approach: float, fitted: float,
+                   pooled: tuple[float, int], step: float) -> None:
+        """The bias-refit event: approach and fitted biases [m/s^2], the departure pooled
+        over n earlier flights, the feed-forward's step [m/s^2] (docs/contracts.md)."""
+        m, (mean, n), own = self.model, pooled, fitted - approach
+        with_earlier = f" pooled with {n} earlier flight{'s' if n > 1 else ''}" if n else ""
         self._events.append(LogEvent(t, "bias-refit", (
             f"stage 2: bias {m.bias_mps2:.3f} m/s^2 = the approach's {approach:.3f} + "
-            f"{share:g} x {pooled:+.3f} (stage 1's {self.departure_mps2:+.3f}"
-            + (f" pooled with {n} earlier flight{'s' if n > 1 else ''})" if n else ")")), {
-                "bias_mps2": m.bias_mps2, "fitted_mps2": fitted,
-                "departure_mps2": self.departure_mps2, "pooled_mps2": pooled,
-                "prior_flights": n, "rms_mps": m.rms_mps, "samples": m.samples,
-                "step_mps2": step}))
-        return step
+            f"{self.cfg.stage2_refit_share:g} x {mean:+.3f} (stage 1's {own:+.3f}"
+            f"{with_earlier})"), {
+                "bias_mps2": m.bias_mps2, "fitted_mps2": fitted, "departure_mps2": own,
+                "pooled_mps2": mean, "prior_flights": n, "rms_mps": m.rms_mps,
+                "samples": m.samples, "step_mps2": step}))
 
     def _pooled(self, departure: float) -> tuple[float, int]:
         """(the departure [m/s^2] stage 2 flies, n): this flight's pooled with the mean of
