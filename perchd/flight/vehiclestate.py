@@ -61,8 +61,8 @@ class VehicleStore:
         rec = (self._read() if vehicles is None else vehicles).get(key)
         return rec if isinstance(rec, dict) else {}
 
-    def hover_ratio(self, key: str) -> float | None:
-        ratio = self._record(key).get("hover_ratio")
+    def hover_ratio(self, key: str, vehicles: dict | None = None) -> float | None:
+        ratio = self._record(key, vehicles).get("hover_ratio")
         return float(ratio) if _number(ratio) and 0.1 < ratio < 10 else None
 
     def stage2_departure(self, key: str, vehicles: dict | None = None
@@ -78,7 +78,8 @@ class VehicleStore:
         """cfg with what earlier flights learned: the hover as its initial guess, unless the
         config gives one (vehicle.hover_thrust_n overrides the memory), and the stage-2
         departure as its prior, unless the config gives one (lag_id.stage2_prior_mps2)."""
-        ratio, departure = self.hover_ratio(key), self.stage2_departure(key)
+        vehicles = self._read()
+        ratio, departure = self.hover_ratio(key, vehicles), self.stage2_departure(key, vehicles)
         if ratio is not None and cfg.vehicle.hover_thrust_n is None:
             v = cfg.vehicle
             hover = min(ratio * v.mass_kg * v.g, v.thrust_max_n)
