@@ -1,4 +1,4 @@
-"""Issue 17 item 1: plan files and libraries take the service's bounded regular-file rule on the
+"""Plan files and libraries take the service's bounded regular-file rule on the
 command line too, and unknown top-level keys are refused naming the key (docs/contracts.md §1)."""
 
 import json

@@ -1,4 +1,4 @@
-"""Issue 17 item 7: a campaign writes its table as flights finish; SIGINT/SIGTERM stop it with
+"""A campaign writes its table as flights finish; SIGINT/SIGTERM stop it with
 the summary of what finished, exit 130 / 143 (docs/contracts.md §6)."""
 
 import csv

@@ -1,4 +1,4 @@
-"""Issue 17 item 9: `perchd ctl` is readable by default, JSON with --json, refusals on stderr,
+"""`perchd ctl` is readable by default, JSON with --json, refusals on stderr,
 and says what to check when no service is there."""
 
 import subprocess

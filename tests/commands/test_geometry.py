@@ -1,4 +1,4 @@
-"""Issue 17 item 5: non-finite or absurd flight geometry is refused before the flight, naming
+"""Non-finite or absurd flight geometry is refused before the flight, naming
 the flag (a NaN surface used to start a flight that ended STALE_MOCAP)."""
 
 import subprocess

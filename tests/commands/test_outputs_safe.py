@@ -1,4 +1,4 @@
-"""Issue 17 item 2 (and the write errors of item 3): outputs never destroy data. An existing
+"""Outputs never destroy data, and write errors are reported. An existing
 file is overwritten only with --force; no directory is made but the default log directory."""
 
 import shutil

@@ -2,7 +2,7 @@
 
 The agent flies with the zmq:// driver and the natnet:// mocap against `perchd sim` in
 another process, and must perch within the tolerances the in-process simulator meets
-(tests/closedloop/test_perch_acceptance.py): contact inside the speed window and within
+(tests/flight/test_perch_acceptance.py): contact inside the speed window and within
 0.05 m/s of the plan's speed, the planned time within 5 %.
 """
 

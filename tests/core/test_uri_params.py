@@ -1,4 +1,4 @@
-"""Issue 17 item 6: every URI scheme refuses unknown parameters and lists its parameters in one
+"""Every URI scheme refuses unknown parameters and lists its parameters in one
 table (perchd.core.uriparams.PARAMS), which docs/contracts.md §7 and `perchd fly --help` show."""
 
 import subprocess

@@ -1,4 +1,4 @@
-"""Issue 13 A: the flight config's vehicle is the one mass. Drivers take it (bind_mass)
+"""The flight config's vehicle is the one mass. Drivers take it (bind_mass)
 before they connect; a URI mass= that disagrees is refused, in one line naming both."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 13 B-D in perchd's own sim: the hold learns the hover thrust (and the approach waits
+"""In perchd's own sim: the hold learns the hover thrust (and the approach waits
 for it), the approach's speed integral meets v0 at the trigger despite drag, and the thrust
 saturates at the driver's ceiling."""
 

@@ -1,4 +1,4 @@
-"""Issue 17 item 8: `perchd serve` checks plan_dir and log_dir before READY=1 and fails at
+"""`perchd serve` checks plan_dir and log_dir before READY=1 and fails at
 start with one line naming the key; the per-instance unit's LogsDirectory is where a default
 log_dir goes."""
 
