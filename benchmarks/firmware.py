@@ -52,12 +52,11 @@ stale_timeout_s = 0.25
 and its harness on two shared cores `perchd fly` is descheduled for tens of milliseconds,
 past the default three mocap periods (30 ms at 100 Hz)."""
 HEADING_DEG = "60"
-"""[deg] PX4 turns to this compass heading before the flight, as issue 20's trial flew: a
+"""[deg] PX4 turns to this compass heading before the flight, as the PX4 trial flies: a
 heading off the world's axes (the frame's rotation) and both truth velocity components in
 the contact speed (HIL_STATE_QUATERNION's are whole cm/s)."""
 CONTACT_TOL_MPS = 0.03
-"""[m/s] on target: in the plan's window and this close to its contact speed (issues 15
-and 20)."""
+"""[m/s] on target: in the plan's window and this close to its contact speed."""
 SIM_SPEED = os.environ.get("PERCHD_PX4_SIM_SPEED", "1.015")
 """SIH's speed factor: on this 2-core machine its lockstep clock ran at 0.984-0.990 of the
 wall clock at 1 (with the harness's fine timer slack), 0.992-1.005 at 1.015; the summary
@@ -91,7 +90,7 @@ FIRMWARES = (
              config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text()),  # has it
     Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5", "--heading", HEADING_DEG,
                                             "--sim-speed", SIM_SPEED), config=PX4_CONFIG),
-    # Issue 20's other start: on the ground, GPS off, EKF2 on the mocap perchd forwards;
+    # PX4's other start: on the ground, GPS off, EKF2 on the mocap perchd forwards;
     # perchd arms and takes off. The same 1.5 m run-up to x0 as in the air (with 4.5 m,
     # 4 of 10 reached x0 0.11-0.2 m/s fast and the trigger refused: docs/firmware.md).
     Firmware("px4-ground", "PERCHD_PX4", "--px4", ("--vision", "--ahead", "4.5",

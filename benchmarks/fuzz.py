@@ -3,7 +3,7 @@ receive path, and control-socket lines into a running `perchd serve`.
 
     python benchmarks/fuzz.py [--natnet 1000000] [--udp 100000] [--lines 100000] [--seed 8] [--json]
 
-(about 30 s; the issue asks for at least 1e5 NatNet packets and 1e4 control lines.)
+(about 30 s; the target is at least 1e5 NatNet packets and 1e4 control lines.)
 
 natnet: recorded Motive packets (tests/fixtures/natnet: 3 servers, NatNet 2.5 to 3.0),
     each mutated (bit flips, cuts, inserts, extreme words, a lying length field) or replaced

@@ -3,7 +3,7 @@ goes on toward the wall, and what its autopilot does after.
 
     python benchmarks/fwkill.py [--kills N] [--speed V] [--only NAME ...] [--json]
 
-Issue 20's target for PX4: no further than 0.5 m toward the wall, then holding in place or
+The target for PX4: no further than 0.5 m toward the wall, then holding in place or
 landed, never returning home (docs/safety.md, "The brake"). Each of N kills (default 3) per
 firmware: the harness and `perchd fly` as benchmarks/firmware.py starts them (the same
 environment variables name the binaries), the agent SIGKILLed once its flight log shows the
@@ -42,7 +42,7 @@ AFTER_S = 8.0
 """[s] watched after the kill: PX4's COM_OF_LOSS_T, the sentinel's brake and LAND, a descent."""
 NOISE_M = 0.001
 TARGET_M = 0.5
-"""[m] issue 20: no further toward the wall than this after the kill."""
+"""[m] the target: no further toward the wall than this after the kill."""
 OFFBOARD_MODES = ("OFFBOARD", "GUIDED_NOGPS")
 
 

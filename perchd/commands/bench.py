@@ -42,7 +42,7 @@ def register(sub) -> None:
                                             "pose-to-setpoint latency over ZMQ, CPU")
     lp.add_argument("--seconds", type=float, default=5.0,
                     help="[s] length of the 500 Hz run and of each ZMQ mode (default 5; "
-                         "60 for the issue's overrun figure)")
+                         "60 for the overrun figure)")
     lp.add_argument("--json", action="store_true", help="print one JSON object")
     add_load(lp, "the loops, the rig and the agent (perchd fly --realtime)")
     lp.set_defaults(run=run_loop)

@@ -19,7 +19,7 @@ The result is verified densely in t (perchd.tau.plan.make_plan: first switch by 
 roots, peaks by peak_abs) and re-solved with tightened limits or a wider margin if the grid
 let a peak or the crossing slip between nodes.
 
-Why the search is global, in terms a reviewer can check:
+Why the search is global, in terms a reader can check:
   1. Nested feasible sets. Limits enter only as right-hand sides (V/v_max <= 1,
      |A|/a_max <= 1, V_l <= V(1) <= V_u); the grid, the margin and the dense check do not
      depend on them. So any z feasible for tighter limits is feasible for looser ones, and

@@ -251,7 +251,7 @@ def test_without_pymavlink_the_factory_names_the_extra_to_install(monkeypatch):
         open_driver("mavlink:udpout:127.0.0.1:14550?mass=1", Runtime.real())
 
 
-# -- issue 20: airborne take-over, level at the heading, udpout to PX4, failsafe parameters --
+# -- PX4: airborne take-over, level at the heading, udpout to PX4, failsafe parameters --
 
 def heading_of(q) -> float:
     """[deg] NED yaw of a (w, x, y, z) target."""

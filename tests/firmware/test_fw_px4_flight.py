@@ -61,7 +61,7 @@ AHEAD_M = 7.5
 PX4's attitude lag left the approach at 1.1 of v0 = 1.5 m/s and the trigger refused), the
 hold 0.5 m inside the geofence's x_min = -8 m (at 8 m a hold swaying 0.2 m ended GEOFENCE)."""
 HEADING_DEG = "60"
-"""[deg] the compass heading PX4 turns to before an airborne perch: issue 20's trial."""
+"""[deg] the compass heading PX4 turns to before an airborne perch (as benchmarks/firmware.py)."""
 CONFIG = f"""version = 1
 [vehicle]
 mass_kg = {SIH_MASS_KG}

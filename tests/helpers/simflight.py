@@ -16,7 +16,7 @@ from perchd.mocap.base import open_source
 
 PLANS = Path(__file__).resolve().parents[2] / "plans"
 NOISY = "sim://?latency=0.02&noise=0.001"
-"""20 ms command latency and 1 mm mocap noise (the issue's second acceptance case)."""
+"""20 ms command latency and 1 mm mocap noise (the second acceptance case)."""
 
 
 class Sim:
