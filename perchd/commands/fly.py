@@ -20,15 +20,13 @@ With `--driver sim:// --mocap sim://` the flight is simulated on a simulated clo
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
-import math
 import sys
 import time
 from pathlib import Path
 
-from perchd.commands.argcheck import numbers_as_values, within
-from perchd.commands.log import write_file
+from perchd.console.argcheck import numbers_as_values
+from perchd.console.flightargs import load_config
 from perchd.core import realtime
 from perchd.core.errors import ConfigError, PerchdError
 from perchd.core.extras import require
@@ -36,12 +34,11 @@ from perchd.core.interrupts import catching
 from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
-from perchd.flight.config import MAX_COORD_M, FlightConfig, SurfaceConfig
 from perchd.flight.run import FlightAbort
 from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.logs.flightlog import read_log
+from perchd.logs.mcapexport import export_mcap
 from perchd.logs.foxglove import ViewProcess, parse_address
-from perchd.service.config import load_flight_config
 from perchd.sim.session import open_links
 from perchd.tau import load_plan
 
@@ -102,34 +99,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "PORT 0 for any free one; needs perchd[foxglove]")
     p.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
     p.set_defaults(run=run)
-
-
-def load_config(args: argparse.Namespace):
-    """FlightConfig from --config (the TOML loader, perchd.service.config) and --surface/--normal."""
-
-    cfg = FlightConfig()
-    if args.config:
-        cfg = load_flight_config(args.config)
-    surface = cfg.surface
-    if args.surface:
-        surface = dataclasses.replace(surface, point=tuple(args.surface))
-    if args.normal:
-        surface = dataclasses.replace(surface, normal=tuple(args.normal))
-    where = f"in --config {args.config}" if args.config else "default"
-    check_geometry(surface.point, surface.normal,
-                   "--surface" if args.surface else f"[surface] point ({where})",
-                   "--normal" if args.normal else f"[surface] normal ({where})")
-    return dataclasses.replace(cfg, surface=SurfaceConfig(surface.point, surface.normal))
-
-
-def check_geometry(point, normal, point_flag: str, normal_flag: str) -> None:
-    """Refuse non-finite or absurd geometry before any link opens (a NaN surface used to start
-    a flight that ended STALE_MOCAP)."""
-    within(point_flag, point, -MAX_COORD_M, MAX_COORD_M, "m")
-    within(normal_flag, normal, -1e6, 1e6, "")
-    if math.sqrt(sum(c * c for c in normal)) < 1e-9:
-        raise ConfigError(f"{normal_flag} {' '.join(f'{c:g}' for c in normal)}: "
-                          "must be a non-zero direction")
 
 
 class StatusLine:
@@ -212,7 +181,7 @@ def live_view(address: str | None, log: Path):
 def write_mcap(log: Path, out: Path, force: bool) -> bool:
     """The flown log exported to `out`; a failure is a warning: the flight and its JSONL stand."""
     try:
-        write_file(read_log(log), out, force, "--log")
+        export_mcap(read_log(log), out, force, "--log")
         return True
     except (PerchdError, OSError) as err:
         _warn(f"{out} not written ({err}); the flight log is {log}")

@@ -6,16 +6,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
-from perchd.commands.plan import draw
 from perchd.core.errors import PerchdError
 from perchd.core.extras import require
-from perchd.core.safefile import OutputError, check_output
-from perchd.logs.flightlog import FlightLog, read_log
-from perchd.logs.mcapexport import write_mcap
+from perchd.core.safefile import check_output
+from perchd.logs.flightlog import read_log
+from perchd.console.outputs import draw
+from perchd.logs.mcapexport import export_mcap
 from perchd.logs.plot import plot_flights
 from perchd.logs.summary import summarize, summary_text
 
@@ -76,28 +75,9 @@ def export(args: argparse.Namespace) -> int:
     require("mcap.writer", "mcap")  # before any work: the one line naming the extra
     out = check_output(args.mcap, "--mcap", args.force, inputs=(args.log,))
     log = _read(args.log)
-    write_file(log, out, args.force)
+    export_mcap(log, out, args.force)
     if not log.complete:
         print(f"perchd log export: {args.log}: no end line (a flight cut short); exported its "
               f"{len(log.rows)} rows and {len(log.events)} events", file=sys.stderr)
     print(out)
     return 0
-
-
-def write_file(log: FlightLog, out: Path, force: bool, flag: str = "--mcap") -> None:
-    """`log` as MCAP at `out` (checked by check_output): created exclusively unless `force`,
-    so a file appearing meanwhile survives; a file left half written is removed."""
-    try:
-        f = open(out, "wb" if force else "xb")
-    except FileExistsError:
-        raise OutputError(f"{flag} {out}: exists (pass --force to overwrite)") from None
-    except OSError as err:
-        raise OutputError(f"{flag} {out}: cannot write ({err.strerror})") from None
-    try:
-        with f:
-            write_mcap(log, f)
-    except BaseException as err:
-        os.unlink(out)
-        if isinstance(err, OSError) and not isinstance(err, PerchdError):
-            raise OutputError(f"{flag} {out}: cannot write ({err.strerror})") from None
-        raise

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import os
 import stat
+import tempfile
 from pathlib import Path
+from typing import IO, Callable
 
 from perchd.core.errors import PerchdError
 
@@ -92,12 +94,42 @@ def check_output(path: str | os.PathLike, flag: str, force: bool = False,
 
 
 def write_text(path: Path, text: str, flag: str, force: bool) -> None:
-    """Write `text` to `path` (checked by check_output); created exclusively unless `force`,
-    so a file appearing meanwhile is not overwritten either. OSError as one OutputError."""
+    """`text` written to `path` (checked by check_output) by write_atomic."""
+    write_atomic(path, lambda f: f.write(text.encode("utf-8")), flag, force)
+
+
+def write_atomic(path: Path, write: Callable[[IO[bytes]], None], flag: str, force: bool) -> None:
+    """`write(f)` into a temporary file beside `path`, then renamed onto it: a failure at any
+    point leaves whatever was at `path` as it was. Without `force` an existing `path` (one
+    that appeared since check_output) is refused, and the rename cannot replace one made
+    meanwhile (os.link refuses an existing name)."""
+    parent = path.parent if str(path.parent) else Path(".")
     try:
-        with open(path, "w" if force else "x", encoding="utf-8") as f:
-            f.write(text)
-    except FileExistsError:
-        raise OutputError(f"{flag} {path}: exists (pass --force to overwrite)") from None
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
     except OSError as err:
         raise OutputError(f"{flag} {path}: cannot write ({err.strerror})") from None
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        _place(tmp, path, flag, force)
+    except OSError as err:
+        if isinstance(err, PerchdError):
+            raise
+        raise OutputError(f"{flag} {path}: cannot write ({err.strerror})") from None
+    finally:
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+
+
+def _place(tmp: str, path: Path, flag: str, force: bool) -> None:
+    if force:
+        if os.path.lexists(path) and not os.path.isfile(path):
+            raise OutputError(f"{flag} {path}: not a regular file; refusing to replace it")
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise OutputError(f"{flag} {path}: exists (pass --force to overwrite)") from None

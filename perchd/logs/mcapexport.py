@@ -11,10 +11,12 @@ from __future__ import annotations
 import dataclasses
 import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import IO, Any, Iterator
 
 from perchd.core.errors import PerchdError
 from perchd.core.extras import require
+from perchd.core.safefile import write_atomic
 from perchd.logs.flightlog import FlightLog, LogEvent, LogRow, jsonable
 
 PREFIX = "/perchd"
@@ -155,3 +157,9 @@ def write_mcap(log: FlightLog, out: IO[bytes]) -> int:
                                         "complete": str(log.complete).lower()})
     w.finish()
     return len(msgs)
+
+
+def export_mcap(log: FlightLog, out: Path, force: bool, flag: str = "--mcap") -> None:
+    """`log` as MCAP at `out` (checked by check_output), by the one rule for written files
+    (core/safefile.py:write_atomic): a failed export leaves `out` as it was."""
+    write_atomic(out, lambda f: write_mcap(log, f), flag, force)

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import pytest
 from terminal import run_on_terminal
 
-from perchd.commands.progress import Progress
+from perchd.console.progress import Progress
 
 PLANS = Path(__file__).parents[2] / "plans"
 BOX = str(PLANS / "robust-n3-table2-box.json")

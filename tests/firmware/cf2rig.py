@@ -15,7 +15,7 @@ from typing import Iterator
 
 import pytest
 
-from perchd.commands.sim_firmware import GIL_SWITCH_S
+from perchd.commands.sim.firmware import GIL_SWITCH_S
 from perchd.core.types import Phase, Pose, Setpoint
 from perchd.sim.firmware.cf2 import Cf2Params, Cf2Vehicle
 from perchd.sim.firmware.harness import ProcessGroup

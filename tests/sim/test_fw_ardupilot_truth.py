@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from perchd.commands.sim_firmware import arducopter_params, register_under
+from perchd.commands.sim.firmware import arducopter_params, register_under
 from perchd.core.errors import UriError
 from perchd.sim.firmware.ardupilot import (
     DEG7_M,

@@ -9,12 +9,13 @@ from pathlib import Path
 
 import numpy as np
 
-from perchd.commands.argcheck import numbers_as_values, within
-from perchd.commands.plan_library import check_library
-from perchd.commands.plan_library import register as register_library
-from perchd.commands.plan_robust import register as register_robust
+from perchd.console.argcheck import numbers_as_values, within
+from perchd.commands.plan.library import check_library
+from perchd.commands.plan.library import register as register_library
+from perchd.commands.plan.robust import register as register_robust
+from perchd.console.outputs import draw
 from perchd.core.errors import PlanError
-from perchd.core.safefile import OutputError, check_output, read_regular, write_text
+from perchd.core.safefile import check_output, read_regular, write_text
 from perchd.logs.planplot import plot_plan
 from perchd.tau import load_plan, plan_ctds, plan_ctdts, plan_ipts, report
 from perchd.tau.ipts import MAX_ORDER, UNBOUNDED
@@ -172,14 +173,6 @@ def _schema(text: str) -> object:
     except (ValueError, RecursionError):
         return None
     return doc.get("schema") if isinstance(doc, dict) else None
-
-
-def draw(plotter, data, out, flag: str) -> None:
-    """plotter(data, out), matplotlib's refusals (a format it lacks, a write error) as one line."""
-    try:
-        plotter(data, out)
-    except (OSError, ValueError) as err:
-        raise OutputError(f"{flag} {out}: cannot draw ({err})") from None
 
 
 def table(rep, plan) -> str:

@@ -22,7 +22,7 @@ exactly one JSON object on stdout (contact time [s] and speed [m/s], counts). Ex
 --duration or --exit-on-stop, 130 / 143 after SIGINT / SIGTERM (docs/contracts.md §6).
 
 `perchd sim --campaign P.json ...` flies many simulated flights in this process instead
-(no sockets; see perchd.commands.campaign): --pose-out and --setpoint-in are then not wanted.
+(no sockets; see perchd.commands.sim.campaign): --pose-out and --setpoint-in are then not wanted.
 """
 
 from __future__ import annotations
@@ -34,11 +34,12 @@ import threading
 import time
 from typing import Any
 
-from perchd.commands import campaign as campaign_cli
-from perchd.commands import sim_firmware
-from perchd.commands.argcheck import numbers_as_values, within
-from perchd.commands.campaign import add_arguments
-from perchd.commands.fly import MAX_COORD_M, check_geometry
+from perchd.commands.sim import campaign as campaign_cli
+from perchd.commands.sim import firmware as sim_firmware
+from perchd.console.argcheck import numbers_as_values, within
+from perchd.commands.sim.campaign import add_arguments
+from perchd.console.flightargs import check_geometry
+from perchd.flight.config import MAX_COORD_M
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.interrupts import catching

@@ -14,8 +14,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from perchd.commands.argcheck import numbers_as_values
-from perchd.commands.progress import Progress
+from perchd.console.argcheck import numbers_as_values
+from perchd.console.progress import Progress
 from perchd.core.errors import PlanError
 from perchd.core.safefile import check_output, write_text
 from perchd.tau.certify import Box

@@ -12,8 +12,8 @@ import json
 import time
 from pathlib import Path
 
-from perchd.commands.argcheck import numbers_as_values
-from perchd.commands.progress import Progress
+from perchd.console.argcheck import numbers_as_values
+from perchd.console.progress import Progress
 from perchd.core.safefile import check_output, write_text
 from perchd.tau import report
 from perchd.tau.library import SCHEMA, build_library, library_from_json, library_text

@@ -21,8 +21,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from perchd.commands.fly import load_config
-from perchd.commands.progress import Progress
+from perchd.console.flightargs import load_config
+from perchd.console.progress import Progress
 from perchd.core.errors import ConfigError
 from perchd.core.interrupts import exit_code
 from perchd.core.safefile import OutputError, check_output
