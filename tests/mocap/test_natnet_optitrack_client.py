@@ -1,10 +1,14 @@
 """OptiTrack's own Python NatNet client (NatNet SDK 4.1, on PyPI as `natnetsdk`) talks to the
-emulator: server info, model definitions, frames and keep-alives, in unicast on loopback.
+emulator: server info, model definitions, frames and keep-alives, in unicast and multicast on
+loopback.
 
-Its multicast data socket binds the interface address, which on Linux receives no multicast,
-so multicast interoperability is left to perchd's own client (tested on loopback). Its
-NatNet 4.0 reader expects the 4.1 precision timestamp; OptiTrack's C++ PacketClient and the
-4.1 notes put that in 4.1+, as the emulator does, so 4.0 is not tried with it here.
+In multicast its data socket binds the client address and the data port it is told (not the
+one the server announces). On Linux a socket bound to an interface address receives no
+multicast, so the client address is 0.0.0.0, and its group membership then goes to the
+interface of the route to the group: not loopback here, so the test joins the group on
+loopback itself, as a route for 239.0.0.0/8 via lo would. Its NatNet 4.0 reader expects the
+4.1 precision timestamp; OptiTrack's C++ PacketClient and the 4.1 notes put that in 4.1+, as
+the emulator does, so 4.0 is not tried with it here.
 """
 
 from __future__ import annotations
@@ -30,17 +34,20 @@ def stop(client) -> None:
     client.shutdown()
 
 
+@pytest.mark.parametrize("multicast", [False, True], ids=["unicast", "multicast"])
 @pytest.mark.parametrize("version", [(3, 0), (4, 1)], ids=["3.0", "4.1"])
-def test_optitracks_client_reads_the_emulator(version, capsys):
+def test_optitracks_client_reads_the_emulator(version, multicast, capsys):
     clock = MonotonicClock()
-    server = NatNetServer({"cf1": 1, "wand": 2}, version, rate_hz=100.0).start()
+    server = NatNetServer({"cf1": 1, "wand": 2}, version, rate_hz=100.0,
+                          multicast=multicast).start()
     server.publish(Pose("cf1", 0, clock.now(), (0.5, 1.0, 1.5), (0.0, 0.0, 0.0, 1.0)))
     bodies, frames, printed = [], [], []
     client = natnetsdk.NatNetClient()
-    client.set_client_address("127.0.0.1")
+    client.set_client_address("0.0.0.0" if multicast else "127.0.0.1")
     client.set_server_address("127.0.0.1")
-    client.set_use_multicast(False)
-    client.command_port = server.command_port
+    client.set_use_multicast(multicast)
+    client.command_port, client.data_port = server.command_port, server.data_port
+    loopback_member = joined_on_loopback(server.group) if multicast else None
     client.set_print_level(10 ** 9)  # quiet frames, but print the model definitions
     client.rigid_body_listener = lambda body_id, p, q: bodies.append((body_id, p, q))
     client.new_frame_listener = frames.append
@@ -53,12 +60,24 @@ def test_optitracks_client_reads_the_emulator(version, capsys):
     finally:
         stop(client)
         server.close()
+        if loopback_member is not None:
+            loopback_member.close()
     assert client.connected() and client.get_application_name() == "Motive"
     assert client.get_nat_net_version_server()[:2] == list(version)
     assert bodies[-1] == (1, pytest.approx((0.5, 1.5, -1.0)), (0.0, 0.0, 0.0, 1.0))  # Y up
     numbers = [f["frame_number"] for f in frames]
     assert numbers == sorted(set(numbers)) and all(f["rigid_body_count"] == 1 for f in frames)
-    assert "wand" in "".join(printed) and server.keepalives > 0
+    assert "wand" in "".join(printed)
+    assert (server.keepalives > 0) is not multicast  # keep-alives are a unicast client's
+
+
+def joined_on_loopback(group: str) -> socket.socket:
+    """A socket holding `group` on loopback: Linux then hands the group's datagrams that
+    arrive there to every socket bound to their port on 0.0.0.0 (IP_MULTICAST_ALL)."""
+    member = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    member.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                      socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
+    return member
 
 
 def _until(condition, timeout: float = 3.0) -> None:

@@ -13,10 +13,16 @@ interface) or by unicast to every client that connected (to the socket it connec
 Motive does). With `rate_hz` it sends a frame at that rate carrying each body's newest pose;
 without, every `publish` sends one frame at once.
 
+The data port is, as in Motive, a port the server advertises and sends to but does not hold:
+clients (OptiTrack's samples, libmotioncapture) bind it themselves, so a server holding it
+would make their bind fail. Frames leave from an ephemeral socket of the server's own.
+
 Stamps: the server's high-resolution clock is `clock` (the agent's injected clock, so a
 simulated world and its mocap share one time base) at `clock_hz` ticks/s; a pose's `t` is its
 camera mid-exposure, the publish time its data-received stamp, the send time its transmit.
-Ports default to 0 (ephemeral); read them back from `command_port` and `data_port`.
+The command port defaults to 0 (ephemeral); the data port to Motive's 1511, or with an
+ephemeral command port to a port free at start-up, so servers of parallel tests do not
+share one. Read them back from `command_port` and `data_port`.
 """
 
 from __future__ import annotations
@@ -46,7 +52,8 @@ class NatNetServer:
     """See the module docstring. Thread-safe: publish from any thread."""
 
     def __init__(self, bodies: dict[str, int] | list[str], version: Version = (4, 1), *,
-                 host: str = "127.0.0.1", command_port: int = 0, multicast: bool = False,
+                 host: str = "127.0.0.1", command_port: int = 0, data_port: int | None = None,
+                 multicast: bool = False,
                  group: str = proto.DEFAULT_MULTICAST, rate_hz: float | None = None,
                  up: str = "y", clock: Clock | None = None, clock_hz: int = 10_000_000,
                  app: tuple[str, tuple[int, int, int, int]] = ("Motive", (3, 1, 0, 0))) -> None:
@@ -70,6 +77,7 @@ class NatNetServer:
         self._threads: list[threading.Thread] = []
         self._command = self._bind(command_port)
         self._data = self._bind(0)
+        self._data_port = _advertised_data_port(data_port, command_port, host)
         if multicast:
             self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
                                   socket.inet_aton(host))
@@ -85,7 +93,8 @@ class NatNetServer:
 
     @property
     def data_port(self) -> int:
-        return self._data.getsockname()[1]
+        """The port frames are sent to (multicast) and the server info announces."""
+        return self._data_port
 
     @property
     def uri(self) -> str:
@@ -178,7 +187,7 @@ class NatNetServer:
     def _bind(self, port: int) -> socket.socket:
         # Exclusive: no SO_REUSEADDR/SO_REUSEPORT, so a second server on a taken command port
         # fails here instead of sharing it and stealing clients (the ZMQ path refuses too).
-        # The data socket is an ephemeral sender; clients bind their own data port.
+        # The data socket is an ephemeral sender; clients bind the advertised data port.
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.bind((self.host, port))
@@ -294,6 +303,17 @@ class NatNetServer:
         with self._lock:
             if address in self._clients:
                 self._clients[address] = time.monotonic()
+
+
+def _advertised_data_port(data_port: int | None, command_port: int, host: str) -> int:
+    """`data_port`, else Motive's 1511, else (ephemeral command port) one free right now."""
+    if data_port:
+        return data_port
+    if data_port is None and command_port:
+        return proto.DEFAULT_DATA_PORT
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind((host, 0))
+        return probe.getsockname()[1]
 
 
 # requests Motive answers with an integer 0 ("ok", or "0" for counts and modes)
