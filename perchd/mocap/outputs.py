@@ -1,7 +1,9 @@
 """Pose outputs: where a simulator (`perchd sim --pose-out URI`) or a bridge sends poses.
 
-    natnet://HOST[:PORT][?version=4.1][&multicast=1][&group=239.255.42.99][&rate=120][&up=y]
-        a NatNet server emulator on HOST's command PORT (1510; 0 = any free port)
+    natnet://HOST[:PORT][?version=4.1][&multicast=1][&group=239.255.42.99][&data_port=1511]
+        [&rate=120][&up=y]
+        a NatNet server emulator on HOST's command PORT (1510; 0 = any free port); its
+        options, with unit and default, are NATNET_OPTIONS (`perchd sim --help` prints them)
     zmq://HOST:PORT[?public=1]
         a ZMQ publisher bound there (docs/contracts.md §3 topic `pose`); loopback unless public=1
 
@@ -20,10 +22,29 @@ from perchd.core.netbind import port_error
 from perchd.core.types import Pose
 from perchd.core.uri import parse_uri
 from perchd.core.uriparams import bool_param, float_param
+from perchd.mocap.natnet.protocol import DEFAULT_MULTICAST
 from perchd.mocap.natnet.server import NatNetServer
+from perchd.mocap.natnet.uris import check_address, port_param
 from perchd.mocap.zmq import ZmqPosePublisher
 
-_NATNET_PARAMS = ("version", "multicast", "group", "rate", "up")
+# (name, unit, default, meaning) of every natnet:// output option; the one table the parser
+# checks keys against and `perchd sim --help` and docs/contracts.md describe
+NATNET_OPTIONS = (
+    ("version", "", "4.1", "NatNet version spoken, 2.0..4.1"),
+    ("multicast", "", "0", "1: frames by multicast to group:data_port; 0: unicast to each "
+                          "client's command socket"),
+    ("group", "", DEFAULT_MULTICAST, "multicast group announced and sent to"),
+    ("data_port", "", "1511; a free one when PORT is 0",
+     "data port announced (clients bind it, the emulator does not), 0..65535"),
+    ("rate", "Hz", "none: a frame per pose", "frame rate, 1..1000"),
+    ("up", "", "y", "up axis streamed, y (Motive's default) or z"),
+)
+
+
+def natnet_options_help() -> str:
+    """The natnet:// output options, one per line: name [unit] (default) meaning."""
+    return "\n".join(f"{name}{f' [{unit}]' if unit else ''} ({default}) {meaning}"
+                     for name, unit, default, meaning in NATNET_OPTIONS)
 
 
 class PoseOutput(Protocol):
@@ -54,19 +75,21 @@ def open_pose_output(text: str, bodies: list[str], clock: Clock) -> PoseOutput:
 
 
 def _natnet_output(uri, bodies: list[str], clock: Clock):
-    unknown = sorted(set(uri.query) - set(_NATNET_PARAMS))
+    known = [name for name, *_ in NATNET_OPTIONS]
+    unknown = sorted(set(uri.query) - set(known))
     if unknown:
-        raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; "
-                       f"known: {', '.join(_NATNET_PARAMS)}")
+        raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; known: {', '.join(known)}")
     if not uri.host:
         raise UriError(f"{uri.raw}: no host to serve on (natnet://127.0.0.1[:PORT])")
     version = _version(uri)
     rate = float_param(uri, "rate", None, 1.0, 1000.0, " Hz")
+    group = uri.param("group", DEFAULT_MULTICAST) or DEFAULT_MULTICAST
+    check_address(group, "group", uri.raw, multicast=True)
     try:
         server = NatNetServer(bodies, version, host=uri.host,
                               command_port=1510 if uri.port is None else uri.port,
-                              multicast=bool_param(uri, "multicast"),
-                              group=uri.param("group", "239.255.42.99") or "239.255.42.99",
+                              data_port=port_param(uri, "data_port", lowest=0),
+                              multicast=bool_param(uri, "multicast"), group=group,
                               rate_hz=rate, up=uri.param("up", "y") or "y", clock=clock)
     except OSError as err:
         raise port_error(uri.raw, err) from None

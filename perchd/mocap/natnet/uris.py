@@ -24,7 +24,8 @@ from perchd.mocap.natnet.protocol import DEFAULT_COMMAND_PORT
 from perchd.mocap.natnet.server import NatNetServer
 from perchd.mocap.stream import PoseLimits
 
-__all__ = ["NatNetConfig", "NatNetServer", "NatNetSource", "config_from_uri", "open_natnet"]
+__all__ = ["NatNetConfig", "NatNetServer", "NatNetSource", "check_address", "config_from_uri",
+           "open_natnet", "port_param"]
 
 _PARAMS = ("body", "transport", "multicast", "data_port", "local", "up", "timeout", "max_age")
 
@@ -49,29 +50,31 @@ def config_from_uri(uri: Uri) -> NatNetConfig:
     if transport not in ("auto", "multicast", "unicast"):
         raise UriError(f"{where}: transport={transport!r} must be auto, multicast or unicast")
     if group is not None:
-        _check_address(group, "multicast", where, multicast=True)
+        check_address(group, "multicast", where, multicast=True)
     local = uri.param("local", "0.0.0.0") or "0.0.0.0"
-    _check_address(local, "local", where)
+    check_address(local, "local", where)
     return NatNetConfig(
         server=uri.host, body=body, command_port=uri.port or DEFAULT_COMMAND_PORT,
         transport=transport, multicast_group=group,
-        data_port=_port(uri, "data_port"),
+        data_port=port_param(uri, "data_port"),
         local=local, up=UpAxis.parse(uri.param("up", "y") or "y", where),
         connect_timeout_s=float_param(uri, "timeout", 2.0, 0.05, 60.0, " s"),
         limits=PoseLimits(max_age_s=float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")))
 
 
-def _port(uri: Uri, key: str) -> int | None:
-    value = float_param(uri, key, None, 1, 65535)
+def port_param(uri: Uri, key: str, lowest: int = 1) -> int | None:
+    """The whole port number `key` names, lowest..65535; None when absent."""
+    value = float_param(uri, key, None, lowest, 65535)
     if value is not None and value != int(value):
         raise UriError(f"{uri.raw}: {key}={value:g} is not a whole port number")
     return None if value is None else int(value)
 
 
-def _check_address(text: str, key: str, where: str, multicast: bool = False) -> None:
+def check_address(text: str, key: str, where: str, multicast: bool = False) -> None:
+    """UriError unless `text` is an IPv4 address (a multicast one when `multicast`)."""
     try:
         address = ipaddress.IPv4Address(text)
     except ValueError:
         raise UriError(f"{where}: {key}={text!r} is not an IPv4 address") from None
     if multicast and not address.is_multicast:
-        raise UriError(f"{where}: multicast={text} is not a multicast address (224.0.0.0/4)")
+        raise UriError(f"{where}: {key}={text} is not a multicast address (224.0.0.0/4)")
