@@ -1,18 +1,23 @@
 """`perchd ctl {fly P.json [--wait] | abort | status} [--socket PATH]`: talk to `perchd serve`
 over its control socket (docs/contracts.md §4). Prints the reply as readable `key: value` lines
 (--json: the reply as one JSON object); a refusal goes to stderr as one line. Exit 0 when it
-says ok (with --wait: when the flight ended in contact), 1 otherwise."""
+says ok (with --wait: when the flight ended in contact), 1 otherwise. No reply is one line
+saying why (no such socket, permission denied, the bound reached, a timeout). An abort the
+socket does not take is sent as SIGUSR1, which perchd serve treats as abort, to the pid
+listening there (docs/safety.md "The operator always wins")."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import signal
 import sys
 import time
+from pathlib import Path
 
 from perchd.core.errors import LinkError
-from perchd.service.control_socket import request
+from perchd.service.control_client import TIMEOUT_S, Unreachable, exchange
 
 DEFAULT_SOCKET = "/run/perchd/control.sock"
 WAIT_POLL_S = 0.2
@@ -42,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     if args.cmd == "fly":
         # a file that exists here goes by its absolute path; otherwise the service looks in plan_dir
         req["plan"] = os.path.abspath(args.plan) if os.path.exists(args.plan) else args.plan
-    reply = ask(args.socket, req)
+    reply = abort(args.socket) if args.cmd == "abort" else ask(args.socket, req)
     if args.cmd == "fly" and reply.get("ok") and args.wait:
         reply = _wait(args.socket, reply["log"])
         show(reply, args.json)
@@ -52,12 +57,37 @@ def run(args: argparse.Namespace) -> int:
 
 
 def ask(socket_path: str, req: dict) -> dict:
-    """One request; no service there is one line saying what to check (exit 1)."""
+    """One request; no reply is a LinkError saying why (exit 1)."""
+    return exchange(socket_path, req).reply
+
+
+def abort(socket_path: str, timeout_s: float = TIMEOUT_S) -> dict:
+    """Abort over the socket, else by SIGUSR1 to the serve process listening there."""
     try:
-        return request(socket_path, req)
-    except LinkError as err:
-        raise LinkError(f"is perchd serve running? (socket {socket_path}: "
-                        f"{str(err).rpartition(': ')[2]})") from None
+        answer = exchange(socket_path, {"cmd": "abort"}, timeout_s)
+    except Unreachable as err:
+        why, pid = str(err), err.server_pid
+    else:
+        if answer.reply.get("ok"):
+            return answer.reply
+        why, pid = answer.reply.get("error", "refused"), answer.server_pid
+    if pid is None or not _is_serve(pid):
+        raise LinkError(f"abort not delivered: {why}")
+    try:
+        os.kill(pid, signal.SIGUSR1)
+    except OSError as err:
+        raise LinkError(f"abort not delivered: {why}; SIGUSR1 to perchd serve (pid {pid}): "
+                        f"{err.strerror}") from None
+    return {"ok": True, "signalled": pid, "signal": "SIGUSR1", "socket_refused": why}
+
+
+def _is_serve(pid: int) -> bool:
+    """pid runs `perchd serve`: not systemd, which listens for a socket-activated service."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return False
+    return b"serve" in argv and any(b"perchd" in a for a in argv)
 
 
 def show(reply: dict, as_json: bool) -> None:

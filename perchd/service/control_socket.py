@@ -1,9 +1,9 @@
 """The control socket of `perchd serve` (docs/contracts.md §4): Unix stream, one JSON object per line.
 
 ControlServer is polled from the daemon's select loop (no threads): `fds()` to wait on,
-`handle(fd)` when one is readable. Each complete line is parsed with json.loads only (never
-eval or unpickle) and handed to `dispatch(request) -> reply`; a malformed line, an unknown
-command or a dispatch error gets {"ok": false, "error": ...} and the service carries on.
+`handle(fd)` when one is readable. Each complete line is parsed (service/request_line.py) and
+handed to `dispatch(request) -> reply`; a malformed line, an unknown command or a dispatch
+error gets {"ok": false, "error": ...} and the service carries on.
 
 Access is checked twice: the socket file is mode 0660 (owner and group may connect), and each
 connection's peer credentials (SO_PEERCRED) must pass a PeerPolicy: by default the service's
@@ -23,14 +23,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from perchd.core.errors import ConfigError, LinkError
+from perchd.core.clock import Clock, MonotonicClock
+from perchd.core.errors import ConfigError
+from perchd.service.request_line import BadRequest, parse_request
 
 MAX_LINE = 65536
 """[bytes] a longer request line is refused and the client dropped."""
 UNIX_PATH_MAX = 107
 """[bytes] longest AF_UNIX socket path Linux binds (sun_path is 108 bytes with its NUL)."""
 MAX_CLIENTS = 32
-"""Connections served at once; more are refused (select() and the fd table stay bounded)."""
+"""Connections served at once (select() and the fd table stay bounded); over it, abort only."""
+RESERVED_SLOTS = 4
+"""Connections taken over MAX_CLIENTS, each for one abort."""
+IDLE_TIMEOUT_S = 30.0
+"""[s] a client that sends nothing this long is closed, so idle ones cannot hold the bound."""
+RESERVED_WAIT_S = 2.0
+"""[s] how long a connection over the bound may take to send its abort."""
 
 Dispatch = Callable[[dict[str, Any]], dict[str, Any]]
 _UCRED = struct.Struct("3i")  # struct ucred {pid_t pid; uid_t uid; gid_t gid;}
@@ -79,17 +87,37 @@ def _groups_of(peer: Peer) -> set[int]:
     return {peer.gid, *os.getgrouplist(name, peer.gid)}
 
 
+@dataclass
+class Client:
+    """One accepted connection: its unread bytes and when it last sent any [s, server clock].
+    A reserved client came in over the bound: it is served one abort, then closed."""
+
+    conn: socket.socket
+    buf: bytearray
+    last_s: float
+    reserved: bool = False
+
+
 class ControlServer:
     """Binds `path` itself, or serves `listening`, a socket systemd bound and passed
-    (perchd.service.activation): then the file is systemd's, left in place on close()."""
+    (perchd.service.activation): then the file is systemd's, left in place on close().
+
+    The operator always gets an abort through: at most `max_clients` connections are served
+    and each is closed after `idle_s` without a byte (expire(), called from the service
+    loop), and over that bound up to RESERVED_SLOTS more are taken, each served only an
+    abort within RESERVED_WAIT_S (a full reserve drops its oldest: the newest connection is
+    the one whose request is still to come)."""
 
     def __init__(self, path: str | os.PathLike, dispatch: Dispatch, mode: int = 0o660,
                  peers: PeerPolicy | None = None,
                  on_refuse: Callable[[str], None] | None = None,
-                 listening: socket.socket | None = None) -> None:
+                 listening: socket.socket | None = None, clock: Clock | None = None,
+                 max_clients: int = MAX_CLIENTS, idle_s: float = IDLE_TIMEOUT_S) -> None:
         self.dispatch = dispatch
         self.peers = peers or PeerPolicy.owner()
         self.on_refuse = on_refuse
+        self.clock = clock or MonotonicClock()
+        self.max_clients, self.idle_s = max_clients, idle_s
         self.refused = 0
         self.activated = listening is not None
         if listening is None:
@@ -97,7 +125,7 @@ class ControlServer:
         else:
             self.path, self.sock = Path(listening.getsockname()), listening
         self.sock.setblocking(False)
-        self.clients: dict[int, tuple[socket.socket, bytearray]] = {}
+        self.clients: dict[int, Client] = {}
 
     def fds(self) -> list[int]:
         return [self.sock.fileno(), *self.clients]
@@ -106,9 +134,9 @@ class ControlServer:
         if fd == self.sock.fileno():
             self._accept()
             return
-        conn, buf = self.clients[fd]
+        client = self.clients[fd]
         try:
-            data = conn.recv(4096)
+            data = client.conn.recv(4096)
         except (BlockingIOError, InterruptedError):
             return
         except OSError:
@@ -116,31 +144,37 @@ class ControlServer:
         if not data:
             self._drop(fd)
             return
-        buf += data
-        while b"\n" in buf:
-            line, _, rest = bytes(buf).partition(b"\n")
-            buf[:] = rest
-            if not self._reply(conn, self.answer(line)):
+        client.last_s = self.clock.now()
+        client.buf += data
+        while b"\n" in client.buf:
+            line, _, rest = bytes(client.buf).partition(b"\n")
+            client.buf[:] = rest
+            if not self._reply(client.conn, self.answer(line, client.reserved)) or client.reserved:
                 self._drop(fd)
                 return
-        if len(buf) > MAX_LINE:
-            self._reply(conn, {"ok": False, "error": f"request line longer than {MAX_LINE} bytes"})
-            self._drop(fd)
+        if len(client.buf) > MAX_LINE:
+            self._refuse(fd, f"request line longer than {MAX_LINE} bytes")
 
-    def answer(self, line: bytes) -> dict[str, Any]:
-        """The reply to one request line."""
+    def answer(self, line: bytes, reserved: bool = False) -> dict[str, Any]:
+        """The reply to one request line; over the bound (`reserved`) only abort is served."""
         try:
-            req = json.loads(line.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError) as err:
-            return {"ok": False, "error": f"malformed request, not one JSON object: {err}"}
-        except RecursionError:  # json.loads of "[[[[..." recurses per level
-            return {"ok": False, "error": "malformed request, not one JSON object: nested too deeply"}
-        if not isinstance(req, dict) or not isinstance(req.get("cmd"), str):
-            return {"ok": False, "error": 'a request is a JSON object with a "cmd" string'}
+            req = parse_request(line)
+        except BadRequest as err:
+            return {"ok": False, "error": str(err)}
+        if reserved and req["cmd"] != "abort":
+            return {"ok": False, "error": self._bound_text()}
         try:
             return self.dispatch(req)
         except Exception as err:  # noqa: BLE001 - one bad request must not stop the service
             return {"ok": False, "error": f"{type(err).__name__}: {err}"}
+
+    def expire(self) -> None:
+        """Close every client silent for longer than its allowance."""
+        now = self.clock.now()
+        for fd, client in list(self.clients.items()):
+            allowed = RESERVED_WAIT_S if client.reserved else self.idle_s
+            if now - client.last_s > allowed:
+                self._refuse(fd, f"closed: nothing received for {allowed:g} s")
 
     def close(self) -> None:
         for fd in list(self.clients):
@@ -158,9 +192,8 @@ class ControlServer:
             conn, _ = self.sock.accept()
         except OSError:  # nothing to accept after all, or out of fds: the service carries on
             return
+        conn.setblocking(False)
         refusal = self.peers.refusal(peer_of(conn))
-        if refusal is None and len(self.clients) >= MAX_CLIENTS:
-            refusal = f"{MAX_CLIENTS} clients connected already; try again"
         if refusal is not None:
             self.refused += 1
             if self.on_refuse is not None:
@@ -168,22 +201,36 @@ class ControlServer:
             self._reply(conn, {"ok": False, "error": refusal})
             conn.close()
             return
-        conn.setblocking(False)
-        self.clients[conn.fileno()] = (conn, bytearray())
+        reserved = sum(not c.reserved for c in self.clients.values()) >= self.max_clients
+        if reserved:
+            self._make_room()
+        self.clients[conn.fileno()] = Client(conn, bytearray(), self.clock.now(), reserved)
+
+    def _make_room(self) -> None:
+        """Over the bound: drop the oldest reserved client if the reserve is full."""
+        reserve = [fd for fd, c in self.clients.items() if c.reserved]
+        if len(reserve) >= RESERVED_SLOTS:
+            self._refuse(min(reserve, key=lambda fd: self.clients[fd].last_s), self._bound_text())
+
+    def _bound_text(self) -> str:
+        return (f"{self.max_clients} clients connected already (the bound); over it only abort "
+                "is served: try again once one closes")
+
+    def _refuse(self, fd: int, why: str) -> None:
+        self._reply(self.clients[fd].conn, {"ok": False, "error": why})
+        self._drop(fd)
 
     def _reply(self, conn: socket.socket, reply: dict[str, Any]) -> bool:
-        """Send one reply line; a client that cannot take it (gone, not reading) is dropped."""
+        """Send one reply line without waiting: a client that has not read its earlier replies
+        (its buffer full) or is gone is dropped rather than stalling the service loop."""
         try:
-            conn.settimeout(1.0)
             conn.sendall((json.dumps(reply) + "\n").encode())
-            conn.setblocking(False)
             return True
         except OSError:
             return False
 
     def _drop(self, fd: int) -> None:
-        conn, _ = self.clients.pop(fd)
-        conn.close()
+        self.clients.pop(fd).conn.close()
 
 
 def _check_length(path: Path) -> None:
@@ -230,24 +277,3 @@ def _remove_stale(path: Path) -> None:
     finally:
         probe.close()
     raise ConfigError(f"--socket {path}: another perchd serve is listening there")
-
-
-def request(path: str | os.PathLike, req: dict[str, Any], timeout: float = 5.0) -> dict[str, Any]:
-    """Client side: send one request, return the one reply (used by `perchd ctl`)."""
-
-    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
-        s.settimeout(timeout)
-        try:
-            s.connect(str(path))
-            s.sendall((json.dumps(req) + "\n").encode())
-            buf = b""
-            while b"\n" not in buf:
-                chunk = s.recv(65536)
-                if not chunk:
-                    break
-                buf += chunk
-        except OSError as err:
-            raise LinkError(f"control socket {path}: {err.strerror or err}") from None
-    if not buf.strip():
-        raise LinkError(f"control socket {path}: closed without a reply")
-    return json.loads(buf.partition(b"\n")[0])

@@ -13,7 +13,8 @@ healthy (a stalled loop stops the pings and gets restarted), STATUS= with the ph
 STOPPING=1 on the way out. SIGTERM/SIGINT abort a flight with the driver's failsafe (end
 reason SIGNAL) and wait for its log to close; SIGTERM is a service's stop request (systemctl
 stop), so it exits 0, while SIGINT (Ctrl-C) exits 130 like every command (docs/contracts.md
-§6). SIGHUP reloads the config between flights (RELOADING=1 at once, READY=1 when done:
+§6). SIGUSR1 is abort, as `perchd ctl abort` (docs/safety.md "The operator always wins").
+SIGHUP reloads the config between flights (RELOADING=1 at once, READY=1 when done:
 Type=notify-reload). The control socket is bound here, or taken from systemd's socket
 activation (perchd.service.activation).
 
@@ -202,7 +203,7 @@ class Daemon:
         rfd, wfd = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self.wake_fd = wfd
         previous = {s: signal.signal(s, lambda *_: None)
-                    for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)}
+                    for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGUSR1)}
         old_wakeup = signal.set_wakeup_fd(wfd, warn_on_full_buffer=False)
         try:
             self._start()
@@ -253,6 +254,7 @@ class Daemon:
                 self._wakeups(os.read(rfd, 256))
             elif fd in self.server.fds():
                 self.server.handle(fd)
+        self.server.expire()
         self._reap()
         if self.job is None and self.links.healthy():
             self.notifier.watchdog()
@@ -267,8 +269,19 @@ class Daemon:
                     self.job.abort.request(EndReason.SIGNAL)
             elif byte == signal.SIGHUP:
                 self._reload_requested()
+            elif byte == signal.SIGUSR1:
+                self._abort_signalled()
         if self.reload_pending and self.job is None:
             self.reload()
+
+    def _abort_signalled(self) -> None:
+        """SIGUSR1 is abort: the way in that no number of connections can block."""
+        try:
+            reply = self.cmd_abort({})
+        except Exception as err:  # noqa: BLE001 - the service loop must survive a failed failsafe
+            say(f"SIGUSR1: abort failed: {type(err).__name__}: {err}")
+            return
+        say(f"SIGUSR1: abort ({'flight aborting' if reply.get('flying') else 'failsafe sent'})")
 
     def _reap(self) -> None:
         if self.job is None or self.job.is_alive():
