@@ -1,9 +1,10 @@
 """Fuzzing at volume, with a fixed seed: NatNet packets into the parser and the client's
 receive path, and control-socket lines into a running `perchd serve`.
 
-    python benchmarks/fuzz.py [--natnet 1000000] [--udp 100000] [--lines 100000] [--seed 8] [--json]
+    python benchmarks/fuzz.py [--natnet 1000000] [--udp 100000] [--requests 1000000]
+                              [--lines 100000] [--seed 8] [--json]
 
-(about 30 s; the target is at least 1e5 NatNet packets and 1e4 control lines.)
+(about a minute; the target is at least 1e5 of each kind of input.)
 
 natnet: recorded Motive packets (tests/fixtures/natnet: 3 servers, NatNet 2.5 to 3.0),
     each mutated (bit flips, cuts, inserts, extreme words, a lying length field) or replaced
@@ -13,7 +14,11 @@ natnet: recorded Motive packets (tests/fixtures/natnet: 3 servers, NatNet 2.5 to
 udp: the first --udp of them sent over real loopback UDP to a started NatNet client
     (connected to perchd's server emulator); afterwards the emulator's next pose must still
     reach it (else a crash).
-lines: random bytes, mutated requests, any JSON, hostile plan paths, deep nesting, in
+requests: control lines (as below) through the control socket's request handling in this
+    process (ControlServer.answer: the parser, duplicate keys, the abort-only reserve over the
+    bound, a dispatch that raises). accepted = {"ok": true}, rejected = {"ok": false} with a
+    one-line error; crash = an exception, or a reply of any other shape.
+lines: random bytes, mutated requests, requests with a key given twice, any JSON, hostile plan paths, deep nesting, in
     batches of 25 on one connection, a status request after each batch, and every 40th batch
     an overlong line (counted as an input too), to `perchd serve` (sim://) over its Unix socket. accepted = {"ok": true} reply,
     rejected = {"ok": false} reply (or the overlong-line drop); crash = a line without its
@@ -51,6 +56,7 @@ from perchd.mocap.natnet.clock import ClockSync
 from perchd.mocap.natnet.frame import decode_frame
 from perchd.mocap.natnet.uris import NatNetServer, open_natnet
 from perchd.mocap.natnet.wire import MalformedPacket
+from perchd.service.control_socket import ControlServer
 
 FIXTURES = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet"
 OLD_MOTIVE = {"1.5.0": (2, 5), "1.7.2": (2, 7), "1.9.0": (2, 9)}  # NatNet of each Motive 1.x
@@ -263,8 +269,17 @@ def random_json(rng: random.Random, depth: int = 0):
     return [random_json(rng, depth + 1) for _ in range(rng.randint(0, 4))]
 
 
+def duplicate_key(rng: random.Random) -> bytes:
+    """A request with one key written twice (the second value any JSON)."""
+    req = {"cmd": rng.choice(["abort", "status", "fly"]), "plan": rng.choice(HOSTILE_PLANS)}
+    key = rng.choice(sorted(req))
+    return (json.dumps(req)[:-1] + ", " + json.dumps({key: random_json(rng)})[1:]).encode()
+
+
 def control_line(rng: random.Random) -> bytes:
-    kind = rng.randrange(8)
+    kind = rng.randrange(9)
+    if kind == 8:
+        return duplicate_key(rng)
     if kind == 0:
         return rng.randbytes(rng.randint(0, 300)).replace(b"\n", b"")
     if kind == 1:  # a good request mutated byte-wise
@@ -282,6 +297,46 @@ def control_line(rng: random.Random) -> bytes:
     if kind == 5:
         return rng.choice([b"[" * 60000, b"{" * 1000, b'{"cmd":' * 3000, b"\xff\xfe\xfd", b"\0" * 64])
     return rng.choice(GOOD)
+
+
+def _dispatch(req: dict) -> dict:
+    if req["cmd"] == "eval":
+        raise RuntimeError("a dispatch that fails")
+    return {"ok": True, "cmd": req["cmd"]}
+
+
+def fuzz_requests(rng: random.Random, n: int) -> Tally:
+    """n lines through ControlServer.answer, CHUNK at a time; every 7th as over the bound."""
+    tally = Tally()
+    with tempfile.TemporaryDirectory(prefix="perchd-fuzz-") as tmp:
+        server = ControlServer(Path(tmp) / "c.sock", _dispatch)
+        try:
+            for first in range(0, n, CHUNK):
+                lines = [control_line(rng) for _ in range(min(CHUNK, n - first))]
+                _answer_all(server, lines, first, tally)
+        finally:
+            server.close()
+    return tally
+
+
+def _answer_all(server: ControlServer, lines: list[bytes], first: int, tally: Tally) -> None:
+    tally.inputs += len(lines)
+    start = time.perf_counter()
+    for i, line in enumerate(lines, first):
+        try:
+            reply = server.answer(line, reserved=i % 7 == 6)
+        except Exception as err:  # noqa: BLE001 - this is what is being counted
+            tally.crash(f"{type(err).__name__}: {err} on {line[:200]!r}")
+            continue
+        if reply.get("ok") is True:
+            tally.accepted += 1
+        elif isinstance(reply.get("error"), str) and reply["error"] and "\n" not in reply["error"]:
+            tally.rejected += 1
+        else:
+            tally.crash(f"reply {reply!r:.200} to {line[:200]!r}")
+    took = time.perf_counter() - start
+    tally.seconds += took
+    tally.rates.append(len(lines) / took)
 
 
 class Service:
@@ -391,6 +446,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--natnet", type=int, default=1_000_000, help="NatNet packets (default 1e6)")
     parser.add_argument("--udp", type=int, default=100_000, help="of them also sent over UDP (default 1e5)")
+    parser.add_argument("--requests", type=int, default=1_000_000,
+                        help="control lines through the request handling in-process (default 1e6)")
     parser.add_argument("--lines", type=int, default=100_000, help="control lines (default 1e5)")
     parser.add_argument("--seed", type=int, default=8)
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
@@ -399,6 +456,7 @@ def main(argv: list[str] | None = None) -> int:
     results = {"parser": fuzz_parser(natnet_chunks(args.seed, args.natnet)),
                "client": fuzz_client(natnet_chunks(args.seed, args.natnet)),
                "udp": fuzz_udp([x for c in natnet_chunks(args.seed, args.udp) for x in c])}
+    results["requests"] = fuzz_requests(random.Random(args.seed + 2), args.requests)
     results["lines"], checks = fuzz_lines(random.Random(args.seed + 1), args.lines)
     crashes = sum(t.crashes for t in results.values())
     if args.json:
@@ -410,6 +468,7 @@ def main(argv: list[str] | None = None) -> int:
         print(results["parser"].line("natnet parser", "  (accepted = decoded, rejected = MalformedPacket)"))
         print(results["client"].line("natnet client", "  (accepted = poses, rejected = dropped)"))
         print(results["udp"].line("natnet udp", "  (then a good pose still arrives)"))
+        print(results["requests"].line("control parse", "  (in-process: accepted = ok, rejected = error)"))
         print(results["lines"].line("control lines", f"  ({checks} status checks between batches)"))
         for name, t in results.items():
             for example in t.examples:
