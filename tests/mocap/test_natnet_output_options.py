@@ -4,6 +4,7 @@ emulator does not hold, and every option is described from the one table."""
 from __future__ import annotations
 
 import socket
+from pathlib import Path
 
 import pytest
 
@@ -55,3 +56,9 @@ def test_the_help_names_every_option_with_its_default():
     text = natnet_options_help()
     for name, unit, default, _ in NATNET_OPTIONS:
         assert f"{name}{f' [{unit}]' if unit else ''} ({default})" in text
+
+
+def test_docs_contracts_lists_every_option_as_the_table_does():
+    text = (Path(__file__).resolve().parents[2] / "docs" / "contracts.md").read_text()
+    for name, unit, default, meaning in NATNET_OPTIONS:
+        assert f"| `{name}` | {unit} | {default} | {meaning} |".replace("|  |", "| |") in text
