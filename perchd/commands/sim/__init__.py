@@ -44,11 +44,15 @@ from perchd.core.clock import MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.interrupts import catching
 from perchd.core.netbind import port_error
-from perchd.mocap.outputs import open_pose_output
+from perchd.mocap.outputs import natnet_options_help, open_pose_output
 from perchd.sim.plant import PlantParams
 from perchd.sim.receiver import Counts, SetpointInbox
 from perchd.sim.watchdog import SetpointWatchdog, WatchdogParams
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
+
+EPILOG = f"""--pose-out natnet:// options, KEY [unit] (default) meaning; any other key is refused
+(docs/contracts.md §7), e.g. natnet://127.0.0.1?multicast=1&data_port=1511:
+{natnet_options_help()}"""
 
 STOP_GRACE_S = 0.5
 """[s] --exit-on-stop keeps serving this long after a stop (the agent's last messages)."""
@@ -56,10 +60,11 @@ STOP_GRACE_S = 0.5
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("sim", help="run the simulated vehicle as its own process",
-                              description=__doc__.splitlines()[0])
+                              description=__doc__.splitlines()[0], epilog=EPILOG,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
     numbers_as_values(p)
-    p.add_argument("--pose-out", help="natnet://HOST[:PORT] or zmq://HOST:PORT (required "
-                                       "without --campaign)")
+    p.add_argument("--pose-out", help="natnet://HOST[:PORT][?KEY=VALUE&...] (options below) or "
+                                       "zmq://HOST:PORT (required without --campaign)")
     p.add_argument("--setpoint-in", help="zmq://HOST:PORT to bind for setpoints (required "
                                           "without --campaign)")
     p.add_argument("--body", default="cf1", help="rigid body name (default cf1)")
