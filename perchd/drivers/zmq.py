@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import secrets
 import time
 from typing import Any
 
@@ -24,6 +26,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param
+from perchd.drivers.targetlock import TargetLock, hold_target
 
 SETPOINT, STOP = b"setpoint", b"stop"
 
@@ -40,11 +43,27 @@ def open_zmq_driver(uri: Uri, runtime: Runtime) -> "ZmqSetpointDriver":
         wait=float_param(uri, "wait", 2.0, 0.0, 60.0, " s"))
 
 
-def setpoint_message(vehicle: str, seq: int, sp: Setpoint) -> dict[str, Any]:
+def setpoint_message(vehicle: str, seq: int, sp: Setpoint, sender: str = "") -> dict[str, Any]:
     """The docs/contracts.md §3 setpoint body: radians, newtons, world-frame Z-Y-X attitude."""
     return {"vehicle": vehicle, "seq": seq, "t": sp.t, "pose_seq": sp.pose_seq,
             "roll": sp.roll, "pitch": sp.pitch, "yaw": sp.yaw, "thrust": sp.thrust,
-            "phase": sp.phase.value}
+            "phase": sp.phase.value, "sender": sender}
+
+
+def new_sender_id() -> str:
+    """This driver on the wire: the pid, and random bits for a pid reused or a second driver."""
+    return f"{os.getpid()}-{secrets.token_hex(4)}"
+
+
+def sender_of(body: bytes) -> str:
+    """The sender id of a `setpoint` or `stop` body ("" when it names none: a sender older
+    than the field, or not JSON at all)."""
+    try:
+        msg = json.loads(body)
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        return ""
+    sender = msg.get("sender", "") if isinstance(msg, dict) else ""
+    return sender if isinstance(sender, str) else ""
 
 
 class BadSetpoint(ValueError):
@@ -92,9 +111,19 @@ class ZmqSetpointDriver(DriverBase):
         self._subscribers = 0
         self._seq = 0
         self._stopped = False
+        self._lock: TargetLock | None = None
+        self.sender = new_sender_id()
         self.failsafe_reasons: list[EndReason] = []
 
     def connect(self) -> None:
+        self._lock = self._lock or hold_target(self.uri)
+        try:
+            self._open()
+        except BaseException:
+            self._release()
+            raise
+
+    def _open(self) -> None:
         sock = zmq.Context.instance().socket(zmq.XPUB)
         sock.setsockopt(zmq.LINGER, 500)  # let a final stop reach the subscriber
         sock.setsockopt(zmq.XPUB_VERBOSER, 1)  # every (un)subscription, for the count
@@ -111,14 +140,13 @@ class ZmqSetpointDriver(DriverBase):
         while self._subscribers <= 0:
             left = deadline - time.monotonic()
             if left <= 0 or not sock.poll(int(left * 1000) + 1):
-                self._release()
                 raise LinkError(f"{self.uri}: no subscriber to 'setpoint' within {self.wait:g} s")
             self._drain()
 
     def send(self, setpoint: Setpoint) -> None:
         if self._stopped or self._sock is None:
             return
-        body = setpoint_message(self.vehicle, self._seq, setpoint)
+        body = setpoint_message(self.vehicle, self._seq, setpoint, self.sender)
         self._seq += 1
         self._publish(SETPOINT, body)
 
@@ -150,7 +178,7 @@ class ZmqSetpointDriver(DriverBase):
         self._stopped = True
         if self._sock is not None:
             self._publish(STOP, {"vehicle": self.vehicle, "reason": reason, "code": code,
-                                 "t": self.clock.now()})
+                                 "t": self.clock.now(), "sender": self.sender})
 
     def _publish(self, topic: bytes, body: dict[str, Any]) -> None:
         try:
@@ -168,4 +196,8 @@ class ZmqSetpointDriver(DriverBase):
 
     def _release(self) -> None:
         sock, self._sock = self._sock, None
-        sock.close()
+        if sock is not None:
+            sock.close()
+        lock, self._lock = self._lock, None
+        if lock is not None:
+            lock.release()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 from perchd.drivers.base import open_driver
@@ -29,8 +30,11 @@ def test_setpoints_follow_contract_3_with_the_pose_they_came_from(sub):
         assert sub.wait_for(lambda: len(sub.of("setpoint")) == 2)
     first, second = sub.of("setpoint")
     assert first == {"vehicle": "cf7", "seq": 0, "t": 12.35, "pose_seq": 17, "roll": 0.1,
-                     "pitch": -0.2, "yaw": 0.3, "thrust": 0.27, "phase": "stage1"}
+                     "pitch": -0.2, "yaw": 0.3, "thrust": 0.27, "phase": "stage1",
+                     "sender": drv.sender}
     assert (second["seq"], second["pose_seq"], second["phase"]) == (1, 18, "stage2")
+    assert drv.sender.startswith(f"{os.getpid()}-") and second["sender"] == drv.sender
+    assert sub.wait_for(lambda: sub.of("stop")) and sub.of("stop")[-1]["sender"] == drv.sender
 
 
 def test_failsafe_publishes_stop_with_the_named_reason_once_and_silences_setpoints(sub):

@@ -15,11 +15,12 @@ import zmq
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 from mutate import json_values, mutated_bytes, mutated_document
-from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, setpoint_message
+from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, sender_of, setpoint_message
 
 from perchd.commands.sim import Counts, SetpointInbox, make_world
 from perchd.core.clock import ManualClock
 from perchd.core.types import Phase, Pose, Setpoint
+from perchd.sim.onesender import SenderGate
 from perchd.mocap.zmq import ZmqPoseSource, pose_message
 
 POSE = Pose("cf1", 17, 4.9, (-3.0, 0.1, 1.0), (0.0, 0.0, 0.0, 1.0), True, 0.0)
@@ -77,7 +78,9 @@ def inbox():
     args = argparse.Namespace(latency=0.0, noise=0.0, start=None, surface=(0.0, 0.0, 0.0),
                               normal=(1.0, 0.0, 0.0), body="cf1")
     counts = Counts()
-    box = SetpointInbox("zmq://127.0.0.1:0", make_world(args), "cf1", counts)
+    # the unnamed sender holds the vehicle throughout: a fuzzed sender id is refused
+    box = SetpointInbox("zmq://127.0.0.1:0", make_world(args), "cf1", counts,
+                        gate=SenderGate(live_s=math.inf))
     pub = zmq.Context.instance().socket(zmq.PUB)
     pub.setsockopt(zmq.LINGER, 0)
     pub.connect("tcp://" + box.uri.split("//")[1].split("?")[0])
@@ -119,6 +122,6 @@ def obeyed(message: list[bytes]) -> bool:
     if len(message) != 2 or message[0] != b"setpoint":
         return False
     try:
-        return parse_setpoint_message(message[1])[0] in ("", "cf1")
+        return parse_setpoint_message(message[1])[0] in ("", "cf1") and sender_of(message[1]) == ""
     except BadSetpoint:
         return False
