@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from perchd.drivers import cflink, childproc
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
 from perchd.drivers.mavbrake import WillSchedule, lean_for
+from perchd.drivers.targetlock import TargetLock
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.drivers.ticker import Ticker
 
@@ -145,18 +146,25 @@ class CrazyflieDriver(DriverBase):
         self.uri_mass: float | None = None  # [kg] the URI's mass=, checked by bind_mass
         self._will = WillSchedule()  # the keeper's brake, renewed from the mocap
         self._hold_n = 0.0  # [N] the last setpoint's vertical thrust (the keeper's hold)
+        self._lock = TargetLock(uri)  # one agent per vehicle on this machine
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
+        self._lock.take()
+        try:
+            self._open_link()
+        except BaseException:
+            self._close_link()
+            raise
+
+    def _open_link(self) -> None:
         self._stopped = False
         self._start_keeper()
         if not self._opened.wait(KEEPER_START_S) or self._link_error:
             why = self._link_error or f"link keeper did not start within {KEEPER_START_S:g} s"
-            self._close_link()
             raise LinkError(f"{self.uri}: connection failed: {why}")
         if not self._echoed.wait(self.wait) or self._link_error:
             why = self._link_error or f"no answer to a link echo within {self.wait:g} s"
-            self._close_link()
             raise LinkError(f"{self.uri}: connection failed: {why}")
         self._send(b"S" + cflink.CMD.pack(0.0, 0.0, 0.0, 0, 0))  # unlocks the thrust lock
 
@@ -340,3 +348,4 @@ class CrazyflieDriver(DriverBase):
         keeper, self._keeper = self._keeper, None
         if keeper is not None:  # reaped in the background: it exits after its stop
             childproc.reap_later(keeper, cflink.DESCENT_S + 2.0, "crazyflie-reap")
+        self._lock.release()

@@ -63,23 +63,35 @@ def lock_path(uri: str) -> Path:
 
 
 class TargetLock:
-    """A held lock; release() once (close() of the driver that took it)."""
+    """A driver's hold on its vehicle: take() at connect, release() at close (and when the
+    connect fails); both may be called again and do nothing then."""
 
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self._released = False
+    def __init__(self, uri: str) -> None:
+        self.uri = uri
+        self.path: Path | None = None  # where, once taken
+
+    @property
+    def held(self) -> bool:
+        return self.path is not None
+
+    def take(self) -> None:
+        """TargetBusy naming the process that holds the vehicle, if another does."""
+        if self.path is None:
+            path = lock_path(self.uri)
+            _HELD.take(path, self.uri)
+            self.path = path
 
     def release(self) -> None:
-        if not self._released:
-            self._released = True
-            _HELD.drop(self.path)
+        path, self.path = self.path, None
+        if path is not None:
+            _HELD.drop(path)
 
 
 def hold_target(uri: str) -> TargetLock:
-    """The lock for `uri`'s vehicle, or TargetBusy naming the process that holds it."""
-    path = lock_path(uri)
-    _HELD.take(path, uri)
-    return TargetLock(path)
+    """The lock for `uri`'s vehicle, taken."""
+    lock = TargetLock(uri)
+    lock.take()
+    return lock
 
 
 class _Held:

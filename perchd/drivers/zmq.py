@@ -26,7 +26,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param
-from perchd.drivers.targetlock import TargetLock, hold_target
+from perchd.drivers.targetlock import TargetLock
 
 SETPOINT, STOP = b"setpoint", b"stop"
 
@@ -111,12 +111,12 @@ class ZmqSetpointDriver(DriverBase):
         self._subscribers = 0
         self._seq = 0
         self._stopped = False
-        self._lock: TargetLock | None = None
+        self._lock = TargetLock(uri)
         self.sender = new_sender_id()
         self.failsafe_reasons: list[EndReason] = []
 
     def connect(self) -> None:
-        self._lock = self._lock or hold_target(self.uri)
+        self._lock.take()
         try:
             self._open()
         except BaseException:
@@ -198,6 +198,4 @@ class ZmqSetpointDriver(DriverBase):
         sock, self._sock = self._sock, None
         if sock is not None:
             sock.close()
-        lock, self._lock = self._lock, None
-        if lock is not None:
-            lock.release()
+        self._lock.release()
