@@ -40,6 +40,7 @@ def test_a_second_fly_at_the_same_vehicle_is_refused_naming_the_first(tmp_path, 
         assert not (tmp_path / "second.jsonl").exists()
         first.send_signal(signal.SIGINT)
         assert first.wait(30) == 130
+        assert sim.summary()["foreign"] == 0  # nothing of the second reached the wire
     finally:
         if first.poll() is None:
             first.kill()

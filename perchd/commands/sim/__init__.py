@@ -127,7 +127,8 @@ def summary(world: Any, counts: Counts, mocap_uri: str, driver_uri: str,
     st = world.state()
     out = {"contact": c is not None, "contact_t": c.t - world.t0 if c else None,
            "contact_speed": c.speed if c else None, "setpoints": counts.setpoints,
-           "stops": counts.stops, "rejected": counts.rejected, "poses": counts.poses,
+           "stops": counts.stops, "rejected": counts.rejected, "foreign": counts.foreign,
+           "poses": counts.poses,
            "mocap": mocap_uri, "driver": driver_uri,
            "vehicle": {"z_m": st.p[2], "thrust_n": st.thrust}}
     if watchdog is not None:  # the silences [s] at which it acted
@@ -172,7 +173,8 @@ def run(args: argparse.Namespace) -> int:
         contact = (f"contact at {result['contact_speed']:.3f} m/s, {result['contact_t']:.3f} s "
                    "after start" if result["contact"] else "no contact")
         print(f"{contact}; {counts.setpoints} setpoints, {counts.stops} stops, "
-              f"{counts.rejected} rejected, {counts.poses} poses; watchdog: "
+              f"{counts.rejected} rejected, {counts.foreign} from a second sender, "
+              f"{counts.poses} poses; watchdog: "
               f"{len(inbox.watchdog.levels)} levels, {len(inbox.watchdog.cuts)} cuts")
     caught.say("sim", "stopped serving; the summary covers the run so far")
     return caught.exit_code(0)
