@@ -44,6 +44,7 @@ SOURCES: Registry[PoseSource] = Registry("mocap", {
     "sim": "perchd.sim.world:open_sim_mocap",
     "natnet": "perchd.mocap.natnet.uris:open_natnet",
     "zmq": "perchd.mocap.zmq:open_zmq",
+    "motioncapture": "perchd.mocap.motioncapture:open_motioncapture",
 })
 
 
