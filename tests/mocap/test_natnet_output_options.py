@@ -7,17 +7,12 @@ import socket
 from pathlib import Path
 
 import pytest
+from freeport import free_udp_port
 
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import UriError
 from perchd.mocap.natnet.protocol import DEFAULT_DATA_PORT
 from perchd.mocap.outputs import NATNET_OPTIONS, natnet_options_help, open_pose_output
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def test_the_announced_data_port_is_free_for_a_client_to_bind():
