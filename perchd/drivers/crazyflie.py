@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from perchd.drivers import cflink, childproc
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
 from perchd.drivers.mavbrake import WillSchedule, lean_for
-from perchd.drivers.targetlock import TargetLock
+from perchd.drivers.targetlock import TargetLock, connect_holding
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.drivers.ticker import Ticker
 
@@ -150,12 +150,7 @@ class CrazyflieDriver(DriverBase):
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
-        self._lock.take()
-        try:
-            self._open_link()
-        except BaseException:
-            self._close_link()
-            raise
+        connect_holding(self._lock, self._open_link, self._close_link)
 
     def _open_link(self) -> None:
         self._stopped = False

@@ -19,6 +19,7 @@ import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from perchd.core.errors import PerchdError
 from perchd.core.uri import parse_uri
@@ -85,6 +86,20 @@ class TargetLock:
         path, self.path = self.path, None
         if path is not None:
             _HELD.drop(path)
+
+
+def connect_holding(lock: TargetLock, open_link: Callable[[], None],
+                    close_link: Callable[[], None]) -> None:
+    """A driver's connect(): the lock taken first (refused: nothing opened), then the link;
+    a link that fails to open is closed and the lock released, so a failed connect holds
+    nothing."""
+    lock.take()
+    try:
+        open_link()
+    except BaseException:
+        close_link()
+        lock.release()
+        raise
 
 
 def hold_target(uri: str) -> TargetLock:

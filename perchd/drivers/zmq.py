@@ -26,7 +26,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param
-from perchd.drivers.targetlock import TargetLock
+from perchd.drivers.targetlock import TargetLock, connect_holding
 
 SETPOINT, STOP = b"setpoint", b"stop"
 
@@ -116,12 +116,7 @@ class ZmqSetpointDriver(DriverBase):
         self.failsafe_reasons: list[EndReason] = []
 
     def connect(self) -> None:
-        self._lock.take()
-        try:
-            self._open()
-        except BaseException:
-            self._release()
-            raise
+        connect_holding(self._lock, self._open, self._release)
 
     def _open(self) -> None:
         sock = zmq.Context.instance().socket(zmq.XPUB)
