@@ -40,8 +40,6 @@ log = logging.getLogger("perchd.mocap.motioncapture")
 
 OWN_PARAMS = ("body", "up", "max_age", "timeout")
 CLOSE_WAIT_S = 0.3  # [s] a killed worker is reaped within this, else left to the OS
-LATENCY_NOTE = ("libmotioncapture reports no latency: poses are stamped when the library "
-                "hands them over; camera and network delay are not included")
 
 
 @dataclass(frozen=True)
@@ -109,8 +107,6 @@ def _check_options(uri: Uri, backend: mcbackends.Backend, options: dict[str, str
 
 class MotionCaptureSource(ThreadedSource):
     """PoseSource over libmotioncapture in a worker process; see the module docstring."""
-
-    latency_note = LATENCY_NOTE
 
     def __init__(self, config: MotionCaptureConfig, clock: Clock) -> None:
         super().__init__()
