@@ -17,9 +17,9 @@ import os
 import re
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from perchd.core.errors import PerchdError
 from perchd.core.uri import parse_uri

@@ -48,7 +48,7 @@ def takes(uri: str) -> subprocess.CompletedProcess:
     """Whether another process can take the lock now."""
     code = "import sys; from perchd.drivers.targetlock import hold_target; hold_target(sys.argv[1])"
     return subprocess.run([sys.executable, "-c", code, uri], capture_output=True, text=True,
-                          timeout=30)
+                          timeout=30, check=False)
 
 
 def test_the_target_is_the_uri_without_its_options():

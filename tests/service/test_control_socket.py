@@ -2,17 +2,17 @@
 
 import json
 import os
-import time
 import select
 import socket
 import stat
 import threading
+import time
 
 import pytest
 
+from perchd.core.clock import ManualClock
 from perchd.core.errors import ConfigError
 from perchd.service.control_client import request
-from perchd.core.clock import ManualClock
 from perchd.service.control_socket import RESERVED_SLOTS, RESERVED_WAIT_S, ControlServer
 
 

@@ -53,8 +53,8 @@ def test_a_second_sender_is_refused_counted_and_named_until_the_first_stops(inbo
         second.failsafe(EndReason.OPERATOR_ABORT)  # its stop must not stop the first's flight
         until(lambda: counts.foreign >= 4, lambda: None)
         assert counts.stops == 0 and box.gate.holder == first.sender
-        assert lines == [f"refusing sender {second.sender}: sender {first.sender} is steering "
-                         "the vehicle"]
+        assert lines == [(f"refusing sender {second.sender}: sender {first.sender} is steering "
+                          "the vehicle")]
         first.failsafe(EndReason.CONTACT)
         until(lambda: counts.stops == 1, lambda: None)
         taken = counts.setpoints
