@@ -103,8 +103,8 @@ def realtime_jitter(logdir: Path) -> dict:
 
 def agent_tick_us(n: int = 5000) -> dict:
     """The agent's own work per tick, no simulator: estimator update and prediction, then
-    supervisor + controller, over synthetic perches back to back (perchd.sim.loopbench) [us]."""
-    from perchd.sim.loopbench import hot_compute
+    supervisor + controller, over synthetic perches back to back (perchd.bench.loop) [us]."""
+    from perchd.bench.loop import hot_compute
     return hot_compute(case1("ipts"), n)
 
 

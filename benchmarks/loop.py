@@ -4,7 +4,7 @@
 
 500 Hz fixed-rate loop jitter, overruns per minute at 500 and 100 Hz, the agent's compute per tick, pose-arrival to
 setpoint latency over real ZMQ sockets in mocap-synchronous and fixed-rate mode, and the
-agent's CPU load at 100 Hz; see perchd/sim/loopbench.py for how each is taken.
+agent's CPU load at 100 Hz; see perchd/bench/loop.py for how each is taken.
 """
 
 from __future__ import annotations

@@ -35,7 +35,7 @@ from perchd.core.clock import MonotonicClock
 from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
 from perchd.flight.planner_worker import InlinePlanner
 from perchd.logs.flightlog import read_log
-from perchd.sim.session import open_session
+from perchd.session import open_session
 from perchd.tau import load_plan, retarget
 from perchd.tau.library import load_library
 

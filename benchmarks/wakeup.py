@@ -17,7 +17,7 @@ import time
 from perchd.core.clock import MonotonicClock
 from perchd.core.realtime import RealtimeConfig, apply
 from perchd.flight.loop import FixedRateLoop
-from perchd.sim.loopbench import StealMeter, stats_us
+from perchd.bench.loop import StealMeter, stats_us
 
 
 class SpinningClock(MonotonicClock):

@@ -1,8 +1,8 @@
 """`perchd bench planner|loop [--load N] [--json]`: timing figures with min/median/p99.
 
-The loop figures are measured by perchd.sim.loopbench (also `python benchmarks/loop.py`).
+The loop figures are measured by perchd.bench.loop (also `python benchmarks/loop.py`).
 --load N measures the same figures twice in one run, without load and with N CPU-bound
-processes beside them (perchd.sim.cpuload), which are stopped however the run ends.
+processes beside them (perchd.bench.cpuload), which are stopped however the run ends.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from pathlib import Path
 from perchd.core import realtime
 from perchd.core.errors import ConfigError
 from perchd.flight.loop import spread
-from perchd.sim import loopbench
-from perchd.sim.cpuload import MAX_HOGS, cpu_hogs
+from perchd.bench import loop as loopbench
+from perchd.bench.cpuload import MAX_HOGS, cpu_hogs
 from perchd.tau import plan_bound, plan_ipts
 from perchd.tau.cases import CASES
 from perchd.tau.library import build_library, load_library

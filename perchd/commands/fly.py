@@ -39,7 +39,7 @@ from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.logs.flightlog import read_log
 from perchd.logs.mcapexport import export_mcap
 from perchd.logs.foxglove import ViewProcess, parse_address
-from perchd.sim.session import open_links
+from perchd.session import open_links
 from perchd.tau import load_plan
 
 EPILOG = f"""URI query parameters, KEY [unit] (default); any other key is refused

@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 from perchd.core.clock import Clock, MonotonicClock
-
-if TYPE_CHECKING:  # for the annotation only: core never imports sim at run time
-    from perchd.sim.world import SimWorld
 
 
 @dataclass
@@ -16,12 +13,13 @@ class Runtime:
     """Passed to every driver and mocap factory.
 
     clock: the agent's clock (a simulated one when the vehicle is simulated).
-    sim: the simulated world shared by the `sim://` driver and `sim://` mocap
-         (perchd.sim.session builds it; a factory opened alone creates one).
+    sim: the simulated world (perchd.sim.world.SimWorld) shared by the `sim://` driver and
+         `sim://` mocap; typed Any so that core names nothing of the packages above it
+         (perchd.session builds it; a factory opened alone creates one).
     """
 
     clock: Clock
-    sim: SimWorld | None = None
+    sim: Any = None
 
     @classmethod
     def real(cls) -> "Runtime":

@@ -18,9 +18,9 @@ from typing import Any, Callable, Protocol
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import ConfigError, LinkError
+from perchd.core.ports import Driver, PoseSource
 from perchd.core.realtime import below_loop
 from perchd.core.types import EndReason, Phase, State
-from perchd.drivers.base import Driver
 from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
@@ -34,7 +34,6 @@ from perchd.flight.supervisor import (
     Trigger,
 )
 from perchd.logs.flightlog import FlightLogWriter, LogRow, jsonable
-from perchd.mocap.base import PoseSource
 from perchd.tau.plan import Plan
 
 __all__ = ["FlightAbort", "FlightResult", "TickStatus", "bind_vehicle", "fly", "plan_summary"]
@@ -208,17 +207,16 @@ class GroundTruth(Protocol):
 def bind_vehicle(driver: Driver, cfg: FlightConfig) -> FlightConfig:
     """Give the driver the flight's vehicle (its mass: Driver.bind_mass, which refuses a URI
     mass= that disagrees) and cap the thrust at the driver's ceiling, so saturation and
-    anti-windup act where the vehicle really stops (VehicleConfig.thrust_max_n). Drivers
-    written before these hooks have neither; getattr keeps them flying as before."""
+    anti-windup act where the vehicle really stops (VehicleConfig.thrust_max_n). The
+    session binds the same mass before connect (perchd/session.py); binding it again here
+    refuses a config whose mass changed since."""
     v = cfg.vehicle
-    bind = getattr(driver, "bind_mass", None)
-    if bind is not None:
-        bind(v.mass_kg)
-    ceiling = getattr(driver, "thrust_ceiling_n", lambda: None)()
+    driver.bind_mass(v.mass_kg)
+    ceiling = driver.thrust_ceiling_n()
     if ceiling is None or ceiling >= v.thrust_max_n:
         return cfg
     if ceiling < v.hover_guess_n:
-        raise ConfigError(f"{getattr(driver, 'uri', 'driver')}: its thrust ceiling "
+        raise ConfigError(f"{driver.uri}: its thrust ceiling "
                           f"{ceiling:.4f} N is below the hover thrust {v.hover_guess_n:.4f} N "
                           f"of vehicle.mass_kg = {v.mass_kg:g} kg")
     return dataclasses.replace(cfg, vehicle=dataclasses.replace(v, thrust_max_n=ceiling))
@@ -264,8 +262,8 @@ def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, head
     run = _Run(plan, driver, source, clock, cfg, abort, on_tick, planner)  # may refuse
     log = run.log = FlightLogWriter(log_path, {"plan": plan_summary(plan),
                                                "config": jsonable(cfg),
-                                               "driver": getattr(driver, "uri", ""),
-                                               "mocap_body": getattr(source, "body", ""),
+                                               "driver": driver.uri,
+                                               "mocap_body": source.body,
                                                **(header or {})})
     try:
         engage(driver, source)
@@ -286,11 +284,8 @@ def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, head
 
 def engage(driver: Driver, source: PoseSource) -> None:
     """Take the vehicle for this flight, handing the driver the pose source to forward
-    from while it waits (an autopilot's EKF may need mocap before it arms). Drivers written
-    before Driver.engage have none; their connect was the take-over."""
-    take = getattr(driver, "engage", None)
-    if take is not None:
-        take(source.latest)
+    from while it waits (an autopilot's EKF may need mocap before it arms)."""
+    driver.engage(source.latest)
 
 
 def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult:

@@ -1,44 +1,11 @@
-"""The PoseSource protocol and the explicit registry of mocap URI schemes."""
+"""The explicit registry of mocap URI schemes (the PoseSource protocol itself: core/ports.py)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol
-
+from perchd.core.ports import PoseSource
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import Registry
-
-
-@dataclass(frozen=True, slots=True)
-class SourceStats:
-    """Counters a source keeps; dropped packets are counted, never raised."""
-
-    received: int = 0
-    poses: int = 0
-    dropped: int = 0
-
-
-class PoseSource(Protocol):
-    """A stream of poses for one body, converted to the world frame (Z up, metres)."""
-
-    body: str
-
-    def start(self) -> None:
-        """Open sockets / threads; raises LinkError if the source cannot be reached."""
-
-    def latest(self) -> Pose | None:
-        """The newest pose received so far (None before the first); never blocks."""
-
-    def wait(self, after_seq: int, timeout: float) -> Pose | None:
-        """Block up to `timeout` [s] for a pose newer than `after_seq` (mocap-synchronous mode)."""
-
-    def stats(self) -> SourceStats:
-        ...
-
-    def close(self) -> None:
-        ...
-
 
 SOURCES: Registry[PoseSource] = Registry("mocap", {
     "sim": "perchd.sim.world:open_sim_mocap",

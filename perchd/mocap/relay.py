@@ -15,9 +15,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from perchd.core.ports import PoseSource, SourceStats
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
-from perchd.mocap.base import PoseSource, SourceStats, open_source
+from perchd.mocap.base import open_source
 from perchd.mocap.outputs import PoseOutput
 
 

@@ -14,8 +14,8 @@ import threading
 import time
 from dataclasses import dataclass, fields
 
+from perchd.core.ports import SourceStats
 from perchd.core.types import Pose
-from perchd.mocap.base import SourceStats
 
 
 class Drop(enum.Enum):

@@ -41,14 +41,13 @@ from perchd.core import realtime
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import ConfigError, LinkError, PerchdError, PlanError
 from perchd.core.interrupts import exit_code
+from perchd.core.ports import Driver, PoseSource
 from perchd.core.runtime import Runtime
 from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
-from perchd.drivers.base import Driver
 from perchd.flight.config import SurfaceConfig
 from perchd.flight.run import FlightAbort, fly
 from perchd.flight.vehiclestate import VehicleStore
-from perchd.mocap.base import PoseSource
 from perchd.service.activation import activated_socket
 from perchd.service.config import (
     VERSION,
@@ -60,7 +59,7 @@ from perchd.service.config import (
 from perchd.service.control_socket import ControlServer
 from perchd.service.idle_feed import IdleFeed
 from perchd.service.sdnotify import Notifier
-from perchd.sim.session import Session, open_links
+from perchd.session import Session, open_links
 from perchd.tau import load_plan
 from perchd.tau.plan import Plan
 

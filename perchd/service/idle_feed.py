@@ -15,8 +15,8 @@ from __future__ import annotations
 import logging
 import threading
 
-from perchd.drivers.base import Driver
-from perchd.mocap.base import PoseSource, next_pose
+from perchd.core.ports import Driver, PoseSource
+from perchd.mocap.base import next_pose
 
 log = logging.getLogger(__name__)
 

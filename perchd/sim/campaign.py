@@ -32,7 +32,7 @@ from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.frame import PerchFrame
 from perchd.flight.run import FlightResult, TickStatus
 from perchd.sim.plant import PlantParams
-from perchd.sim.session import open_session
+from perchd.session import open_session
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 from perchd.tau import retarget
 from perchd.tau.plan import Plan

@@ -1,7 +1,7 @@
 """The simulated world: one plant, a surface that registers contact, and a mocap model.
 
 The `sim://` driver and the `sim://` mocap source share one world through Runtime.sim
-(perchd.sim.session puts it there). The world is
+(perchd.session puts it there). The world is
 lazy: it integrates the plant up to runtime.clock.now() whenever it is asked for a pose or
 given a setpoint, so with a ManualClock the control loop's sleep_until drives simulated time
 and a 3 s flight runs in a few hundred milliseconds of wall time.
@@ -25,11 +25,11 @@ from typing import Callable
 
 from perchd.core.clock import Clock
 from perchd.core.errors import UriError
+from perchd.core.ports import SourceStats
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Pose, Setpoint, Vec3
 from perchd.core.uri import Uri
 from perchd.core.uriparams import check_params, float_param
-from perchd.mocap.base import SourceStats
 from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
 from perchd.sim.stall import Stall, stall_from_uri

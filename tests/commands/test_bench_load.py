@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from perchd.sim.cpuload import cpu_hogs
+from perchd.bench.cpuload import cpu_hogs
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -70,7 +70,7 @@ def test_a_short_json_run_has_every_figure_and_they_come_from_real_runs():
 
 
 def test_the_text_report_names_each_figure_and_its_target():
-    from perchd.sim.loopbench import rows, text
+    from perchd.bench.loop import rows, text
     s = {"min_us": 1.0, "median_us": 2.0, "p99_us": 3.0, "max_us": 4.0}
     z = {"sync": "mocap", "rate_hz": 100.0, "mocap_hz": 100.0, "flights": 1,
          "outcomes": ["CONTACT"], "setpoints_matched": 400, "overruns": 0, "cpu_fraction": 0.05,

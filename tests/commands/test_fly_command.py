@@ -16,7 +16,7 @@ from perchd.core.types import Phase
 from perchd.flight.config import FlightConfig
 from perchd.flight.run import TickStatus
 from perchd.logs.flightlog import read_log
-from perchd.sim.session import open_links
+from perchd.session import open_links
 
 
 def plan_file(tmp_path, strategy="ipts"):

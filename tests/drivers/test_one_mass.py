@@ -11,7 +11,7 @@ from perchd.drivers.base import open_driver
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 from perchd.flight.config import FlightConfig, VehicleConfig
 from perchd.flight.run import bind_vehicle
-from perchd.sim.session import open_links
+from perchd.session import open_links
 
 
 def _cf(query: str = ""):

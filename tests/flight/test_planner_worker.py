@@ -33,7 +33,7 @@ from perchd.flight.config import (
 from perchd.flight.planner_worker import WorkerPlanner
 from perchd.logs.flightlog import read_log
 from perchd.sim.faults import Stop
-from perchd.sim.session import open_session
+from perchd.session import open_session
 from perchd.tau import load_plan, retarget
 from perchd.tau.library import load_library
 

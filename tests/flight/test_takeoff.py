@@ -17,7 +17,7 @@ from perchd.flight.takeoff import (
     TakeoffProfile,
 )
 from perchd.sim.plant import PlantParams
-from perchd.sim.session import open_session
+from perchd.session import open_session
 from perchd.sim.world import WorldParams
 
 HOLD_M = FlightConfig().approach.takeoff_height_m

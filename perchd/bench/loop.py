@@ -15,7 +15,7 @@
    threads) come from its `--json` loop summary. Perches are flown back to back until S
    seconds have passed; one still flying then (and at least MIN_FLIGHT_S after its first
    setpoint) is stopped with SIGINT. The same rig and sockets with the agent replaced by an
-   echo (each pose's seq sent straight back as a setpoint: `python -m perchd.sim.loopbench echo`)
+   echo (each pose's seq sent straight back as a setpoint: `python -m perchd.bench.loop echo`)
    give the sockets' own share, so what the agent adds is the difference.
 4. The machine's own wake-up tail: the 500 Hz loop with an empty tick (at most 20 s).
 The load average before and after is printed: figures from a busy machine say so.
@@ -48,7 +48,7 @@ from perchd.flight.loop import NO_SEQ, FixedRateLoop, LoopStats, spread
 from perchd.flight.supervisor import Conditions, Supervisor
 from perchd.mocap.base import open_source
 from perchd.mocap.zmq import ZmqPosePublisher
-from perchd.sim.cpuload import cpu_hogs
+from perchd.bench.cpuload import cpu_hogs
 from perchd.sim.receiver import bind_setpoint_socket
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 from perchd.tau import plan_ipts, save_plan
@@ -246,7 +246,7 @@ class Rig:
 def _agent(plan_file: Path, rig: Rig, sync: str, rate_hz: float, tmp: Path,
            n: int, realtime: int = 0) -> subprocess.Popen:
     if sync == "echo":
-        cmd = [sys.executable, "-m", "perchd.sim.loopbench", "echo", rig.mocap_uri, rig.driver_uri]
+        cmd = [sys.executable, "-m", "perchd.bench.loop", "echo", rig.mocap_uri, rig.driver_uri]
         return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                 text=True)
     config = tmp / f"{sync}.toml"
@@ -461,7 +461,7 @@ def load_text(fig: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
-if __name__ == "__main__":  # the echo agent: python -m perchd.sim.loopbench echo MOCAP DRIVER
+if __name__ == "__main__":  # the echo agent: python -m perchd.bench.loop echo MOCAP DRIVER
     if sys.argv[1:2] != ["echo"] or len(sys.argv) != 4:
-        sys.exit("usage: python -m perchd.sim.loopbench echo MOCAP_URI DRIVER_URI")
+        sys.exit("usage: python -m perchd.bench.loop echo MOCAP_URI DRIVER_URI")
     echo(sys.argv[2], sys.argv[3])

@@ -15,13 +15,14 @@ from typing import Callable
 
 from perchd.core.clock import Clock, ManualClock
 from perchd.core.errors import UriError
+from perchd.core.ports import Driver, PoseSource
 from perchd.core.runtime import Runtime
 from perchd.core.uri import parse_uri
-from perchd.drivers.base import Driver, open_driver
+from perchd.drivers.base import open_driver
 from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.planner_worker import Planner
 from perchd.flight.run import FlightAbort, FlightResult, TickStatus, fly
-from perchd.mocap.base import PoseSource, open_source
+from perchd.mocap.base import open_source
 from perchd.sim.world import SimWorld, WorldParams, world_params_from_uri
 from perchd.tau.plan import Plan
 
