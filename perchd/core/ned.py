@@ -1,7 +1,7 @@
 """Autopilot frames to perchd's and back: NED world and FRD body (MAVLink's) against a Z-up
 world and an FLU body (docs/architecture.md, frames). One rotation, used both ways: the
 ArduPilot and PX4 harnesses (perchd/sim/firmware) turn truth into mocap with it, the
-MAVLink driver turns mocap into the autopilot's vision input (drivers/mavvision.py).
+MAVLink driver turns mocap into the autopilot's vision input (drivers/mavlink/vision.py).
 
 A Z-up world is placed on NED by yaw0 [rad], the NED heading (from north, clockwise) of
 world X: pi about X (NED -> NWU), then yaw0 about Z. NWU is yaw0 = 0, ENU yaw0 = pi/2."""
@@ -69,7 +69,8 @@ def _canonical(q: QuatWXYZ) -> QuatWXYZ:
 def world_quat(q_ned_wxyz: QuatWXYZ, frame: str | float) -> Quat:
     """An autopilot attitude (w, x, y, z; body FRD -> NED) as perchd's (x, y, z, w), body
     FLU -> world."""
-    q = quat_mul(quat_mul(world_from_ned(yaw0_of(frame)), tuple(q_ned_wxyz)), FRD_FROM_FLU)
+    w0, x0, y0, z0 = q_ned_wxyz
+    q = quat_mul(quat_mul(world_from_ned(yaw0_of(frame)), (w0, x0, y0, z0)), FRD_FROM_FLU)
     w, x, y, z = _canonical(q)
     return (x, y, z, w)
 

@@ -19,7 +19,7 @@ MAX_FILE_BYTES = 1 << 20
 """[bytes] largest plan or config file read (a plan is ~1 kB, the full config ~6 kB)."""
 
 
-def confine(name: str | os.PathLike, root: str | os.PathLike, what: str,
+def confine(name: str | os.PathLike[str], root: str | os.PathLike[str], what: str,
             error: type[PerchdError]) -> Path:
     """`name` (relative to `root`, or absolute) resolved; `error` unless it lies inside root."""
     base = Path(os.path.realpath(root))
@@ -32,7 +32,7 @@ def confine(name: str | os.PathLike, root: str | os.PathLike, what: str,
     return real
 
 
-def read_regular(path: str | os.PathLike, what: str, error: type[PerchdError],
+def read_regular(path: str | os.PathLike[str], what: str, error: type[PerchdError],
                  max_bytes: int = MAX_FILE_BYTES) -> str:
     """The UTF-8 text of a regular file of at most `max_bytes`; `error` naming why not,
     as "WHAT PATH: why" (or "PATH: why" when `what` is empty)."""
@@ -73,8 +73,8 @@ class OutputError(PerchdError, OSError):
     """An output path that would destroy data or needs directories made (exit 2)."""
 
 
-def check_output(path: str | os.PathLike, flag: str, force: bool = False,
-                 inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
+def check_output(path: str | os.PathLike[str], flag: str, force: bool = False,
+                 inputs: tuple[str | os.PathLike[str], ...] = ()) -> Path:
     """`path` if writing it destroys nothing: its directory exists (none is created), it is
     not a directory, not one of `inputs`, and absent unless `force`; else OutputError
     naming `flag`."""
@@ -95,7 +95,7 @@ def check_output(path: str | os.PathLike, flag: str, force: bool = False,
 
 def write_text(path: Path, text: str, flag: str, force: bool) -> None:
     """`text` written to `path` (checked by check_output) by write_atomic."""
-    write_atomic(path, lambda f: f.write(text.encode("utf-8")), flag, force)
+    write_atomic(path, lambda f: _write_all(f, text.encode("utf-8")), flag, force)
 
 
 def write_atomic(path: Path, write: Callable[[IO[bytes]], None], flag: str, force: bool) -> None:
@@ -133,3 +133,7 @@ def _place(tmp: str, path: Path, flag: str, force: bool) -> None:
         os.link(tmp, path)
     except FileExistsError:
         raise OutputError(f"{flag} {path}: exists (pass --force to overwrite)") from None
+
+
+def _write_all(f: IO[bytes], data: bytes) -> None:
+    f.write(data)

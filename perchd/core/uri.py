@@ -64,7 +64,8 @@ class Registry(Generic[T]):
             known = ", ".join(f"{s}://" for s in self.schemes)
             raise UriError(f"unknown {self.kind} scheme {scheme!r}: use one of {known}")
         module, name = target.split(":")
-        return getattr(importlib.import_module(module), name)
+        factory: Callable[..., T] = getattr(importlib.import_module(module), name)
+        return factory
 
     def open(self, text: str, runtime: Any) -> T:
         uri = parse_uri(text)
