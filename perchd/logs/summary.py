@@ -13,6 +13,7 @@ import statistics
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from perchd.core.types import EndReason
 from perchd.logs.flightlog import FlightLog, LogRow
 
 TAU_STAGES = ("stage1", "stage2")
@@ -101,16 +102,29 @@ def _ms(s: Spread | None) -> str:
     return "--" if s is None else f"median {s.median * 1e3:.2f} ms, p99 {s.p99 * 1e3:.2f} ms, max {s.max * 1e3:.2f} ms"
 
 
+def figure_lines(outcome: str, detail: str, contact_speed: float | None,
+                 v_contact_plan: float | None, perch_time: float | None,
+                 plan_duration: float | None) -> list[str]:
+    """The head every flight summary opens with, from a flight just flown (`perchd fly`) or
+    read back from its log (`perchd log summary`): the outcome and what it means, then the
+    contact speed and the perch time against the plan's."""
+    meaning = EndReason[outcome].value if outcome in EndReason.__members__ else ""
+    lines = [f"outcome: {outcome}" + (f" ({meaning})" if meaning else "")
+             + (f": {detail}" if detail else "")]
+    if contact_speed is not None:
+        plan = "" if v_contact_plan is None else \
+            f" (plan {v_contact_plan:.3f} m/s, error {contact_speed - v_contact_plan:+.3f} m/s)"
+        lines.append(f"contact speed: {contact_speed:.3f} m/s{plan}")
+    if perch_time is not None:
+        plan = "" if not plan_duration else \
+            f" (plan {plan_duration:.3f} s, error {100 * (perch_time / plan_duration - 1):+.1f} %)"
+        lines.append(f"perch time: {perch_time:.3f} s{plan}")
+    return lines
+
+
 def summary_text(s: LogSummary) -> str:
-    lines = [f"outcome: {s.outcome}" + (f" ({s.detail})" if s.detail else "")]  # no empty "()"
-    if s.contact_speed is not None:
-        plan = f" (plan {s.v_contact_plan:.3f}, error {s.contact_speed - s.v_contact_plan:+.3f} m/s)" \
-            if s.v_contact_plan is not None else ""
-        lines.append(f"contact speed: {s.contact_speed:.3f} m/s{plan}")
-    if s.perch_time is not None:
-        plan = f" (plan {s.plan_duration:.3f} s, error {100 * (s.perch_time / s.plan_duration - 1):+.1f} %)" \
-            if s.plan_duration else ""
-        lines.append(f"perch time: {s.perch_time:.3f} s{plan}")
+    lines = figure_lines(s.outcome, s.detail, s.contact_speed, s.v_contact_plan, s.perch_time,
+                         s.plan_duration)
     if s.tau_rms is not None:
         lines.append(f"tau tracking RMS: {s.tau_rms * 1e3:.1f} ms over {s.tau_rows} ticks "
                      f"(stage 1 alone {s.tau_rms_stage1 * 1e3:.1f} ms)" if s.tau_rms_stage1 is not None

@@ -1,8 +1,10 @@
-"""The summary's words: no empty brackets, and the loop said as it ran."""
+"""The summary's words: no empty brackets, one head for a flight flown and a flight read back,
+and the loop said as it ran."""
 
 import dataclasses
 
-from perchd.logs.summary import LogSummary, summary_text
+from perchd.core.types import EndReason
+from perchd.logs.summary import LogSummary, figure_lines, summary_text
 
 
 def bare(**given) -> LogSummary:
@@ -13,7 +15,19 @@ def bare(**given) -> LogSummary:
 
 def test_no_empty_brackets_after_the_outcome():
     first = summary_text(bare()).splitlines()[0]
-    assert first == "outcome: OPERATOR_ABORT"
+    assert first == f"outcome: OPERATOR_ABORT ({EndReason.OPERATOR_ABORT.value})"
+    assert "()" not in summary_text(bare(outcome="NOT_A_REASON")).splitlines()[0]
+
+
+def test_a_flight_read_back_opens_as_the_flight_did():
+    """`perchd fly` and `perchd log summary` share one head: the same figures give the same
+    lines whichever side formats them."""
+    figures = dict(contact_speed=0.987, v_contact_plan=1.0, perch_time=2.03, plan_duration=2.0)
+    read_back = summary_text(bare(outcome="CONTACT", detail="touched", **figures)).splitlines()
+    flown = figure_lines("CONTACT", "touched", 0.987, 1.0, 2.03, 2.0)
+    assert read_back[:3] == flown
+    assert flown[1] == "contact speed: 0.987 m/s (plan 1.000 m/s, error -0.013 m/s)"
+    assert flown[2] == "perch time: 2.030 s (plan 2.000 s, error +1.5 %)"
 
 
 def test_a_mocap_synchronous_loop_is_not_called_a_fixed_rate():
