@@ -34,6 +34,7 @@ from perchd.flight.supervisor import (
     Trigger,
 )
 from perchd.logs.flightlog import FlightLogWriter, LogRow, jsonable
+from perchd.logs.nolog import NoLog
 from perchd.tau.plan import Plan
 
 __all__ = ["FlightAbort", "FlightResult", "TickStatus", "bind_vehicle", "fly", "plan_summary"]
@@ -230,7 +231,7 @@ def needs_worker(cfg: FlightConfig, clock: Clock) -> bool:
         and isinstance(clock, MonotonicClock)
 
 
-def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: str | Path,
+def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: str | Path | None,
         cfg: FlightConfig = FlightConfig(), abort: FlightAbort | None = None,
         on_tick: Callable[[TickStatus], None] | None = None,
         world: GroundTruth | None = None,
@@ -240,7 +241,8 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
 
     clock: the loop's clock (the Runtime's). abort: the external hook (see FlightAbort).
     on_tick: called after every tick with a TickStatus (live display). world: the SimWorld
-    when simulated, for the true contact figures. header: extra header fields for the log.
+    when simulated, for the true contact figures. header: extra header fields for the log;
+    log_path None keeps no log (NoLog).
     planner: the trigger's planner (flight/planner_worker.py), owned and closed here; None:
     a worker process when needs_worker(), else the supervisor solves in the tick.
     """
@@ -260,7 +262,7 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
 def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, header,
          planner) -> FlightResult:
     run = _Run(plan, driver, source, clock, cfg, abort, on_tick, planner)  # may refuse
-    log = run.log = FlightLogWriter(log_path, {"plan": plan_summary(plan),
+    log = run.log = NoLog() if log_path is None else FlightLogWriter(log_path, {"plan": plan_summary(plan),
                                                "config": jsonable(cfg),
                                                "driver": driver.uri,
                                                "mocap_body": source.body,
@@ -276,7 +278,7 @@ def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, head
         finally:
             log.close({"outcome": reason.name, "detail": f"{type(err).__name__}: {err}"})
         raise
-    result = _result(run, world, str(log_path))
+    result = _result(run, world, "" if log_path is None else str(log_path))
     log.close({"outcome": result.outcome.name, "detail": result.detail,
                "summary": result.to_json()})
     return result

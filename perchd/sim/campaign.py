@@ -103,7 +103,11 @@ class FlightRow:
     contact_speed [m/s] and perch_time [s, trigger to contact] from the simulator
     (contact_speed_est: the agent's estimate); plan_v_contact [m/s] and plan_duration [s]
     of the plan flown; v_lo..v_hi [m/s] its contact window and in_window;
-    perch_error_s [s] = perch_time - plan_duration. Figures without contact are None."""
+    perch_error_s [s] = perch_time - plan_duration and speed_error_mps [m/s] = contact_speed -
+    plan_v_contact. Figures without contact are None. strategy: the plan's; ticks: control
+    ticks flown; mass_kg [kg] and thrust_max_n [N]: the vehicle's; agent_median_ms and
+    agent_max_ms [ms]: the estimator + supervisor + controller part of a tick; cpu_s [s]:
+    the flight's CPU time in its worker (the last three measure the machine)."""
 
     index: int
     x0_aim: float
@@ -129,9 +133,20 @@ class FlightRow:
     perch_error_s: float | None
     action: str
     detail: str
+    strategy: str = ""
+    speed_error_mps: float | None = None
+    ticks: int = 0
+    mass_kg: float = 0.0
+    thrust_max_n: float = 0.0
+    agent_median_ms: float = 0.0
+    agent_max_ms: float = 0.0
+    cpu_s: float = 0.0
 
 
 COLUMNS = tuple(f.name for f in dataclasses.fields(FlightRow))
+TIMING_COLUMNS = ("agent_median_ms", "agent_max_ms", "cpu_s")
+"""Columns that measure the machine, not the flight: the same seed gives the same table
+but for these."""
 
 
 # --- what to fly ---------------------------------------------------------------------------
@@ -259,7 +274,15 @@ def _row(spec: FlightSpec, spread: Spread, plan: Plan, res: FlightResult | None,
         trig and trig.x, trig and trig.v, speed, res.contact_speed if hit else None, perch,
         duration, res.v_contact_plan if res else float(plan.v_contact), lo, hi,
         hit and lo <= speed <= hi, None if perch is None else perch - duration,
-        trig.action if trig else "", res.detail if res else why)
+        trig.action if trig else "", res.detail if res else why, plan.strategy,
+        None if speed is None else speed - res.v_contact_plan,
+        **(_loop_figures(res.loop) if res else {}))
+
+
+def _loop_figures(loop: Any) -> dict[str, Any]:
+    """The row's figures of the flight's flight.loop.LoopSummary."""
+    return {"ticks": loop.ticks, "agent_median_ms": loop.agent_median_s * 1e3,
+            "agent_max_ms": loop.agent_max_s * 1e3}
 
 
 def _fly_logged(args: tuple) -> FlightRow:

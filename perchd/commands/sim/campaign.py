@@ -4,7 +4,13 @@ stderr, the outcome table (CSV) and the printed summary. The flying is perchd.si
     perchd sim --campaign P.json [--flights N | --grid NX NV] [--x0 LO HI] [--v0 LO HI]
                [--latency S] [--noise M] [--gust DV] [--seed N] [--start X Y Z]
                [--surface X Y Z] [--normal NX NY NZ] [--config F] [--policy P]
-               [--table out.csv] [--logs DIR] [--jobs J] [--json]
+               [--table OUT.parquet|OUT.csv] [--logs DIR] [--jobs J]
+               [--cluster local[:N] | tcp://SCHEDULER:8786] [--json]
+
+Each flight is a row of the table, written as it ends, with a JSON summary beside it
+(OUT.summary.json). The same command on an existing table flies only the flights missing
+from it (perchd.sim.results); a different campaign on it is refused. `perchd sim report
+TABLE` prints a table's summary and draws its plots.
 
 Exit 0 when every flight made contact inside its plan's contact window, 1 otherwise.
 """
@@ -27,7 +33,12 @@ from perchd.core.errors import ConfigError
 from perchd.core.interrupts import exit_code
 from perchd.core.safefile import OutputError, check_output
 from perchd.flight.config import TriggerPolicy
+from perchd.logs.flightlog import jsonable
 from perchd.sim import campaign as cp
+from perchd.sim.batches import CampaignJob, fly_campaign
+from perchd.sim.engine import open_engine, parse_cluster
+from perchd.sim.results import CampaignTable, digest, summary_path
+from perchd.sim.tableformats import have_pyarrow
 from perchd.tau import load_plan
 
 DEFAULT_FLIGHTS = 20
@@ -35,7 +46,7 @@ LIVE_ONLY = ("pose_out", "setpoint_in", "duration", "exit_on_stop")
 """Options of a live `perchd sim` (all unset by default) that mean nothing to a campaign."""
 CAMPAIGN_DEFAULTS = {"flights": None, "grid": None, "x0": None, "v0": None, "gust": 0.0,
                      "seed": 0, "policy": None, "config": None, "table": None, "logs": None,
-                     "jobs": 1, "force": False}
+                     "jobs": 1, "force": False, "cluster": None}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,13 +71,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--policy", choices=("robust", "replan", "refuse"),
                    help="trigger policy (default robust for a plan with a box, else replan)")
     g.add_argument("--config", help="flight configuration file (TOML), as for perchd fly")
-    g.add_argument("--table", help="outcome table, CSV; its directory must exist "
-                                   "(default ./campaigns/<time>-<plan>.csv, directory made)")
+    g.add_argument("--table", help="outcome table, .parquet (pyarrow) or .csv; its directory "
+                                   "must exist; the same command again resumes it (default "
+                                   "./campaigns/<time>-<plan>.parquet, or .csv without "
+                                   "pyarrow; directory made)")
     g.add_argument("--logs", help="keep each flight's log (flight-NNNN.jsonl) in this existing "
                                   "directory (default: none kept)")
     g.add_argument("--force", action="store_true",
                    help="overwrite an existing --table file or flight logs in --logs")
-    g.add_argument("--jobs", type=int, default=CAMPAIGN_DEFAULTS["jobs"], help="worker processes (default 1)")
+    g.add_argument("--jobs", type=int, default=CAMPAIGN_DEFAULTS["jobs"],
+                   help="worker processes on this machine (default 1: this process)")
+    g.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
+                   help="where flights run: local[:N], N worker processes here (a Dask "
+                        "LocalCluster, or a process pool without Dask; N defaults to --jobs), "
+                        "or a Dask scheduler's address (pip install 'perchd[cluster]')")
 
 
 def check_mode(args: argparse.Namespace) -> None:
@@ -132,11 +150,16 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
 
 
 def table_path(args: argparse.Namespace) -> Path:
-    """--table checked (nothing overwritten without --force, no directory made), or the
-    default in ./campaigns, the one directory a campaign creates."""
+    """--table checked (no directory made; an existing table is resumed or refused by
+    CampaignTable, replaced only with --force), or the default in ./campaigns, the one
+    directory a campaign creates."""
     if args.table:
+        table = Path(args.table)
+        if not args.force and (table.exists() or summary_path(table).exists()):
+            return table
         return check_output(args.table, "--table", args.force, inputs=(args.campaign,))
-    table = Path("campaigns") / f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}.csv"
+    suffix = ".parquet" if have_pyarrow() else ".csv"
+    table = Path("campaigns") / f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}{suffix}"
     return check_output(table, "--table", args.force) if table.parent.is_dir() else table
 
 
@@ -150,47 +173,78 @@ def check_log_dir(logs: str | None, indices: list[int], force: bool) -> None:
         check_output(Path(logs) / f"flight-{i:04d}.jsonl", "--logs", force)
 
 
+def identity(args: argparse.Namespace, cfg: Any, spread: Any, flights: int) -> dict[str, Any]:
+    """What makes a campaign's table: the plan file, policy, configuration, spread and draw
+    (not where or how fast it flies)."""
+    draw = {"grid": list(args.grid)} if args.grid else {"flights": flights}
+    return {"plan": digest(Path(args.campaign).read_bytes()), "policy": cfg.trigger.policy.value,
+            "config": digest(jsonable(cfg)), "spread": asdict(spread), "draw": draw}
+
+
 def run(args: argparse.Namespace) -> int:
 
     plan, cfg, spread, specs = build(args)
+    cluster = parse_cluster(args.cluster)
     table = table_path(args)
-    check_log_dir(args.logs, [s.index for s in specs], args.force)
-    progress = Progress(len(specs), "flights", "sim")
-    rows: list[Any] = []
+    results = CampaignTable(table, identity(args, cfg, spread, len(specs)), args.force)
+    todo = results.missing(specs)
+    check_log_dir(args.logs, [s.index for s in todo], args.force)
+    make_default_dir(table)
+    results.begin()
+    progress = Progress(len(specs), "flights", "sim", rates=True, done=results.resumed)
     t0 = time.monotonic()
-    stopped = None
-    with open_table(table, args.force) as writer, on_signals():
-        def finished(row: Any) -> None:
-            rows.append(row)
-            writer.write(row)  # as it finishes: an interrupted campaign keeps it
-            progress(row.outcome)
+    stopped, engine = None, None
+
+    def finished(rows: list[Any]) -> None:
+        results.append(rows)  # as they finish: an interrupted campaign keeps them
+        for row in rows:
+            progress(row.outcome, failed=not row.in_window)
+
+    with on_signals():
         try:
-            cp.run_campaign(plan, cfg, spread, specs, args.jobs, args.logs, finished)
+            engine = open_engine(cluster, args.jobs)
+            fly_campaign(CampaignJob(plan, cfg, spread, args.logs), todo, engine, finished)
         except Stopped as stop:
             stopped = stop
         finally:
             progress.close()
-    rows.sort(key=lambda r: r.index)
-    report(args, cfg, spread, rows, table, time.monotonic() - t0, stopped, len(specs))
+            close_quietly(engine)
+            where = {"engine": engine.name if engine else None, "resumed": results.resumed,
+                     "flown": len(results.rows) - results.resumed}
+            rows = results.finish(len(specs), where)
+    report(args, cfg, spread, rows, table, time.monotonic() - t0, stopped, len(specs), where)
     if stopped is not None:
         return stopped.exit_code
     return 0 if cp.summarize(rows).in_window == len(rows) else 1
 
 
+def close_quietly(engine: Any) -> None:
+    """The engine closed with signals held off: a second Ctrl-C does not leave workers."""
+    if engine is None:
+        return
+    held = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        engine.close()
+    finally:
+        for s, handler in held.items():
+            signal.signal(s, handler)
+
+
 def report(args, cfg, spread, rows: list[Any], table: Path, wall: float,
-           stopped: "Stopped | None", planned: int) -> None:
-    """The summary of the flights that finished (all of them unless `stopped`)."""
+           stopped: "Stopped | None", planned: int, where: dict[str, Any]) -> None:
+    """The summary of the table's flights (all of them unless `stopped`)."""
     summary = cp.summarize(rows)
     if args.json:
         print(json.dumps({**asdict(summary), "plan": args.campaign, "policy": cfg.trigger.policy.value,
                           "spread": asdict(spread), "table": str(table), "wall_s": wall,
                           "interrupted": None if stopped is None else stopped.name,
-                          "planned": planned}))
+                          "planned": planned, **where}))
     else:
         print(summary_text(summary, table, wall))
     if stopped is not None:
         print(f"perchd sim: interrupted by {stopped.name} after {len(rows)} of {planned} "
-              f"flights; the table holds those", file=sys.stderr)
+              f"flights; the table holds those, and the same command flies the rest",
+              file=sys.stderr)
 
 
 class Stopped(BaseException):
@@ -206,6 +260,8 @@ class Stopped(BaseException):
 def on_signals():
     """SIGINT and SIGTERM raise Stopped in the main thread while the campaign runs."""
     def stop(signum, _frame):
+        for s in (signal.SIGINT, signal.SIGTERM):  # once: the first signal decides
+            signal.signal(s, signal.SIG_IGN)
         raise Stopped(signum)
     previous = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -215,13 +271,7 @@ def on_signals():
             signal.signal(s, handler)
 
 
-def open_table(table: Path, force: bool):
-    """The table's writer; the default ./campaigns is the one directory a campaign makes."""
+def make_default_dir(table: Path) -> None:
+    """The default ./campaigns is the one directory a campaign makes."""
     if table.parent == Path("campaigns"):
         table.parent.mkdir(exist_ok=True)
-    try:
-        return cp.TableWriter(table, overwrite=force)
-    except FileExistsError:
-        raise OutputError(f"--table {table}: exists (pass --force to overwrite)") from None
-    except OSError as err:
-        raise OutputError(f"--table {table}: cannot write ({err.strerror})") from None

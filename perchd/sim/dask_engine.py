@@ -1,0 +1,68 @@
+"""The Dask engine: a LocalCluster of worker processes on 127.0.0.1, or a running
+scheduler (`dask scheduler` + `dask worker tcp://HOST:8786` on each node).
+
+Dask reruns a task whose worker was lost on another worker, and idle workers steal queued
+tasks, so a campaign's units spread evenly and none is lost with a node. Imported only
+when Dask is installed (pip install 'perchd[cluster]')."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Callable, Iterator, Sequence, TypeVar
+
+from distributed import Client, LocalCluster, as_completed
+
+from perchd.core.errors import ConfigError
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+CONNECT_TIMEOUT_S = 10.0
+"""[s] to reach a scheduler named by --cluster tcp://."""
+
+
+class DaskEngine:
+    """A Dask client, and the LocalCluster it started (None on a remote scheduler)."""
+
+    def __init__(self, client: Client, cluster: LocalCluster | None, name: str) -> None:
+        self.client, self.cluster, self.name = client, cluster, name
+
+    @classmethod
+    def start(cls, address: str | None, workers: int) -> "DaskEngine":
+        if address is None:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address=None,
+                                   silence_logs=logging.ERROR)
+            try:
+                return cls(Client(cluster), cluster, f"a local Dask cluster of {workers}")
+            except BaseException:
+                cluster.close()
+                raise
+        try:
+            client = Client(address, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError) as err:
+            raise ConfigError(f"--cluster {address}: no scheduler answers ({err})") from None
+        return cls(client, None, f"the Dask scheduler at {address}")
+
+    @property
+    def workers(self) -> int:
+        return max(1, sum(w.get("nthreads", 1) for w in self._info().values()))
+
+    def _info(self) -> dict[str, Any]:
+        return self.client.scheduler_info().get("workers", {})
+
+    def map_unordered(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[R]:
+        futures = [self.client.submit(fn, item, pure=False) for item in items]
+        try:
+            for fut in as_completed(futures):
+                yield fut.result()
+        finally:
+            self.client.cancel([f for f in futures if not f.done()])
+
+    def close(self) -> None:
+        """The client, then the cluster this engine started: no worker outlives it."""
+        try:
+            self.client.close()
+        finally:
+            if self.cluster is not None:
+                self.cluster.close()
