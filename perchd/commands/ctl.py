@@ -1,7 +1,8 @@
 """`perchd ctl {fly P.json [--wait] | abort | status} [--socket PATH]`: talk to `perchd serve`
 over its control socket (docs/contracts.md §4). Prints the reply as readable `key: value` lines
 (--json: the reply as one JSON object); a refusal goes to stderr as one line. Exit 0 when it
-says ok (with --wait: when the flight ended in contact), 1 otherwise. No reply is one line
+says ok (with --wait: when the flight ended in contact), 2 when the service refused the
+plan (perchd.flight.planguard, as `perchd fly` does), 1 otherwise. No reply is one line
 saying why (no such socket, permission denied, the bound reached, a timeout). An abort the
 socket does not take is sent as SIGUSR1, which perchd serve treats as abort, to the pid
 listening there (docs/safety.md "The operator always wins")."""
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         show(reply, args.json)
         return 0 if reply.get("outcome") == "CONTACT" else 1
     show(reply, args.json)
-    return 0 if reply.get("ok") else 1
+    return 0 if reply.get("ok") else 2 if reply.get("refused") == "plan" else 1
 
 
 def ask(socket_path: str, req: dict) -> dict:

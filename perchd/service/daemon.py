@@ -46,6 +46,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.safefile import confine, read_regular
 from perchd.core.types import EndReason
 from perchd.flight.config import SurfaceConfig
+from perchd.flight.planguard import check_flight_plan
 from perchd.flight.run import FlightAbort, fly
 from perchd.flight.vehiclestate import VehicleStore
 from perchd.service.activation import activated_socket
@@ -394,6 +395,9 @@ class Daemon:
             return {"ok": False, "error": 'fly needs "plan": a plan file path'}
         try:
             plan, path = self._read_plan(req["plan"])
+            check_flight_plan(plan, self.config.flight)  # before the flight engages
+        except PlanError as err:  # `perchd ctl fly` exits 2 on it, as `perchd fly` does
+            return {"ok": False, "error": str(err), "refused": "plan"}
         except PerchdError as err:
             return {"ok": False, "error": str(err)}
         if not self.links.healthy():

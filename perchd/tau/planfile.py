@@ -12,12 +12,12 @@ from pathlib import Path
 
 from perchd.core.errors import PlanError
 from perchd.core.safefile import read_regular
+from perchd.tau.figures import disagreement
 from perchd.tau.ipts import MAX_ORDER
 from perchd.tau.limits import Limits
 from perchd.tau.plan import STRATEGIES, Plan, make_plan
 
 SCHEMA = "perchd.plan/1"
-REL_TOL = 1e-6  # stored figures are written at full precision; this absorbs re-derivation round-off
 
 
 def plan_to_json(plan: Plan) -> dict:
@@ -98,15 +98,11 @@ def _known_keys(doc: dict) -> None:
 
 def _agree(doc: dict, plan: Plan) -> None:
     peaks = _field(doc, "peaks", dict)
-    for name, stored, derived in (
-            ("t_switch", _number(doc, "t_switch"), plan.t_switch),
-            ("duration", _number(doc, "duration"), plan.duration),
-            ("v_contact", _number(doc, "v_contact"), plan.v_contact),
-            ("peaks.v", _number(peaks, "v", "peaks.v"), plan.peaks.v),
-            ("peaks.a", _number(peaks, "a", "peaks.a"), plan.peaks.a)):
-        if not math.isclose(stored, derived, rel_tol=REL_TOL, abs_tol=1e-9):
-            raise PlanError(f"{name}: file says {stored:.6g} but its parameters give "
-                            f"{derived:.6g} (tampered or stale plan)")
+    stored = {name: _number(doc, name) for name in ("t_switch", "duration", "v_contact")}
+    stored |= {f"peaks.{k}": _number(peaks, k, f"peaks.{k}") for k in ("v", "a")}
+    why = disagreement(stored, plan)
+    if why is not None:
+        raise PlanError(why)
 
 
 def _field(doc: dict, key: str, kind: type, name: str | None = None):

@@ -6,7 +6,8 @@ from dataclasses import asdict, dataclass
 
 from perchd.core.errors import PlanError
 from perchd.tau.bound import plan_bound
-from perchd.tau.plan import Plan
+from perchd.tau.figures import disagreement, figures
+from perchd.tau.plan import Plan, make_plan
 from perchd.tau.robustplan import check_plan
 
 TOL = 1e-6  # relative slack for a limit met with equality by an optimiser
@@ -37,6 +38,18 @@ def _robust_violations(plan: Plan) -> list[str]:
     except PlanError as err:
         return [str(err)]
     return []
+
+
+def verify_plan(plan: Plan) -> Plan:
+    """The plan itself, or PlanError naming its first fault: a figure its parameters do not
+    give (re-derived as the loader does), or a limit it breaks (what `perchd plan check`
+    reports infeasible)."""
+    derived = make_plan(plan.strategy, plan.x0, plan.v0, plan.tau_s, plan.limits,
+                        c=plan.c, k=plan.k, robust=plan.robust)
+    why = disagreement(figures(plan), derived)
+    if why is not None:
+        raise PlanError(why)
+    return check_limits(plan)
 
 
 def check_limits(plan: Plan) -> Plan:
