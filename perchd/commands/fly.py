@@ -34,6 +34,7 @@ from perchd.core.interrupts import catching
 from perchd.core.safefile import check_output
 from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
+from perchd.flight.planguard import check_flight_plan
 from perchd.flight.run import FlightAbort
 from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.logs.flightlog import read_log
@@ -193,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
     store = VehicleStore(Path(args.state) if args.state else default_path(), _warn)
     key = args.vehicle or args.driver
     cfg = store.with_learned_guess(key, load_config(args))
+    check_flight_plan(plan, cfg)  # before any link opens: exit 2 naming the field
     mcap = mcap_path(args)
     if mcap is not None:
         args.log = str(mcap.with_suffix(".jsonl"))

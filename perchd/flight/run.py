@@ -25,6 +25,7 @@ from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
 from perchd.flight.loop import LoopSummary, make_loop
+from perchd.flight.planguard import check_flight_plan
 from perchd.flight.planner_worker import Planner, WorkerPlanner
 from perchd.flight.supervisor import (
     Conditions,
@@ -237,7 +238,8 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
         world: GroundTruth | None = None,
         header: dict[str, Any] | None = None,
         planner: Planner | None = None) -> FlightResult:
-    """Fly `plan` (a perchd.tau.Plan) with a connected driver and a started pose source.
+    """Fly `plan` (a perchd.tau.Plan) with a connected driver and a started pose source;
+    a plan that fails check_flight_plan is refused (PlanError) before anything engages.
 
     clock: the loop's clock (the Runtime's). abort: the external hook (see FlightAbort).
     on_tick: called after every tick with a TickStatus (live display). world: the SimWorld
@@ -246,6 +248,7 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
     planner: the trigger's planner (flight/planner_worker.py), owned and closed here; None:
     a worker process when needs_worker(), else the supervisor solves in the tick.
     """
+    check_flight_plan(plan, cfg)  # the last line of defence: the commands checked it already
     abort = abort or FlightAbort()
     cfg = bind_vehicle(driver, cfg)  # before the log: a refused vehicle never flies
     if planner is None and needs_worker(cfg, clock):

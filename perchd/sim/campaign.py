@@ -30,6 +30,7 @@ from perchd.core.errors import ConfigError, PlanError
 from perchd.core.types import EndReason, Phase, Vec3
 from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.frame import PerchFrame
+from perchd.flight.planguard import check_flight_plan
 from perchd.flight.run import FlightResult, TickStatus
 from perchd.sim.plant import PlantParams
 from perchd.session import open_session
@@ -227,7 +228,7 @@ def fly_one(plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
     """Fly `plan` aimed at spec's trigger state in a fresh simulated world; one table row."""
 
     try:
-        aimed = retarget(plan, spec.x0, spec.v0)
+        aimed = check_flight_plan(retarget(plan, spec.x0, spec.v0), cfg)
     except PlanError as err:  # the aimed state admits no plan: recorded, not fatal
         return _row(spec, spread, plan, None, f"no plan at the aimed state: {err}")
     return _row(spec, spread, aimed, _simulate(aimed, cfg, spread, spec, log_path), "")
@@ -299,6 +300,7 @@ def run_campaign(plan: Plan, cfg: FlightConfig, spread: Spread, specs: Iterable[
     directory and are removed."""
     if jobs < 1:
         raise ConfigError(f"--jobs {jobs}: at least 1")
+    check_flight_plan(plan, cfg)  # the campaign's plan, before any flight
     with tempfile.TemporaryDirectory(prefix="perchd-campaign-") as tmp:
         where = Path(log_dir) if log_dir is not None else Path(tmp)
         where.mkdir(parents=True, exist_ok=True)

@@ -33,6 +33,7 @@ from perchd.core.errors import ConfigError
 from perchd.core.interrupts import exit_code
 from perchd.core.safefile import OutputError, check_output
 from perchd.flight.config import TriggerPolicy
+from perchd.flight.planguard import check_flight_plan
 from perchd.logs.flightlog import jsonable
 from perchd.sim import campaign as cp
 from perchd.sim.batches import CampaignJob, fly_campaign
@@ -141,6 +142,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
                        args.gust, tuple(args.start) if args.start else None, args.seed)
     policy = TriggerPolicy(args.policy) if args.policy else cp.default_policy(plan)
     cfg = cp.campaign_config(load_config(args), policy)
+    check_flight_plan(plan, cfg)  # before the table is made: exit 2 naming the field
     if args.grid:
         specs = cp.grid_specs(spread, *args.grid, plan.duration)
     else:
