@@ -9,7 +9,7 @@ URI registries whether they are real or simulated.
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -18,10 +18,12 @@ from perchd.core.errors import UriError
 from perchd.core.ports import Driver, PoseSource
 from perchd.core.runtime import Runtime
 from perchd.core.uri import parse_uri
+from perchd.core.uriparams import query_of, split_sim
 from perchd.drivers.base import open_driver
 from perchd.flight.config import FlightConfig, SurfaceConfig
 from perchd.flight.planner_worker import Planner
 from perchd.flight.run import FlightAbort, FlightResult, TickStatus, fly
+from perchd.logs.flightlog import jsonable
 from perchd.mocap.base import open_source
 from perchd.sim.world import SimWorld, WorldParams, world_params_from_uri
 from perchd.tau.plan import Plan
@@ -37,6 +39,9 @@ class Session:
     world: SimWorld | None
     driver: Driver
     source: PoseSource
+    applied: dict = field(default_factory=dict)
+    """The URI parameters each link applied (every other key was refused), and the
+    simulated world's resolved parameters: the flight log's header records them."""
 
     @property
     def clock(self) -> Clock:
@@ -45,11 +50,15 @@ class Session:
     def fly(self, plan: Plan, log_path: str | Path, cfg: FlightConfig = FlightConfig(),
             abort: FlightAbort | None = None,
             on_tick: Callable[[TickStatus], None] | None = None,
-            header: dict | None = None, planner: Planner | None = None) -> FlightResult:
-        """One flight on this vehicle, then its links closed (planner: see flight.run.fly)."""
+            header: dict | None = None, planner: Planner | None = None,
+            log_force: bool = False) -> FlightResult:
+        """One flight on this vehicle, then its links closed (planner, log_force: see
+        flight.run.fly)."""
         try:
             return fly(plan, self.driver, self.source, self.clock, log_path, cfg, abort,
-                       on_tick, world=self.world, header=header, planner=planner)
+                       on_tick, world=self.world,
+                       header={"uri_params": self.applied, **(header or {})}, planner=planner,
+                       log_force=log_force)
         finally:
             self.close()
 
@@ -73,8 +82,10 @@ def open_links(driver_uri: str, mocap_uri: str, surface: SurfaceConfig | None = 
     if sims[0] != sims[1]:
         raise UriError("sim:// flies only with sim:// on both driver and mocap "
                        f"(got {driver_uri} and {mocap_uri})")
-    if sims[0]:
-        return open_session(driver_uri, surface=surface, clock=simulated_clock)
+    if sims[0]:  # one world: the vehicle's options from --driver, the mocap's from --mocap
+        wp = world_params_from_uri(parse_uri(driver_uri), kind="driver")
+        wp = world_params_from_uri(parse_uri(mocap_uri), wp, kind="mocap")
+        return _simulate(wp, driver_uri, mocap_uri, surface, simulated_clock)
     return _connect(Runtime.real(), None, driver_uri, mocap_uri, mass_kg)
 
 
@@ -92,20 +103,30 @@ def _connect(runtime: Runtime, world: SimWorld | None, driver_uri: str,
     except BaseException:
         source.close()
         raise
-    return Session(runtime, world, driver, source)
+    applied = {"driver": query_of(parse_uri(driver_uri)), "mocap": query_of(parse_uri(mocap_uri))}
+    if world is not None:
+        applied["sim_world"] = jsonable(world.params)
+    return Session(runtime, world, driver, source, applied)
 
 
 def open_session(uri: str = "sim://", *, surface: SurfaceConfig | None = None,
                  params: WorldParams | None = None, clock: Clock | None = None) -> Session:
     """A connected simulated vehicle.
 
-    uri: the sim:// URI whose options (latency, noise, start, ...) apply over `params`.
+    uri: the sim:// URI whose options (latency, noise, start, ...) apply over `params`:
+    a whole world's, the vehicle's and the mocap's options in one (split between the links).
     surface: where the wall is (default: params' surface). clock: a ManualClock at 0 unless
     given (a MonotonicClock runs the world in real time, as `perchd serve` does).
     """
-    wp = world_params_from_uri(parse_uri(uri), params)
+    parsed = parse_uri(uri)
+    return _simulate(world_params_from_uri(parsed, params), *split_sim(parsed), surface, clock)
+
+
+def _simulate(wp: WorldParams, driver_uri: str, mocap_uri: str,
+              surface: SurfaceConfig | None, clock: Clock | None) -> Session:
+    """A fresh world of `wp` on `clock`, its two links connected."""
     if surface is not None:
         wp = dataclasses.replace(wp, surface_point=surface.point, surface_normal=surface.normal)
     runtime = Runtime(clock or ManualClock(0.0))
     runtime.sim = SimWorld(wp, runtime.clock)
-    return _connect(runtime, runtime.sim, uri, uri)
+    return _connect(runtime, runtime.sim, driver_uri, mocap_uri)

@@ -1,8 +1,19 @@
-"""Reading files named by untrusted input (control-socket requests, config paths) safely.
+"""The one rule for every file perchd reads or writes.
 
-A path a client names is resolved (symlinks followed) and must land inside the directory the
-service was configured with; what is read must be a regular file of bounded size. Opening is
-non-blocking so a FIFO or device named as a plan cannot stall the service loop.
+Reading: a path a client names is resolved (symlinks followed) and must land inside the
+directory the service was configured with; what is read must be a regular file of bounded
+size, opened non-blocking and checked on the open descriptor, so a FIFO or device named as
+a plan, config, log or state file is refused at once instead of stalling a read.
+
+Writing: an output is checked before anything runs (check_output: its directory exists, it
+is a regular file or missing, not one of the inputs, absent unless --force), then written
+to a temporary file beside it and renamed into place (write_atomic), so a failure at any
+point leaves the old file as it was. A file written as it goes (a flight log, a campaign
+table) is a Stream: a new one is created exclusively at its own name (O_EXCL|O_NOFOLLOW, so
+nothing existing is truncated or followed and a FIFO there never blocks), where a crash or
+a live view finds it; one replacing an existing file (--force) is written beside it and
+renamed onto it when finished. A name taken from config or a request (a vehicle name in a
+log name) is refused unless it is a plain file-name component (safe_name).
 """
 
 from __future__ import annotations
@@ -39,8 +50,8 @@ def read_regular(path: str | os.PathLike[str], what: str, error: type[PerchdErro
     what = f"{what} {path}" if what else str(path)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOCTTY)
-    except OSError as err:
-        raise error(f"{what}: cannot read ({err.strerror})") from None
+    except (OSError, ValueError) as err:
+        raise error(f"{what}: cannot read ({_why(err)})") from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
@@ -60,6 +71,13 @@ def read_regular(path: str | os.PathLike[str], what: str, error: type[PerchdErro
         raise error(f"{what}: not UTF-8 text (byte {err.start})") from None
 
 
+def _why(err: OSError | ValueError) -> str:
+    """An OS error's own words; a NUL byte in a path (ValueError) named as such."""
+    if isinstance(err, OSError):
+        return err.strerror or str(err)
+    return "a path with a NUL byte" if "null" in str(err) else str(err)
+
+
 def _kind(mode: int) -> str:
     for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
                        (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
@@ -73,29 +91,55 @@ class OutputError(PerchdError, OSError):
     """An output path that would destroy data or needs directories made (exit 2)."""
 
 
-def check_output(path: str | os.PathLike[str], flag: str, force: bool = False,
-                 inputs: tuple[str | os.PathLike[str], ...] = ()) -> Path:
+def _stat(path: Path, flag: str) -> os.stat_result | None:
+    """os.stat of `path` (symlinks followed), None if nothing is there; OutputError for a
+    path that cannot be looked at (too long, a NUL byte, no permission, a symlink loop)."""
+    try:
+        return os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except (OSError, ValueError) as err:
+        raise OutputError(f"{flag} {path}: cannot write ({_why(err)})") from None
+
+
+def check_output(path: str | os.PathLike, flag: str, force: bool = False,
+                 inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
     """`path` if writing it destroys nothing: its directory exists (none is created), it is
-    not a directory, not one of `inputs`, and absent unless `force`; else OutputError
-    naming `flag`."""
+    a regular file or missing, not one of `inputs`, and absent unless `force`; else
+    OutputError naming `flag`."""
     out = Path(path)
-    if out.is_dir():
+    st = _stat(out, flag)
+    if st is not None and stat.S_ISDIR(st.st_mode):
         raise OutputError(f"{flag} {out}: is a directory (give a file path inside it)")
     parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
+    up = _stat(parent, flag)
+    if up is None or not stat.S_ISDIR(up.st_mode):
         raise OutputError(f"{flag} {out}: directory {parent} does not exist "
                           "(perchd creates none; make it first)")
+    if st is None:
+        return out
+    if not stat.S_ISREG(st.st_mode):
+        raise OutputError(f"{flag} {out}: not a regular file ({_kind(st.st_mode)}); "
+                          "perchd writes only regular files")
     for given in inputs:
-        if os.path.exists(given) and out.exists() and os.path.samefile(out, given):
+        if _same(st, given):
             raise OutputError(f"{flag} {out}: is the input {given}; give another path")
-    if out.exists() and not force:
+    if not force:
         raise OutputError(f"{flag} {out}: exists (pass --force to overwrite)")
     return out
 
 
+def _same(st: os.stat_result, other: str | os.PathLike) -> bool:
+    try:
+        ost = os.stat(other)
+    except (OSError, ValueError):
+        return False
+    return (st.st_dev, st.st_ino) == (ost.st_dev, ost.st_ino)
+
+
 def write_text(path: Path, text: str, flag: str, force: bool) -> None:
     """`text` written to `path` (checked by check_output) by write_atomic."""
-    write_atomic(path, lambda f: _write_all(f, text.encode("utf-8")), flag, force)
+    write_atomic(path, lambda f: f.write(text.encode("utf-8")), flag, force)
 
 
 def write_atomic(path: Path, write: Callable[[IO[bytes]], None], flag: str, force: bool) -> None:
@@ -103,13 +147,9 @@ def write_atomic(path: Path, write: Callable[[IO[bytes]], None], flag: str, forc
     point leaves whatever was at `path` as it was. Without `force` an existing `path` (one
     that appeared since check_output) is refused, and the rename cannot replace one made
     meanwhile (os.link refuses an existing name)."""
-    parent = path.parent if str(path.parent) else Path(".")
+    tmp = _temp_beside(path, flag)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
-    except OSError as err:
-        raise OutputError(f"{flag} {path}: cannot write ({err.strerror})") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
+        with open(tmp, "wb") as f:
             write(f)
             f.flush()
             os.fsync(f.fileno())
@@ -117,15 +157,31 @@ def write_atomic(path: Path, write: Callable[[IO[bytes]], None], flag: str, forc
     except OSError as err:
         if isinstance(err, PerchdError):
             raise
-        raise OutputError(f"{flag} {path}: cannot write ({err.strerror})") from None
+        raise OutputError(f"{flag} {path}: cannot write ({_why(err)})") from None
     finally:
         if os.path.lexists(tmp):
             os.unlink(tmp)
 
 
+def _temp_beside(path: Path, flag: str) -> str:
+    """A new empty temporary file in `path`'s directory (so the rename stays on its
+    filesystem), with a regular file's mode (0666 less the umask, not mkstemp's 0600)."""
+    parent = path.parent if str(path.parent) else Path(".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.", suffix=".part", dir=parent)
+    except (OSError, ValueError) as err:
+        raise OutputError(f"{flag} {path}: cannot write ({_why(err)})") from None
+    umask = os.umask(0)
+    os.umask(umask)
+    os.fchmod(fd, 0o666 & ~umask)
+    os.close(fd)
+    return tmp
+
+
 def _place(tmp: str, path: Path, flag: str, force: bool) -> None:
     if force:
-        if os.path.lexists(path) and not os.path.isfile(path):
+        st = _stat(path, flag)
+        if st is not None and not stat.S_ISREG(st.st_mode):
             raise OutputError(f"{flag} {path}: not a regular file; refusing to replace it")
         os.replace(tmp, path)
         return
@@ -135,5 +191,62 @@ def _place(tmp: str, path: Path, flag: str, force: bool) -> None:
         raise OutputError(f"{flag} {path}: exists (pass --force to overwrite)") from None
 
 
-def _write_all(f: IO[bytes], data: bytes) -> None:
-    f.write(data)
+NEW_FILE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_NONBLOCK \
+    | os.O_CLOEXEC | os.O_NOCTTY
+"""A new regular file only: whatever exists at the name (a file, a FIFO, a device, a
+symlink) is EEXIST, before anything could block or be truncated."""
+
+
+class Stream:
+    """A file written as it goes (a flight log, a campaign table): `file` is open on
+    `writing`, which is `target` itself when nothing was there (so a crash or a live view
+    finds it) and a temporary file beside it when it replaces one (`force`); finish() puts
+    it in place, abandon() drops a replacement and leaves the old file as it was."""
+
+    def __init__(self, target: str | os.PathLike, flag: str, force: bool) -> None:
+        self.target, self.flag = Path(target), flag
+        replacing = _stat(check_output(self.target, flag, force), flag) is not None
+        self.writing = Path(_temp_beside(self.target, flag)) if replacing else self.target
+        self.file: IO[bytes] = self._open(replacing)
+
+    def _open(self, replacing: bool) -> IO[bytes]:
+        try:
+            if replacing:  # _temp_beside made it, exclusively, a moment ago
+                fd = os.open(self.writing, os.O_WRONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+            else:
+                fd = os.open(self.writing, NEW_FILE, 0o666)
+        except FileExistsError:
+            raise OutputError(f"{self.flag} {self.target}: exists "
+                              "(pass --force to overwrite)") from None
+        except (OSError, ValueError) as err:
+            raise OutputError(f"{self.flag} {self.target}: cannot write ({_why(err)})") from None
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "wb")
+
+    def finish(self) -> None:
+        """Close; a replacement renamed onto the target (OSError if that fails: the old
+        file stays)."""
+        self.file.close()
+        if self.writing != self.target:
+            _place(str(self.writing), self.target, self.flag, force=True)
+
+    def abandon(self) -> None:
+        """Close; a replacement removed (the old file stays), a new file kept as written."""
+        try:
+            self.file.close()
+        except OSError:
+            pass  # the data that failed to write is what is being dropped
+        if self.writing != self.target and os.path.lexists(self.writing):
+            os.unlink(self.writing)
+
+
+def safe_name(name: object, what: str, error: type[PerchdError]) -> str:
+    """`name` if it is a plain file-name component (letters, digits, '.', '_', '-', at most
+    64, not starting with '.'), so a file named after it stays in its directory; `error`
+    otherwise. Refused, not sanitised: two names sanitised alike would share files."""
+    ok = isinstance(name, str) and 0 < len(name) <= 64 and not name.startswith(".") \
+        and all(c.isascii() and (c.isalnum() or c in "._-") for c in name)
+    if not ok:
+        raise error(f"{what}: {name!r} is not a plain name (letters, digits, '.', '_', '-'; "
+                    "at most 64, not starting with '.'): it names files")
+    return name

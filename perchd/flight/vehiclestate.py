@@ -12,6 +12,11 @@ the surface: the mean of the first MEMORY_FLIGHTS, then an exponential mean weig
 new flight 1/MEMORY_FLIGHTS. Reading or writing never fails a flight: a missing,
 unreadable or malformed file or field is no memory, an unwritable file or a push beyond
 STAGE2_PRIOR_MAX_MPS2 one warning line.
+
+The file is read by core/safefile.py's bounded regular-file rule and written by its
+write_atomic. Only a state file of perchd's own is ever replaced: anything else at the path
+(a plan, a FIFO, /dev/zero, a file of another schema) is left as it is, refused before a
+flight by check() and warned about after one.
 """
 
 from __future__ import annotations
@@ -23,6 +28,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
+from perchd.core.errors import PerchdError
+from perchd.core.safefile import OutputError, read_regular, write_text
 from perchd.core.types import EndReason
 from perchd.flight.config import STAGE2_PRIOR_MAX_MPS2, FlightConfig
 
@@ -48,14 +55,28 @@ class VehicleStore:
     path: Path
     warn: Callable[[str], None]
 
-    def _read(self) -> dict:
-        try:
-            doc = json.loads(self.path.read_text())
-        except (OSError, ValueError):
+    def check(self) -> None:
+        """OutputError (one line, before anything flies) unless the path is missing or a
+        state file of perchd's own: a flight must never replace what is there."""
+        if os.path.lexists(self.path) and self._load() is None:
+            raise OutputError(f"--state {self.path}: not a perchd vehicle state file "
+                              f"(schema {SCHEMA}); give another path")
+
+    def _load(self) -> dict | None:
+        """The vehicles of the state file; {} when there is none, None when the path holds
+        something else (unreadable, not a regular file, not JSON, another schema)."""
+        if not os.path.lexists(self.path):
             return {}
+        try:
+            doc = json.loads(read_regular(self.path, "", PerchdError))
+        except (PerchdError, ValueError, RecursionError):
+            return None
         ok = isinstance(doc, dict) and doc.get("schema") == SCHEMA \
             and isinstance(doc.get("vehicles"), dict)
-        return doc["vehicles"] if ok else {}
+        return doc["vehicles"] if ok else None
+
+    def _read(self) -> dict:
+        return self._load() or {}
 
     def _record(self, key: str, vehicles: dict | None = None) -> dict:
         rec = (self._read() if vehicles is None else vehicles).get(key)
@@ -121,17 +142,18 @@ class VehicleStore:
 
     def _write(self, vehicles: dict, hover_n: float | None,
                departure_mps2: float | None) -> None:
-        tmp = self.path.with_name(self.path.name + ".tmp")
         try:
+            if self._load() is None:
+                raise OutputError(f"{self.path}: not a perchd vehicle state file; left as it is")
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            tmp.write_text(json.dumps({"schema": SCHEMA, "vehicles": vehicles}, indent=1))
-            os.replace(tmp, self.path)
+            write_text(self.path, json.dumps({"schema": SCHEMA, "vehicles": vehicles},
+                                             indent=1), "--state", force=True)
         except OSError as err:
             learned = [f"hover {hover_n:.4f} N" if hover_n is not None else "",
                        f"stage-2 departure {departure_mps2:+.3f} m/s^2"
                        if departure_mps2 is not None else ""]
-            self.warn(f"warning: learned {' and '.join(x for x in learned if x)} not kept: "
-                      f"{self.path}: {err.strerror or err}")
+            why = err if isinstance(err, PerchdError) else f"{self.path}: {err.strerror or err}"
+            self.warn(f"warning: learned {' and '.join(x for x in learned if x)} not kept: {why}")
 
 
 def _number(x: object) -> bool:

@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import IO, Any
 
 from perchd.core.errors import PerchdError
+from perchd.core.safefile import OutputError, Stream, read_regular
+from perchd.logs.logfields import END, HEADER, LogFormatError, record, shaped
 
 SCHEMA = "perchd.flightlog/1"
 
@@ -105,24 +107,38 @@ def _finite(value: Any) -> Any:
 
 
 class FlightLogWriter:
-    """Open with the header; `row`, `event` as the flight goes; `close(end)` once."""
+    """Open with the header; `row`, `event` as the flight goes; `close(end)` once.
 
-    def __init__(self, path: str | os.PathLike, header: dict[str, Any]) -> None:
+    The file is a safefile.Stream: created exclusively at `path` (or, replacing an existing
+    log with `force`, beside it and renamed at close). A failure to open it or to write the
+    header is an OutputError before anything flies; a write failing later (a full disk)
+    never raises out of the flight loop: writing stops, `lost` says why, and the flight
+    reads it (flight/run.py ends a flight whose record is lost)."""
+
+    def __init__(self, path: str | os.PathLike, header: dict[str, Any],
+                 force: bool = False) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._f: IO[str] | None = open(self.path, "w", encoding="utf-8")
         self.rows = 0
+        self.lost: str | None = None
+        self._stream: Stream | None = Stream(self.path, "--log", force)
         self._write({"schema": SCHEMA, **jsonable(header)})
+        if self.lost is not None:
+            self._stream.abandon()
+            raise OutputError(f"--log {self.lost}")
 
     @property
     def closed(self) -> bool:
-        return self._f is None
+        return self._stream is None
 
     def _write(self, obj: dict[str, Any]) -> None:
-        if self._f is None:
+        if self._stream is None or self.lost is not None:
             return
-        self._f.write(json.dumps(obj, separators=(",", ":")) + "\n")
-        self._f.flush()
+        try:
+            self._stream.file.write(json.dumps(obj, separators=(",", ":")).encode() + b"\n")
+            self._stream.file.flush()
+        except (OSError, ValueError) as err:
+            why = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+            self.lost = f"{self.path}: cannot write ({why})"
 
     def row(self, row: LogRow) -> None:
         # LogRow is flat (numbers, strings, None): skip jsonable's recursion, once per tick.
@@ -133,30 +149,61 @@ class FlightLogWriter:
         self._write({"event": jsonable(ev)})
 
     def close(self, end: dict[str, Any] | None = None) -> None:
-        if self._f is None:
+        """The end line written and the file put in place; a failure sets `lost`."""
+        if self._stream is None:
             return
         if end is not None:
             self._write({"end": jsonable(end)})
-        f, self._f = self._f, None
-        f.close()
+        stream, self._stream = self._stream, None
+        if self.lost is not None:
+            stream.abandon()
+            return
+        try:
+            stream.finish()
+        except OSError as err:
+            stream.abandon()
+            self.lost = f"{self.path}: cannot write ({err.strerror or err})"
+
+
+MAX_LOG_BYTES = 1 << 30
+"""[bytes] largest flight log read (a minute at 500 Hz is ~15 MB)."""
 
 
 def read_log(path: str | os.PathLike) -> FlightLog:
-    """Parse a flight log; a torn last line (killed writer) is ignored."""
-
-    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    """Parse a flight log; a torn last line (killed writer) is ignored. Anything else that
+    is not a perchd flight log (another schema, garbage, a field of the wrong kind) is one
+    PerchdError naming the file and line."""
+    text = read_regular(path, "", PerchdError, MAX_LOG_BYTES)
+    lines = text.splitlines()
     objs = []
     for i, line in enumerate(lines):
         try:
             objs.append(json.loads(line))
-        except ValueError:
-            if i == len(lines) - 1:
+        except (ValueError, RecursionError):
+            if i == len(lines) - 1 and i > 0:
                 break  # torn by a crash mid-write
             raise PerchdError(f"{path}: line {i + 1} is not JSON") from None
-    if not objs or objs[0].get("schema") != SCHEMA:
+    if not objs or not isinstance(objs[0], dict) or objs[0].get("schema") != SCHEMA:
         raise PerchdError(f"{path}: not a perchd flight log (schema {SCHEMA} expected)")
-    header = objs[0]
-    rows = [LogRow(**o["row"]) for o in objs[1:] if "row" in o]
-    events = [LogEvent(**o["event"]) for o in objs[1:] if "event" in o]
-    end = next((o["end"] for o in objs[1:] if "end" in o), None)
+    try:
+        return parse_lines(objs)
+    except LogFormatError as err:
+        raise PerchdError(f"{path}: {err}") from None
+
+
+def parse_lines(objs: list[Any]) -> FlightLog:
+    """The FlightLog of a log's parsed lines (the first its header); LogFormatError naming
+    the first line that is not a row, an event or the end, or holds a field of the wrong kind."""
+    header = shaped(objs[0], HEADER, "line 1 (header)")
+    rows, events, end = [], [], None
+    for i, obj in enumerate(objs[1:], 2):
+        kind = next(iter(obj), None) if isinstance(obj, dict) and len(obj) == 1 else None
+        if kind == "row":
+            rows.append(LogRow(**record(LogRow, obj["row"], f"line {i} (row)")))
+        elif kind == "event":
+            events.append(LogEvent(**record(LogEvent, obj["event"], f"line {i} (event)")))
+        elif kind == "end" and end is None:
+            end = shaped(obj["end"], END, f"line {i} (end)")
+        else:
+            raise LogFormatError(f"line {i}: not a row, an event or the one end")
     return FlightLog(header, rows, events, end, end is not None)

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from perchd.core.errors import ConfigError
 from perchd.core.realtime import RealtimeConfig
-from perchd.core.safefile import read_regular
+from perchd.core.safefile import read_regular, safe_name
 from perchd.flight.config import FlightConfig
 from perchd.service.control_socket import PeerPolicy
 
@@ -63,6 +63,10 @@ class ServiceConfig:
     allowed_users: tuple[int | str, ...] = ()
     allowed_groups: tuple[int | str, ...] = ()
     realtime: RealtimeConfig = RealtimeConfig()
+
+    def __post_init__(self) -> None:
+        # the vehicle names each flight's log file: it must not lead out of log_dir
+        safe_name(self.vehicle, "[service] vehicle", ConfigError)
 
     def peer_policy(self, name: str = "perchd.toml") -> "PeerPolicy":
         """The control socket's PeerPolicy; ConfigError naming an unknown user or group."""
@@ -193,11 +197,11 @@ def _coerce(tp: Any, raw: Any, name: str, where: str, key: str) -> Any:
             raise bad("true or false")
         return raw
     if tp is int:
-        if isinstance(raw, bool) or not isinstance(raw, int):
+        if isinstance(raw, bool) or not isinstance(raw, int) or abs(raw) >= 1 << 63:
             raise bad("an integer")
         return raw
     if tp is float:
-        if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
+        if not _finite(raw):
             raise bad("a number")
         return float(raw)
     if tp is str:
@@ -213,10 +217,22 @@ def _coerce(tp: Any, raw: Any, name: str, where: str, key: str) -> Any:
         return _coerce_ids(raw, bad)
     if origin is tuple:
         if (not isinstance(raw, list) or len(raw) != len(args)
-                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in raw)):
+                or not all(_number(v) for v in raw)):
             raise bad(f"a list of {len(args)} numbers")
         return tuple(float(v) for v in raw)
     raise bad(f"a value of type {tp}")  # a FlightConfig field type this loader lacks
+
+
+def _number(raw: Any) -> bool:
+    """A number a float holds (NaN and inf too: the geometry check names them)."""
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        return False
+    return not isinstance(raw, int) or abs(raw) < 1e308
+
+
+def _finite(raw: Any) -> bool:
+    """A finite number a float holds: not a bool, NaN, inf, or an integer beyond a float."""
+    return _number(raw) and math.isfinite(raw)
 
 
 def _coerce_ids(raw: Any, bad: Any) -> tuple[int | str, ...]:
