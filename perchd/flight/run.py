@@ -64,7 +64,9 @@ class FlightResult:
     loop: timing statistics; failsafe_sent: driver.failsafe was called; hover_n [N]: the
     hover thrust the hold learned (None if it did not settle or learning is off),
     hover_guess_n [N] the guess it started from; stage2_departure_mps2 [m/s^2]: stage 1's
-    bias refit less the approach's (None without one), which the next flights pool."""
+    bias refit less the approach's (None without one), which the next flights pool;
+    log_lost: why the flight log stopped being written (a full disk; None: it was kept),
+    which ends the flight as a software error."""
 
     outcome: EndReason
     detail: str
@@ -81,6 +83,7 @@ class FlightResult:
     hover_n: float | None = None
     hover_guess_n: float | None = None
     stage2_departure_mps2: float | None = None
+    log_lost: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The `perchd fly --json` object (docs/contracts.md §2 keys first)."""
@@ -93,7 +96,8 @@ class FlightResult:
                 "trigger": jsonable(self.trigger), "loop": jsonable(self.loop),
                 "failsafe_sent": self.failsafe_sent, "hover_n": self.hover_n,
                 "hover_guess_n": self.hover_guess_n,
-                "stage2_departure_mps2": self.stage2_departure_mps2}
+                "stage2_departure_mps2": self.stage2_departure_mps2,
+                "log_lost": self.log_lost}
 
 
 def plan_summary(plan: Plan) -> dict[str, Any]:
@@ -180,8 +184,13 @@ class _Run:
         for ev in self.sup.events[self._events:]:
             self.log.event(ev)
         self._events = len(self.sup.events)
-        sp, timing = rep.setpoint, self.loop.last
         st = st if st is not None else _NO_STATE
+        self._log_row(k, t, st, rep)
+        if self.log.lost is not None:  # a flight leaves a record or ends: failsafe next tick
+            self.abort.request(EndReason.SOFTWARE_ERROR)
+
+    def _log_row(self, k: int, t: float, st: State | _NoState, rep: TickReport) -> None:
+        sp, timing = rep.setpoint, self.loop.last
         self.log.row(LogRow(
             t=t, k=k, phase=rep.phase.value, x=st.x, xdot=st.xdot, tau=st.tau,
             tau_ref=rep.refs.tau_ref, x_plan=rep.refs.x, v_plan=rep.refs.v, a_plan=rep.refs.a,
@@ -237,7 +246,7 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
         on_tick: Callable[[TickStatus], None] | None = None,
         world: GroundTruth | None = None,
         header: dict[str, Any] | None = None,
-        planner: Planner | None = None) -> FlightResult:
+        planner: Planner | None = None, log_force: bool = False) -> FlightResult:
     """Fly `plan` (a perchd.tau.Plan) with a connected driver and a started pose source;
     a plan that fails check_flight_plan is refused (PlanError) before anything engages.
 
@@ -247,6 +256,7 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
     log_path None keeps no log (NoLog).
     planner: the trigger's planner (flight/planner_worker.py), owned and closed here; None:
     a worker process when needs_worker(), else the supervisor solves in the tick.
+    log_force: the log may replace an existing file (--force; safefile.Stream).
     """
     check_flight_plan(plan, cfg)  # the last line of defence: the commands checked it already
     abort = abort or FlightAbort()
@@ -256,20 +266,20 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
         below_loop(planner.pid)  # a solve must never hold the loop's CPU (docs/safety.md)
     try:
         return _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world,
-                    header, planner)
+                    header, planner, log_force)
     finally:
         if planner is not None:
             planner.close()  # every way out: the worker never outlives its flight
 
 
 def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, header,
-         planner) -> FlightResult:
+         planner, log_force) -> FlightResult:
     run = _Run(plan, driver, source, clock, cfg, abort, on_tick, planner)  # may refuse
     log = run.log = NoLog() if log_path is None else FlightLogWriter(log_path, {"plan": plan_summary(plan),
                                                "config": jsonable(cfg),
                                                "driver": driver.uri,
                                                "mocap_body": source.body,
-                                               **(header or {})})
+                                               **(header or {})}, log_force)
     try:
         engage(driver, source)
         run.loop.run(run.tick)
@@ -284,7 +294,8 @@ def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, head
     result = _result(run, world, "" if log_path is None else str(log_path))
     log.close({"outcome": result.outcome.name, "detail": result.detail,
                "summary": result.to_json()})
-    return result
+    # the end line or the rename may be what failed
+    return dataclasses.replace(result, log_lost=log.lost) if log.lost else result
 
 
 def engage(driver: Driver, source: PoseSource) -> None:
@@ -301,10 +312,12 @@ def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult
     if world is not None and world.contact is not None:
         true_speed = world.contact.speed
         true_perch = world.contact.t - trig.t if trig else None
+    lost = run.log.lost
+    detail = f"the flight log was lost: {lost}" if lost and not sup.end_detail else sup.end_detail
     return FlightResult(
-        sup.end or EndReason.SOFTWARE_ERROR, sup.end_detail,
+        sup.end or EndReason.SOFTWARE_ERROR, detail,
         contact.speed if contact else None, perch, float(sup.plan.duration),
         float(sup.plan.v_contact), trig, true_speed, true_perch, log_path,
         run.loop.summary(), run.failsafe_sent, sup.hover_learned_n, sup.hover.guess_n,
-        sup.response.departure_mps2)
+        sup.response.departure_mps2, lost)
 
