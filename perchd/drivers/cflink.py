@@ -4,11 +4,12 @@
 The firmware holds the last thrust, levelled, for 2 s after the last setpoint
 (COMMANDER_WDT_TIMEOUT_SHUTDOWN): a dead agent mid-approach would climb and then drop.
 So the link lives in this process, and when the agent goes (EOF on the socket: the kernel
-closes it on SIGKILL; or no message for SILENT_S) it flies a bounded descent itself:
-thrust from the last vertical component down to DESCENT_FRACTION of it, for DESCENT_S, then
-the stop setpoint, then it closes the link and exits; during its first |v| / a (at most
-LEAN_MAX_S) it leans against the velocity the driver last measured (the brake the driver
-keeps renewing, the MAVLink sentinel's: drivers/mavbrake.py), level after that.
+closes it on SIGKILL; or no message for SILENT_S) it flies the vehicle down itself: level
+at once (during its first |v| / a, at most LEAN_MAX_S, leaning against the velocity the
+driver last measured: the brake the driver keeps renewing, drivers/mavlink/brake.py), at a
+sink speed held on the flight's own mocap, opened here at the death (drivers/cfsink.py
+ClosedSink), or open loop about the hover thrust while the mocap is not there (OpenSink);
+then the stop setpoint, then it closes the link and exits.
 
 Wire (a SOCK_SEQPACKET pair, one message per packet, little-endian):
   driver -> keeper: b"S" <fffHH> roll deg, pitch deg, yaw rate deg/s (cflib conventions),
@@ -17,14 +18,17 @@ Wire (a SOCK_SEQPACKET pair, one message per packet, little-endian):
                     b"P" <7f> extpose (x, y, z, qx, qy, qz, qw); b"B" <ffffd> the brake:
                     roll deg, pitch deg (cflib conventions), duration s, the thrust
                     units' factor that holds height at that tilt, time.monotonic() when
-                    measured; b"A" alive; b"X" stop;
+                    measured; b"Z" <fd> height m, time.monotonic() when measured;
+                    b"A" alive; b"X" stop;
                     b"U" leave the stop (the next flight's take-over; ignored once the
                     agent is gone); b"C" close (the keeper exits).
   keeper -> driver: b"R" link open; b"E" message: cflib could not open it; b"H" <dd> seconds since the vehicle was last heard
                     (-1: never), echo round trip median (-1: none), then a UTF-8 link error
                     ("" while the link is fine).
 
-Run as `python -m perchd.drivers.cflink FD LINK_URI REPEAT_S` by drivers/crazyflie.py.
+Run as `python -m perchd.service.cflink_main FD LINK_URI REPEAT_S HOVER_UNITS MASS_KG
+[MOCAP_URI]` by drivers/crazyflie.py: that entry point opens the mocap (no driver imports
+one) and hands it in (`main`'s `open_mocap`).
 """
 
 from __future__ import annotations
@@ -37,16 +41,22 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from perchd.drivers.mavbrake import WILL_MAX_AGE_S
-from perchd.drivers.thrust import CF_UNITS_MAX
+from perchd.core.ports import PoseSource
+from perchd.drivers import cfsink
+from perchd.drivers.cfsink import ClosedSink, Hover, OpenSink, hover_mean
+from perchd.drivers.childproc import say
+from perchd.drivers.mavlink.brake import WILL_MAX_AGE_S
+from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 
 CMD = struct.Struct("<fffHH")
 POSE = struct.Struct("<7f")
 BRAKE = struct.Struct("<ffffd")
 STATUS = struct.Struct("<dd")
+HEIGHT = struct.Struct("<fd")
 
 PING_S = 0.02
 """[s] period of CRTP link-echo pings and of status reports to the driver."""
@@ -54,14 +64,14 @@ KEEPALIVE_S = 0.1
 """[s] no setpoint this long: the hold thrust goes out levelled (the firmware levels at 0.5 s)."""
 SILENT_S = 0.25
 """[s] no message from the driver (it sends one every PING_S) = the agent is hung: descend."""
-RAMP_S = 0.2
-"""[s] from the hold thrust to the descent thrust."""
-DESCENT_S = 1.0
-"""[s] of descent before the stop: at 0.85 g net down, ~0.7 m lower (docs/safety.md)."""
-DESCENT_FRACTION = 0.85
-"""descent thrust as a fraction of the hold thrust (units)."""
 LEAN_MAX_S = 0.5
-"""[s] the longest brake, half the descent: at the 1.5 m/s of a perch's approach, all of it."""
+"""[s] the longest brake: at the 1.5 m/s of a perch's approach, all of it."""
+HEIGHT_MAX_AGE_S = 1.0
+"""[s] an older height from the driver is not known (the open loop's bound without one)."""
+DESCENT_MAX_S = cfsink.DESCENT_MAX_S
+"""[s] the keeper's longest descent: then the stop."""
+HOVER_BAND = (0.5, 1.5)
+"""hold thrusts outside this share of the model's weight (spool-up, a kick) teach no hover."""
 FAILSAFE_REPEAT_S = 3.0
 """[s] the stop is repeated with every ping this long: one sent into a dead link is lost."""
 PING_TAG = b"pd"
@@ -72,7 +82,7 @@ ECHO_HEADER = 0xFC
 
 @dataclass(frozen=True)
 class Lean:
-    """The brake (drivers/mavbrake.py): roll_deg, pitch_deg in cflib's conventions, held
+    """The brake (drivers/mavlink/brake.py): roll_deg, pitch_deg in cflib's conventions, held
     for duration_s [s], level thrust units times thrust_factor (the driver's thrust model:
     the units are not linear in force); measured (time.monotonic()) at t_s [s]."""
 
@@ -92,25 +102,36 @@ class Lean:
 NO_LEAN = Lean(0.0, 0.0, 0.0, 1.0, 0.0)
 
 
-@dataclass(frozen=True)
 class Descent:
-    """The keeper's own flight after the agent is gone: its thrust ramps down from the
-    death on, for DESCENT_S in all, leaning first (the brake, its tilt compensated, for at
-    most LEAN_MAX_S), then level."""
+    """The keeper's own flight after the agent is gone, from t0_s (time.monotonic()): the
+    brake's lean first (its tilt compensated, for at most LEAN_MAX_S), level after; the
+    level thrust from the closed loop while it has the mocap, else from the open loop."""
 
-    t0: float  # [s] time.monotonic() when the agent was found gone
-    hold_units: int  # level thrust that held height at the last command
-    lean: Lean = NO_LEAN
+    def __init__(self, t0_s: float, open_sink: OpenSink, closed: ClosedSink | None,
+                 lean: Lean = NO_LEAN) -> None:
+        self.t0_s = t0_s
+        self.open = open_sink
+        self.closed = closed
+        self.lean = lean
+        self.units = open_sink.hold_units  # the last level thrust flown
 
     def command(self, now: float) -> tuple[float, float, float, int] | None:
         """send_setpoint arguments at `now`, None once the descent is over (send the stop)."""
-        t = now - self.t0
-        if t >= DESCENT_S or self.hold_units <= 0:
+        level = self._level(now)
+        if level is None:
             return None
-        low = DESCENT_FRACTION * self.hold_units
-        level = int(self.hold_units - (self.hold_units - low) * min(1.0, t / RAMP_S))
-        leaning = t < min(self.lean.duration_s, LEAN_MAX_S)
+        self.units = level
+        leaning = now - self.t0_s < min(self.lean.duration_s, LEAN_MAX_S)
         return self.lean.command(level) if leaning else (0.0, 0.0, 0.0, level)
+
+    def _level(self, now: float) -> int | None:
+        closed = self.closed
+        if closed is not None and closed.flying(now):
+            return closed.level_units(now)
+        if closed is not None and closed.vz_mps is not None:  # the mocap is lost
+            say("cflink", "the mocap is lost: the open-loop sink goes on")
+            self.open, self.closed = closed.open_sink(now, self.units), None
+        return self.open.level_units(now)
 
 
 class _LinkPort:
@@ -128,11 +149,22 @@ class _LinkPort:
         """Incoming packets are drained by the keeper itself; nothing dispatches them."""
 
 
+MocapOpener = Callable[[str], PoseSource]
+"""Opens a mocap URI, not started (the mocap is no driver's to import)."""
+
+
 class Keeper:
-    def __init__(self, sock: socket.socket, link_uri: str, repeat_s: float) -> None:
+    def __init__(self, sock: socket.socket, link_uri: str, repeat_s: float,
+                 model: CrazyflieThrust | None = None, mocap: PoseSource | None = None) -> None:
         self.sock = sock
         self.link_uri = link_uri
         self.repeat_s = repeat_s
+        self.model = model or CrazyflieThrust()
+        self.hover_n = self.model.newtons(self.model.hover_units)  # the hold thrusts' mean
+        self.hold_at: float | None = None  # time.monotonic() of the last hold thrust
+        self.height: tuple[float, float] | None = None  # [m], time.monotonic() measured
+        self.mocap = mocap  # the flight's mocap, opened, started at the death
+        self.mocap_seq = -1
         self.error = ""
         self.heard: float | None = None  # time.monotonic() the vehicle was last heard
         self.rtts: deque[float] = deque(maxlen=RTT_SAMPLES)
@@ -207,9 +239,12 @@ class Keeper:
         if kind == b"S" and self.stop_until is None and self.descent is None:
             roll, pitch, yawrate, thrust, hold = CMD.unpack(body)
             self.hold_units = hold
+            self.learn_hover(hold)
             self.send_cmd((roll, pitch, yawrate, thrust))
         elif kind == b"B" and len(body) == BRAKE.size:
             self.lean = Lean(*BRAKE.unpack(body))
+        elif kind == b"Z" and len(body) == HEIGHT.size:
+            self.height = HEIGHT.unpack(body)
         elif kind == b"P" and self.stop_until is None:
             vals = POSE.unpack(body)
             self.loc.send_extpose(list(vals[:3]), list(vals[3:]))
@@ -222,13 +257,52 @@ class Keeper:
                 self.stop()
             self.running = False
 
+    def learn_hover(self, hold_units: int) -> None:
+        """The hold thrusts' mean, in newtons: the hover the agent's own hold learned."""
+        now, newtons = time.monotonic(), self.model.newtons(hold_units)
+        weight = self.model.newtons(self.model.hover_units)
+        if HOVER_BAND[0] * weight <= newtons <= HOVER_BAND[1] * weight:
+            dt = 0.0 if self.hold_at is None else now - self.hold_at
+            self.hover_n = hover_mean(self.hover_n, newtons, dt)
+            self.hold_at = now
+
     def agent_lost(self, now: float) -> None:
         """EOF or silence: brake and descend unless already stopped (then only the repeats
         remain). A brake older than WILL_MAX_AGE_S is not flown: the mocap had stopped."""
         self.agent_gone = True
         if self.stop_until is None and self.descent is None:
             fresh = time.monotonic() - self.lean.t_s <= WILL_MAX_AGE_S
-            self.descent = Descent(now, self.hold_units, self.lean if fresh else NO_LEAN)
+            hover = Hover(self.model, self.hover_n)
+            opened = self.start_mocap()
+            self.descent = Descent(
+                now, OpenSink(now, self.hold_units, hover, self.known_height(now)),
+                ClosedSink(now, hover) if opened else None, self.lean if fresh else NO_LEAN)
+
+    def known_height(self, now: float) -> float | None:
+        """[m] above the floor, from the driver's last height if recent."""
+        if self.height is None or now - self.height[1] > HEIGHT_MAX_AGE_S:
+            return None
+        return self.height[0] - cfsink.FLOOR_Z_M
+
+    def start_mocap(self) -> bool:
+        """The flight's mocap, its sockets opened now (never beside the agent's own)."""
+        if self.mocap is None:
+            return False
+        try:
+            self.mocap.start()
+        except Exception as err:  # noqa: BLE001 - the open loop flies without it
+            say("cflink", f"the mocap cannot be opened: {err}; open-loop sink")
+            self.mocap = None
+            return False
+        return True
+
+    def feed_mocap(self, now: float) -> None:
+        """The newest pose, if new, to the closed loop."""
+        closed = self.descent.closed if self.descent is not None else None
+        pose = self.mocap.latest() if self.mocap is not None and closed is not None else None
+        if pose is not None and pose.seq != self.mocap_seq:
+            self.mocap_seq = pose.seq
+            closed.observe(pose, now)
 
     def tick(self, now: float) -> None:
         """Every PING_S: ping, report, and keep the vehicle commanded."""
@@ -243,8 +317,10 @@ class Keeper:
             elif self.agent_gone:
                 self.running = False  # stopped, repeated, nobody left to tell
         elif self.descent is not None:
+            self.feed_mocap(now)
             cmd = self.descent.command(now)
             if cmd is None:
+                self.end_descent()
                 self.stop()
                 self.running = False  # the stop went twice; the agent is gone
             else:
@@ -252,6 +328,14 @@ class Keeper:
         elif now - self.last_sent >= KEEPALIVE_S:
             # levelled at the hold thrust: the tilted thrust, levelled, would climb
             self.send_cmd((0.0, 0.0, 0.0, self.hold_units))
+
+    def end_descent(self) -> None:
+        closed = self.descent.closed if self.descent is not None else None
+        how = "open loop" if closed is None else "touchdown" if closed.landed else "its bound"
+        say("cflink", f"descent over ({how}): motors stopped")
+        if self.mocap is not None:
+            self.mocap.close()
+            self.mocap = None
 
     def read_driver(self, timeout: float) -> None:
         if self.agent_gone:
@@ -284,13 +368,27 @@ class Keeper:
                 next_tick = max(next_tick + PING_S, now)
 
 
-def main(argv: list[str]) -> int:
+def open_mocap_or_none(uri: str | None, open_mocap: MocapOpener | None) -> PoseSource | None:
+    """The flight's mocap, opened (imports done, no sockets yet), or None: the open loop."""
+    if not uri or open_mocap is None:
+        return None
+    try:
+        return open_mocap(uri)
+    except Exception as err:  # noqa: BLE001 - the keeper's link matters more
+        say("cflink", f"the mocap {uri} cannot be opened: {err}")
+        return None
+
+
+def main(argv: list[str], open_mocap: MocapOpener | None = None) -> int:
+    """FD LINK_URI REPEAT_S [HOVER_UNITS MASS_KG [MOCAP_URI]]."""
     # the agent's Ctrl-C, a service stop, systemd's watchdog signal and a terminal's hang-up
     # reach the whole group: the keeper outlives them and ends when the agent's socket closes
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     sock = socket.socket(fileno=int(argv[0]))
-    keeper = Keeper(sock, argv[1], float(argv[2]))
+    model = CrazyflieThrust(float(argv[3]), float(argv[4])) if len(argv) > 4 else None
+    mocap = open_mocap_or_none(argv[5] if len(argv) > 5 else None, open_mocap)
+    keeper = Keeper(sock, argv[1], float(argv[2]), model, mocap)
     try:
         keeper.open()
     except Exception as err:  # cflib raises bare Exceptions (no dongle, link open)
@@ -300,6 +398,8 @@ def main(argv: list[str]) -> int:
         keeper.run()
     finally:
         keeper.running = False
+        if keeper.mocap is not None:
+            keeper.mocap.close()
         # cflib's udp close waits up to 1 s for its receive thread; the stop is out already
         closer = threading.Thread(target=keeper.link.close, daemon=True)
         closer.start()

@@ -2,8 +2,9 @@
 link (software-in-the-loop, and the tests' CRTP responder).
 
 The link lives in a child process, the keeper (drivers/cflink.py): when this process dies
-it flies the brake this driver keeps renewing from the mocap, a bounded descent, and stops
-the motors (docs/safety.md, "When the agent dies").
+it flies the brake this driver keeps renewing from the mocap, a descent at a held sink speed
+on the flight's mocap (bind_mocap), and stops the motors (docs/safety.md, "When the agent
+dies").
 It speaks the low-level CRTP link (cflib.crtp.get_link_driver) with cflib's own
 Commander and Localization encoders, not the full `Crazyflie` object: that one downloads the
 log/param TOCs and memories on connect, which the attitude stream does not need.
@@ -39,13 +40,6 @@ import threading
 import time
 from dataclasses import dataclass
 
-from perchd.drivers import cflink, childproc
-from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
-from perchd.drivers.mavbrake import WillSchedule, lean_for
-from perchd.drivers.targetlock import TargetLock, connect_holding
-from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
-from perchd.drivers.ticker import Ticker
-
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.ned import ned_vec
@@ -54,12 +48,20 @@ from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, without_query
 from perchd.core.vehicle import CRAZYFLIE_HOVER_UNITS, CRAZYFLIE_MASS_KG
+from perchd.drivers import cflink, childproc
+from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
+from perchd.drivers.mavlink.brake import WillSchedule, lean_for
+from perchd.drivers.targetlock import TargetLock, connect_holding
+from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
+from perchd.drivers.ticker import Ticker
 
 PING_S = cflink.PING_S
 """[s] period of CRTP link-echo pings (the keeper's) and of the driver's alive messages."""
 FAILSAFE_REPEAT_S = cflink.FAILSAFE_REPEAT_S
 """[s] after failsafe() the keeper repeats the stop with every ping this long (or until
 close()): one sent into a dead link is lost. Past it the firmware has cut the motors."""
+KEEPER_MODULE = "perchd.service.cflink_main"
+"""The keeper's entry point: it opens the flight's mocap, which no driver imports."""
 KEEPER_START_S = 15.0
 """[s] for the keeper process to start and open the link (python + cflib imports, loaded
 machine); the connect's wait= for the echo counts from then."""
@@ -79,7 +81,7 @@ class KeeperStatus:
     error: str  # cflib's link error, "" while fine
 
 
-def open_crazyflie(uri: Uri, runtime: Runtime) -> "CrazyflieDriver":
+def open_crazyflie(uri: Uri, runtime: Runtime) -> CrazyflieDriver:
     """Factory for `radio://` and `udp://` (not connected yet)."""
     require("cflib", "crazyflie")
     if uri.scheme == "radio":
@@ -147,6 +149,7 @@ class CrazyflieDriver(DriverBase):
         self._will = WillSchedule()  # the keeper's brake, renewed from the mocap
         self._hold_n = 0.0  # [N] the last setpoint's vertical thrust (the keeper's hold)
         self._lock = TargetLock(uri)  # one agent per vehicle on this machine
+        self.mocap_uri: str | None = None  # the flight's mocap, the keeper's descent
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
@@ -221,6 +224,10 @@ class CrazyflieDriver(DriverBase):
         except ValueError as err:
             raise ConfigError(f"{self.uri}: vehicle.mass_kg: {err}") from None
 
+    def bind_mocap(self, uri: str) -> None:
+        """The flight's mocap: the keeper opens it itself to land a vehicle whose agent died."""
+        self.mocap_uri = uri
+
     def thrust_ceiling_n(self) -> float:
         """[N] what CF_UNITS_MAX (the firmware's RPYT clamp) gives in this model."""
         return self.model.newtons(CF_UNITS_MAX)
@@ -248,12 +255,13 @@ class CrazyflieDriver(DriverBase):
 
     def _renew_will(self, pose: Pose) -> None:
         """Every WILL_PERIOD_S, the brake the keeper is to fly should this process die:
-        against the mocap's velocity (drivers/mavbrake.py; world X taken as north, so FRD
+        against the mocap's velocity (drivers/mavlink/brake.py; world X taken as north, so FRD
         roll is the world's and its pitch the world's negated: cflib's degrees)."""
         now = time.monotonic()
         v = self._will.due(pose, now)
         if v is None or self._stopped:
             return
+        self._send(b"Z" + cflink.HEIGHT.pack(pose.p[2], now))
         roll, pitch, duration = lean_for(ned_vec(v, 0.0), -self._yaw)
         level = self.model.units(self._hold_n)
         factor = self.model.units(self._hold_n / (math.cos(roll) * math.cos(pitch))) / level \
@@ -263,13 +271,15 @@ class CrazyflieDriver(DriverBase):
 
     # -- the keeper ------------------------------------------------------------------
     def _start_keeper(self) -> None:
-        """`python -m perchd.drivers.cflink FD URI REPEAT_S` on one end of a socket pair; this very
-        perchd first on its path, so the keeper runs the same code."""
+        """`python -m KEEPER_MODULE FD URI REPEAT_S HOVER_UNITS MASS_KG [MOCAP_URI]` on one
+        end of a socket pair; this very perchd first on its path, so the keeper runs the
+        same code."""
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        args = [str(theirs.fileno()), self.link_uri, repr(FAILSAFE_REPEAT_S),
+                repr(self.model.hover_units), repr(self.model.mass_kg)]
         try:
-            self._keeper = childproc.start(
-                "perchd.drivers.cflink", [str(theirs.fileno()), self.link_uri,
-                                          repr(FAILSAFE_REPEAT_S)], (theirs.fileno(),))
+            self._keeper = childproc.start(KEEPER_MODULE, args + [self.mocap_uri or ""],
+                                           (theirs.fileno(),))
         finally:
             theirs.close()
         ours.settimeout(0.05)
@@ -342,5 +352,5 @@ class CrazyflieDriver(DriverBase):
             sock.close()
         keeper, self._keeper = self._keeper, None
         if keeper is not None:  # reaped in the background: it exits after its stop
-            childproc.reap_later(keeper, cflink.DESCENT_S + 2.0, "crazyflie-reap")
+            childproc.reap_later(keeper, cflink.DESCENT_MAX_S + 2.0, "crazyflie-reap")
         self._lock.release()

@@ -1,7 +1,9 @@
-"""Opt-in (PERCHD_CF2): SIGKILL of `perchd fly` 0.5 s into stage 1 against the Crazyflie
-firmware in the loop. The link keeper (drivers/cflink.py) must fly the vehicle down and
-stop its motors: from the harness's truth track, the vehicle rises no more than 0.1 m
-after the kill and its motors stop within 2.5 s (docs/safety.md, "When the agent dies").
+"""Opt-in (PERCHD_CF2): SIGKILL of `perchd fly` in each phase of a perch (take-off, hold,
+approach, stage 2) against the Crazyflie firmware in the loop. The link keeper
+(drivers/cflink.py) must bring the vehicle down at a sink it holds on the mocap and stop its
+motors: from the harness's truth track, the vehicle rises no more than RISE_MAX_M after the
+kill, touches the floor sinking at no more than TOUCHDOWN_MAX_MPS, and its motors stop
+(docs/safety.md, "When the agent dies").
 
 Figures are printed (pytest -s) and, with PERCHD_FW_REPORT=PATH, appended there."""
 
@@ -19,63 +21,100 @@ import pytest
 from cf2rig import CF2, needs_cf2
 from fwharness import ENV, PLAN, start_harness, stop_harness
 
+from perchd.drivers import cflink
+
 pytestmark = [pytest.mark.firmware, needs_cf2]
 pytest.importorskip("cflib")
 
-INTO_STAGE1_S = 0.5
 RISE_MAX_M = 0.1
-MOTORS_STOP_S = 2.5
+TOUCHDOWN_MAX_MPS = 1.0
+FLOOR_M = 0.002
+"""[m] the harness's floor is z = 0: at or below this the vehicle is down."""
+MOTORS_STOP_S = cflink.DESCENT_MAX_S + 1.0
+KILLS = {  # phase: (the first row of the phase that kills, seconds after it)
+    "takeoff": (lambda row: row.get("phase") == "takeoff" and (row.get("z") or 0) >= 0.8, 0.0),
+    "hold": (lambda row: row.get("phase") == "hold", 0.5),
+    "approach": (lambda row: row.get("phase") == "approach", 0.3),
+    "stage2": (lambda row: row.get("phase") == "stage2", 0.0),
+}
 
 
-def stage1_row_seen(log: Path) -> bool:
-    """The flight log is flushed per row: the first stage-1 row is the stage's start."""
+def rows(log: Path) -> list[dict]:
+    """The flight log's rows so far (it is flushed per row; a torn last line is skipped)."""
     try:
-        return any('"phase": "stage1"' in ln or '"phase":"stage1"' in ln
-                   for ln in log.read_text().splitlines())
+        lines = log.read_text().splitlines()
     except FileNotFoundError:
-        return False
+        return []
+    out = []
+    for ln in lines:
+        try:
+            out.append(json.loads(ln).get("row") or {})
+        except json.JSONDecodeError:
+            pass
+    return out
+
+
+def touchdown(after: list[tuple[float, float, bool]], t_kill: float) -> dict:
+    """The first floor sample after the kill and the sink over the two samples before it."""
+    i = next((k for k, (_, z, _) in enumerate(after) if z <= FLOOR_M), None)
+    if i is None or i < 2:
+        return {"touchdown_s": None, "touchdown_mps": None}
+    (t1, z1, _), (t2, z2, _) = after[i - 2], after[i - 1]
+    return {"touchdown_s": round(after[i][0] - t_kill, 3),
+            "touchdown_mps": round((z1 - z2) / (t2 - t1), 3)}
 
 
 def after_kill(track: list[list], t_kill: float) -> dict:
-    """Rise and motor stop from the truth track ([monotonic s, z m, motors on])."""
+    """Rise, touchdown and motor stop from the truth track ([monotonic s, z m, motors on])."""
     before = [z for t, z, _ in track if t <= t_kill]
     after = [(t, z, on) for t, z, on in track if t > t_kill]
     on_after = [t for t, _, on in after if on]
-    return {"z_at_kill": before[-1], "rise_m": max(z for _, z, _ in after) - before[-1],
-            "motors_stop_s": (on_after[-1] - t_kill + 0.01) if on_after else 0.0,
-            "z_at_stop": next((z for t, z, on in after if on_after and t > on_after[-1]), None),
-            "track_after_s": after[-1][0] - t_kill}
+    return {"z_at_kill": before[-1], "rise_m": round(max(z for _, z, _ in after) - before[-1], 4),
+            **touchdown(after, t_kill),
+            "motors_stop_s": round(on_after[-1] - t_kill + 0.01, 3) if on_after else 0.0,
+            "track_after_s": round(after[-1][0] - t_kill, 3)}
 
 
-def test_sigkill_in_stage1_gets_a_descent_and_a_stop(tmp_path):
+def fly_and_kill(tmp_path: Path, phase: str) -> dict | None:
+    """A perch, its agent SIGKILLed where KILLS says; the figures, None if never reached."""
     proc, mocap, driver = start_harness("--cf2", CF2, "--link", "udp://127.0.0.1:0",
                                         "--fw-log", str(tmp_path / "cf2.log"), env=ENV)
-    log = tmp_path / "flight.jsonl"
+    log, (due, delay) = tmp_path / "flight.jsonl", KILLS[phase]
     t_kill = None
     try:
         fly = subprocess.Popen(
             [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
              mocap, "--log", str(log), "--json"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+            stdout=subprocess.DEVNULL, stderr=(tmp_path / "fly.err").open("w"), env=ENV)
         deadline = time.monotonic() + 60
-        while fly.poll() is None and time.monotonic() < deadline and not stage1_row_seen(log):
+        while fly.poll() is None and time.monotonic() < deadline:
+            if any(due(r) for r in rows(log)):
+                time.sleep(delay)
+                fly.send_signal(signal.SIGKILL)
+                t_kill = time.monotonic()
+                break
             time.sleep(0.02)
-        if fly.poll() is None and stage1_row_seen(log):
-            time.sleep(INTO_STAGE1_S)
-            fly.send_signal(signal.SIGKILL)
-            t_kill = time.monotonic()
         fly.wait(10)
-        out, err = fly.communicate()
-        time.sleep(MOTORS_STOP_S + 1.0)  # the truth track after the stop
+        time.sleep(MOTORS_STOP_S + 1.0)  # the truth track through the stop
     finally:
         sim = stop_harness(proc, 15.0)
     if t_kill is None:
-        pytest.skip(f"the flight ended before stage 1 (noted, not chased): {out}{err[-500:]}")
-    figures = {"kill_after_stage1_s": INTO_STAGE1_S, **after_kill(sim["track"], t_kill),
-               "launches": [r["outcome"] for r in sim["launches"]]}
+        return None
+    return {"phase": phase, **after_kill(sim["track"], t_kill),
+            "launches": [r["outcome"] for r in sim["launches"]]}
+
+
+@pytest.mark.parametrize("phase", list(KILLS))
+def test_sigkill_gets_a_held_sink_a_soft_touchdown_and_a_stop(tmp_path, phase):
+    figures = fly_and_kill(tmp_path, phase)
+    if figures is None:
+        err = (tmp_path / "fly.err").read_text()[-400:]
+        pytest.skip(f"the flight ended before the {phase} kill (noted, not chased): {err}")
     print("\n" + json.dumps(figures))
     if os.environ.get("PERCHD_FW_REPORT"):
         with open(os.environ["PERCHD_FW_REPORT"], "a") as f:
             f.write(json.dumps({"test": "sigkill", **figures}) + "\n")
     assert figures["rise_m"] <= RISE_MAX_M
+    assert figures["touchdown_mps"] is not None  # came down to the floor
+    assert figures["touchdown_mps"] <= TOUCHDOWN_MAX_MPS
     assert figures["motors_stop_s"] <= MOTORS_STOP_S

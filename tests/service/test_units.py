@@ -120,7 +120,7 @@ def test_the_failsafe_runs_after_the_service_with_its_config_and_time_to_land(na
     config = s["ExecStart"].split("--config ")[1].split()[0]
     assert s["ExecStopPost"] == f"/opt/perchd/bin/perchd failsafe --config {config}"
     assert s["KillMode"] == "control-group"  # mixed would SIGKILL the link keeper at once
-    keeper_s = cflink.RAMP_S + cflink.DESCENT_S + cflink.PING_S
+    keeper_s = cflink.DESCENT_MAX_S + cflink.PING_S
     assert float(s["TimeoutStopSec"]) > keeper_s + failsafe_command.DEFAULT_TIMEOUT_S
     assert s["RuntimeDirectoryPreserve"] == "yes"  # the .socket's file lives there
 
