@@ -6,9 +6,18 @@ t [s] as a scalar or a numpy array and return the same shape.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+Times = float | FloatArray
+"""A time [s] or an array of times; each profile returns a value of the same shape."""
+Coefficients = Sequence[float] | FloatArray
+"""Polynomial coefficients (k_0..k_n or k_1..k_n) as a tuple, list or array."""
 
 
 @dataclass(frozen=True)
@@ -23,20 +32,36 @@ class ConstantTauDot:
     def tau0(self) -> float:
         return self.x0 / self.v0
 
-    def _base(self, t):
+    def _base(self, t: Times) -> Times:
         # 1 + c t / tau_0 reaches 0 at contact; clip the round-off just past it.
         return np.maximum(1.0 + self.c * np.asarray(t, float) / self.tau0, 0.0)
 
-    def tau(self, t):
+    @overload
+    def tau(self, t: float) -> float: ...
+    @overload
+    def tau(self, t: FloatArray) -> FloatArray: ...
+    def tau(self, t: Times) -> Times:
         return self.c * np.asarray(t, float) + self.tau0
 
-    def x(self, t):
+    @overload
+    def x(self, t: float) -> float: ...
+    @overload
+    def x(self, t: FloatArray) -> FloatArray: ...
+    def x(self, t: Times) -> Times:
         return self.x0 * self._base(t) ** (1.0 / self.c)
 
-    def v(self, t):
+    @overload
+    def v(self, t: float) -> float: ...
+    @overload
+    def v(self, t: FloatArray) -> FloatArray: ...
+    def v(self, t: Times) -> Times:
         return self.v0 * self._base(t) ** (1.0 / self.c - 1.0)
 
-    def a(self, t):
+    @overload
+    def a(self, t: float) -> float: ...
+    @overload
+    def a(self, t: FloatArray) -> FloatArray: ...
+    def a(self, t: Times) -> Times:
         return self.v0 ** 2 / self.x0 * (1.0 - self.c) * self._base(t) ** (1.0 / self.c - 2.0)
 
 
@@ -50,27 +75,46 @@ class InversePolynomial:
     x0: float
     k: tuple[float, ...]
 
-    def _p(self, t):
-        return np.polynomial.polynomial.polyval(np.asarray(t, float), self.k)
+    def _p(self, t: Times) -> Times:
+        p: Times = np.polynomial.polynomial.polyval(np.asarray(t, float), self.k)
+        return p
 
-    def _dp(self, t):
-        return np.polynomial.polynomial.polyval(np.asarray(t, float),
-                                                np.polynomial.polynomial.polyder(self.k))
+    def _dp(self, t: Times) -> Times:
+        dp: Times = np.polynomial.polynomial.polyval(np.asarray(t, float),
+                                                     np.polynomial.polynomial.polyder(self.k))
+        return dp
 
-    def _P(self, t):
-        return np.polynomial.polynomial.polyval(np.asarray(t, float),
-                                                np.polynomial.polynomial.polyint(self.k))
+    def _P(self, t: Times) -> Times:
+        big_p: Times = np.polynomial.polynomial.polyval(np.asarray(t, float),
+                                                        np.polynomial.polynomial.polyint(self.k))
+        return big_p
 
-    def tau(self, t):
+    @overload
+    def tau(self, t: float) -> float: ...
+    @overload
+    def tau(self, t: FloatArray) -> FloatArray: ...
+    def tau(self, t: Times) -> Times:
         return 1.0 / self._p(t)
 
-    def x(self, t):
+    @overload
+    def x(self, t: float) -> float: ...
+    @overload
+    def x(self, t: FloatArray) -> FloatArray: ...
+    def x(self, t: Times) -> Times:
         return self.x0 * np.exp(self._P(t))
 
-    def v(self, t):
+    @overload
+    def v(self, t: float) -> float: ...
+    @overload
+    def v(self, t: FloatArray) -> FloatArray: ...
+    def v(self, t: Times) -> Times:
         return self.x(t) * self._p(t)
 
-    def a(self, t):
+    @overload
+    def a(self, t: float) -> float: ...
+    @overload
+    def a(self, t: FloatArray) -> FloatArray: ...
+    def a(self, t: Times) -> Times:
         p = self._p(t)
         return self.x(t) * (self._dp(t) + p * p)
 
