@@ -26,5 +26,5 @@ class Limits:
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise PlanError(f"limits.{name} must be a positive number, got {value!r}")
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, object]:
         return {"v_contact": list(self.v_contact), "v_max": self.v_max, "a_max": self.a_max}
