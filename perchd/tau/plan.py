@@ -8,17 +8,22 @@ Times t are seconds since trigger; every method accepts scalars or numpy arrays.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any, overload
 
 import numpy as np
 
 from perchd.core.errors import PlanError
 from perchd.tau.limits import Limits
-from perchd.tau.profiles import ConstantTauDot, InversePolynomial
+from perchd.tau.profiles import Coefficients, ConstantTauDot, FloatArray, InversePolynomial, Times
 
 STRATEGIES = ("ctds", "ctdts", "ipts")
 PEAK_SAMPLES = 4001  # coarse scan of stage 1, then refined around the peak
+
+RobustBox = tuple[tuple[float, float], tuple[float, float]]
+"""((x0_lo, x0_hi), (v0_lo, v0_hi)) [m, m/s]: the trigger states a robust plan holds."""
 
 
 @dataclass(frozen=True)
@@ -49,8 +54,8 @@ class Plan:
     v_contact: float
     limits: Limits
     peaks: Peaks
-    robust: tuple[tuple[float, float], tuple[float, float]] | None = None
-    extra: dict = field(default_factory=dict, compare=False, hash=False)
+    robust: RobustBox | None = None
+    extra: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     @cached_property
     def stage1(self) -> ConstantTauDot | InversePolynomial:
@@ -60,38 +65,60 @@ class Plan:
     def order(self) -> int | None:
         return None if self.k is None else len(self.k) - 1
 
-    def stage(self, t) -> int:
+    def stage(self, t: float) -> int:
         return 1 if float(t) < self.t_switch else 2
 
-    def _split(self, t, first, second):
-        t = np.asarray(t, float)
-        one = t < self.t_switch
-        out = np.where(one, first(np.where(one, t, 0.0)), second(t))
+    def _split(self, t: Times, first: Callable[[FloatArray], FloatArray],
+               second: Callable[[FloatArray], FloatArray]) -> Times:
+        ts = np.asarray(t, float)
+        one = ts < self.t_switch
+        out = np.where(one, first(np.where(one, ts, 0.0)), second(ts))
         return out if out.ndim else float(out)
 
-    def tau_ref(self, t):
-        return self._split(t, self.stage1.tau, lambda s: self.tau_s + (s - self.t_switch))
+    @overload
+    def tau_ref(self, t: float) -> float: ...
+    @overload
+    def tau_ref(self, t: FloatArray) -> FloatArray: ...
+    def tau_ref(self, t: Times) -> Times:
+        # stage 2 starts at the switch; ctds switches at contact, where tau is 0
+        tau_s = 0.0 if self.tau_s is None else self.tau_s
+        return self._split(t, self.stage1.tau, lambda s: tau_s + (s - self.t_switch))
 
-    def x(self, t):
+    @overload
+    def x(self, t: float) -> float: ...
+    @overload
+    def x(self, t: FloatArray) -> FloatArray: ...
+    def x(self, t: Times) -> Times:
         return self._split(t, self.stage1.x, lambda s: -self.v_contact * (self.duration - s))
 
-    def v(self, t):
+    @overload
+    def v(self, t: float) -> float: ...
+    @overload
+    def v(self, t: FloatArray) -> FloatArray: ...
+    def v(self, t: Times) -> Times:
         return self._split(t, self.stage1.v, lambda s: np.full_like(s, self.v_contact))
 
-    def a(self, t):
+    @overload
+    def a(self, t: float) -> float: ...
+    @overload
+    def a(self, t: FloatArray) -> FloatArray: ...
+    def a(self, t: Times) -> Times:
         return self._split(t, self.stage1.a, np.zeros_like)
 
 
-def stage1_profile(strategy, x0, v0, c, k):
+def stage1_profile(strategy: str, x0: float, v0: float, c: float | None,
+                   k: Coefficients | None) -> ConstantTauDot | InversePolynomial:
     if strategy in ("ctds", "ctdts"):
         if c is None or not (math.isfinite(c) and c > 0):  # also keeps 1/c defined
             raise PlanError(f"stage1.c must be a positive tau-dot (with c <= 0 the vehicle "
                             f"never arrives), got {c!r}")
         return ConstantTauDot(x0, v0, c)
+    if k is None:
+        raise PlanError("stage1.k: ipts needs its coefficients k_0..k_n")
     return InversePolynomial(x0, tuple(k))
 
 
-def peak_abs(f, t_end: float) -> float:
+def peak_abs(f: Callable[[FloatArray], FloatArray], t_end: float) -> float:
     """max |f| over [0, t_end], scanned densely and refined around the coarse maximum."""
     t = np.linspace(0.0, t_end, PEAK_SAMPLES)
     y = np.abs(f(t))
@@ -109,19 +136,21 @@ def check_trigger(x0: float, v0: float) -> None:
 
 
 def make_plan(strategy: str, x0: float, v0: float, tau_s: float | None, limits: Limits, *,
-              c: float | None = None, k=None, robust=None) -> Plan:
+              c: float | None = None, k: Coefficients | None = None,
+              robust: RobustBox | None = None) -> Plan:
     """Derive every figure of a plan from its parameters (used by planners and the loader)."""
     if strategy not in STRATEGIES:
         raise PlanError(f"strategy must be one of {', '.join(STRATEGIES)}, got {strategy!r}")
     check_trigger(x0, v0)
     profile = stage1_profile(strategy, x0, v0, c, k)
-    if strategy == "ctds":
-        t_switch = duration = -profile.tau0 / c
+    if strategy == "ctds" and isinstance(profile, ConstantTauDot):  # ctds: always one
+        t_switch = duration = -profile.tau0 / profile.c
         v_contact = 0.0
     else:
-        t_switch = switch_time(profile, tau_s)
+        hold = checked_tau_s(tau_s)
+        t_switch = switch_time(profile, hold)
         v_contact = float(profile.v(t_switch))
-        duration = t_switch - tau_s
+        duration = t_switch - hold
     if not (math.isfinite(duration) and 0 < t_switch <= duration):
         raise PlanError(f"stage1: switch at {t_switch:g} s and contact at {duration:g} s "
                         "after the trigger; both must be positive and in that order")
@@ -130,9 +159,13 @@ def make_plan(strategy: str, x0: float, v0: float, tau_s: float | None, limits: 
                 float(t_switch), float(duration), v_contact, limits, peaks, robust)
 
 
-def switch_time(profile, tau_s: float | None) -> float:
+def checked_tau_s(tau_s: float | None) -> float:
     if tau_s is None or not (math.isfinite(tau_s) and tau_s < 0):
         raise PlanError(f"tau_s must be a negative number of seconds, got {tau_s!r}")
+    return tau_s
+
+
+def switch_time(profile: ConstantTauDot | InversePolynomial, tau_s: float) -> float:
     if isinstance(profile, ConstantTauDot):
         return (tau_s - profile.tau0) / profile.c
     t_s = profile.first_switch(tau_s)
