@@ -37,12 +37,24 @@ Method (what `certify_box` implements, nothing sampled is trusted):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TypedDict, cast, overload
 
 import numpy as np
 from numpy.polynomial import polynomial as npoly
+from numpy.typing import NDArray
+
+from perchd.core.errors import PlanError
+from perchd.tau.profiles import Coefficients, FloatArray, Times
 
 SLACK = 1e-9          # relative slack on every proven bound (floating point)
 MAX_CELLS = 4_000_000  # total 2-D cells examined before giving up (not certified)
+
+Interval = tuple[Times, Times]
+"""(lo, hi) enclosures, elementwise over arrays of cells."""
+KCell = tuple[float, float, float, float]
+"""(a, b, t_s(a), t_s(b)): a k0-cell [a, b] [1/s] and its switch times [s]."""
+Centre = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+"""(k0, t, f1, f2) at the centres of 2-D cells."""
 
 
 @dataclass(frozen=True)
@@ -62,7 +74,11 @@ class Box:
         """k_0 = v0/x0 [1/s] over the box (both negative)."""
         return (-self.v0[1] / -self.x0[1], -self.v0[0] / -self.x0[0])
 
-    def segment(self, k0):
+    @overload
+    def segment(self, k0: float) -> tuple[float, float]: ...
+    @overload
+    def segment(self, k0: FloatArray) -> tuple[FloatArray, FloatArray]: ...
+    def segment(self, k0: Times) -> tuple[Times, Times]:
         """s = |x0| range [m] of the box states with v0/x0 = k0 (vectorised)."""
         r = np.abs(k0)
         return (np.maximum(-self.x0[1], self.v0[0] / r), np.minimum(-self.x0[0], self.v0[1] / r))
@@ -70,8 +86,11 @@ class Box:
     def scaled(self, factor: float, about: tuple[float, float] | None = None) -> "Box":
         """The box shrunk (factor < 1) or grown about `about` (x0, v0), default its centre."""
         xc, vc = about if about is not None else (sum(self.x0) / 2, sum(self.v0) / 2)
-        return Box(tuple(float(xc + (e - xc) * factor) for e in self.x0),
-                   tuple(float(vc + (e - vc) * factor) for e in self.v0))
+
+        def edge(e: float, centre: float) -> float:
+            return float(centre + (e - centre) * factor)
+        return Box((edge(self.x0[0], xc), edge(self.x0[1], xc)),
+                   (edge(self.v0[0], vc), edge(self.v0[1], vc)))
 
     def contains(self, x0: float, v0: float) -> bool:
         return self.x0[0] <= x0 <= self.x0[1] and self.v0[0] <= v0 <= self.v0[1]
@@ -101,6 +120,14 @@ class Violation:
                 "v_max": "speed above v_max", "a_max": "|acceleration| above a_max"}[self.limit]
 
 
+class Bounds(TypedDict, total=False):
+    """What a certificate proves over its box [SI]."""
+
+    v_peak: float
+    a_peak: float
+    v_contact: tuple[float, float]
+
+
 @dataclass(frozen=True)
 class Certificate:
     """Outcome of `certify_box`.  Bounds are proven upper/lower bounds over the whole box."""
@@ -108,12 +135,12 @@ class Certificate:
     certified: bool
     violation: Violation | None
     reason: str
-    bounds: dict = field(default_factory=dict)   # v_peak, a_peak, v_contact (lo, hi) [SI]
+    bounds: Bounds = field(default_factory=Bounds)   # v_peak, a_peak, v_contact (lo, hi) [SI]
     duration: tuple[float, float] = (float("nan"), float("nan"))  # [s] min, max over box
     cells: int = 0
 
 
-def first_switch(k: np.ndarray, k0: float, tau_s: float) -> tuple[float | None, str]:
+def first_switch(k: FloatArray, k0: float, tau_s: float) -> tuple[float | None, str]:
     """t_s [s]: first t > 0 with p(t) = 1/tau_s, or (None, limit name) if tau never gets there
     or p reaches 0 (tau infinite, then positive) first.  k = (k_1..k_n).
 
@@ -136,71 +163,81 @@ def first_switch(k: np.ndarray, k0: float, tau_s: float) -> tuple[float | None, 
     return (ts, "") if pmax < 0 else (None, "tau")
 
 
-def _polish(poly: np.ndarray, t: float) -> float:
+def _polish(poly: FloatArray, t: float) -> float:
     d = npoly.polyder(poly)
     for _ in range(3):
         slope = npoly.polyval(t, d)
         if slope == 0:
             break
-        t -= npoly.polyval(t, poly) / slope
+        t -= float(npoly.polyval(t, poly) / slope)
     return t
 
 
 # --- point evaluation -------------------------------------------------------------
 
-def scale_functions(k: np.ndarray, k0, t):
+@overload
+def scale_functions(k: FloatArray, k0: float, t: float) -> tuple[float, float, float]: ...
+@overload
+def scale_functions(k: FloatArray, k0: FloatArray,
+                    t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]: ...
+def scale_functions(k: FloatArray, k0: Times, t: Times) -> tuple[Times, Times, Times]:
     """(p, f1, f2) at k0, t (broadcast): V = |x0| f1, A = |x0| f2 (see module docstring).
     Vectorised over k0 too (one per cell centre), which InversePolynomial (one k) is not."""
     q = np.concatenate(([0.0], k))
     big_q = np.concatenate(([0.0, 0.0], np.asarray(k) / np.arange(2, len(k) + 2)))
     p = k0 + npoly.polyval(t, q)
     e = np.exp(k0 * t + npoly.polyval(t, big_q))
-    return p, -e * p, e * (npoly.polyval(t, npoly.polyder(q)) + p * p)
+    # numpy types polyval's result as floating[Any] whatever the input; here it is float64
+    return cast(tuple[Times, Times, Times],
+                (p, -e * p, e * (npoly.polyval(t, npoly.polyder(q)) + p * p)))
 
 
 # --- interval arithmetic on arrays (lo, hi) ----------------------------------------
 
-def _ipoly(c: np.ndarray, t1: np.ndarray, t2: np.ndarray):
+def _ipoly(c: FloatArray, t1: FloatArray, t2: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Enclosure of sum c_i t^i over [t1, t2] with t1 >= 0 (t^i monotone)."""
     i = np.arange(len(c))
     a, b = c * t1[:, None] ** i, c * t2[:, None] ** i
     return np.minimum(a, b).sum(1), np.maximum(a, b).sum(1)
 
 
-def _imul(x, y):
+def _imul(x: Interval, y: Interval) -> tuple[FloatArray, FloatArray]:
     prods = np.stack([x[0] * y[0], x[0] * y[1], x[1] * y[0], x[1] * y[1]])
     return prods.min(0), prods.max(0)
 
 
-def _iadd(*xs):
+def _iadd(*xs: Interval) -> Interval:
     return sum(x[0] for x in xs), sum(x[1] for x in xs)
 
 
-def _iscale(c: float, x):
+def _iscale(c: float, x: Interval) -> Interval:
     return (c * x[0], c * x[1]) if c >= 0 else (c * x[1], c * x[0])
 
 
-def _isq(x):
+def _isq(x: Interval) -> tuple[FloatArray, FloatArray]:
     lo2, hi2 = x[0] ** 2, x[1] ** 2
     lo = np.where((x[0] <= 0) & (x[1] >= 0), 0.0, np.minimum(lo2, hi2))
     return lo, np.maximum(lo2, hi2)
 
 
-def _absmax(x):
+def _absmax(x: Interval) -> FloatArray:
     return np.maximum(np.abs(x[0]), np.abs(x[1]))
 
 
 class _Poly:
     """Coefficient vectors of q, q', q'', Q for k = (k_1..k_n)."""
 
-    def __init__(self, k: np.ndarray):
-        self.q = np.concatenate(([0.0], k))
-        self.dq = npoly.polyder(self.q)
-        self.ddq = npoly.polyder(self.q, 2) if len(k) > 1 else np.zeros(1)
-        self.big_q = np.concatenate(([0.0, 0.0], k / np.arange(2, len(k) + 2)))
+    def __init__(self, k: FloatArray) -> None:
+        self.q: FloatArray = np.concatenate(([0.0], k))
+        self.dq: FloatArray = np.asarray(npoly.polyder(self.q), np.float64)
+        self.ddq: FloatArray = np.asarray(npoly.polyder(self.q, 2) if len(k) > 1 else np.zeros(1),
+                                          np.float64)
+        self.big_q: FloatArray = np.concatenate(([0.0, 0.0], k / np.arange(2, len(k) + 2)))
 
 
-def _cell_bounds(poly: _Poly, ka, kb, t1, t2):
+def _cell_bounds(poly: _Poly, ka: FloatArray, kb: FloatArray, t1: FloatArray,
+                 t2: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray,
+                                          FloatArray, Centre]:
     """Upper bounds of f1 and |f2| on cells [ka,kb] x [t1,t2], the upper bound of p, and the
     two excess terms (k-direction, t-direction) of the f2 bound, used to pick a split."""
     kc, tc, hk, ht = (ka + kb) / 2, (t1 + t2) / 2, (kb - ka) / 2, (t2 - t1) / 2
@@ -225,7 +262,7 @@ def _cell_bounds(poly: _Poly, ka, kb, t1, t2):
 
 # --- the certifier --------------------------------------------------------------
 
-def certify_box(k, box: Box, v_contact: tuple[float, float], v_max: float | None,
+def certify_box(k: Coefficients, box: Box, v_contact: tuple[float, float], v_max: float | None,
                 a_max: float | None, tau_s: float, *, min_width: float = 1e-9) -> Certificate:
     """Prove that k = (k_1..k_n) meets every limit for every trigger state in `box`
     (method in the module docstring), or return the violation found."""
@@ -239,11 +276,12 @@ def certify_box(k, box: Box, v_contact: tuple[float, float], v_max: float | None
         s = box.segment(kmax)[0]
         return _fail(Violation(why, -s, s * abs(kmax), float("nan"), float("nan"), tau_s),
                      "not certified")
-    ts_min, _ = first_switch(k, kmin, tau_s)
-    cells_k, vc = _contact_cells(k, box, v_contact, tau_s, kmin, kmax, min_width)
-    if isinstance(vc, Violation) or vc is None:
-        return _fail(vc, "not certified") if vc else Certificate(
+    ts_min = _switch_in_box(k, kmin, tau_s)
+    contact = _contact_cells(k, box, v_contact, tau_s, kmin, kmax, min_width)
+    if not isinstance(contact, tuple):
+        return _fail(contact, "not certified") if contact else Certificate(
             False, None, "not certified: contact speed within 1e-9 of a limit somewhere (undecided)")
+    cells_k, vc = contact
     peaks = _peak_cells(k, box, cells_k, v_max, a_max, tau_s, min_width)
     if not isinstance(peaks, tuple):
         return _fail(peaks, "not certified") if peaks else Certificate(
@@ -258,20 +296,32 @@ def _fail(v: Violation, reason: str) -> Certificate:
     return Certificate(False, v, f"{reason}: {v}")
 
 
-def _contact_cells(k, box, v_contact, tau_s, kmin, kmax, min_width, n0: int = 32):
-    """Step 2: returns (list of (a, b, ts_a, ts_b) covering [kmin, kmax], (V_c lo, V_c hi)
-    proven) or (None, Violation | None)."""
-    poly = _Poly(k)
-    ts = {}
+def _switch_in_box(k: FloatArray, k0: float, tau_s: float) -> float:
+    """t_s at a k0 of the box, which has one once k_max has (step 1 of the method)."""
+    ts, why = first_switch(k, k0, tau_s)
+    if ts is None:  # only by round-off at a root of p's own level
+        raise PlanError(f"certify: no switch time at k0 = {k0:g} 1/s ({why}) although "
+                        f"there is one at the box's largest k0")
+    return ts
 
-    def t_s(k0):
+
+def _contact_cells(k: FloatArray, box: Box, v_contact: tuple[float, float], tau_s: float,
+                   kmin: float, kmax: float, min_width: float, n0: int = 32
+                   ) -> tuple[list[KCell], tuple[float, float]] | Violation | None:
+    """Step 2: returns (list of (a, b, ts_a, ts_b) covering [kmin, kmax], (V_c lo, V_c hi)
+    proven), or a Violation, or None (undecided)."""
+    poly = _Poly(k)
+    ts: dict[float, float] = {}
+
+    def t_s(k0: float) -> float:
         if k0 not in ts:
-            ts[k0] = first_switch(k, k0, tau_s)[0]
+            ts[k0] = _switch_in_box(k, k0, tau_s)
         return ts[k0]
 
     edges = list(np.linspace(kmin, kmax, n0 + 1))
     todo = [(a, b) for a, b in zip(edges[:-1], edges[1:])]
-    done, lo_all, hi_all, undecided = [], np.inf, -np.inf, False
+    done: list[KCell] = []
+    lo_all, hi_all, undecided = np.inf, -np.inf, False
     v_l, v_u = v_contact
     while todo:
         a, b = todo.pop()
@@ -297,20 +347,21 @@ def _contact_cells(k, box, v_contact, tau_s, kmin, kmax, min_width, n0: int = 32
             continue
         witness = _contact_witness(k, box, (c,), v_contact, tau_s)
         if witness:
-            return None, witness
+            return witness
         if 2 * h < min_width * max(1.0, abs(kmin)):
             witness = _contact_witness(k, box, (a, b), v_contact, tau_s)
             if witness:
-                return None, witness
+                return witness
             undecided = True   # within SLACK of a limit: keep looking for a real violation
             continue
         todo += [(a, c), (c, b)]
-    return (None, None) if undecided else (done, (lo_all, hi_all))
+    return None if undecided else (done, (lo_all, hi_all))
 
 
-def _contact_witness(k, box, k0s, v_contact, tau_s):
+def _contact_witness(k: FloatArray, box: Box, k0s: tuple[float, ...],
+                     v_contact: tuple[float, float], tau_s: float) -> Violation | None:
     for k0 in k0s:
-        ts, _ = first_switch(k, k0, tau_s)
+        ts = _switch_in_box(k, k0, tau_s)
         for s, lim, bound in zip(box.segment(k0), ("v_contact_low", "v_contact_high"), v_contact):
             vc = s * scale_functions(k, k0, ts)[1]
             if (lim == "v_contact_low" and vc < bound) or (lim == "v_contact_high" and vc > bound):
@@ -318,16 +369,22 @@ def _contact_witness(k, box, k0s, v_contact, tau_s):
     return None
 
 
-def _peak_cells(k, box, cells_k, v_max, a_max, tau_s, min_width, m0: int = 16):
+def _peak_cells(k: FloatArray, box: Box, cells_k: list[KCell], v_max: float | None,
+                a_max: float | None, tau_s: float, min_width: float, m0: int = 16
+                ) -> tuple[float, float, int] | Violation | None:
     """Step 3: (v_peak, a_peak, cells examined) proven, or a Violation, or None (undecided)."""
     poly = _Poly(k)
     v_lim = np.inf if v_max is None else v_max
     a_lim = np.inf if a_max is None else a_max
-    ka, kb, t1, t2, tsb = [], [], [], [], []
+    cka: list[float] = []
+    ckb: list[float] = []
+    ct1: list[float] = []
+    ct2: list[float] = []
+    ctsb: list[float] = []
     for a, b, _, tb in cells_k:
         edges = np.linspace(0.0, tb, m0 + 1)
-        ka += [a] * m0; kb += [b] * m0; t1 += list(edges[:-1]); t2 += list(edges[1:]); tsb += [tb] * m0
-    ka, kb, t1, t2, tsb = map(np.array, (ka, kb, t1, t2, tsb))
+        cka += [a] * m0; ckb += [b] * m0; ct1 += list(edges[:-1]); ct2 += list(edges[1:]); ctsb += [tb] * m0
+    ka, kb, t1, t2, tsb = map(np.array, (cka, ckb, ct1, ct2, ctsb))
     v_peak = a_peak = 0.0
     examined, undecided = 0, False
     kspan = box.k0_range[1] - box.k0_range[0]
@@ -361,10 +418,12 @@ def _peak_cells(k, box, cells_k, v_max, a_max, tau_s, min_width, m0: int = 16):
     return None if undecided else (v_peak, a_peak, examined)
 
 
-def _split(k, tau_s, ka, kb, t1, t2, tsb, along_k):
+def _split(k: FloatArray, tau_s: float, ka: FloatArray, kb: FloatArray, t1: FloatArray,
+           t2: FloatArray, tsb: FloatArray, along_k: NDArray[np.bool_]
+           ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Halve each cell along k0 (where along_k) or t; drop children after t_s(b)."""
     kc, tc = (ka + kb) / 2, (t1 + t2) / 2
-    ts_c = np.array([first_switch(k, c, tau_s)[0] if ak else 0.0 for c, ak in zip(kc, along_k)])
+    ts_c = np.array([_switch_in_box(k, c, tau_s) if ak else 0.0 for c, ak in zip(kc, along_k)])
     ka_n = np.concatenate([np.where(along_k, ka, ka), np.where(along_k, kc, ka)])
     kb_n = np.concatenate([np.where(along_k, kc, kb), np.where(along_k, kb, kb)])
     t1_n = np.concatenate([t1, np.where(along_k, t1, tc)])
@@ -375,7 +434,8 @@ def _split(k, tau_s, ka, kb, t1, t2, tsb, along_k):
     return ka_n[keep], kb_n[keep], t1_n[keep], t2_n[keep], ts_n[keep]
 
 
-def _centre_witness(k, box, centre, bad, v_lim, a_lim, tau_s):
+def _centre_witness(k: FloatArray, box: Box, centre: Centre, bad: NDArray[np.bool_],
+                    v_lim: float, a_lim: float, tau_s: float) -> Violation | None:
     """The worst real violation at the centre of a failing cell (largest s of its ray), if any."""
     kc, tc, f1c, f2c = (x[bad] for x in centre)
     s = box.segment(kc)[1]
@@ -391,10 +451,11 @@ def _centre_witness(k, box, centre, bad, v_lim, a_lim, tau_s):
     return None
 
 
-def _peak_witness(k, box, ka, kb, t1, t2, v_lim, a_lim, tau_s):
+def _peak_witness(k: FloatArray, box: Box, ka: FloatArray, kb: FloatArray, t1: FloatArray,
+                  t2: FloatArray, v_lim: float, a_lim: float, tau_s: float) -> Violation | None:
     for a, b, ta, tb in zip(ka, kb, t1, t2):
         for k0 in (a, b, (a + b) / 2):
-            ts, _ = first_switch(k, k0, tau_s)
+            ts = _switch_in_box(k, k0, tau_s)
             t = min((ta + tb) / 2, ts)
             s = box.segment(k0)[1]
             _, f1, f2 = scale_functions(k, k0, t)
