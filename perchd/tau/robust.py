@@ -15,15 +15,17 @@ Every result is then shrunk (about its centre, or about the state it must hold) 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.optimize import differential_evolution, minimize
 
 from perchd.core.errors import PlanError
 from perchd.tau.certify import Box, Certificate, certify_box, first_switch
-from perchd.tau.profiles import InversePolynomial
+from perchd.tau.profiles import Coefficients, FloatArray, InversePolynomial
 
 Progress = Callable[[int, int], None]
 """progress(done, total): steps of a long search done so far."""
@@ -41,7 +43,7 @@ class RobustLimits:
     v_max: float
     a_max: float
 
-    def certify(self, k, box: Box) -> Certificate:
+    def certify(self, k: Coefficients, box: Box) -> Certificate:
         return certify_box(k, box, self.v_contact, self.v_max, self.a_max, self.tau_s)
 
 
@@ -54,7 +56,8 @@ class RobustResult:
     certificate: Certificate
 
 
-def admissible(k, k0s: np.ndarray, lim: RobustLimits, margin: float = SEARCH_MARGIN):
+def admissible(k: Coefficients, k0s: FloatArray, lim: RobustLimits,
+               margin: float = SEARCH_MARGIN) -> tuple[FloatArray, FloatArray]:
     """Sampled (L, U) [m] of admissible |x0| for each k_0 (nan where tau misses tau_s)."""
 
     lo, hi = np.full(len(k0s), np.nan), np.full(len(k0s), np.nan)
@@ -71,7 +74,7 @@ def admissible(k, k0s: np.ndarray, lim: RobustLimits, margin: float = SEARCH_MAR
     return lo, hi
 
 
-def box_margin(k, box: Box, lim: RobustLimits, n_edge: int = 16) -> float:
+def box_margin(k: Coefficients, box: Box, lim: RobustLimits, n_edge: int = 16) -> float:
     """Worst relative margin over sampled box-boundary states (< 0: some limit broken)."""
     xs = np.linspace(box.x0[0], box.x0[1], n_edge)
     vs = np.linspace(box.v0[0], box.v0[1], n_edge)
@@ -84,7 +87,7 @@ def box_margin(k, box: Box, lim: RobustLimits, n_edge: int = 16) -> float:
     return float(min(np.min(1 - lo / s), np.min(hi / s - 1)))
 
 
-def _largest_rectangle(mask: np.ndarray) -> tuple[int, int, int, int, int]:
+def _largest_rectangle(mask: NDArray[np.bool_]) -> tuple[int, int, int, int, int]:
     """(cells, i0, i1, j0, j1) of the largest all-True rectangle mask[i0:i1, j0:j1]."""
     best = (0, 0, 0, 0, 0)
     heights = np.zeros(mask.shape[1], int)
@@ -114,7 +117,7 @@ class SearchDomain:
     grid: int = 60
 
 
-def grid_box(k, lim: RobustLimits, dom: SearchDomain) -> Box | None:
+def grid_box(k: Coefficients, lim: RobustLimits, dom: SearchDomain) -> Box | None:
     """Largest box (on dom's grid) whose grid states all pass the sampled limits."""
     s = np.linspace(*dom.s_range, dom.grid)
     v = np.linspace(*dom.v_range, dom.grid)
@@ -136,7 +139,8 @@ def grid_box(k, lim: RobustLimits, dom: SearchDomain) -> Box | None:
     return Box((-s[i1 - 1], -s[i0]), (v[j0], v[j1 - 1]))
 
 
-def _box_containing(mask, s, v, state) -> Box | None:
+def _box_containing(mask: NDArray[np.bool_], s: FloatArray, v: FloatArray,
+                    state: tuple[float, float]) -> Box | None:
     """Grow a box cell by cell around the grid point nearest `state` while it stays feasible."""
     i = int(np.clip(np.searchsorted(s, -state[0]) - 1, 0, len(s) - 2))
     j = int(np.clip(np.searchsorted(v, state[1]) - 1, 0, len(v) - 2))
@@ -155,7 +159,7 @@ def _box_containing(mask, s, v, state) -> Box | None:
     return Box((-s[i1 - 1], -s[i0]), (v[j0], v[j1 - 1]))
 
 
-def _score(k, lim, dom) -> float:
+def _score(k: FloatArray, lim: RobustLimits, dom: SearchDomain) -> float:
     """-area of the grid box; when a required state is infeasible, how far it is (> 0)."""
     box = grid_box(k, lim, dom)
     if box is not None:
@@ -169,17 +173,17 @@ def _score(k, lim, dom) -> float:
     return float(max(lo[0] + x0, -x0 - hi[0], 0.0)) + 1e-3
 
 
-def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain,
-           evals: int | None = None) -> tuple[np.ndarray, Box]:
+def polish(k: Coefficients, box: Box, lim: RobustLimits, dom: SearchDomain,
+           evals: int | None = None) -> tuple[FloatArray, Box]:
     """Grow the box and adjust k together (Nelder-Mead; sampled boundary must keep a margin)."""
 
     n = len(k)
     z0 = np.concatenate([k, [box.x0[0], box.x0[1], box.v0[0], box.v0[1]]])
 
-    def unpack(z):
+    def unpack(z: FloatArray) -> tuple[FloatArray, Box]:
         return z[:n], Box((z[n], z[n + 1]), (z[n + 2], z[n + 3]))
 
-    def cost(z):
+    def cost(z: FloatArray) -> float:
         kk, b = unpack(z)
         if not (b.x0[0] < b.x0[1] < 0 < b.v0[0] < b.v0[1]) or (
                 dom.contains and not (b.x0[0] <= dom.contains[0] <= b.x0[1]
@@ -194,7 +198,9 @@ def polish(k, box: Box, lim: RobustLimits, dom: SearchDomain,
     return np.asarray(kk), b
 
 
-def shrink_until_certified(k, box: Box, lim: RobustLimits, about=None, steps: int = 40) -> RobustResult:
+def shrink_until_certified(k: Coefficients, box: Box, lim: RobustLimits,
+                           about: tuple[float, float] | None = None,
+                           steps: int = 40) -> RobustResult:
     """Largest (within 0.1 %) shrink of `box` about `about` (default its centre) that
     `certify_box` proves."""
     cert = lim.certify(k, box)
@@ -273,7 +279,7 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
                         f"v0 {box.v0[0]:g}..{box.v0[1]:g} m/s: the best one breaks a limit by "
                         f"{-100 * de.fun:.3g} % ({cert.reason})")
 
-    def worst(k):
+    def worst(k: FloatArray) -> float:
         ts, _ = first_switch(np.asarray(k), k_max, lim.tau_s)
         return 1e3 if ts is None else ts
 
@@ -292,13 +298,13 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
     raise PlanError(f"order-{order} k for the box could not be certified: {cert.reason}")
 
 
-def _generations(progress: Progress | None, maxiter: int):
+def _generations(progress: Progress | None, maxiter: int) -> Callable[[Any], None] | None:
     """A differential_evolution callback counting generations into `progress` (or None)."""
     if progress is None:
         return None
     done = [0]
 
-    def callback(intermediate_result) -> None:  # scipy passes the result by this name
+    def callback(intermediate_result: Any) -> None:  # scipy passes the result by this name
         done[0] += 1
         progress(done[0], maxiter)
     return callback
@@ -310,14 +316,14 @@ def contact_ratio(box: Box) -> tuple[float, float]:
     V_u/V_l.  The ratio is piecewise monotone in k_0 with breaks where a segment end
     changes edge, so its maximum is at one of those breaks or an end."""
     kmin, kmax = box.k0_range
-    cands = [kmin, kmax, -box.v0[1] / -box.x0[0], -box.v0[0] / -box.x0[1]]
-    cands = np.array([c for c in cands if kmin <= c <= kmax])
+    ends = [kmin, kmax, -box.v0[1] / -box.x0[0], -box.v0[0] / -box.x0[1]]
+    cands = np.array([c for c in ends if kmin <= c <= kmax])
     lo, hi = box.segment(cands)
     j = int(np.argmax(hi / lo))
     return float(hi[j] / lo[j]), float(cands[j])
 
 
-def retarget_k(k, box: Box, x0: float, v0: float) -> np.ndarray:
+def retarget_k(k: Coefficients, box: Box, x0: float, v0: float) -> FloatArray:
     """(k_0, k_1..k_n) for a measured trigger state: k_1..k_n kept, k_0 = v0/x0.
     PlanError if (x0, v0) lies outside the certified box."""
     if not box.contains(x0, v0):
