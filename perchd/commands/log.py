@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(out, "--out", args.force, inputs=tuple(args.log))
     logs = [_read(p) for p in args.log]
     names = [Path(p).name for p in args.log]
-    draw(lambda data, path: plot_flights(data, path, names), logs, out, "--out")
+    draw(lambda data, path: plot_flights(data, path, names, args.force), logs, out, "--out")
     print(out)
     return 0
 

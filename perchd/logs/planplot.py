@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from perchd.core.extras import require
+from perchd.logs.figsave import save_figure
 from perchd.tau.plan import Plan
 
 
-def plot_plan(plan: Plan, path: str) -> None:
+def plot_plan(plan: Plan, path: str, force: bool = False) -> None:
     require("matplotlib", "plot").use("Agg")
     import matplotlib.pyplot as plt
 
@@ -30,5 +31,7 @@ def plot_plan(plan: Plan, path: str) -> None:
     axes[-1].set_xlabel("time since trigger [s]")
     axes[0].set_title(f"{plan.strategy}: {plan.duration:.4f} s, contact {plan.v_contact:.3f} m/s")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, 100, "--plot", force)
+    finally:
+        plt.close(fig)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Sequence
 
 from perchd.core.extras import require
+from perchd.logs.figsave import save_figure
 from perchd.logs.flightlog import FlightLog
 
 PRE_TRIGGER_S = 0.5
@@ -25,7 +26,8 @@ ROWS = (("x", "x_plan", "distance X [m]"), ("xdot", "v_plan", "velocity Xdot [m/
 
 
 def plot_flights(logs: Sequence[FlightLog], out: str | Path,
-                 titles: Sequence[str] | None = None) -> Path:
+                 titles: Sequence[str] | None = None, force: bool = False) -> Path:
+    """The flights side by side, saved to `out` (an existing file only with `force`)."""
 
     mpl = require("matplotlib", "plot")
     mpl.use("Agg")
@@ -36,15 +38,14 @@ def plot_flights(logs: Sequence[FlightLog], out: str | Path,
         title = titles[col] if titles else ""
         _column(axes[:, col], log, title)
     fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    try:
+        return save_figure(fig, out, 110, "--out", force)
+    finally:
+        plt.close(fig)
 
 
-def plot_flight(log: FlightLog, out: str | Path, title: str = "") -> Path:
-    return plot_flights([log], out, [title])
+def plot_flight(log: FlightLog, out: str | Path, title: str = "", force: bool = False) -> Path:
+    return plot_flights([log], out, [title], force)
 
 
 def shown_rows(log: FlightLog) -> tuple[float, list]:

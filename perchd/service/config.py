@@ -109,6 +109,8 @@ def load_config(path: str | os.PathLike) -> Config:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{name}: not valid TOML: {err}") from None
+    except ValueError as err:  # an integer of more digits than Python converts
+        raise ConfigError(f"{name}: not valid TOML: {err}") from None
     except RecursionError:
         raise ConfigError(f"{name}: not valid TOML: nested too deeply") from None
     return config_from_dict(doc, name, str(path))

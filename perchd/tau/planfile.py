@@ -11,7 +11,7 @@ import math
 from pathlib import Path
 
 from perchd.core.errors import PlanError
-from perchd.core.safefile import read_regular
+from perchd.core.safefile import read_regular, write_text
 from perchd.tau.figures import disagreement
 from perchd.tau.ipts import MAX_ORDER
 from perchd.tau.limits import Limits
@@ -36,8 +36,10 @@ def plan_text(plan: Plan) -> str:
     return json.dumps(plan_to_json(plan), indent=2) + "\n"
 
 
-def save_plan(plan: Plan, path: str | Path) -> None:
-    Path(path).write_text(plan_text(plan))
+def save_plan(plan: Plan, path: str | Path, force: bool = True) -> None:
+    """`plan` written to `path` by the one rule (core/safefile.py write_atomic); replacing
+    a file by default: the callers (the shipped cases, a benchmark) own their paths."""
+    write_text(Path(path), plan_text(plan), "plan", force)
 
 
 def load_plan(path: str | Path, text: str | None = None) -> Plan:
@@ -54,6 +56,8 @@ def load_json(path: str | Path, parse, what: str, text: str | None = None):
         doc = json.loads(text)
     except json.JSONDecodeError as err:
         raise PlanError(f"{path}: not JSON ({err.msg} at line {err.lineno})") from None
+    except ValueError as err:  # an integer of more digits than Python converts
+        raise PlanError(f"{path}: not JSON ({err})") from None
     except RecursionError:
         raise PlanError(f"{path}: not JSON (nested too deeply)") from None
     try:
@@ -117,6 +121,9 @@ def _field(doc: dict, key: str, kind: type, name: str | None = None):
 
 def _number(doc: dict, key: str, name: str | None = None) -> float:
     value = _field(doc, key, (int, float), name or key)
+    if isinstance(value, int) and abs(value) >= 1e308:  # beyond a float
+        raise PlanError(f"{name or key}: must be finite, got an integer of "
+                        f"{len(str(abs(value)))} digits")
     if not math.isfinite(value):
         raise PlanError(f"{name or key}: must be finite, got {value!r}")
     return float(value)

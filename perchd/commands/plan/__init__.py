@@ -162,7 +162,7 @@ def run_check(args) -> int:
         check_output(args.plot, "--plot", args.force, inputs=(args.file,))
     plan = load_plan(args.file, text)
     if args.plot:
-        draw(plot_plan, plan, args.plot, "--plot")
+        draw(lambda p, path: plot_plan(p, path, args.force), plan, args.plot, "--plot")
     return _emit(argparse.Namespace(out=None, json=args.json), plan)
 
 
