@@ -11,13 +11,15 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, overload
+from typing import Any, TypeVar, overload
 
 import numpy as np
 
 from perchd.core.errors import PlanError
 from perchd.tau.limits import Limits
 from perchd.tau.profiles import Coefficients, ConstantTauDot, FloatArray, InversePolynomial, Times
+
+T = TypeVar("T")
 
 STRATEGIES = ("ctds", "ctdts", "ipts")
 PEAK_SAMPLES = 4001  # coarse scan of stage 1, then refined around the peak
@@ -126,6 +128,14 @@ def peak_abs(f: Callable[[FloatArray], FloatArray], t_end: float) -> float:
     step = t_end / (PEAK_SAMPLES - 1)
     fine = np.linspace(max(0.0, t[i] - step), min(t_end, t[i] + step), 201)
     return float(max(y[i], np.abs(f(fine)).max()))
+
+
+def given(value: T | None, name: str) -> T:
+    """A plan field its strategy sets (k for ipts, c for ctds/ctdts, tau_s for two-stage
+    plans), or PlanError naming it if a plan built by hand left it out."""
+    if value is None:
+        raise PlanError(f"{name}: missing")
+    return value
 
 
 def check_trigger(x0: float, v0: float) -> None:
