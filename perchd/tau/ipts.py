@@ -49,7 +49,8 @@ from scipy.optimize import minimize
 
 from perchd.core.errors import PlanError
 from perchd.tau.limits import Limits
-from perchd.tau.plan import Plan, check_trigger, make_plan
+from perchd.tau.plan import Plan, check_trigger, given, make_plan
+from perchd.tau.profiles import FloatArray
 
 MAX_ORDER = 9  # the paper stops at 7; orders 8-9 reach duration/bound <= 1.01 in both cases
 GRID = 96          # constraint nodes in u, clustered at both ends where peaks sit
@@ -59,6 +60,10 @@ VERIFY_TOL = 1e-9  # relative overshoot of a limit accepted by the dense check
 TIGHTEN_MARGIN = 1e-8  # extra relative tightening when a peak slipped between grid nodes
 UNBOUNDED = 1e3    # stands in for an unset v_max [m/s] or a_max [m/s^2]
 SWITCH_MARGIN = 1e-3  # how far (relative to 1/|tau_s|) q keeps from 1/tau_s before the switch
+
+Profiles = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                 FloatArray, FloatArray]
+"""On the u-grid: q, dq/dz, V, dV/dz, A, dA/dz, q', dq'/dz."""
 
 
 @dataclass(frozen=True)
@@ -80,7 +85,7 @@ class Problem:
         return 1.0 / self.tau_s - self.m0
 
 
-def _grid(n: int = GRID) -> np.ndarray:
+def _grid(n: int = GRID) -> FloatArray:
     return 0.5 - 0.5 * np.cos(np.linspace(0.0, math.pi, n))
 
 
@@ -91,7 +96,7 @@ class _Model:
     rows are O(1) whatever the limits: SLSQP's merit function weighs them alike, and a loose
     limit neither swamps nor vanishes beside the others."""
 
-    def __init__(self, prob: Problem, u: np.ndarray, a_max: float, v_max: float,
+    def __init__(self, prob: Problem, u: FloatArray, a_max: float, v_max: float,
                  switch_margin: float = SWITCH_MARGIN) -> None:
         self.p, self.u, self.a_max, self.v_max = prob, u, a_max, v_max
         self.switch_margin = switch_margin
@@ -100,10 +105,12 @@ class _Model:
         self.dU = i * u[:, None] ** (i - 1)                        # d q' / d m_i
         self.IU = u[:, None] ** (i + 1) / (i + 1)                  # d Q / d m_i
         self.ln_s0 = math.log(-prob.x0)
-        self._key: bytes | None = None  # the z last assembled, and what it gave (SLSQP asks
-        self._val = None                # for value and gradient at the same z in turn)
+        # the z last assembled, and what it gave (SLSQP asks for value and gradient at the
+        # same z in turn)
+        self._key: bytes | None = None
+        self._val: tuple[FloatArray, FloatArray] | None = None
 
-    def eval(self, z: np.ndarray):
+    def eval(self, z: FloatArray) -> Profiles:
         m, ts = z[:-1], z[-1]
         p = self.p
         q = p.m0 + self.U @ m
@@ -122,19 +129,19 @@ class _Model:
         dA = -(dS * g[:, None] + S[:, None] * dg)
         return q, dq_z, V, dV, A, dA, dq, ddq_z
 
-    def constraints(self, z: np.ndarray) -> np.ndarray:
+    def constraints(self, z: FloatArray) -> FloatArray:
         return self._both(z)[0]
 
-    def jacobian(self, z: np.ndarray) -> np.ndarray:
+    def jacobian(self, z: FloatArray) -> FloatArray:
         return self._both(z)[1]
 
-    def _both(self, z):
+    def _both(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
         key = z.tobytes()
-        if self._key != key:
+        if self._key != key or self._val is None:
             self._key, self._val = key, self._assemble(z)
         return self._val
 
-    def _assemble(self, z):
+    def _assemble(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
         q, dq, V, dV, A, dA, slope, dslope = self.eval(z)
         lo, hi = self.p.limits.v_contact
         q_s = -1.0 / self.p.tau_s            # |q| at the switch: the scale of q
@@ -155,22 +162,25 @@ class _Model:
         return np.concatenate([r[0] for r in rows]), np.vstack([r[1] for r in rows])
 
 
-def _seed_from_bound(prob: Problem, v_c: float, a_max: float, v_max: float) -> np.ndarray | None:
+def _seed_from_bound(prob: Problem, v_c: float, a_max: float, v_max: float) -> FloatArray | None:
     """Fit q(u) to the tau of the bang-bang profile ending at V_c: a start near the optimum."""
     hold = -prob.tau_s
     gap = -prob.x0 - v_c * hold
-    t, x, v = _bang_bang(gap, prob.v0, v_c, a_max, v_max)
-    if t is None:
+    profile = _bang_bang(gap, prob.v0, v_c, a_max, v_max)
+    if profile is None:
         return None
+    t, x, v = profile
     ts = t[-1]
     u = t / ts
     return _fit(prob, u, v / (prob.x0 + x), ts)  # p = V / X along the profile
 
 
-def _bang_bang(gap, v0, v_c, a, v_max, n: int = 200):
+def _bang_bang(gap: float, v0: float, v_c: float, a: float, v_max: float,
+               n: int = 200) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """(t [s], x [m], v [m/s]) of the bang-bang profile, or None if the gap is too short."""
     brake = (v0 * v0 - v_c * v_c) / (2 * a)
     if gap < brake:
-        return None, None, None
+        return None
     vp = min(math.sqrt((2 * a * gap + v0 * v0 + v_c * v_c) / 2), v_max)
     t1, t3 = (vp - v0) / a, (vp - v_c) / a
     d1, d3 = (vp * vp - v0 * v0) / (2 * a), (vp * vp - v_c * v_c) / (2 * a)
@@ -181,7 +191,7 @@ def _bang_bang(gap, v0, v_c, a, v_max, n: int = 200):
     return t, x, v
 
 
-def _fit(prob: Problem, u, target, ts) -> np.ndarray:
+def _fit(prob: Problem, u: FloatArray, target: FloatArray, ts: float) -> FloatArray:
     """Least squares for m_1..m_n with the switch equality sum m_i = m_sum enforced."""
     U = u[:, None] ** np.arange(1, prob.order + 1)
     r = target - prob.m0
@@ -193,7 +203,7 @@ def _fit(prob: Problem, u, target, ts) -> np.ndarray:
     return np.append(m, ts)
 
 
-def _random_seeds(prob: Problem, count: int, rng) -> list[np.ndarray]:
+def _random_seeds(prob: Problem, count: int, rng: np.random.Generator) -> list[FloatArray]:
     """Random polynomials on the switch equality, t_s spread about a time scale of the state
     alone: the same starts for any limits, so loosening a limit never loses a start."""
     lo, hi = prob.limits.v_contact
@@ -207,7 +217,7 @@ def _random_seeds(prob: Problem, count: int, rng) -> list[np.ndarray]:
     return seeds
 
 
-def _solve_from(model: _Model, z0: np.ndarray, prob: Problem):
+def _solve_from(model: _Model, z0: FloatArray, prob: Problem) -> FloatArray | None:
 
     n = prob.order
     eq = {"type": "eq", "fun": lambda z: np.array([z[:-1].sum() - prob.m_sum]),
@@ -222,7 +232,7 @@ def _solve_from(model: _Model, z0: np.ndarray, prob: Problem):
     return res.x if ok else None
 
 
-def _to_plan(prob: Problem, z: np.ndarray) -> Plan | None:
+def _to_plan(prob: Problem, z: FloatArray) -> Plan | None:
     m, ts = z[:-1], z[-1]
     k = [prob.m0] + [mi / ts ** i for i, mi in enumerate(m, start=1)]
     try:
@@ -260,7 +270,7 @@ def plan_ipts(x0: float, v0: float, tau_s: float, v_contact: tuple[float, float]
     raise _infeasible(prob, a_lim, v_lim, near, higher, probe_orders)
 
 
-def _search(prob: Problem, model: _Model, seeds) -> Plan | None:
+def _search(prob: Problem, model: _Model, seeds: list[FloatArray]) -> Plan | None:
     """SLSQP from every start; the fastest grid optima are verified densely, best first."""
     found = sorted((z for z0 in seeds if (z := _solve_from(model, z0, prob)) is not None),
                    key=lambda z: z[-1])
@@ -275,9 +285,9 @@ def _meets(plan: Plan, a_lim: float, v_lim: float) -> bool:
     return plan.peaks.a <= a_lim * (1 + VERIFY_TOL) and plan.peaks.v <= v_lim * (1 + VERIFY_TOL)
 
 
-def _z_of(plan: Plan) -> np.ndarray:
+def _z_of(plan: Plan) -> FloatArray:
     ts = plan.t_switch
-    return np.array([k * ts ** i for i, k in enumerate(plan.k)][1:] + [ts])
+    return np.array([k * ts ** i for i, k in enumerate(given(plan.k, "stage1.k"))][1:] + [ts])
 
 
 def plan_ipts_from(x0: float, v0: float, tau_s: float, v_contact: tuple[float, float],
@@ -295,7 +305,7 @@ def plan_ipts_from(x0: float, v0: float, tau_s: float, v_contact: tuple[float, f
     return None if z is None else _verified(prob, z, a_lim, v_lim)
 
 
-def _verified(prob: Problem, z: np.ndarray, a_lim: float, v_lim: float) -> Plan | None:
+def _verified(prob: Problem, z: FloatArray, a_lim: float, v_lim: float) -> Plan | None:
     """Check the grid solution densely; where a peak slipped between nodes, tighten that
     limit by the overshoot, and where tau reached tau_s between nodes before the switch,
     widen the switch margin; then re-solve from here, a few times at most."""
@@ -312,13 +322,15 @@ def _verified(prob: Problem, z: np.ndarray, a_lim: float, v_lim: float) -> Plan 
             # creeping up on the limit in steps SLSQP can no longer resolve (fails near 1e-9).
             a_eff /= max(over_a, 1.0) * (1 + TIGHTEN_MARGIN)
             v_eff /= max(over_v, 1.0) * (1 + TIGHTEN_MARGIN)
-        z = _solve_from(_Model(prob, _grid(), a_eff, v_eff, margin), z, prob)
-        if z is None:
+        solved = _solve_from(_Model(prob, _grid(), a_eff, v_eff, margin), z, prob)
+        if solved is None:
             return None
+        z = solved
     return None
 
 
-def _problem(x0, v0, tau_s, v_contact, v_max, a_max, order) -> Problem:
+def _problem(x0: float, v0: float, tau_s: float, v_contact: tuple[float, float],
+             v_max: float | None, a_max: float | None, order: int) -> Problem:
     check_trigger(x0, v0)
     if not 1 <= order <= MAX_ORDER:
         raise PlanError(f"order must be 1..{MAX_ORDER}, got {order}")
@@ -329,10 +341,11 @@ def _problem(x0, v0, tau_s, v_contact, v_max, a_max, order) -> Problem:
     if -x0 - lo * -tau_s <= 0:
         raise PlanError(f"x0 = {x0:g} m is too close: stage 2 alone at V_l = {lo:g} m/s "
                         f"for |tau_s| = {-tau_s:g} s covers {lo * -tau_s:g} m")
-    return Problem(x0, v0, tau_s, Limits(tuple(v_contact), v_max, a_max), order)
+    return Problem(x0, v0, tau_s, Limits((lo, hi), v_max, a_max), order)
 
 
-def _seeds(prob: Problem, a_lim: float, v_lim: float, starts: int, seed: int):
+def _seeds(prob: Problem, a_lim: float, v_lim: float, starts: int,
+           seed: int) -> list[FloatArray]:
     lo, hi = prob.limits.v_contact
     seeds = [s for v_c in np.linspace(lo, hi, 4)
              if (s := _seed_from_bound(prob, float(v_c), a_lim, v_lim)) is not None]
@@ -406,7 +419,8 @@ def _any_plan_shortfalls(prob: Problem, a_lim: float, v_lim: float) -> tuple[Sho
     return (Shortfall("a_max", a_lim, need),) if need > a_lim else ()
 
 
-def _least_relaxed(prob: Problem, a_lim: float, v_lim: float, seeds) -> Plan | None:
+def _least_relaxed(prob: Problem, a_lim: float, v_lim: float,
+                   seeds: list[FloatArray]) -> Plan | None:
     """The plan of this order needing the least common factor on v_max and a_max, every
     other constraint met: minimise lam with V <= lam v_max, |A| <= lam a_max. Its dense
     peaks are what the limits would have to be; the plan itself is the witness."""
@@ -416,7 +430,7 @@ def _least_relaxed(prob: Problem, a_lim: float, v_lim: float, seeds) -> Plan | N
     return next((plan for w in found[:CANDIDATES] if (plan := _to_plan(prob, w[:-1]))), None)
 
 
-def _relax_from(model: _Model, z0: np.ndarray, prob: Problem) -> np.ndarray | None:
+def _relax_from(model: _Model, z0: FloatArray, prob: Problem) -> FloatArray | None:
     from scipy.optimize import minimize
 
     n, g = prob.order, len(model.u)
