@@ -9,7 +9,7 @@ from perchd.tau.certify import Box
 from perchd.tau.ctds import plan_ctds
 from perchd.tau.ctdts import plan_ctdts
 from perchd.tau.ipts import plan_ipts
-from perchd.tau.plan import Plan, make_plan
+from perchd.tau.plan import Plan, given, make_plan
 from perchd.tau.robust import retarget_k
 
 if TYPE_CHECKING:
@@ -30,7 +30,7 @@ def retarget(plan: Plan, x0: float, v0: float, library: PlanLibrary | None = Non
     lim = plan.limits
     if plan.robust is not None:
 
-        k = retarget_k(plan.k[1:], Box(*plan.robust), x0, v0)
+        k = retarget_k(given(plan.k, "stage1.k")[1:], Box(*plan.robust), x0, v0)
         return make_plan("ipts", x0, v0, plan.tau_s, lim, k=k, robust=plan.robust)
     if library is not None:
         why = library.matches(plan)
@@ -38,8 +38,9 @@ def retarget(plan: Plan, x0: float, v0: float, library: PlanLibrary | None = Non
             raise PlanError(f"library cannot retarget this plan: {why}")
         return library.replan(x0, v0)
     if plan.strategy == "ctds":
-        return plan_ctds(x0, v0, plan.c, lim)
+        return plan_ctds(x0, v0, given(plan.c, "stage1.c"), lim)
     if plan.strategy == "ctdts":
-        return plan_ctdts(x0, v0, plan.tau_s, plan.v_contact, lim.a_max, lim.v_max,
-                          lim.v_contact)
-    return plan_ipts(x0, v0, plan.tau_s, lim.v_contact, lim.v_max, lim.a_max, plan.order)
+        return plan_ctdts(x0, v0, given(plan.tau_s, "tau_s"), plan.v_contact, lim.a_max,
+                          lim.v_max, lim.v_contact)
+    return plan_ipts(x0, v0, given(plan.tau_s, "tau_s"), lim.v_contact, lim.v_max, lim.a_max,
+                     given(plan.order, "stage1.k"))
