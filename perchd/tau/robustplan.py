@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
 
 from perchd.core.errors import PlanError
-from perchd.tau.certify import Box
+from perchd.tau.certify import Box, Certificate
 from perchd.tau.limits import Limits
-from perchd.tau.plan import make_plan
-from perchd.tau.robust import RobustLimits, retarget_k
+from perchd.tau.plan import Plan, given, make_plan
+from perchd.tau.profiles import Coefficients
+from perchd.tau.robust import RobustLimits, RobustResult, retarget_k
 
 METHOD = ("certify_box: monotone t_s in k0, mean-value enclosures on adaptive k0 x t cells "
           "(perchd/tau/certify.py)")
@@ -18,19 +20,27 @@ METHOD = ("certify_box: monotone t_s in k0, mean-value enclosures on adaptive k0
 
 def _inward(box: Box, digits: int = 4) -> Box:
     """The box with edges rounded inward (a sub-box of a certified box is certified)."""
-    f = 10 ** digits
-    up, down = (lambda e: math.ceil(round(e * f, 6)) / f), (lambda e: math.floor(round(e * f, 6)) / f)
+    f: int = 10 ** digits
+
+    def up(e: float) -> float:
+        return math.ceil(round(e * f, 6)) / f
+
+    def down(e: float) -> float:
+        return math.floor(round(e * f, 6)) / f
+
     return Box((up(box.x0[0]), down(box.x0[1])), (up(box.v0[0]), down(box.v0[1])))
 
 
-def robust_plan(k, box: Box, lim, x0: float, v0: float, extra: dict | None = None):
+def robust_plan(k: Coefficients, box: Box, lim: RobustLimits, x0: float, v0: float,
+                extra: dict[str, Any] | None = None) -> Plan:
     """The Plan (perchd.tau.make_plan) of k flown from (x0, v0), carrying its certified box."""
     plan = make_plan("ipts", x0, v0, lim.tau_s, Limits(lim.v_contact, lim.v_max, lim.a_max),
                      k=retarget_k(k, box, x0, v0), robust=(box.x0, box.v0))
     return replace(plan, extra=extra) if extra else plan
 
 
-def certified_plan(result, lim, nominal=None):
+def certified_plan(result: RobustResult, lim: RobustLimits,
+                   nominal: tuple[float, float] | None = None) -> Plan:
     """The plan file's Plan for a robust result, flown from `nominal` (default: box centre),
     its box rounded inward to 0.1 mm, re-certified, and the certificate in plan.extra."""
     box = _inward(result.box)
@@ -45,7 +55,7 @@ def certified_plan(result, lim, nominal=None):
     return robust_plan(result.k, box, lim, x0, v0, {"certificate": record})
 
 
-def check_plan(plan):
+def check_plan(plan: Plan) -> Certificate:
     """Re-certify a robust Plan over its whole box (`perchd plan check` calls this).
     Returns the Certificate; PlanError names the broken limit and the state, or the field."""
     lim = plan.limits
@@ -53,13 +63,15 @@ def check_plan(plan):
         raise PlanError(f"robust: only two-stage ipts plans can be robust, got {plan.strategy}")
     if lim.v_max is None or lim.a_max is None:
         raise PlanError("robust: limits.v_max and limits.a_max are needed to certify a box")
-    box = Box(tuple(plan.robust[0]), tuple(plan.robust[1]))
+    (x_lo, x_hi), (v_lo, v_hi) = given(plan.robust, "robust")
+    box = Box((x_lo, x_hi), (v_lo, v_hi))
     if not box.x0[0] < box.x0[1] < 0 < box.v0[0] < box.v0[1]:
         raise PlanError(f"robust: box must have x0 lo < hi < 0 < v0 lo < hi, got {plan.robust}")
-    if not math.isclose(plan.k[0], plan.v0 / plan.x0, rel_tol=1e-9):
-        raise PlanError(f"stage1.k[0] = {plan.k[0]:g} is not v0/x0 = {plan.v0 / plan.x0:g}")
-    cert = RobustLimits(plan.tau_s, tuple(lim.v_contact), lim.v_max, lim.a_max).certify(
-        plan.k[1:], box)
+    k = given(plan.k, "stage1.k")
+    if not math.isclose(k[0], plan.v0 / plan.x0, rel_tol=1e-9):
+        raise PlanError(f"stage1.k[0] = {k[0]:g} is not v0/x0 = {plan.v0 / plan.x0:g}")
+    lo, hi = lim.v_contact
+    cert = RobustLimits(plan.tau_s, (lo, hi), lim.v_max, lim.a_max).certify(k[1:], box)
     if not cert.certified:
         raise PlanError(f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} "
                         f"m/s {cert.reason}")
