@@ -1,5 +1,5 @@
 """The drivers' helper processes (the Crazyflie link keeper, drivers/cflink.py; the MAVLink
-sentinel, drivers/mavsentinel.py): started with this very perchd first on their path, so they
+sentinel, drivers/mavlink/sentinel.py): started with this very perchd first on their path, so they
 run the agent's own code, and reaped in the background once told to end; `say` is how they
 write a line to the agent's stderr."""
 

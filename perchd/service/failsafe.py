@@ -111,10 +111,8 @@ class _Vehicle:
 
     def modes(self) -> tuple[int, int, tuple[int, int]]:
         """(perchd's offboard custom mode, LAND's, LAND as main/sub) for this autopilot."""
-        m = self.mav
-        if self.autopilot == m.PX4:
-            return m.px4_custom_mode(*m.PX4_OFFBOARD), m.px4_custom_mode(*m.PX4_AUTO_LAND), m.PX4_AUTO_LAND
-        return m.ARDUPILOT_GUIDED_NOGPS, m.ARDUPILOT_LAND, (m.ARDUPILOT_LAND, 0)
+        d = self.mav.dialect_for(self.autopilot) or self.mav.ARDUPILOT
+        return d.flight.custom, d.land.custom, (d.land.main, d.land.sub)
 
     def command_land(self, main_sub: tuple[int, int]) -> None:
         self.conn.mav.command_long_send(self.system, 1, self.mav.CMD_DO_SET_MODE, 0, 1,

@@ -1,4 +1,4 @@
-"""The brake a killed agent leaves the MAVLink sentinel (drivers/mavbrake.py): a lean that
+"""The brake a killed agent leaves the MAVLink sentinel (drivers/mavlink/brake.py): a lean that
 decelerates the vehicle's horizontal velocity at BRAKE_ACCEL_MPS2 while thrust holds its
 height, for as long as stopping takes. Checked here against the attitude's own thrust
 vector, not against the formula that made it."""
@@ -9,7 +9,7 @@ import dataclasses
 import math
 
 import pytest
-from perchd.drivers.mavbrake import (
+from perchd.drivers.mavlink.brake import (
     BRAKE_ACCEL_MPS2,
     BRAKE_MIN_MPS,
     VELOCITY_WINDOW_S,

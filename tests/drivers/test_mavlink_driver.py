@@ -158,7 +158,7 @@ def test_land_is_repeated_until_the_vehicles_heartbeat_shows_it_taken(ardupilot)
         ardupilot.wait_for(lambda: False, timeout=0.9)
         assert lands(ardupilot) >= 2 + 2  # the failsafe's two, then one per LAND_RETRY_S
         ardupilot.unmute()  # the next LAND's heartbeat shows custom mode 9
-        assert ardupilot.wait_for(lambda: drv._mode == 9)
+        assert ardupilot.wait_for(lambda: drv.vehicle.mode == 9)
         taken = lands(ardupilot)
         ardupilot.wait_for(lambda: False, timeout=0.6)
         assert lands(ardupilot) == taken  # and then no more

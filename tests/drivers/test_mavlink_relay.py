@@ -1,4 +1,4 @@
-"""The mocap relayed after the agent's death (drivers/mavrelay.py): an agent killed while it
+"""The mocap relayed after the agent's death (drivers/mavlink/relay.py): an agent killed while it
 flies a vehicle on mocap alone leaves its sentinel sending the flight's own mocap on to the
 EKF, in the agent's frame and stamps, with TIMESYNC answered, until the landing is over.
 Real processes, ZMQ and MAVLink on loopback."""
@@ -12,13 +12,13 @@ import time
 
 import pytest
 from mavlink_double import PX4, VehicleDouble, agent_process
-from perchd.drivers.mavrelay import DISARMED_GRACE_S
-from perchd.drivers.mavsentinel import FOLLOW_PERIOD_S, LAND_REPEATS, VEHICLE_SILENT_S
-from perchd.drivers.mavvision import POS_STD_M, vision_estimate, vision_message
+from perchd.drivers.mavlink.relay import DISARMED_GRACE_S
+from perchd.drivers.mavlink.sentinel import FOLLOW_PERIOD_S, LAND_REPEATS, VEHICLE_SILENT_S
+from perchd.drivers.mavlink.vision import POS_STD_M, vision_estimate, vision_message
 from still_poses import StillPoses
 
 from perchd.core.types import Pose
-from perchd.sim.session import open_links
+from perchd.session import open_links
 
 YAW0_DEG = 60.0
 SPEED_MPS = 0.5

@@ -1,4 +1,4 @@
-"""The MAVLink sentinel (drivers/mavsentinel.py): an agent killed while it flies the vehicle
+"""The MAVLink sentinel (drivers/mavlink/sentinel.py): an agent killed while it flies the vehicle
 has it in LAND within a tenth of a second, over the very link it flew on; a normal end, a
 vehicle not yet taken and one handed back say nothing."""
 
@@ -21,15 +21,15 @@ from mavlink_double import (
     agent_process,
     connected,
 )
-from perchd.drivers.mavbrake import (
+from perchd.drivers.mavlink.brake import (
     BRAKE_ACCEL_MPS2,
     BRAKE_DONE_MPS,
     BRAKE_ROUNDS,
     LEVEL_MAX_S,
 )
-from perchd.drivers.mavlink import HOVER_PARAM
-from perchd.drivers.mavrelay import RELAY_MAX_S
-from perchd.drivers.mavsentinel import (
+from perchd.drivers.mavlink import Connection, dialect_for
+from perchd.drivers.mavlink.relay import RELAY_MAX_S
+from perchd.drivers.mavlink.sentinel import (
     LAND_REPEATS,
     Sentinel,
     agent_death,
@@ -136,7 +136,7 @@ def test_a_vehicle_killed_at_speed_is_braked_levelled_then_landed(airborne, auto
     roll, pitch, yaw = euler_zyx((x, y, z, w))
     assert pitch == pytest.approx(math.atan2(BRAKE_ACCEL_MPS2, 9.81), abs=1e-5)
     assert (roll, yaw) == pytest.approx((0.0, 0.0), abs=1e-5)
-    hover = SAFE_PARAMS[autopilot][HOVER_PARAM[autopilot]]
+    hover = SAFE_PARAMS[autopilot][dialect_for(autopilot).hover_param]
     assert len(level) >= 10 and all(t.thrust == pytest.approx(hover) for t in level)
     assert land - lean[-1].t == pytest.approx(LEVEL_MAX_S, abs=0.06)
     assert {mode for t, mode in vehicle.modes if t > killed} == {LAND[autopilot]}
@@ -249,7 +249,7 @@ def test_over_a_stream_link_the_land_command_is_one_whole_frame():
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
     conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=255)
-    sentinel = Sentinel(conn, (1, 1), (9, 0))
+    sentinel = Sentinel(Connection(conn), (1, 1), (9, 0))
     sentinel.flying(True)
     sentinel._sock.close()  # the driver's end gone without a release, as on SIGKILL
     thread.join(5.0)
@@ -271,7 +271,7 @@ def test_over_a_udpin_link_the_land_goes_to_the_vehicle_heard():
     vehicle.sendto(px4.heartbeat_encode(2, 12, 0, 0, 4).pack(px4),
                    ("127.0.0.1", conn.port.getsockname()[1]))
     assert conn.recv_match(type="HEARTBEAT", blocking=True, timeout=2.0) is not None
-    sentinel = Sentinel(conn, (1, 1), (4, 6))
+    sentinel = Sentinel(Connection(conn), (1, 1), (4, 6))
     sentinel.flying(True)
     sentinel._sock.close()
     parser = mavutil.mavlink.MAVLink(None)
@@ -285,12 +285,12 @@ def test_a_brake_that_fails_still_ends_in_land(monkeypatch):
     cost the other."""
     import signal
 
-    from perchd.drivers import mavsentinel
-    from perchd.drivers.mavbrake import brake_for
+    from perchd.drivers.mavlink import sentinel
+    from perchd.drivers.mavlink.brake import brake_for
 
     def broken(*_: object) -> None:
         raise RuntimeError("a brake that cannot be flown")
-    monkeypatch.setattr(mavsentinel, "fly_brake", broken)
+    monkeypatch.setattr(sentinel, "fly_brake", broken)
     vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     vehicle.bind(("127.0.0.1", 0))
     vehicle.settimeout(2.0)
@@ -303,7 +303,7 @@ def test_a_brake_that_fails_still_ends_in_land(monkeypatch):
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT)}
     try:
         argv = [str(theirs.detach()), str(link.fileno()), dest, "255", "190", "1", "1", "4", "6", "-"]
-        assert mavsentinel.main(argv) == 0
+        assert sentinel.main(argv) == 0
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)

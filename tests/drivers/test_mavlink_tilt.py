@@ -1,4 +1,4 @@
-"""The autopilot's tilt error sent back into the setpoints (drivers/mavtilt.py): paired in
+"""The autopilot's tilt error sent back into the setpoints (drivers/mavlink/tilt.py): paired in
 time through the autopilot's boot clock, only its change, bounded; and through the MAVLink
 driver over real pymavlink on loopback against the vehicle double."""
 
@@ -13,7 +13,7 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from mavlink_double import PX4, VehicleDouble, connected
-from perchd.drivers.mavtilt import MAX_RAD, STALE_S, BootClock, TiltCorrection
+from perchd.drivers.mavlink.tilt import MAX_RAD, STALE_S, BootClock, TiltCorrection
 from pymavlink.quaternion import Quaternion
 
 from perchd.core.types import Phase, Pose, Setpoint

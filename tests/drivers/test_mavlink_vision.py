@@ -74,7 +74,7 @@ def test_yaw0_auto_forwards_from_the_first_pose_at_the_measured_offset():
     v = VehicleDouble(PX4, yaw_deg=100.0)
     try:
         drv = connected(v, "&yaw0=auto")
-        v.wait_for(lambda: drv._yaw_ned is not None)
+        v.wait_for(lambda: drv.vehicle.yaw_ned is not None)
         drv.observe_pose(pose(drv.clock.now(), (1.0, 0.0, 0.0), yaw=math.radians(30)))
         assert v.wait_for(lambda: len(v.visions) == 1)
         m = v.visions[0][1]

@@ -201,7 +201,7 @@ def takeoff_overshoot(log: Path, truth: list[tuple[float, float, float, float, f
 
 def test_sigkill_of_perchd_fly_mid_approach_brakes_and_lands_within_3_s(tmp_path):
     """No failsafe can be sent by the agent: its sentinel leans the vehicle against its
-    velocity, levels it and commands LAND (drivers/mavbrake.py; at most BRAKE_ROUNDS rounds
+    velocity, levels it and commands LAND (drivers/mavlink/brake.py; at most BRAKE_ROUNDS rounds
     of lean and level); behind it GUID_TIMEOUT (0.5 s) and the GCS failsafe (FS_GCS_ENABLE
     5, FS_GCS_TIMEOUT 2 s) would; docs/safety.md."""
     proc, mocap, driver = start(tmp_path)

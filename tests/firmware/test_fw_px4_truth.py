@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import math
 import random
+import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -242,36 +244,73 @@ def test_sih_falling_behind_the_wall_clock_is_measured(tmp_path):
     assert vehicle.summary()["sim_clock_rate"] == pytest.approx(0.99, abs=1e-6)
 
 
-class Commands:
-    """A MAVLink connection's `mav` that keeps the COMMAND_LONGs sent."""
+class HeadingPx4:
+    """PX4's side of the harness link on loopback: ATTITUDE at 50 Hz with heading_deg (settable),
+    and every COMMAND_LONG it receives kept."""
 
-    def __init__(self) -> None:
-        self.mav, self.sent = self, []
+    def __init__(self, port: int) -> None:
+        from pymavlink import mavutil
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.02)
+        self.port, self.heading_deg, self.commands = port, 0.0, []
+        self.mav = mavutil.mavlink.MAVLink(None, 1, 1)
+        self._parser = mavutil.mavlink.MAVLink(None)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
 
-    def command_long_send(self, system, component, command, confirmation, *params) -> None:
-        self.sent.append((command, params))
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            yaw = math.radians(self.heading_deg)
+            msg = self.mav.attitude_encode(int(time.monotonic() * 1e3) & 0xFFFFFFFF, 0.0, 0.0,
+                                           yaw, 0.0, 0.0, 0.0)
+            self.sock.sendto(msg.pack(self.mav), ("127.0.0.1", self.port))
+            try:
+                data = self.sock.recv(512)
+            except TimeoutError:
+                continue
+            self.commands += [m for m in self._parser.parse_buffer(data) or []
+                              if m.get_type() == "COMMAND_LONG"]
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.sock.close()
 
 
 def test_px4_is_turned_in_hold_until_its_heading_estimate_has_held_there(tmp_path):
     """DO_REPOSITION (192) with only a yaw, in radians as PX4 reads it, position and height
     left NaN (kept); done once ATTITUDE's heading has stayed within 2 deg for 1 s."""
-    import threading
+    from pymavlink import mavutil
+
+    from ticks import wait_for
+
+    from perchd.drivers.mavlink import Connection
 
     vehicle = Px4Vehicle(Px4Params(fake_build(tmp_path)))
-    vehicle._conn = Commands()
-    vehicle._ekf_heading = 0.0
-    done = threading.Event()
-    turner = threading.Thread(target=lambda: (vehicle._turn(math.radians(60.0), threading.Event()),
-                                              done.set()))
-    turner.start()
-    time.sleep(0.3)
-    assert not done.is_set()
-    vehicle._ekf_heading = math.radians(61.5)
-    turner.join(5.0)
-    assert done.is_set()
-    command, params = vehicle._conn.sent[0]
-    assert command == 192 and params[3] == pytest.approx(math.radians(60.0))
-    assert all(math.isnan(p) for p in params[4:7])
+    vehicle._link = Connection(mavutil.mavlink_connection("udpin:127.0.0.1:0"))
+    vehicle._on_truth(hil_east(0.0, 0.0))  # ATTITUDE is read once the truth flows
+    receiver = threading.Thread(target=vehicle._receive, daemon=True)
+    receiver.start()
+    px4 = HeadingPx4(vehicle._link.conn.port.getsockname()[1])
+    try:
+        assert wait_for(lambda: vehicle._ekf_heading is not None)  # PX4 heard: answered
+        done = threading.Event()
+        turner = threading.Thread(target=lambda: (
+            vehicle._turn(math.radians(60.0), threading.Event()), done.set()))
+        turner.start()
+        time.sleep(0.3)
+        assert not done.is_set()
+        px4.heading_deg = 61.5
+        turner.join(5.0)
+        assert done.is_set()
+    finally:
+        vehicle.close()
+        px4.close()
+    command = px4.commands[0]
+    assert command.command == 192 and command.param4 == pytest.approx(math.radians(60.0))
+    assert all(math.isnan(p) for p in (command.param5, command.param6, command.param7))
 
 
 def test_the_push_px4s_attitude_estimate_puts_on_the_vehicle_is_averaged_before_contact(

@@ -216,7 +216,8 @@ def test_by_default_the_loop_is_mocap_synchronous_and_a_dropout_keeps_setpoints_
     """The default loop ticks on each frame; when the frames stop it still ticks every 1.5
     periods, so a driver never goes quiet long enough for its own keep-alive (100 ms on the
     Crazyflie keeper and MAVLink) to stand in, and stale mocap ends the flight on time."""
-    from perchd.drivers import cflink, mavlink
+    from perchd.drivers import cflink
+    from perchd.drivers.mavlink import setpoints
 
     sim = Sim()
     sim.world.faults.mocap_outages.append((2.0, 9.0))
@@ -227,5 +228,5 @@ def test_by_default_the_loop_is_mocap_synchronous_and_a_dropout_keeps_setpoints_
     assert 3 / 120 < rows[-1].t - last_pose <= 3 / 120 + 1.5 / 100 + 1e-9
     times = [r.t for r in rows]
     gaps = [b - a for a, b in zip(times, times[1:])]
-    assert max(gaps) <= 1.5 / 100 + 1e-9 < min(cflink.KEEPALIVE_S, mavlink.KEEPALIVE_S)
+    assert max(gaps) <= 1.5 / 100 + 1e-9 < min(cflink.KEEPALIVE_S, setpoints.KEEPALIVE_S)
     assert len(sim.world.sent) >= len(rows) - 1  # every tick but the failsafe one sent

@@ -11,7 +11,7 @@ time before it uses GPS), then SIM_SPEEDUP goes back to 1: perchd flies in real 
 
 The world frame is perchd's (docs/architecture.md: Z up, metres): NED about the first
 true position, rotated into NWU (default) or ENU, plus `start`. NWU is the frame
-perchd's MAVLink driver assumes (drivers/mavlink.py: rotating by pi about X maps perchd's
+perchd's MAVLink driver assumes (drivers/mavlink/setpoints.py: rotating by pi about X maps perchd's
 world onto NED, so yaw zero = north = world X); in ENU yaw zero would face world Y.
 """
 
@@ -31,6 +31,12 @@ from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.ned import world_quat, world_vec
 from perchd.core.types import Vec3
+from perchd.drivers.mavlink.link import (
+    CMD_SET_MESSAGE_INTERVAL,
+    MAV_PARAM_TYPE_REAL32,
+    Connection,
+    wait_for,
+)
 from perchd.sim.firmware.harness import (
     FirmwareVehicle,
     Interrupted,
@@ -50,7 +56,11 @@ nothing else says when the inertial checks settle ("Accels inconsistent" for ~30
 the GPS start is ready at about this time too (docs/firmware.md)."""
 STATUS_HZ = 2.0
 """[Hz] SYS_STATUS (its pre-arm health bit): SITL streams nothing on a bare serial."""
-CMD_SET_MESSAGE_INTERVAL = 511
+SITL_TARGET = (1, 1)  # ArduCopter SITL's system and component
+ASK_S = 0.5
+"""[s] a request awaited during start-up (a parameter, a message rate) is sent this often."""
+RECEIVE_S = 0.05
+"""[s] the receiving thread's longest block: how soon it sees close()."""
 PREARM_BIT = 0x10000000
 """MAV_SYS_STATUS_PREARM_CHECK: SYS_STATUS health bit set when the pre-arm checks pass."""
 EKF_GPS_TEXT = "is using GPS"
@@ -60,13 +70,13 @@ COPTER_MODES = {0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITE
                 6: "RTL", 9: "LAND", 17: "BRAKE", 20: "GUIDED_NOGPS"}
 DEFAULT_PARAMS = (("GUID_OPTIONS", 8.0), ("GUID_TIMEOUT", 0.5), ("FS_GCS_ENABLE", 5.0),
                   ("FS_GCS_TIMEOUT", 2.0), ("ATC_ANGLE_BOOST", 0.0))
-"""What perchd's driver checks (drivers/mavparams.py): GUID_OPTIONS bit 3 (thrust is thrust,
+"""What perchd's driver checks (drivers/mavlink/ardupilot.py): GUID_OPTIONS bit 3 (thrust is thrust,
 not a climb rate), the failsafe that levels and lands a dead agent's vehicle (docs/safety.md),
 no second tilt compensation. stock_params leaves all but GUID_OPTIONS at copter.parm's."""
 VISION_BOOT_PARAMS = (("VISO_TYPE", 1.0), ("GPS1_TYPE", 0.0), ("EK3_SRC1_POSXY", 6.0),
                       ("EK3_SRC1_VELXY", 0.0), ("EK3_SRC1_POSZ", 6.0), ("EK3_SRC1_VELZ", 0.0),
                       ("EK3_SRC1_YAW", 6.0))
-"""vision=True: no GPS, the EKF on perchd's mocap (drivers/mavvision.py); in a defaults file
+"""vision=True: no GPS, the EKF on perchd's mocap (drivers/mavlink/vision.py); in a defaults file
 read at boot, as VISO_TYPE takes effect only then."""
 
 
@@ -288,18 +298,18 @@ class ArduPilotVehicle(FirmwareVehicle):
         self._lock = threading.Lock()
         self._t0 = self.clock.now()
         self.driver_port = free_udp_port()
-        self._conn = self._open_link()
+        self._link = self._open_link()
         self._thread = threading.Thread(target=self._receive_loop, name="sitl-link", daemon=True)
         self._thread.start()
 
-    def _open_link(self) -> Any:
+    def _open_link(self) -> Connection:
         from perchd.core.extras import require
         require("pymavlink", "mavlink")
         from pymavlink import mavutil
         conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=250,
                                           source_component=190)
         self.harness_port = conn.port.getsockname()[1]
-        return conn
+        return Connection(conn)
 
     # -- FirmwareVehicle ----------------------------------------------------------------
     def start(self, procs: ProcessGroup, cancel: threading.Event) -> None:
@@ -309,15 +319,16 @@ class ArduPilotVehicle(FirmwareVehicle):
         argv = sitl_argv(self.params, defaults, self.harness_port, self.driver_port)
         self.proc = procs.launch(in_dir(self.workdir, argv), self.log)
         deadline = time.monotonic() + self.params.ready_timeout_s
-        self._wait(lambda: self.state.sim_states > 0, "SIM_STATE", deadline, cancel,
-                   ask=self._ask_truth)
+        self._wait(("SIM_STATE",), lambda: self.state.sim_states > 0, "SIM_STATE", deadline,
+                   cancel, ask=self._ask_truth)
         for name, value in self.params.params:
             self._set_param(name, value, deadline, cancel)
         if self.params.vision:  # no position before perchd's mocap: no pre-arm pass either
-            self._wait(lambda: self.state.boot_s >= VISION_BOOT_S,
+            self._wait(("SYSTEM_TIME",), lambda: self.state.boot_s >= VISION_BOOT_S,
                        f"{VISION_BOOT_S:g} s since boot", deadline, cancel)
         else:
-            self._wait(lambda: self.state.ekf_gps and self.state.prearm_ok,
+            self._wait(("STATUSTEXT", "SYS_STATUS"),
+                       lambda: self.state.ekf_gps and self.state.prearm_ok,
                        "the EKF to use GPS and the pre-arm checks to pass", deadline, cancel)
         self._set_param("SIM_SPEEDUP", 1.0, deadline, cancel)
         self._ask_truth()  # the rate is per wall second: ask again at speed-up 1
@@ -349,51 +360,50 @@ class ArduPilotVehicle(FirmwareVehicle):
     def close(self) -> None:
         self._halt.set()
         self._thread.join(timeout=1.0)
-        self._conn.close()
+        self._link.close()
         if self._own_dir:
             shutil.rmtree(self.workdir, ignore_errors=True)
 
     # -- start-up ------------------------------------------------------------------------
-    def _wait(self, done: Callable[[], bool], what: str, deadline: float,
-              cancel: threading.Event, ask: Callable[[], None] | None = None) -> None:
-        asked = 0.0
-        while not done():
+    def _wait(self, types: tuple[str, ...], done: Callable[[], bool], what: str,
+              deadline: float, cancel: threading.Event,
+              ask: Callable[[], None] | None = None) -> None:
+        """Until done(), checked on each message of `types`; ask() every ASK_S meanwhile;
+        LinkError past `deadline` (time.monotonic()) or when arducopter exits."""
+        def idle() -> None:
             if cancel.is_set():
                 raise Interrupted()
             if self.proc.poll() is not None:
                 raise LinkError(f"arducopter exited ({self.proc.returncode}) while waiting "
                                 f"for {what}; see {self.log}")
-            if time.monotonic() > deadline:
-                raise LinkError(f"arducopter: no {what} within {self.params.ready_timeout_s:g} s; "
-                                f"see {self.log}")
-            if ask is not None and time.monotonic() - asked > 0.5:
-                asked = time.monotonic()
-                ask()
-            time.sleep(0.02)
+        clock = MonotonicClock()
+        if not done() and wait_for(self._link, types, lambda _msg: done(),
+                                   deadline - clock.now(), clock, ask=ask, ask_every_s=ASK_S,
+                                   idle=idle) is None:
+            raise LinkError(f"arducopter: no {what} within {self.params.ready_timeout_s:g} s; "
+                            f"see {self.log}")
 
     def _ask_truth(self) -> None:
         for msg_id, hz in ((SIM_STATE_ID, self.params.truth_hz), (SYS_STATUS_ID, STATUS_HZ),
                            (SYSTEM_TIME_ID, STATUS_HZ)):
-            self._conn.mav.command_long_send(1, 1, CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
-                                             1e6 / hz, 0, 0, 0, 0, 0)
+            self._link.command(SITL_TARGET, CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
 
     def _set_param(self, name: str, value: float, deadline: float,
                    cancel: threading.Event) -> None:
         def send() -> None:
-            self._conn.mav.param_set_send(1, 1, name.encode(), value, 9)  # 9: REAL32
+            self._link.send(self._link.mav.param_set_encode(*SITL_TARGET, name.encode(), value,
+                                                            MAV_PARAM_TYPE_REAL32))
         self.state.params.pop(name, None)
-        self._wait(lambda: self.state.params.get(name) == value, f"{name}={value:g}",
-                   deadline, cancel, ask=send)
+        self._wait(("PARAM_VALUE",), lambda: self.state.params.get(name) == value,
+                   f"{name}={value:g}", deadline, cancel, ask=send)
 
     # -- receiving -----------------------------------------------------------------------
     def _receive_loop(self) -> None:
         while not self._halt.is_set():
             try:
-                msg = self._conn.recv_match(blocking=True, timeout=0.05)
+                self._link.pump(RECEIVE_S, self._on_message)
             except (OSError, ValueError):
                 return  # closed under us
-            if msg is not None:
-                self._on_message(msg)
 
     def _on_message(self, msg: Any) -> None:
         kind, s, now = msg.get_type(), self.state, self.clock.now()

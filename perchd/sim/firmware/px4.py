@@ -23,7 +23,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
@@ -31,6 +31,7 @@ from perchd.core.extras import require
 from perchd.core.ned import rotate, world_quat, world_vec
 from perchd.core.types import Quat, Vec3
 from perchd.core.vehicle import G_M_S2
+from perchd.drivers.mavlink.link import Connection, wait_for
 from perchd.flight.frame import body_z
 from perchd.sim.firmware.cf2 import Surface
 from perchd.sim.firmware.harness import (
@@ -59,8 +60,8 @@ SAFE_PARAMS = {"COM_OF_LOSS_T": "0.3", "COM_OBL_RC_ACT": "4", "SDLOG_BACKEND": "
 VISION_PARAMS = {"EKF2_EV_CTRL": "11", "EKF2_HGT_REF": "3", "EKF2_GPS_CTRL": "0",
                  "EKF2_EVP_NOISE": "0.01", "EKF2_EVA_NOISE": "0.02", "EKF2_BARO_CTRL": "0"}
 """vision: EKF2 on the mocap perchd's driver forwards (position and yaw, vision height),
-GPS off (drivers/mavparams.py checks the first two); the noise floors down to the mocap's
-(drivers/mavvision.py: EKF2 takes the larger of its floor, 0.1 m and 0.1 rad by default,
+GPS off (drivers/mavlink/px4.py checks the first two); the noise floors down to the mocap's
+(drivers/mavlink/vision.py: EKF2 takes the larger of its floor, 0.1 m and 0.1 rad by default,
 and the covariance sent)."""
 REFINE_GAIN = 0.02
 """Share of the gap to the quantised fix a refined truth position takes up per sample: ~50
@@ -73,6 +74,8 @@ REFINE_MAX_DT_S = 0.02
 PUSH_WINDOW_S, PUSH_KEEP = 0.5, 100
 """[s] the summary's attitude_push_mps2 averages this long before contact (stage 2), of the
 last PUSH_KEEP ATTITUDE messages (2 s at 50 Hz)."""
+RECEIVE_S = 0.05
+"""[s] the receiving thread's longest block: how soon it sees close()."""
 RESEND_AFTER_S = 0.025
 """[s] a truth sample older than this is sent again stamped now (Px4Vehicle.truth)."""
 HOLD, OFFBOARD = (4, 3), (6, 0)  # PX4 (main, sub) modes
@@ -189,7 +192,7 @@ class Px4Vehicle(FirmwareVehicle):
         self.workdir: Path | None = None
         self.surface: Surface | None = None
         self.start_heading: float | None = None  # [rad] ENU yaw when ready
-        self._conn: Any = None
+        self._link: Connection | None = None
         self._truth: Truth | None = None
         self._refiner = PositionRefiner()
         self._origin: tuple[float, float, float] | None = None
@@ -216,12 +219,13 @@ class Px4Vehicle(FirmwareVehicle):
         from pymavlink import mavutil
         self.workdir = Path(tempfile.mkdtemp(prefix="perchd-px4-"))
         port = DISPLAY_PORT + self.params.instance
-        self._conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}",
-                                                source_system=246, source_component=190)
+        self._link = Connection(mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{port}", source_system=246, source_component=190))
         self._launch(procs)
         self._thread = threading.Thread(target=self._receive, name="px4-truth", daemon=True)
         self._thread.start()
-        self._wait(lambda: self._origin is not None and self._truth_acked, BOOT_TIMEOUT_S,
+        self._wait(("HIL_STATE_QUATERNION", "COMMAND_ACK"),
+                   lambda: self._origin is not None and self._truth_acked, BOOT_TIMEOUT_S,
                    cancel, "ground truth (HIL_STATE_QUATERNION) from PX4 SIH", self._ask_truth)
         if self.params.takeoff:
             self._take_off(cancel)
@@ -275,8 +279,8 @@ class Px4Vehicle(FirmwareVehicle):
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=1.0)
-        if self._conn is not None:
-            self._conn.close()
+        if self._link is not None:
+            self._link.close()
         if self.workdir is not None:
             shutil.rmtree(self.workdir, ignore_errors=True)
 
@@ -298,7 +302,7 @@ class Px4Vehicle(FirmwareVehicle):
     def _ask_truth(self) -> None:
         """HIL_STATE_QUATERNION at 100 Hz (sim time), and the display link's
         HIL_ACTUATOR_CONTROLS (~200 Hz) off: parsing it in Python starves the publisher."""
-        if self._conn.clients:
+        if self._link.conn.clients:
             self._command(511, 115, 10000)
             self._command(511, 93, -1)
             self._command(511, 30, 20000)  # ATTITUDE at 50 Hz: its attitude estimate
@@ -311,7 +315,8 @@ class Px4Vehicle(FirmwareVehicle):
                 nan = float("nan")
                 self._command(22, 0, 0, 0, nan, nan, nan, nan)
                 self._command(400, 1)
-        self._wait(lambda: self._armed and self._mode == HOLD and self._truth.p[2] > 2.0,
+        self._wait(("HIL_STATE_QUATERNION", "HEARTBEAT"),
+                   lambda: self._armed and self._mode == HOLD and self._truth.p[2] > 2.0,
                    TAKEOFF_TIMEOUT_S, cancel, "PX4's take-off to Hold above 2 m", send, 2.0)
 
     def _turn(self, heading: float, cancel: threading.Event) -> None:
@@ -326,18 +331,19 @@ class Px4Vehicle(FirmwareVehicle):
             near = est is not None and abs(math.remainder(est - heading, math.tau)) < TURN_TOL_RAD
             since = (since or now) if near else None
             return since is not None and now - since >= TURN_STEADY_S
-        self._wait(steady, TURN_TIMEOUT_S, cancel,
+        self._wait(("ATTITUDE",), steady, TURN_TIMEOUT_S, cancel,
                    f"PX4's turn to heading {math.degrees(heading):.0f} deg in Hold",
                    lambda: self._command(192, -1, 0, 0, heading, nan, nan, nan), 2.0)
 
     def _command(self, command: int, *params: float) -> None:
-        p = list(params) + [0.0] * (7 - len(params))
-        self._conn.mav.command_long_send(self.params.instance + 1, 1, command, 0, *p)
+        self._link.command((self.params.instance + 1, 1), command, *params)
 
-    def _wait(self, done, timeout_s: float, cancel: threading.Event, what: str,
-              poke=None, every_s: float = 0.5) -> None:
-        deadline, poked = time.monotonic() + timeout_s, 0.0
-        while not done():
+    def _wait(self, types: tuple[str, ...], done: Callable[[], bool], timeout_s: float,
+              cancel: threading.Event, what: str, poke: Callable[[], None] | None = None,
+              every_s: float = 0.5) -> None:
+        """Until done(), checked on each message of `types`; poke() every every_s [s]
+        meanwhile; LinkError after timeout_s [s] or when px4 exits."""
+        def idle() -> None:
             if cancel.is_set():
                 raise Interrupted()
             if self._proc is not None and self._proc.poll() is not None:
@@ -346,34 +352,31 @@ class Px4Vehicle(FirmwareVehicle):
                                 f"({self._proc.returncode}) while waiting for {what} (is "
                                 f"another px4 running as instance {self.params.instance}? "
                                 f"log: {self.log})")
-            now = time.monotonic()
-            if now > deadline:
-                raise LinkError(f"PX4 instance {self.params.instance}: no {what} within "
-                                f"{timeout_s:g} s (log: {self.log})")
-            if poke is not None and now - poked >= every_s:
-                poked = now
-                poke()
-            time.sleep(0.02)
+        if not done() and wait_for(self._link, types, lambda _msg: done(), timeout_s,
+                                   MonotonicClock(), ask=poke, ask_every_s=every_s,
+                                   idle=idle) is None:
+            raise LinkError(f"PX4 instance {self.params.instance}: no {what} within "
+                            f"{timeout_s:g} s (log: {self.log})")
 
     # -- truth -------------------------------------------------------------------------
     def _receive(self) -> None:
         while not self._stop.is_set():
             try:
-                msg = self._conn.recv_match(blocking=True, timeout=0.05)
+                self._link.pump(RECEIVE_S, self._on_message)
             except OSError:
                 return
-            if msg is None:
-                continue
-            kind = msg.get_type()
-            if kind == "HIL_STATE_QUATERNION":
-                self._on_truth(msg)
-            elif kind == "ATTITUDE" and self._truth is not None:
-                self._on_attitude(msg)
-            elif kind == "COMMAND_ACK" and msg.command == 511 and msg.result == 0:
-                self._truth_acked = True
-            elif kind == "HEARTBEAT" and msg.get_srcSystem() == self.params.instance + 1 \
-                    and msg.get_srcComponent() == 1:
-                self._on_heartbeat(msg)
+
+    def _on_message(self, msg: Any) -> None:
+        kind = msg.get_type()
+        if kind == "HIL_STATE_QUATERNION":
+            self._on_truth(msg)
+        elif kind == "ATTITUDE" and self._truth is not None:
+            self._on_attitude(msg)
+        elif kind == "COMMAND_ACK" and msg.command == 511 and msg.result == 0:
+            self._truth_acked = True
+        elif kind == "HEARTBEAT" and msg.get_srcSystem() == self.params.instance + 1 \
+                and msg.get_srcComponent() == 1:
+            self._on_heartbeat(msg)
 
     def _on_truth(self, msg: Any) -> None:
         if self._origin is None:  # on the ground at boot: that is the world origin

@@ -7,11 +7,11 @@ went 0.70 m further toward the wall, tilted for the timeout, then braking in Lan
 sentinel holds a copy of the driver's link (the same socket: the vehicle hears the partner
 it knows) and one end of a socket pair whose other end only the driver holds. When that
 closes without a release while perchd flies the vehicle (the kernel closes it on SIGKILL,
-the OOM killer, a crash), the sentinel first flies the brake the agent left (drivers/
-mavbrake.py: leaning against the velocity until it is gone) and then commands the
+the OOM killer, a crash), the sentinel first flies the brake the agent left (brake.py:
+leaning against the velocity until it is gone) and then commands the
 autopilot's LAND, repeated LAND_REPEATS times, LAND_REPEAT_S apart (a lost datagram would
 leave the vehicle flying). Given the flight's mocap URI, it also keeps the mocap flowing to
-the autopilot's EKF from the death until the landing is over (drivers/mavrelay.py), and
+the autopilot's EKF from the death until the landing is over (relay.py), and
 answers the autopilot's TIMESYNC meanwhile. An agent that dies with the vehicle no longer
 its own (between a service's flights: landing in its failsafe's LAND, or a pilot's) gets the
 relay alone: nothing is commanded, and the EKF keeps the mocap it was being fed.
@@ -23,10 +23,11 @@ yaw0 [rad], the NED heading of world X the mocap is relayed in; b"R" release: ex
 without acting; b"L" hand-over: the agent ends with the vehicle landing (its own LAND):
 relay the mocap until the landing is over, command nothing.
 
-Run as `python -m perchd.drivers.mavsentinel CTL_FD LINK_FD DEST SSYS SCOMP SYS COMP MAIN
-SUB MOCAP FLIGHT` by drivers/mavlink.py: DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a
-stream; SSYS, SCOMP the driver's own ids; SYS, COMP the vehicle's; MAIN, SUB the LAND mode
-as DO_SET_MODE's param2 and param3; MOCAP the mocap URI to relay, "-" for none; FLIGHT the
+Run as `python -m perchd.service.mavsentinel_main CTL_FD LINK_FD DEST SSYS SCOMP SYS COMP
+MAIN SUB MOCAP FLIGHT` by the driver (driver.py; that entry point, outside the drivers,
+opens the mocap): DEST is HOST:PORT[,HOST:PORT...] for a UDP link, "-" for a stream;
+SSYS, SCOMP the driver's own ids; SYS, COMP the vehicle's; MAIN, SUB the LAND mode as
+DO_SET_MODE's param2 and param3; MOCAP the mocap URI to relay, "-" for none; FLIGHT the
 custom_mode of the offboard mode perchd flies in.
 """
 
@@ -39,37 +40,40 @@ import select
 import signal
 import socket
 import struct
-import sys
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
 
+from perchd.core.types import Vec3
 from perchd.drivers import childproc
 from perchd.drivers.childproc import say
-from perchd.drivers.mavbrake import (
+from perchd.drivers.mavlink.brake import (
     BRAKE_ROUNDS,
     LEVEL_MAX_S,
     PACKED_SIZE,
     WILL_MAX_AGE_S,
     Brake,
 )
-from perchd.drivers.mavrelay import DISARMED_GRACE_S, RELAY_MAX_S, VisionRelay
-from perchd.drivers.mavvision import timesync_reply
-
-from perchd.core.types import Vec3
+from perchd.drivers.mavlink.link import (
+    CMD_DO_SET_MODE,
+    CMD_SET_MESSAGE_INTERVAL,
+    CUSTOM_MODE_ENABLED,
+    LOCAL_POSITION_NED_ID,
+    Connection,
+)
+from perchd.drivers.mavlink.relay import DISARMED_GRACE_S, RELAY_MAX_S, PoseOpener, VisionRelay
+from perchd.drivers.mavlink.setpoints import attitude_target
+from perchd.drivers.mavlink.vision import timesync_reply
 
 LAND_REPEATS = 10
 LAND_REPEAT_S = 0.1
 """LAND goes out at once and then every LAND_REPEAT_S, LAND_REPEATS times in all (1 s)."""
 BRAKE_PERIOD_S = 0.02
 """[s] the brake's attitude target is repeated this often while it is flown."""
-IGNORE_BODY_RATES = 0b0000_0111  # SET_ATTITUDE_TARGET: the attitude alone
-CMD_DO_SET_MODE, CMD_SET_MESSAGE_INTERVAL = 176, 511
-LOCAL_POSITION_NED_ID = 32
+ENTRY_MODULE = "perchd.service.mavsentinel_main"
+"""The sentinel's process entry point, outside the drivers: it opens the mocap to relay."""
 VELOCITY_INTERVAL_US = 20000
 """LOCAL_POSITION_NED at 50 Hz while braking (the driver asks for 10)."""
-CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 VEHICLE_SILENT_S = 2.0
 """[s] the relay ends when the vehicle has not been heard this long: it is gone, or another
 process (a restarted agent) now receives on the link."""
@@ -77,7 +81,7 @@ FOLLOW_PERIOD_S = 0.05
 """[s] while relaying, the link is read this often (TIMESYNC answered, heartbeats read)."""
 YAW0_WIRE = "<d"
 
-log = logging.getLogger("perchd.drivers.mavsentinel")
+log = logging.getLogger("perchd.drivers.mavlink.sentinel")
 
 
 def command_frame(source: tuple[int, int], target: tuple[int, int], command: int,
@@ -101,9 +105,7 @@ def attitude_frame(source: tuple[int, int], target: tuple[int, int],
     """SET_ATTITUDE_TARGET of an attitude (w, x, y, z; FRD in NED) and normalised thrust."""
     from pymavlink import mavutil
     mav = mavutil.mavlink.MAVLink(None, *source)
-    msg = mav.set_attitude_target_encode(0, *target, IGNORE_BODY_RATES, list(q), 0.0, 0.0,
-                                         0.0, thrust)
-    return msg.pack(mav)
+    return attitude_target(mav, 0, target, q, thrust).pack(mav)
 
 
 @dataclass(frozen=True)
@@ -147,11 +149,11 @@ def agent_death(ctl: socket.socket) -> Death | None:
             (yaw0,) = struct.unpack(YAW0_WIRE, msg[1:])
 
 
-def fly_brake(link: Link, source: tuple[int, int], target: tuple[int, int],
+def fly_brake(link: SentinelLink, source: tuple[int, int], target: tuple[int, int],
               brake: Brake) -> None:
     """Fly the brake if it is fresh (one left before the agent's mocap stopped is not):
     its lean for its duration, then level until the autopilot's own velocity says the
-    vehicle has stopped (drivers/mavbrake.py)."""
+    vehicle has stopped (brake.py)."""
     if brake.duration_s <= 0.0:
         return
     if time.monotonic() - brake.t_s > WILL_MAX_AGE_S:
@@ -166,8 +168,8 @@ def fly_brake(link: Link, source: tuple[int, int], target: tuple[int, int],
         brake = brake.again(v)
 
 
-def brake_round(link: Link, source: tuple[int, int], target: tuple[int, int], brake: Brake
-                ) -> tuple[float, float, float] | None:
+def brake_round(link: SentinelLink, source: tuple[int, int], target: tuple[int, int],
+                brake: Brake) -> tuple[float, float, float] | None:
     """Lean for the brake's duration, then level until stopped (LEVEL_MAX_S at most):
     the autopilot's newest velocity [m/s, NED] then, None if it sent none."""
     leaned = hold(link, attitude_frame(source, target, brake.q_ned, brake.thrust),
@@ -187,7 +189,7 @@ def brake_round(link: Link, source: tuple[int, int], target: tuple[int, int], br
     return v
 
 
-def hold(link: Link, frame: bytes, longest_s: float, done=lambda: False) -> float:
+def hold(link: SentinelLink, frame: bytes, longest_s: float, done=lambda: False) -> float:
     """Send `frame` every BRAKE_PERIOD_S for longest_s [s] or until done(); [s] held."""
     start = time.monotonic()
     while time.monotonic() - start < longest_s and not done():
@@ -196,7 +198,7 @@ def hold(link: Link, frame: bytes, longest_s: float, done=lambda: False) -> floa
     return time.monotonic() - start
 
 
-class Link:
+class SentinelLink:
     """The dead agent's link to the vehicle, from the sentinel's side: `fd` and DEST
     (module docstring), the driver's ids `source` and the vehicle's `target`; sends may
     come from two threads (the relay's and the main one); what the vehicle sent since is
@@ -255,7 +257,8 @@ class Link:
         return b"".join(chunks)
 
 
-def follow_landing(link: Link, relay: VisionRelay, flight_mode: int, died_s: float) -> str:
+def follow_landing(link: SentinelLink, relay: VisionRelay, flight_mode: int,
+                   died_s: float) -> str:
     """Relay until the landing is over: the vehicle disarmed (DISARMED_GRACE_S later), or
     back in the offboard mode `flight_mode` after it left it (a new agent has it: two
     streams must not feed one EKF), or silent for VEHICLE_SILENT_S, or the relay stopped,
@@ -283,7 +286,7 @@ def follow_landing(link: Link, relay: VisionRelay, flight_mode: int, died_s: flo
         select.select([link.fd], [], [], FOLLOW_PERIOD_S)  # TIMESYNC answered on arrival
 
 
-def land(link: Link, frame: bytes) -> int:
+def land(link: SentinelLink, frame: bytes) -> int:
     """LAND_REPEATS times, LAND_REPEAT_S apart; 1 when the link itself is gone (or not one
     went out). A full send buffer costs one repeat, not the rest."""
     sent = 0
@@ -301,13 +304,14 @@ def land(link: Link, frame: bytes) -> int:
     return 0 if sent else 1
 
 
-def prepared_relay(mocap: str, source: tuple[int, int], link: Link) -> VisionRelay | None:
-    """The relay of the mocap URI (opened, not started), or None: none given, or it cannot
-    be opened (said on stderr: the brake and LAND still act)."""
-    if mocap == "-":
+def prepared_relay(mocap: str, source: tuple[int, int], link: SentinelLink,
+                   open_poses: PoseOpener | None) -> VisionRelay | None:
+    """The relay of the mocap URI (opened by open_poses, not started), or None: none given,
+    or it cannot be opened (said on stderr: the brake and LAND still act)."""
+    if mocap == "-" or open_poses is None:
         return None
     try:
-        return VisionRelay(mocap, source, link.send)
+        return VisionRelay(open_poses(mocap), source, link.send)
     except Exception as err:  # noqa: BLE001 - a relay that cannot be must not cost the LAND
         say("mavsentinel", f"no mocap relay ({err})")
         return None
@@ -328,7 +332,7 @@ def start_relay(relay: VisionRelay | None, yaw0: float | None) -> bool:
     return True
 
 
-def brake_and_land(link: Link, source: tuple[int, int], target: tuple[int, int],
+def brake_and_land(link: SentinelLink, source: tuple[int, int], target: tuple[int, int],
                    mode: tuple[int, int], brake: Brake | None) -> int:
     """The brake left, if any, then LAND (land's result)."""
     if brake is not None:
@@ -339,15 +343,17 @@ def brake_and_land(link: Link, source: tuple[int, int], target: tuple[int, int],
     return land(link, land_frame(source, target, *mode))
 
 
-def main(argv: list[str]) -> int:
+def main(argv: list[str], open_poses: PoseOpener | None = None) -> int:
+    """The sentinel's process (module docstring: argv); open_poses opens the MOCAP URI to
+    relay (None: nothing is relayed)."""
     # The agent's Ctrl-C, a service stop, systemd's watchdog signal and a terminal's hang-up
     # reach the whole group: the sentinel outlives them and acts only on its socket's closing.
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     ctl_fd, link_fd, dest = int(argv[0]), int(argv[1]), argv[2]
     source, target, mode = (tuple(map(int, argv[i:i + 2])) for i in (3, 5, 7))
-    link = Link(link_fd, dest, source, target)
-    relay = prepared_relay(argv[9], source, link)
+    link = SentinelLink(link_fd, dest, source, target)
+    relay = prepared_relay(argv[9], source, link, open_poses)
     death = agent_death(socket.socket(fileno=ctl_fd))
     if death is None or (death.handover and relay is None):
         return 0  # nothing to command, nothing to relay
@@ -367,38 +373,21 @@ def main(argv: list[str]) -> int:
     return rc
 
 
-def link_endpoint(conn: Any) -> tuple[int, str]:
-    """(fd, DEST) of a pymavlink connection: its socket and, for UDP, the addresses it
-    writes to (udpin: every partner heard, as pymavlink writes to; udpout: the one given).
-    ValueError when a udpin link has heard no one yet."""
-    port = conn.port
-    if not (isinstance(port, socket.socket) and port.type == socket.SOCK_DGRAM):
-        return port.fileno(), "-"
-    if conn.udp_server:
-        heard = getattr(conn, "clients", None) or {getattr(conn, "last_address", None)} - {None}
-    else:
-        heard = {conn.destination_addr}
-    if not heard:
-        raise ValueError("the UDP link has heard no vehicle address yet")
-    return port.fileno(), ",".join(f"{host}:{p}" for host, p in sorted(heard))
-
-
 class Sentinel:
-    """The driver's side: starts the sentinel on the connection `conn` for the vehicle
-    `target` (system, component) with its LAND `mode` (main, sub), the `mocap` URI to
-    relay after a death (None: none) and the offboard `flight_mode` (custom_mode); flying(True/False) tells it whether perchd flies the
-    vehicle; release() ends it without acting."""
+    """The driver's side: starts the sentinel on the driver's connection `link` for the
+    vehicle `target` (system, component) with its LAND `mode` (main, sub), the `mocap` URI
+    to relay after a death (None: none) and the offboard `flight_mode` (custom_mode);
+    flying(True/False) tells it whether perchd flies the vehicle; release() ends it
+    without acting."""
 
-    def __init__(self, conn: Any, target: tuple[int, int], mode: tuple[int, int],
+    def __init__(self, link: Connection, target: tuple[int, int], mode: tuple[int, int],
                  mocap: str | None = None, flight_mode: int = 0) -> None:
-        link_fd, dest = link_endpoint(conn)
+        link_fd, dest = link.endpoint()
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        source = (conn.mav.srcSystem, conn.mav.srcComponent)
         argv = [str(theirs.fileno()), str(link_fd), dest,
-                *map(str, (*source, *target, *mode)), mocap or "-", str(flight_mode)]
+                *map(str, (*link.source, *target, *mode)), mocap or "-", str(flight_mode)]
         try:
-            self._proc = childproc.start("perchd.drivers.mavsentinel", argv,
-                                         (theirs.fileno(), link_fd))
+            self._proc = childproc.start(ENTRY_MODULE, argv, (theirs.fileno(), link_fd))
         finally:
             theirs.close()
         self._lock = threading.Lock()
@@ -410,7 +399,7 @@ class Sentinel:
             self._send(b"F" if on else b"D")
 
     def will(self, brake: Brake) -> None:
-        """The brake to fly first should the agent die now (drivers/mavbrake.py)."""
+        """The brake to fly first should the agent die now (brake.py)."""
         self._send(b"B" + brake.pack())
 
     def yaw0(self, yaw0: float) -> None:
@@ -446,6 +435,3 @@ class Sentinel:
                 self._sock.close()
                 self._sock = None
 
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))

@@ -4,25 +4,24 @@ agent dies").
 An EKF on mocap alone (PX4 EKF2_EV_CTRL, ArduPilot ExternalNav) loses its only position
 source with the agent: the sentinel's brake stops the vehicle, and then the autopilot's
 Land holds a dead-reckoned position that drifts (PX4 SIH: 1.0-1.4 m further toward the
-wall, creeping at ~0.2 m/s). So the sentinel (drivers/mavsentinel.py) opens the flight's
-own mocap URI when it starts (its sockets only once the agent has died: the agent's own
+wall, creeping at ~0.2 m/s). So the sentinel (sentinel.py) opens the flight's
+own mocap URI when it starts (through the PoseOpener its process entry point injects:
+perchd/service/mavsentinel_main.py) (its sockets only once the agent has died: the agent's own
 source is never competed with) and from the death on sends each pose as
-VISION_POSITION_ESTIMATE, as the driver did (drivers/mavvision.py: the same frame, yaw0 as
+VISION_POSITION_ESTIMATE, as the driver did (vision.py: the same frame, yaw0 as
 the driver last told it, the same stamps on the same monotonic clock, whose TIMESYNC the
-sentinel answers), until the landing is over (mavsentinel.follow_landing).
+sentinel answers), until the landing is over (sentinel.follow_landing).
 """
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from typing import Protocol
 
-from perchd.drivers.childproc import say
-from perchd.drivers.mavvision import vision_estimate, vision_message
-
-from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
-from perchd.mocap.base import next_pose
+from perchd.drivers.childproc import say
+from perchd.drivers.mavlink.vision import vision_estimate, vision_message
 
 RELAY_MAX_S = 120.0
 """[s] the longest the mocap is relayed after the agent's death (a landing takes seconds;
@@ -33,18 +32,32 @@ WAIT_S = 0.1
 """[s] the relay thread looks for its stop this often when no pose comes."""
 
 
+class PoseStream(Protocol):
+    """The flight's mocap as the relay reads it: start() opens its sockets; next(after_seq,
+    timeout_s) -> (the next pose after after_seq within timeout_s [s] or None, the seq to
+    wait after next); close()."""
+
+    def start(self) -> None: ...
+
+    def next(self, after_seq: int, timeout_s: float) -> tuple[Pose | None, int]: ...
+
+    def close(self) -> None: ...
+
+
+PoseOpener = Callable[[str], PoseStream]
+"""Opens a mocap URI as a PoseStream, not started (the mocap is no driver's to import)."""
+
+
 class VisionRelay:
-    """Poses of the mocap URI `mocap` to `send` as VISION_POSITION_ESTIMATE frames from
-    `source` (system, component), in NED by yaw0 [rad] (drivers/mavvision.py). The source
-    is opened (not started) on construction, so a death costs no imports; start() begins
-    the relay on its own thread, stop() ends it and closes the source."""
+    """Poses of `poses` (opened, not started: a death then costs no imports) to `send` as
+    VISION_POSITION_ESTIMATE frames from `source` (system, component), in NED by yaw0 [rad]
+    (vision.py); start() begins the relay on its own thread, stop() ends it and closes the
+    poses."""
 
-    def __init__(self, mocap: str, source: tuple[int, int], send: Callable[[bytes], None]
-                 ) -> None:
+    def __init__(self, poses: PoseStream, source: tuple[int, int],
+                 send: Callable[[bytes], None]) -> None:
         from pymavlink import mavutil
-
-        from perchd.mocap.base import open_source  # the source's own modules: at start-up
-        self.poses = open_source(mocap, Runtime.real())
+        self.poses = poses
         self._mav = mavutil.mavlink.MAVLink(None, *source)
         self._send = send
         self._stop = threading.Event()
@@ -77,7 +90,7 @@ class VisionRelay:
         seq = -1
         try:
             while not self._stop.is_set():
-                pose, seq = next_pose(self.poses, seq, WAIT_S)
+                pose, seq = self.poses.next(seq, WAIT_S)
                 if pose is not None and pose.valid:
                     self._relay(self.frame(pose, yaw0))
         except OSError as err:  # the link is gone: nothing more to relay to
