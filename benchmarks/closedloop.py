@@ -85,8 +85,8 @@ def realtime_jitter(logdir: Path) -> dict:
     from perchd.flight.run import fly
     from perchd.mocap.base import open_source
     rt = Runtime.real()
-    driver = open_driver("sim://?latency=0.02&noise=0.001", rt)
-    source = open_source("sim://", rt)
+    driver = open_driver("sim://?latency=0.02", rt)
+    source = open_source("sim://?noise=0.001", rt)
     driver.connect()
     source.start()
     try:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from urllib.parse import parse_qsl
+from urllib.parse import parse_qsl, urlencode
 
 from perchd.core.errors import UriError
 from perchd.core.uri import Uri
@@ -47,22 +47,28 @@ def bool_param(uri: Uri, key: str, default: bool = False) -> bool:
 
 # -- every scheme's parameters, in one place (docs/contracts.md §7, `perchd fly --help`) -------
 # (name, unit, default, meaning); the factories read them, Registry.open refuses any other key.
-SIM = (
+# sim:// is one simulated world behind both links: the vehicle's options go on --driver, the
+# mocap's on --mocap, and each side refuses the other's (a key on the wrong side was ignored).
+SIM_VEHICLE = (
     ("latency", "s", "0", "setpoint-to-vehicle delay, 0..1"),
     ("attitude_tau", "s", "0.07", "attitude response time constant, 0.005..1"),
     ("motor_tau", "s", "0.03", "motor response time constant, 0.001..1"),
     ("mass", "kg", "0.03", "vehicle mass, 0.005..50"),
     ("drag", "1/s", "0", "linear drag per unit mass, 0..5"),
     ("qdrag", "1/m", "0", "quadratic drag per unit mass (|v| v), 0..5"),
+    ("start", "m", "4.5 m before the surface, 1 m up", "start position X,Y,Z"),
+    ("draught", "m, m/s^2", "none", "X,A: acceleration A along X from x = X on"),
+    ("stall", "s", "none", "AT,FOR: hold the link FOR s at AT s (docs/safety.md)"),
+)
+SIM_MOCAP = (
     ("mocap_rate", "Hz", "120", "mocap frame rate, 1..1000"),
     ("mocap_latency", "s", "0.004", "mocap latency, 0..0.5"),
     ("noise", "m", "0", "mocap noise std per axis, 0..0.1"),
-    ("start", "m", "4.5 m before the surface, 1 m up", "start position X,Y,Z"),
-    ("draught", "m, m/s^2", "none", "X,A: acceleration A along X from x = X on"),
     ("seed", "", "0", "noise seed"),
     ("body", "", "cf1", "rigid body name"),
-    ("stall", "s", "none", "AT,FOR: hold the link FOR s at AT s (docs/safety.md)"),
 )
+SIM = SIM_VEHICLE + SIM_MOCAP
+"""Every sim:// option: one URI describing a whole world (perchd.session.open_session)."""
 CRAZYFLIE = (
     ("hover", "units", "36000", "hover thrust, 1000..60000 of 65535"),
     ("mass", "kg", "0.03", "vehicle mass, 0.010..0.100"),
@@ -71,7 +77,7 @@ CRAZYFLIE = (
     ("wait", "s", "2", "connect() waits this long, 0.05..60"),
 )
 PARAMS: dict[tuple[str, str], tuple[tuple[str, str, str, str], ...]] = {
-    ("driver", "sim"): SIM,
+    ("driver", "sim"): SIM_VEHICLE,
     ("driver", "radio"): CRAZYFLIE,
     ("driver", "udp"): CRAZYFLIE,
     ("driver", "mavlink"): (
@@ -92,7 +98,7 @@ PARAMS: dict[tuple[str, str], tuple[tuple[str, str, str, str], ...]] = {
         ("bind", "", "0", "1: bind instead of connect"),
         ("public", "", "0", "1: allow a non-loopback bind"),
         ("wait", "s", "2", "connect() waits this long for a subscriber, 0..60")),
-    ("mocap", "sim"): SIM,
+    ("mocap", "sim"): SIM_MOCAP,
     ("mocap", "natnet"): (
         ("body", "", "required", "rigid body name"),
         ("transport", "", "from the server", "unicast or multicast (NatNet 2.x)"),
@@ -117,15 +123,41 @@ def query_of(uri: Uri) -> dict[str, str]:
 
 
 def check_params(kind: str, uri: Uri) -> None:
-    """UriError naming the first unknown key of a scheme that lists its parameters."""
+    """UriError naming the first unknown key of a scheme that lists its parameters, and
+    the side it belongs to when it is the other side's (sim://)."""
     known = PARAMS.get((kind, uri.scheme))
     if known is None:
         return
     names = [p[0] for p in known]
     unknown = sorted(set(query_of(uri)) - set(names))
+    if not unknown:
+        return
+    other = "mocap" if kind == "driver" else "driver"
+    if unknown[0] in names_of(PARAMS.get((other, uri.scheme), ())):
+        raise UriError(f"{uri.raw}: {unknown[0]!r} is a --{other} parameter of {uri.scheme}:// "
+                       f"(--{other} {uri.scheme}://?{unknown[0]}=...); --{kind} takes "
+                       f"{', '.join(names)}")
+    check_known(uri, names)
+
+
+def check_known(uri: Uri, names: tuple[str, ...] | list[str]) -> None:
+    """UriError naming the URI's first key not in `names`, and listing them."""
+    unknown = sorted(set(query_of(uri)) - set(names))
     if unknown:
         raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; {uri.scheme}:// takes "
                        f"{', '.join(names)} (perchd fly --help)")
+
+
+def names_of(params: tuple[tuple[str, str, str, str], ...]) -> tuple[str, ...]:
+    return tuple(p[0] for p in params)
+
+
+def split_sim(uri: Uri) -> tuple[str, str]:
+    """A whole-world sim:// URI as (the driver's URI, the mocap's), each with its own keys."""
+    query = query_of(uri)
+    return tuple("sim://" + ("?" + urlencode(part, safe=",") if part else "")
+                 for part in ({k: v for k, v in query.items() if k in names_of(side)}
+                              for side in (SIM_VEHICLE, SIM_MOCAP)))
 
 
 def params_help() -> str:

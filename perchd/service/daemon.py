@@ -162,7 +162,8 @@ class FlightJob(threading.Thread):
             res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
                       self.log, flight, self.abort, self.on_tick, world=self.links.session.world,
                       header={"plan_file": str(self.plan_path), "vehicle": self.cfg.service.vehicle,
-                              "mocap": self.links.mocap_uri, "service": True})
+                              "mocap": self.links.mocap_uri, "service": True,
+                              "uri_params": self.links.session.applied})
             self.result = res.to_json()
             store.remember_flight(key, flight, res)
         except BaseException as err:  # fly has already sent the failsafe and closed the log

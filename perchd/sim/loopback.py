@@ -1,4 +1,4 @@
-"""`sim://[?latency=S&noise=M&...]`: the in-process simulated vehicle (perchd.sim).
+"""`sim://[?latency=S&mass=KG&...]`: the in-process simulated vehicle (perchd.sim).
 
 The reference driver: it keeps the Driver protocol's promises with no radio in between.
 Setpoints go to the shared SimWorld's plant (after the configured command latency); the
@@ -17,7 +17,7 @@ from perchd.sim.world import SimWorld, world_for
 
 
 def open_loopback(uri: Uri, runtime: Runtime) -> "LoopbackDriver":
-    return LoopbackDriver(uri.raw, world_for(uri, runtime))
+    return LoopbackDriver(uri.raw, world_for(uri, runtime, "driver"))
 
 
 class LoopbackDriver(DriverBase):

@@ -6,12 +6,13 @@ lazy: it integrates the plant up to runtime.clock.now() whenever it is asked for
 given a setpoint, so with a ManualClock the control loop's sleep_until drives simulated time
 and a 3 s flight runs in a few hundred milliseconds of wall time.
 
-URI options (read by whichever factory creates the world): latency [s] command delay,
-noise [m] mocap noise std, mocap_rate [Hz], mocap_latency [s], start=X,Y,Z [m],
-attitude_tau [s], motor_tau [s], seed, stall=AT,FOR [s] (perchd.sim.stall: a hung link),
-mass [kg] the simulated vehicle's true mass (the flight config may disagree, as a real
-weight may), drag [1/s] linear drag, qdrag [1/m] quadratic drag, draught=X,A a constant
-acceleration A [m/s^2] along world X from world x = X [m] on (air off a wall).
+URI options, each on the side that owns it (perchd.core.uriparams: the other side refuses
+it). The driver's: latency [s] command delay, start=X,Y,Z [m], attitude_tau [s],
+motor_tau [s], stall=AT,FOR [s] (perchd.sim.stall: a hung link), mass [kg] the simulated
+vehicle's true mass (the flight config may disagree, as a real weight may), drag [1/s]
+linear drag, qdrag [1/m] quadratic drag, draught=X,A a constant acceleration A [m/s^2]
+along world X from world x = X [m] on (air off a wall). The mocap's: noise [m] std,
+mocap_rate [Hz], mocap_latency [s], seed (of the noise), body.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from perchd.core.ports import SourceStats
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Pose, Setpoint, Vec3
 from perchd.core.uri import Uri
-from perchd.core.uriparams import check_params, float_param
+from perchd.core.uriparams import SIM, check_known, check_params, float_param, names_of
 from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
 from perchd.sim.stall import Stall, stall_from_uri
@@ -112,6 +113,11 @@ class SimWorld:
         self._sent = 0  # tie-break of the heap
         self._latest: Pose | None = None
         self._seq = 0
+
+    @property
+    def pristine(self) -> bool:
+        """Nothing measured, commanded or integrated yet: its parameters may still change."""
+        return self._next_frame == 0 and not self.sent and self.clock.now() == self.t0
 
     # --- time -----------------------------------------------------------------------------
     def advance(self, t: float | None = None) -> None:
@@ -214,10 +220,16 @@ class SimWorld:
             return self.t0 + self._next_frame * self._period + self.params.mocap.latency_s
 
 
-def world_params_from_uri(uri: Uri, base: WorldParams | None = None) -> WorldParams:
+def world_params_from_uri(uri: Uri, base: WorldParams | None = None,
+                          kind: str | None = None) -> WorldParams:
     """Apply a sim:// URI's options to `base` (defaults); bad values and unknown keys are one
-    UriError (the keys: perchd.core.uriparams.SIM, docs/contracts.md §7)."""
-    check_params("mocap", uri)
+    UriError. kind "driver" or "mocap": that side's keys only (the other side's are refused
+    naming where they belong); None: a whole world's (perchd.core.uriparams.SIM,
+    docs/contracts.md §7)."""
+    if kind is None:
+        check_known(uri, names_of(SIM))
+    else:
+        check_params(kind, uri)
 
     wp = base or WorldParams()
     plant = replace(
@@ -258,13 +270,22 @@ def _floats(uri: Uri, key: str, n: int, form: str) -> tuple[float, ...] | None:
     return values
 
 
-def world_for(uri: Uri, runtime: Runtime) -> SimWorld:
-    """The runtime's world, created from this URI's options if it has none yet."""
+def world_for(uri: Uri, runtime: Runtime, kind: str) -> SimWorld:
+    """The runtime's world, created from this URI's options (the `kind` side's) if it has
+    none yet; a world made already (by the other link, or perchd.session from both URIs)
+    must be what this URI's options make of it, or they are refused: never ignored."""
     if uri.host:
         raise UriError(f"{uri.raw}: sim:// takes no host; its options go in the query "
-                       "(sim://?latency=0.02&noise=0.001)")
+                       "(--driver sim://?latency=0.02 --mocap sim://?noise=0.001)")
     if runtime.sim is None:
-        runtime.sim = SimWorld(world_params_from_uri(uri), runtime.clock)
+        runtime.sim = SimWorld(world_params_from_uri(uri, kind=kind), runtime.clock)
+        return runtime.sim
+    wanted = world_params_from_uri(uri, runtime.sim.params, kind)
+    if wanted != runtime.sim.params:
+        if not runtime.sim.pristine:
+            raise UriError(f"{uri.raw}: the simulated world has run already without this "
+                           f"--{kind} link's options; open both links before it runs")
+        runtime.sim.__init__(wanted, runtime.clock)  # in place: the other link holds it
     return runtime.sim
 
 
@@ -307,4 +328,4 @@ class SimMocap:
 
 
 def open_sim_mocap(uri: Uri, runtime: Runtime) -> SimMocap:
-    return SimMocap(world_for(uri, runtime))
+    return SimMocap(world_for(uri, runtime, "mocap"))

@@ -98,8 +98,8 @@ def test_the_next_flight_of_a_vehicle_pools_stage_1s_push_with_the_last(tmp_path
     state, flown = tmp_path / "vehicles.json", []
     for seed in range(2):
         log = tmp_path / f"f{seed}.jsonl"
-        driver = f"sim://?draught=-2.9,0.2&noise=0.001&seed={seed}"
-        assert main(["fly", str(plan_file(tmp_path)), "--driver", driver, "--mocap", "sim://",
+        driver, mocap = "sim://?draught=-2.9,0.2", f"sim://?noise=0.001&seed={seed}"
+        assert main(["fly", str(plan_file(tmp_path)), "--driver", driver, "--mocap", mocap,
                      "--log", str(log), "--state", str(state), "--vehicle", "lab-1",
                      "--json"]) == 0
         res = json.loads(capsys.readouterr().out)

@@ -11,7 +11,7 @@ from perchd.core.clock import ManualClock
 from perchd.core.errors import UriError
 from perchd.core.runtime import Runtime
 from perchd.core.uri import parse_uri
-from perchd.core.uriparams import PARAMS, check_params
+from perchd.core.uriparams import PARAMS, SIM, check_params
 from perchd.drivers.base import open_driver
 from perchd.mocap.base import open_source
 from perchd.sim.plant import PlantParams
@@ -43,7 +43,7 @@ def test_world_params_refuse_unknown_keys_too():
 
 
 def test_the_sim_defaults_listed_are_the_code_defaults():
-    listed = {name: default for name, _, default, _ in PARAMS[("driver", "sim")]}
+    listed = {name: default for name, _, default, _ in SIM}
     p, m = PlantParams(), MocapParams()
     for key, value in (("latency", p.latency_s), ("attitude_tau", p.attitude_tau_s),
                        ("motor_tau", p.motor_tau_s), ("mass", p.mass_kg),

@@ -6,6 +6,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from caseplans import case1  # noqa: F401  (re-exported: the flight tests' plan)
+from perchd.core.uri import parse_uri
+from perchd.core.uriparams import split_sim
 from perchd.drivers.base import open_driver
 
 from perchd.core.clock import ManualClock
@@ -24,8 +26,9 @@ class Sim:
 
     def __init__(self, uri: str = "sim://") -> None:
         self.runtime = Runtime(ManualClock(0.0))
-        self.driver = open_driver(uri, self.runtime)
-        self.source = open_source(uri, self.runtime)
+        driver_uri, mocap_uri = split_sim(parse_uri(uri))  # one world's keys, each its side's
+        self.driver = open_driver(driver_uri, self.runtime)
+        self.source = open_source(mocap_uri, self.runtime)
         self.world = self.runtime.sim
         self.driver.connect()
         self.source.start()

@@ -7,6 +7,8 @@ import math
 import statistics
 
 import pytest
+from perchd.core.uri import parse_uri
+from perchd.core.uriparams import split_sim
 from perchd.drivers.base import open_driver
 
 from perchd.core.clock import ManualClock
@@ -20,7 +22,8 @@ G = 9.81
 
 def world(uri="sim://"):
     rt = Runtime(ManualClock(0.0))
-    d, m = open_driver(uri, rt), open_source(uri, rt)
+    driver_uri, mocap_uri = split_sim(parse_uri(uri))  # one world's keys, each its side's
+    d, m = open_driver(driver_uri, rt), open_source(mocap_uri, rt)
     d.connect()
     m.start()
     return rt, d, m
@@ -127,6 +130,6 @@ def test_a_bad_sim_option_is_one_clear_error():
     with pytest.raises(UriError, match="latency=5 s is outside"):
         open_driver("sim://?latency=5", Runtime(ManualClock()))
     with pytest.raises(UriError, match="start='1,2' must be X,Y,Z"):
-        open_source("sim://?start=1,2", Runtime(ManualClock()))
+        open_driver("sim://?start=1,2", Runtime(ManualClock()))
     with pytest.raises(UriError, match="draught='-1,inf' must be X,A"):
-        open_source("sim://?draught=-1,inf", Runtime(ManualClock()))
+        open_driver("sim://?draught=-1,inf", Runtime(ManualClock()))
