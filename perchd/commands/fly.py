@@ -44,7 +44,8 @@ from perchd.session import open_links
 from perchd.tau import load_plan
 
 EPILOG = f"""URI query parameters, KEY [unit] (default); any other key is refused
-(docs/contracts.md §7), e.g. sim://?latency=0.02&noise=0.001:
+(docs/contracts.md §7), e.g. --driver sim://?latency=0.02 --mocap sim://?noise=0.001;
+sim:// is one world: the vehicle's keys on --driver, the mocap's on --mocap:
 {params_help()}
 
 The loop: by default each mocap frame releases a tick (`[flight] sync = "mocap"`, rate_hz
