@@ -8,21 +8,25 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 from perchd.core.errors import PlanError
 from perchd.core.safefile import read_regular, write_text
 from perchd.tau.figures import disagreement
 from perchd.tau.ipts import MAX_ORDER
 from perchd.tau.limits import Limits
-from perchd.tau.plan import STRATEGIES, Plan, make_plan
+from perchd.tau.plan import STRATEGIES, Plan, RobustBox, given, make_plan
 
 SCHEMA = "perchd.plan/1"
+T = TypeVar("T")
 
 
-def plan_to_json(plan: Plan) -> dict:
-    stage1 = {"c": plan.c} if plan.strategy in ("ctds", "ctdts") else {"k": list(plan.k)}
-    doc = {"schema": SCHEMA, "strategy": plan.strategy, "x0": plan.x0, "v0": plan.v0,
+def plan_to_json(plan: Plan) -> dict[str, Any]:
+    stage1: dict[str, Any] = ({"c": plan.c} if plan.strategy in ("ctds", "ctdts")
+                              else {"k": list(given(plan.k, "stage1.k"))})
+    doc: dict[str, Any] = {"schema": SCHEMA, "strategy": plan.strategy, "x0": plan.x0, "v0": plan.v0,
            "tau_s": plan.tau_s, "stage1": stage1, "t_switch": plan.t_switch,
            "duration": plan.duration, "v_contact": plan.v_contact,
            "limits": plan.limits.to_json(), "peaks": {"v": plan.peaks.v, "a": plan.peaks.a}}
@@ -48,7 +52,8 @@ def load_plan(path: str | Path, text: str | None = None) -> Plan:
     return load_json(path, plan_from_json, "plan file", text)
 
 
-def load_json(path: str | Path, parse, what: str, text: str | None = None):
+def load_json(path: str | Path, parse: Callable[[object], T], what: str,
+              text: str | None = None) -> T:
     """parse(JSON document of file `path`), every error one PlanError naming the file."""
     if text is None:  # one bounded regular-file rule for the CLI and the service
         text = read_regular(path, "", PlanError)  # "PATH: why", as below
@@ -76,11 +81,11 @@ def plan_from_json(doc: object) -> Plan:
     if strategy not in STRATEGIES:
         raise PlanError(f"strategy: expected one of {', '.join(STRATEGIES)}, got {strategy!r}")
     stage1 = _field(doc, "stage1", dict)
-    params = {"c": _number(stage1, "c", "stage1.c")} if strategy != "ipts" else \
-        {"k": _numbers(stage1, "k", "stage1.k")}
+    c = _number(stage1, "c", "stage1.c") if strategy != "ipts" else None
+    k = _numbers(stage1, "k", "stage1.k") if strategy == "ipts" else None
     tau_s = None if strategy == "ctds" else _number(doc, "tau_s")
     plan = make_plan(strategy, _number(doc, "x0"), _number(doc, "v0"), tau_s, _limits(doc),
-                     robust=_robust(doc), **params)
+                     c=c, k=k, robust=_robust(doc))
     _agree(doc, plan)
     extra = {key: doc[key] for key in doc.keys() & OPTIONAL_EXTRA}
     return Plan(**{**plan.__dict__, "extra": extra}) if extra else plan
@@ -92,7 +97,7 @@ OPTIONAL_EXTRA = {"certificate"}
 """Documented keys carried through unchecked (docs/contracts.md §1)."""
 
 
-def _known_keys(doc: dict) -> None:
+def _known_keys(doc: dict[str, Any]) -> None:
     """Refuse unknown top-level keys, as the config loader does: a misspelt key is a mistake."""
     unknown = sorted(doc.keys() - KNOWN - OPTIONAL_EXTRA, key=str)
     if unknown:
@@ -100,7 +105,7 @@ def _known_keys(doc: dict) -> None:
         raise PlanError(f"unknown key {unknown[0]!r} (allowed: {allowed})")
 
 
-def _agree(doc: dict, plan: Plan) -> None:
+def _agree(doc: dict[str, Any], plan: Plan) -> None:
     peaks = _field(doc, "peaks", dict)
     stored = {name: _number(doc, name) for name in ("t_switch", "duration", "v_contact")}
     stored |= {f"peaks.{k}": _number(peaks, k, f"peaks.{k}") for k in ("v", "a")}
@@ -109,7 +114,8 @@ def _agree(doc: dict, plan: Plan) -> None:
         raise PlanError(why)
 
 
-def _field(doc: dict, key: str, kind: type, name: str | None = None):
+def _field(doc: dict[str, Any], key: str, kind: type | tuple[type, ...],
+           name: str | None = None) -> Any:
     if key not in doc:
         raise PlanError(f"{name or key}: missing")
     value = doc[key]
@@ -119,7 +125,7 @@ def _field(doc: dict, key: str, kind: type, name: str | None = None):
     return value
 
 
-def _number(doc: dict, key: str, name: str | None = None) -> float:
+def _number(doc: dict[str, Any], key: str, name: str | None = None) -> float:
     value = _field(doc, key, (int, float), name or key)
     if isinstance(value, int) and abs(value) >= 1e308:  # beyond a float
         raise PlanError(f"{name or key}: must be finite, got an integer of "
@@ -129,7 +135,7 @@ def _number(doc: dict, key: str, name: str | None = None) -> float:
     return float(value)
 
 
-def _numbers(doc: dict, key: str, name: str) -> list[float]:
+def _numbers(doc: dict[str, Any], key: str, name: str) -> list[float]:
 
     values = _field(doc, key, list, name)
     if not 2 <= len(values) <= MAX_ORDER + 1:
@@ -138,7 +144,7 @@ def _numbers(doc: dict, key: str, name: str) -> list[float]:
     return [_number({"v": v}, "v", f"{name}[{i}]") for i, v in enumerate(values)]
 
 
-def _limits(doc: dict) -> Limits:
+def _limits(doc: dict[str, Any]) -> Limits:
     lim = _field(doc, "limits", dict)
     pair = _numbers_pair(lim, "v_contact", "limits.v_contact")
     optional = {k: None if lim.get(k) is None else _number(lim, k, f"limits.{k}")
@@ -146,18 +152,19 @@ def _limits(doc: dict) -> Limits:
     return Limits(pair, **optional)
 
 
-def _numbers_pair(doc: dict, key: str, name: str) -> tuple[float, float]:
+def _numbers_pair(doc: dict[str, Any], key: str, name: str) -> tuple[float, float]:
     values = _field(doc, key, list, name)
     if len(values) != 2:
         raise PlanError(f"{name}: expected [low, high], got {values!r}")
-    return tuple(_number({"v": v}, "v", f"{name}[{i}]") for i, v in enumerate(values))
+    lo, hi = (_number({"v": v}, "v", f"{name}[{i}]") for i, v in enumerate(values))
+    return lo, hi
 
 
-def _robust(doc: dict):
+def _robust(doc: dict[str, Any]) -> RobustBox | None:
     if doc.get("robust") is None:
         return None
     box = _field(doc, "robust", dict)
-    pairs = tuple(_numbers_pair(box, k, f"robust.{k}") for k in ("x0", "v0"))
+    pairs = (_numbers_pair(box, "x0", "robust.x0"), _numbers_pair(box, "v0", "robust.v0"))
     for key, (lo, hi) in zip(("x0", "v0"), pairs):
         if lo > hi:
             raise PlanError(f"robust.{key}: low {lo:g} above high {hi:g}")
