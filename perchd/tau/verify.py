@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 from perchd.core.errors import PlanError
 from perchd.tau.bound import plan_bound
@@ -78,9 +79,9 @@ class Report:
     ratio: float
     feasible: bool
     violations: tuple[str, ...]
-    robust: dict | None
+    robust: dict[str, list[float]] | None
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         return asdict(self) | {"violations": list(self.violations)}
 
 
