@@ -58,7 +58,14 @@ class VehicleStore:
     def check(self) -> None:
         """OutputError (one line, before anything flies) unless the path is missing or a
         state file of perchd's own: a flight must never replace what is there."""
-        if os.path.lexists(self.path) and self._load() is None:
+        try:
+            os.lstat(self.path)
+        except (FileNotFoundError, NotADirectoryError):
+            return
+        except (OSError, ValueError) as err:  # too long, a NUL byte, no permission
+            why = err.strerror if isinstance(err, OSError) else err
+            raise OutputError(f"--state {self.path}: cannot read ({why})") from None
+        if self._load() is None:
             raise OutputError(f"--state {self.path}: not a perchd vehicle state file "
                               f"(schema {SCHEMA}); give another path")
 

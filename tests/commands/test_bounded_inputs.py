@@ -75,3 +75,15 @@ def test_shipped_plans_still_load(path):
 @pytest.mark.parametrize("path", sorted((PLANS / "libraries").glob("*.json")), ids=lambda p: p.name)
 def test_shipped_libraries_still_load(path):
     load_library(path)
+
+
+@pytest.mark.parametrize("x0, says", [("1e999", "must be finite"), ("NaN", "must be finite"),
+                                      ("-" + "9" * 400, "400 digits"), ("true", "expected a number"),
+                                      ("-" + "9" * 5000, "not JSON")])
+def test_a_plan_number_of_any_size_is_one_line(tmp_path, x0, says):
+    text = (PLANS / "case1-ipts-n3.json").read_text()
+    doc = json.loads(text)
+    (tmp_path / "p.json").write_text(text.replace(f'"x0": {json.dumps(doc["x0"])}', f'"x0": {x0}', 1))
+    out = perchd("plan", "check", str(tmp_path / "p.json"))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and says in out.stderr, out.stderr

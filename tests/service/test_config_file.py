@@ -112,3 +112,25 @@ def test_a_service_surface_is_held_to_the_same_geometry_rule_as_fly_flags(surfac
     by the config fuzzer: an infinite point loaded)."""
     with pytest.raises(ConfigError, match=re.escape(message)):
         config_from_dict({"version": 1, "surface": surface})
+
+
+@pytest.mark.parametrize("vehicle", ["a/b", "../x", "..", ".hidden", "a\0b", "a\\b", "", "x" * 65])
+def test_a_vehicle_name_that_would_lead_a_log_out_of_log_dir_is_refused(vehicle):
+    # the service names each flight's log after its vehicle: "a/b" would write beside it
+    with pytest.raises(ConfigError, match=r"\[service\] vehicle: .* is not a plain name"):
+        config_from_dict({"version": 1, "service": {"vehicle": vehicle}})
+
+
+@pytest.mark.parametrize("value", [10 ** 400, -10 ** 400, True, math.inf, math.nan])
+def test_a_number_beyond_a_float_or_not_a_number_is_one_config_error(value):
+    with pytest.raises(ConfigError, match=r"vehicle\] mass_kg: expected a number"):
+        config_from_dict({"version": 1, "vehicle": {"mass_kg": value}})
+    with pytest.raises(ConfigError):
+        config_from_dict({"version": 1, "surface": {"point": [value, 0.0, 0.0]}})
+
+
+def test_an_integer_beyond_pythons_digit_limit_is_one_config_error(tmp_path):
+    path = tmp_path / "perchd.toml"
+    path.write_text("version = 1\n[vehicle]\nmass_kg = " + "9" * 5000 + "\n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(path)
