@@ -31,7 +31,7 @@ from perchd.core import realtime
 from perchd.core.errors import ConfigError, PerchdError
 from perchd.core.extras import require
 from perchd.core.interrupts import catching
-from perchd.core.safefile import check_output
+from perchd.core.safefile import OutputError, check_output
 from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
 from perchd.flight.planguard import check_flight_plan
@@ -148,7 +148,7 @@ def summary_text(res) -> str:
     lp = res.loop
     lines.append(f"loop: {lp.ticks} ticks, compute median {lp.compute_median_s * 1e6:.0f} us "
                  f"(p99 {lp.compute_p99_s * 1e6:.0f} us), {lp.overruns} overruns")
-    lines.append(f"log: {res.log}")
+    lines.append(f"log: {res.log}" + (f" (LOST: {res.log_lost})" if res.log_lost else ""))
     return "\n".join(lines)
 
 
@@ -156,9 +156,26 @@ def log_path(args: argparse.Namespace, strategy: str) -> Path:
     """--log checked (nothing overwritten without --force, no directory made), or the default
     in ./flightlogs, the one directory a flight creates."""
     if args.log:
-        return check_output(args.log, "--log", args.force, inputs=(args.plan,))
+        return check_output(args.log, "--log", args.force, inputs=inputs(args))
     log = Path("flightlogs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{strategy}.jsonl"
-    return check_output(log, "--log", args.force) if log.parent.is_dir() else log
+    try:
+        log.parent.mkdir(exist_ok=True)
+    except OSError as err:
+        raise OutputError(f"--log {log}: cannot make {log.parent} ({err.strerror})") from None
+    return check_output(log, "--log", args.force)
+
+
+def inputs(args: argparse.Namespace) -> tuple[str, ...]:
+    """What the flight reads, which no output may be: the plan, --config, --state."""
+    return tuple(p for p in (args.plan, args.config, args.state) if p)
+
+
+def state_store(args: argparse.Namespace) -> VehicleStore:
+    """--state (or the default), refused now unless missing or a state file of perchd's own
+    (it is rewritten after the flight)."""
+    store = VehicleStore(Path(args.state) if args.state else default_path(), _warn)
+    store.check()
+    return store
 
 
 def mcap_path(args: argparse.Namespace) -> Path | None:
@@ -166,7 +183,7 @@ def mcap_path(args: argparse.Namespace) -> Path | None:
     if not (args.log and args.log.endswith(".mcap")):
         return None
     require("mcap.writer", "mcap")
-    return check_output(args.log, "--log", args.force, inputs=(args.plan,))
+    return check_output(args.log, "--log", args.force, inputs=inputs(args))
 
 
 def live_view(address: str | None, log: Path):
@@ -192,7 +209,7 @@ def write_mcap(log: Path, out: Path, force: bool) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     plan = load_plan(args.plan)
-    store = VehicleStore(Path(args.state) if args.state else default_path(), _warn)
+    store = state_store(args)
     key = args.vehicle or args.driver
     cfg = store.with_learned_guess(key, load_config(args))
     check_flight_plan(plan, cfg)  # before any link opens: exit 2 naming the field
@@ -210,7 +227,7 @@ def run(args: argparse.Namespace) -> int:
             links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
             res = links.fly(plan, log, cfg, abort, status,
                             header={"plan_file": str(args.plan), "mocap": args.mocap,
-                                    "scheduling": rt.describe()})
+                                    "scheduling": rt.describe()}, log_force=args.force)
         finally:
             status.close()
             if view is not None:
