@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from perchd.core.errors import PlanError
+from perchd.core.safefile import write_text
 from perchd.tau.ipts import MAX_ORDER, plan_ipts, plan_ipts_from
 from perchd.tau.limits import Limits
 from perchd.tau.plan import Plan
@@ -149,8 +150,9 @@ def library_text(lib: PlanLibrary) -> str:
     return json.dumps(library_to_json(lib)) + "\n"
 
 
-def save_library(lib: PlanLibrary, path: str | Path) -> None:
-    Path(path).write_text(library_text(lib))
+def save_library(lib: PlanLibrary, path: str | Path, force: bool = True) -> None:
+    """`lib` written to `path` by the one rule (core/safefile.py write_atomic)."""
+    write_text(Path(path), library_text(lib), "library", force)
 
 
 def load_library(path: str | Path) -> PlanLibrary:
