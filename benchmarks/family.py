@@ -20,7 +20,6 @@ import argparse
 import dataclasses
 import json
 import math
-import statistics
 import sys
 import tempfile
 import time
@@ -80,15 +79,18 @@ def badness(row: FamilyRow) -> tuple[int, float]:
     return (4 if row.on_time else 3), -err
 
 
-def range_position(name: str, values: list[float]) -> float | None:
-    """Median of `values` as a fraction of the family's range of `name` (0 lo, 1 hi; the
-    mass on its log scale); None without values."""
-    if not values:
-        return None
+def thirds(name: str, rows: list[FamilyRow]) -> dict[str, float | None]:
+    """In-window and on-time rates [%] of the members in the lower and the upper third of
+    the family's range of `name` (the mass's on its log scale): where the misses gather."""
     span = getattr(FAMILY, name)
     scale = math.log if span.log else float
     lo, hi = scale(span.lo), scale(span.hi)
-    return (scale(statistics.median(values)) - lo) / (hi - lo)
+    place = {id(r): (scale(getattr(r, name)) - lo) / (hi - lo) for r in rows}
+    low = [r for r in rows if place[id(r)] < 1 / 3]
+    high = [r for r in rows if place[id(r)] > 2 / 3]
+    rate = lambda rs, key: 100.0 * sum(getattr(r, key) for r in rs) / len(rs) if rs else None  # noqa: E731
+    return {"in_window_low": rate(low, "in_window"), "in_window_high": rate(high, "in_window"),
+            "on_time_low": rate(low, "on_time"), "on_time_high": rate(high, "on_time")}
 
 
 def summarize(rows: list[FamilyRow], wall_s: float) -> dict:
@@ -106,8 +108,7 @@ def summarize(rows: list[FamilyRow], wall_s: float) -> dict:
         "contact_speed_mps": _quantiles(sorted(speeds)),
         "perch_error_pct": _quantiles(errs),
         "misses": len(misses),
-        "miss_position": {p: range_position(p, [getattr(r, p) for r in misses])
-                          for p in PARAMETERS},
+        "by_third": {p: thirds(p, rows) for p in PARAMETERS},
         "wall_s": wall_s, "flights_per_s": n / wall_s if wall_s > 0 else None,
     }
 
@@ -136,25 +137,34 @@ def print_table(s: dict, worst: list[FamilyRow], out=sys.stdout) -> None:
     print(f"perch time - plan [%]          {q(s['perch_error_pct'], '+.2f')}", file=out)
     print(f"flights/s                      {s['flights_per_s']:.2f} ({s['wall_s']:.0f} s)",
           file=out)
-    pos = ", ".join(f"{k} {v:.2f}" for k, v in s["miss_position"].items() if v is not None)
-    print(f"misses {s['misses']}: median place in each range (0 lo .. 1 hi): {pos or '-'}",
-          file=out)
+    print(f"misses (outside the window or off time): {s['misses']}", file=out)
+    print_thirds(s["by_third"], out)
     print_worst(worst, out)
+
+
+def print_thirds(by_third: dict, out=sys.stdout) -> None:
+    print("rates [%] in the lower / upper third of each range:  in window  |  on time",
+          file=out)
+    for name, t in by_third.items():
+        cells = [_fmt(t[k], ".1f") for k in ("in_window_low", "in_window_high",
+                                             "on_time_low", "on_time_high")]
+        print(f"  {name:<18} {cells[0]:>6} / {cells[1]:<6} | {cells[2]:>6} / {cells[3]}",
+              file=out)
 
 
 def print_worst(worst: list[FamilyRow], out=sys.stdout) -> None:
     heads = ("index", "outcome", "v_contact", "perch_err_pct", *PARAMETERS)
     widths = [max(8, len(h)) for h in heads]
     print("worst ten:", file=out)
-    print(" ".join(f"{h:>{w}}" for h, w in zip(heads, widths)), file=out)
+    print(" ".join(f"{h:>{w}}" for h, w in zip(heads, widths, strict=True)), file=out)
     for r in worst:
         cells = (r.index, r.outcome, _fmt(r.contact_speed), _fmt(r.perch_error_pct),
                  *(_fmt(getattr(r, p)) for p in PARAMETERS))
-        print(" ".join(f"{c:>{w}}" for c, w in zip(cells, widths)), file=out)
+        print(" ".join(f"{c:>{w}}" for c, w in zip(cells, widths, strict=True)), file=out)
 
 
-def _fmt(v: float | None) -> str:
-    return "-" if v is None else format(v, ".4g")
+def _fmt(v: float | None, spec: str = ".4g") -> str:
+    return "-" if v is None else format(v, spec)
 
 
 def main() -> int:
