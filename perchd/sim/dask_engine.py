@@ -8,6 +8,7 @@ when Dask is installed (pip install 'perchd[cluster]')."""
 from __future__ import annotations
 
 import logging
+import os
 from typing import Any, Callable, Iterator, Sequence, TypeVar
 
 from distributed import Client, LocalCluster, as_completed
@@ -30,6 +31,7 @@ class DaskEngine:
     @classmethod
     def start(cls, address: str | None, workers: int) -> "DaskEngine":
         if address is None:
+            os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")  # workers: no chatter
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    host="127.0.0.1", dashboard_address=None,
                                    silence_logs=logging.ERROR)

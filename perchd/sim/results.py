@@ -44,7 +44,7 @@ class CampaignTable:
             self.store: TableFormat = table_format(path, FlightRow)
         except ImportError as err:
             raise OutputError(f"--table {path}: {err}") from None
-        self.force = force
+        self.force, self.begun = force, False
         self.rows: list[FlightRow] = [] if force else self._resume()
         self.resumed = len(self.rows)
 
@@ -53,6 +53,7 @@ class CampaignTable:
         so a campaign killed at once is resumed, not refused."""
         if self.force:
             self.store.remove()
+        self.begun = True
         self._write_summary(complete=False)
 
     def _resume(self) -> list[FlightRow]:
@@ -83,8 +84,10 @@ class CampaignTable:
 
     def finish(self, planned: int, extra: dict[str, Any]) -> list[FlightRow]:
         """The table sorted by index, then the summary: complete when every planned flight
-        is in it. The sorted rows."""
+        is in it (nothing written before `begin`). The sorted rows."""
         self.rows.sort(key=lambda r: r.index)
+        if not self.begun:
+            return self.rows
         self.store.finish(self.rows)
         self._write_summary(complete=len(self.rows) == planned, planned=planned, **extra)
         return self.rows

@@ -23,6 +23,7 @@ exactly one JSON object on stdout (contact time [s] and speed [m/s], counts). Ex
 
 `perchd sim --campaign P.json ...` flies many simulated flights in this process instead
 (no sockets; see perchd.commands.sim.campaign): --pose-out and --setpoint-in are then not wanted.
+`perchd sim report TABLE [--plots DIR]` reads a campaign's table back (perchd.commands.sim.report).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from typing import Any
 
 from perchd.commands.sim import campaign as campaign_cli
 from perchd.commands.sim import firmware as sim_firmware
+from perchd.commands.sim import report as sim_report
 from perchd.console.argcheck import numbers_as_values, within
 from perchd.commands.sim.campaign import add_arguments
 from perchd.console.flightargs import check_geometry
@@ -86,7 +88,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_arguments(p)
     p.set_defaults(run=run)
-    sim_firmware.register_under(p)  # `perchd sim firmware ...` (docs/firmware.md)
+    sub = p.add_subparsers(dest="sim_mode", metavar="{firmware,report}", parser_class=type(p))
+    sim_firmware.register(sub)  # `perchd sim firmware ...` (docs/firmware.md)
+    sim_report.register(sub)  # `perchd sim report TABLE`: a campaign's summary and plots
 
 
 def make_world(args: argparse.Namespace) -> Any:

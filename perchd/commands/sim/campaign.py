@@ -192,7 +192,6 @@ def run(args: argparse.Namespace) -> int:
     todo = results.missing(specs)
     check_log_dir(args.logs, [s.index for s in todo], args.force)
     make_default_dir(table)
-    results.begin()
     progress = Progress(len(specs), "flights", "sim", rates=True, done=results.resumed)
     t0 = time.monotonic()
     stopped, engine = None, None
@@ -205,6 +204,7 @@ def run(args: argparse.Namespace) -> int:
     with on_signals():
         try:
             engine = open_engine(cluster, args.jobs)
+            results.begin()
             fly_campaign(CampaignJob(plan, cfg, spread, args.logs), todo, engine, finished)
         except Stopped as stop:
             stopped = stop
@@ -213,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
             close_quietly(engine)
             where = {"engine": engine.name if engine else None, "resumed": results.resumed,
                      "flown": len(results.rows) - results.resumed}
-            rows = results.finish(len(specs), where)
+            rows = results.finish(len(specs), {**where, "wall_s": time.monotonic() - t0})
     report(args, cfg, spread, rows, table, time.monotonic() - t0, stopped, len(specs), where)
     if stopped is not None:
         return stopped.exit_code

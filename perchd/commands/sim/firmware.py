@@ -51,8 +51,12 @@ from perchd.sim.firmware.px4 import Px4Params, Px4Vehicle
 
 def register_under(sim_parser: argparse.ArgumentParser) -> None:
     """`firmware` as a subcommand of `perchd sim` (plain `perchd sim` is unchanged)."""
-    sub = sim_parser.add_subparsers(dest="sim_mode", metavar="{firmware}",
-                                    parser_class=type(sim_parser))
+    register(sim_parser.add_subparsers(dest="sim_mode", metavar="{firmware}",
+                                       parser_class=type(sim_parser)))
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """`firmware` among `perchd sim`'s subcommands."""
     p = sub.add_parser("firmware", help="fly a vehicle's own firmware in the loop",
                        description=__doc__.splitlines()[0])
     which = p.add_mutually_exclusive_group(required=True)
