@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from perchd.core.errors import PlanError
 from perchd.core.safefile import write_text
 from perchd.tau.ipts import MAX_ORDER, plan_ipts, plan_ipts_from
 from perchd.tau.limits import Limits
-from perchd.tau.plan import Plan
+from perchd.tau.plan import Plan, given
 from perchd.tau.planfile import load_json
 
 SCHEMA = "perchd.planlib/1"
@@ -103,22 +104,25 @@ def _cell(grid: tuple[float, ...], value: float, name: str, unit: str) -> tuple[
 
 def build_library(x0: tuple[float, float], v0: tuple[float, float], counts: tuple[int, int],
                   tau_s: float, v_contact: tuple[float, float], v_max: float | None,
-                  a_max: float | None, order: int, progress=None) -> PlanLibrary:
+                  a_max: float | None, order: int,
+                  progress: Callable[[int, int], None] | None = None) -> PlanLibrary:
     """Cold-solve the global minimum-time plan at every node of the grid (x0 [m], v0 [m/s]
     ranges with counts[0] x counts[1] nodes). progress(done, total) is called per node."""
 
     if not 1 <= order <= MAX_ORDER:
         raise PlanError(f"order must be 1..{MAX_ORDER}, got {order}")
-    limits = Limits(tuple(v_contact), v_max, a_max)
+    lo, hi = v_contact
+    limits = Limits((lo, hi), v_max, a_max)
     x0s, v0s = _axis(x0, counts[0], "x0"), _axis(v0, counts[1], "v0")
-    rows, first_refusal = [], ""
+    rows: list[tuple[Node | None, ...]] = []
+    first_refusal = ""
     for i, x in enumerate(x0s):
-        row = []
+        row: list[Node | None] = []
         for j, v in enumerate(v0s):
             try:
                 plan = plan_ipts(x, v, tau_s, v_contact, v_max, a_max, order,
                                  probe_orders=False)  # a hole needs no order advice
-                row.append(Node(tuple(plan.k), plan.t_switch))
+                row.append(Node(tuple(given(plan.k, "stage1.k")), plan.t_switch))
             except PlanError as err:  # infeasible here; the file records the hole
                 row.append(None)
                 first_refusal = first_refusal or f"at x0 = {x:g} m, v0 = {v:g} m/s: {err}"
@@ -139,7 +143,7 @@ def _axis(span: tuple[float, float], count: int, name: str) -> tuple[float, ...]
 
 
 # -- files ------------------------------------------------------------------------------------
-def library_to_json(lib: PlanLibrary) -> dict:
+def library_to_json(lib: PlanLibrary) -> dict[str, object]:
     return {"schema": SCHEMA, "strategy": "ipts", "order": lib.order, "tau_s": lib.tau_s,
             "limits": lib.limits.to_json(), "x0": list(lib.x0s), "v0": list(lib.v0s),
             "nodes": [[None if n is None else {"k": list(n.k), "t_switch": n.t_switch}
@@ -179,9 +183,9 @@ def library_from_json(doc: object) -> PlanLibrary:
     lim = doc.get("limits")
     if not isinstance(lim, dict):
         raise PlanError("limits must be an object")
-    limits = Limits(tuple(_finite(v, "limits.v_contact") for v in _list(lim.get("v_contact"), 2,
-                                                                        "limits.v_contact")),
-                    _optional(lim.get("v_max"), "limits.v_max"),
+    lo, hi = (_finite(v, "limits.v_contact")
+              for v in _list(lim.get("v_contact"), 2, "limits.v_contact"))
+    limits = Limits((lo, hi), _optional(lim.get("v_max"), "limits.v_max"),
                     _optional(lim.get("a_max"), "limits.a_max"))
     x0s, v0s = _grid_axis(doc.get("x0"), "x0"), _grid_axis(doc.get("v0"), "v0")
     rows = _list(doc.get("nodes"), len(x0s), "nodes")
@@ -213,7 +217,7 @@ def _grid_axis(value: object, name: str) -> tuple[float, ...]:
     return grid
 
 
-def _list(value: object, length: int | None, name: str) -> list:
+def _list(value: object, length: int | None, name: str) -> list[object]:
     if not isinstance(value, list) or (length is not None and len(value) != length):
         want = "a list" if length is None else f"a list of {length}"
         raise PlanError(f"{name} must be {want}")
