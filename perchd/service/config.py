@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import grp
 import math
 import os
@@ -146,6 +147,7 @@ def config_from_dict(doc: dict[str, Any], name: str = "perchd.toml", path: str =
     return Config(service, flight, path)
 
 
+@functools.cache  # resolving annotations is most of a load's time; the classes never change
 def _hints(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 

@@ -4,6 +4,7 @@ inputs, and structural mutations of a JSON document (replace, delete or add one 
 from __future__ import annotations
 
 import copy
+import re
 from typing import Any
 
 from hypothesis import strategies as st
@@ -72,3 +73,25 @@ def mutated_document(draw, doc: dict) -> Any:
         elif kind == "scale" and isinstance(parent[key], (int, float)) and not isinstance(parent[key], bool):
             parent[key] = parent[key] * draw(st.sampled_from([-1, 0, 0.5, 1 + 1e-9, 2, 1e6, 1e-6]))
     return doc
+
+
+NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
+NASTY_TOKENS = [b"1e999", b"-1e999", b"NaN", b"Infinity", b"nan", b"inf", b"9" * 400,
+                b"-" + b"9" * 400, b"9" * 5000, b"true", b"false", b"null", b'"1"', b"1e-400",
+                b"-0", b"[]", b"{}", b"0x10", b"1_000"]
+
+
+@st.composite
+def spliced_numbers(draw, seeds: list[bytes]) -> bytes:
+    """A real input with 1..3 of its numbers replaced by an extreme or ill-typed token
+    (1e999, 400 and 5000 digits, NaN, booleans, strings, containers)."""
+    data = draw(st.sampled_from(seeds))
+    spans = [m.span() for m in NUMBER.finditer(data)]
+    for _ in range(draw(st.integers(1, 3))):
+        if not spans:
+            break
+        start, end = draw(st.sampled_from(spans))
+        token = draw(st.sampled_from(NASTY_TOKENS))
+        data = data[:start] + token + data[end:]
+        spans = [m.span() for m in NUMBER.finditer(data)]
+    return data
