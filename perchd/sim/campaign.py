@@ -240,8 +240,10 @@ def _simulate(plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
         plant=PlantParams(latency_s=spread.latency_s), mocap=MocapParams(noise_m=spread.noise_m),
         start=spread.start or start_for(spec.x0, spec.v0, cfg), seed=spec.seed),
         surface=cfg.surface)
+    # log_force: --logs was checked by the command (an existing log there only with --force,
+    # or a resumed campaign's torn one); a replaced log is still renamed into place whole
     return session.fly(plan, log_path, cfg, on_tick=_gust_hook(session.world, spec),
-                       header={"campaign_flight": dataclasses.asdict(spec)})
+                       header={"campaign_flight": dataclasses.asdict(spec)}, log_force=True)
 
 
 def _gust_hook(world: SimWorld, spec: FlightSpec) -> Callable[[TickStatus], None] | None:
