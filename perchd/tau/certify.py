@@ -36,6 +36,7 @@ Method (what `certify_box` implements, nothing sampled is trusted):
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import TypedDict, cast, overload
 
@@ -261,12 +262,26 @@ def _cell_bounds(poly: _Poly, ka: FloatArray, kb: FloatArray, t1: FloatArray,
 
 
 # --- the certifier --------------------------------------------------------------
+CERTIFIED_KEPT = 256
+"""Certificates remembered (the inputs are a few floats; a certificate a few more)."""
+
 
 def certify_box(k: Coefficients, box: Box, v_contact: tuple[float, float], v_max: float | None,
                 a_max: float | None, tau_s: float, *, min_width: float = 1e-9) -> Certificate:
     """Prove that k = (k_1..k_n) meets every limit for every trigger state in `box`
-    (method in the module docstring), or return the violation found."""
-    k = np.asarray(k, dtype=float)
+    (method in the module docstring), or return the violation found. Remembered per
+    process: every flight of a robust campaign re-certifies the same box (check_plan)."""
+    key = Box((float(box.x0[0]), float(box.x0[1])), (float(box.v0[0]), float(box.v0[1])))
+    return _certify_box(tuple(float(x) for x in np.ravel(k)), key,
+                        (float(v_contact[0]), float(v_contact[1])), v_max, a_max, tau_s,
+                        min_width)
+
+
+@functools.lru_cache(maxsize=CERTIFIED_KEPT)
+def _certify_box(k_: tuple[float, ...], box: Box, v_contact: tuple[float, float],
+                 v_max: float | None, a_max: float | None, tau_s: float,
+                 min_width: float) -> Certificate:
+    k = np.asarray(k_, dtype=float)
     kmin, kmax = box.k0_range
     if kmin <= 1.0 / tau_s:
         return _fail(Violation("tau_s", box.x0[1], box.v0[1], 0.0, box.x0[1] / box.v0[1], tau_s),
