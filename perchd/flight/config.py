@@ -13,6 +13,7 @@ import enum
 import math
 from dataclasses import dataclass
 
+from perchd.core.envelope import CEILING_ABOVE_FLOOR_M, MARGIN_M, TAKEOFF_HEIGHT_MAX_M
 from perchd.core.errors import ConfigError
 from perchd.core.vehicle import (
     CRAZYFLIE_HOVER_UNITS,
@@ -389,8 +390,11 @@ class SafetyConfig:
     stale_periods / stale_timeout_s: mocap is stale when no valid pose arrived for more than
         this many mocap periods, or for stale_timeout_s [s] when that is set.
     geofence: perching-frame box: x_min_m..x_max_m [m] along the normal (x_max_m > 0 means
-        the vehicle went through the surface), lateral_max_m [m] from the approach line,
-        floor_m [m] lowest world height after take-off.
+        the vehicle went through the surface; the surface, X = 0, must lie inside),
+        lateral_max_m [m] from the approach line, floor_m [m] lowest world height after
+        take-off, ceiling_m [m] highest world height (at most
+        core.envelope.CEILING_ABOVE_FLOOR_M above the floor, whatever is set). Height
+        references stay core.envelope.MARGIN_M inside floor and ceiling.
     tilt_max_rad: [rad] measured tilt that ends the flight.
     speed_max_mps: [m/s] measured speed that ends the flight.
     tau_error_max / tau_error_s: |tau - tau_ref| [s] beyond max(tau_error_max,
@@ -409,6 +413,7 @@ class SafetyConfig:
     x_max_m: float = 0.3
     lateral_max_m: float = 1.0
     floor_m: float = 0.1
+    ceiling_m: float = 3.0
     tilt_max_rad: float = math.radians(45.0)
     speed_max_mps: float = 3.5
     tau_error_max: float = 0.5
@@ -483,6 +488,22 @@ class FlightConfig:
         validate(self)
 
 
+def envelope_checks(cfg: FlightConfig) -> list[tuple[str, float, float, float]]:
+    """(key, value, low, high) of the hard envelope (perchd.core.envelope): the ceiling, the
+    take-off height and the surface inside the geofence."""
+    s = cfg.safety
+    return [
+        ("safety.ceiling_m", s.ceiling_m, s.floor_m + 2 * MARGIN_M,
+         s.floor_m + CEILING_ABOVE_FLOOR_M),
+        (f"approach.takeoff_height_m ({MARGIN_M:g} m inside floor and ceiling, at most "
+         f"{TAKEOFF_HEIGHT_MAX_M:g} m)", cfg.approach.takeoff_height_m, s.floor_m + MARGIN_M,
+         min(s.ceiling_m - MARGIN_M, TAKEOFF_HEIGHT_MAX_M)),
+        ("safety.x_max_m (the surface, X = 0, inside the geofence)", s.x_max_m, 0.0, math.inf),
+        ("safety.x_min_m (the surface, X = 0, inside the geofence)", s.x_min_m, -math.inf,
+         -MARGIN_M),
+    ]
+
+
 def validate(cfg: FlightConfig) -> None:
     """Raise ConfigError naming the first field out of range and by how much."""
     checks = [
@@ -508,6 +529,7 @@ def validate(cfg: FlightConfig) -> None:
         *((f"surface.point[{i}]", c, -MAX_COORD_M, MAX_COORD_M)
           for i, c in enumerate(cfg.surface.point)),
         *((f"surface.normal[{i}]", c, -1e6, 1e6) for i, c in enumerate(cfg.surface.normal)),
+        *envelope_checks(cfg),
     ]
     for name, value, lo, hi in checks:
         if not math.isfinite(value):

@@ -22,6 +22,7 @@ import threading
 from dataclasses import dataclass
 from typing import Any
 
+from perchd.core.envelope import MARGIN_M
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint, State
 from perchd.flight.config import FlightConfig, PostContact
 from perchd.flight.control import AxisController, Controller, FeedForward
@@ -249,6 +250,8 @@ class Supervisor:
                                             f"(limit {s.lateral_max_m:g} m)")
         if airborne and height < s.floor_m:
             return EndReason.GEOFENCE, f"height {height:.3f} m below the floor limit {s.floor_m:g} m"
+        if height > s.ceiling_m:
+            return EndReason.GEOFENCE, f"height {height:.3f} m above the ceiling {s.ceiling_m:g} m"
         if st.tilt > s.tilt_max_rad:
             return EndReason.TILT_LIMIT, (f"tilt {math.degrees(st.tilt):.1f} deg > "
                                           f"{math.degrees(s.tilt_max_rad):.1f} deg")
@@ -390,7 +393,15 @@ class Supervisor:
         self._hold_x = AxisController(self.cfg.lateral.z)
         start_world = self.frame.rotate_out((st.x, st.y, st.z))
         height = self.frame.point[2] + start_world[2]
-        climb = self.cfg.approach.takeoff_height_m - height
+        s = self.cfg.safety
+        top = s.ceiling_m - MARGIN_M  # every height reference stays below (core/envelope.py)
+        if height > top:
+            self._finish(EndReason.GEOFENCE, t, (
+                f"start height {height:.3f} m is above safety.ceiling_m = {s.ceiling_m:g} m "
+                f"less the {MARGIN_M:g} m margin by {height - top:.3f} m: the hold would "
+                f"fly there"))
+        target = min(max(self.cfg.approach.takeoff_height_m, s.floor_m + MARGIN_M), top)
+        climb = target - height
         self._z_ref = st.z + climb if climb > 0.1 else st.z
         if climb > 0.1:  # perchd/flight/takeoff.py: held until off the ground, never ahead
             self._takeoff = TakeoffProfile(st.z, self._z_ref, self.cfg.approach.takeoff_speed_mps)

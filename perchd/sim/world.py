@@ -25,15 +25,20 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 from perchd.core.clock import Clock
+from perchd.core.envelope import FAILSAFE_DESCENT_MPS, FAILSAFE_DROP_MAX_M
 from perchd.core.errors import UriError
 from perchd.core.ports import SourceStats
 from perchd.core.runtime import Runtime
-from perchd.core.types import EndReason, Pose, Setpoint, Vec3
+from perchd.core.types import EndReason, Phase, Pose, Setpoint, Vec3
 from perchd.core.uri import Uri
 from perchd.core.uriparams import SIM, check_known, check_params, float_param, names_of
 from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
 from perchd.sim.stall import Stall, stall_from_uri
+
+
+DESCENT_GAIN_PER_S = 3.0
+"""[1/s] the failsafe descent's sink-rate gain: m (g + k (v_ref - vz)) of thrust."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +106,7 @@ class SimWorld:
         self.contact: Contact | None = None
         self.sent: list[Setpoint] = []
         self.failsafes: list[EndReason] = []
+        self._descending = False  # the failsafe descends before it cuts (failsafe)
         n = params.surface_normal
         norm = math.sqrt(sum(c * c for c in n))
         self._n = tuple(c / norm for c in n)
@@ -131,6 +137,8 @@ class SimWorld:
                 self.plant.step_to(t_frame, self._check_contact)
                 self._measure(t_frame)
                 self._next_frame += 1
+                if self._descending:  # the failsafe's descent, at the mocap's rate
+                    self._descend(t_frame)
             self.plant.step_to(t, self._check_contact)
             self._deliver(t)
             self._disturb(t)
@@ -175,15 +183,35 @@ class SimWorld:
         return self.params.plant.latency_s
 
     def failsafe(self, reason: EndReason) -> None:
-        """The driver's failsafe: recorded, and the motors stopped."""
-        self.failsafes.append(reason)
-        self.command(Setpoint.stop(self.clock.now()))
+        """The driver's failsafe: recorded, and the motors stopped; from higher than
+        core.envelope.FAILSAFE_DROP_MAX_M above the ground the vehicle first descends, level,
+        at FAILSAFE_DESCENT_MPS to that height (docs/safety.md "Hard envelope")."""
+        with self._lock:
+            self.failsafes.append(reason)
+            self.advance()
+            self._descending = self.plant.p[2] > FAILSAFE_DROP_MAX_M
+            self._descend(self.clock.now())
+
+    def _descend(self, t: float) -> None:
+        """One step of the failsafe's descent (level, thrust on the sink rate), or the cut."""
+        if not self._descending or self.plant.p[2] <= FAILSAFE_DROP_MAX_M:
+            self._descending = False
+            self._queue_command(Setpoint.stop(t), t)
+            return
+        pp = self.plant.params
+        lift = pp.mass_kg * (pp.g + DESCENT_GAIN_PER_S * (-FAILSAFE_DESCENT_MPS - self.plant.v[2]))
+        self._queue_command(Setpoint(t, 0.0, 0.0, 0.0, min(max(lift, 0.0), pp.thrust_max_n),
+                                     -1, Phase.ABORT), t)
 
     def command(self, sp: Setpoint) -> None:
         with self._lock:
             self.advance()
-            self.sent.append(sp)
-            self.plant.command(sp, self.clock.now())
+            self._queue_command(sp, self.clock.now())
+
+    def _queue_command(self, sp: Setpoint, t: float) -> None:
+        """Sent at t [s] (the world integrated up to t already)."""
+        self.sent.append(sp)
+        self.plant.command(sp, t)
 
     def applied(self) -> Setpoint | None:
         """The newest setpoint that has reached the vehicle."""

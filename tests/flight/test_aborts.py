@@ -36,10 +36,15 @@ def test_no_pose_at_all_ends_as_stale_mocap(tmp_path):
     assert res.trigger is None
 
 
-def test_crossing_the_geofence_ends_the_flight(tmp_path):
-    sim, res = fly(tmp_path, safety(x_max_m=-1.0))
+def test_crossing_the_geofence_ceiling_ends_the_flight(tmp_path):
+    def lift(world):
+        world.plant.v[2] += 2.0
+    sim, res = fly(tmp_path, safety(ceiling_m=1.4, speed_max_mps=10.0),
+                   setup=lambda s: s.world.faults.at.append((TRIGGER_T + 0.5, lift)))
     assert_failsafe_and_closed_log(sim, res, EndReason.GEOFENCE)
-    assert read_log(res.log).rows[-2].x <= -1.0 < sim.world.gap(sim.world.plant.p) + 0.05
+    assert "above the ceiling 1.4 m" in res.detail
+    rows = read_log(res.log).rows
+    assert rows[-2].z <= 1.4 < rows[-1].z  # the first tick above it ends the flight
 
 
 def test_a_gust_that_pushes_the_vehicle_off_its_line_is_a_geofence_end(tmp_path):
@@ -87,9 +92,12 @@ def test_a_cut_link_is_a_lost_link_end(tmp_path):
 
 
 def test_going_too_fast_is_a_speed_limit_end(tmp_path):
-    sim, res = fly(tmp_path, safety(speed_max_mps=1.2))
+    def shove(world):  # above the plan's own peak speed, which the limit must allow
+        world.plant.v[0] += 2.6
+    sim, res = fly(tmp_path, safety(speed_max_mps=2.5),
+                   setup=lambda s: s.world.faults.at.append((0.3, shove)))
     assert_failsafe_and_closed_log(sim, res, EndReason.SPEED_LIMIT)
-    assert res.trigger is None  # the approach had not reached v0 = 1.5 m/s
+    assert res.trigger is None  # shoved in the hold, before the approach
 
 
 def test_a_vehicle_stopped_by_a_headwind_diverges_from_its_tau_reference(tmp_path):
