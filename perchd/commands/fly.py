@@ -35,11 +35,12 @@ from perchd.core.safefile import OutputError, check_output
 from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
 from perchd.flight.planguard import check_flight_plan
-from perchd.flight.run import FlightAbort
+from perchd.flight.run import FlightAbort, FlightResult
 from perchd.flight.vehiclestate import VehicleStore, default_path
 from perchd.logs.flightlog import read_log
-from perchd.logs.mcapexport import export_mcap
 from perchd.logs.foxglove import ViewProcess, parse_address
+from perchd.logs.mcapexport import export_mcap
+from perchd.logs.summary import figure_lines
 from perchd.session import open_links
 from perchd.tau import load_plan
 
@@ -128,14 +129,10 @@ class StatusLine:
             self.stream.write("\n")
 
 
-def summary_text(res) -> str:
-    lines = [f"outcome: {res.outcome.name} ({res.outcome.value}){': ' + res.detail if res.detail else ''}"]
-    if res.contact_speed is not None:
-        lines.append(f"contact speed: {res.contact_speed:.3f} m/s (plan {res.v_contact_plan:.3f}, "
-                     f"error {res.contact_speed - res.v_contact_plan:+.3f} m/s)")
-    if res.perch_time is not None:
-        lines.append(f"perch time: {res.perch_time:.3f} s (plan {res.plan_duration:.3f}, "
-                     f"error {100 * (res.perch_time / res.plan_duration - 1):+.1f} %)")
+def summary_text(res: FlightResult) -> str:
+    """The flight's summary: logs/summary.py's head, then what only a live flight knows."""
+    lines = figure_lines(res.outcome.name, res.detail, res.contact_speed, res.v_contact_plan,
+                         res.perch_time, res.plan_duration)
     if res.true_contact_speed is not None:
         lines.append(f"simulator: contact at {res.true_contact_speed:.3f} m/s"
                      + (f", {res.true_perch_time:.3f} s after the trigger"
