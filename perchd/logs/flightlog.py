@@ -17,7 +17,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from perchd.core.errors import PerchdError
 from perchd.core.safefile import OutputError, Stream, read_regular
