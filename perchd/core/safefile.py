@@ -166,15 +166,14 @@ def write_atomic(path: Path, write: Callable[[IO[bytes]], None], flag: str, forc
 
 def _temp_beside(path: Path, flag: str) -> str:
     """A new empty temporary file in `path`'s directory (so the rename stays on its
-    filesystem), with a regular file's mode (0666 less the umask, not mkstemp's 0600)."""
+    filesystem), mode rw-r--r-- as an output's (not mkstemp's 0600; reading the umask
+    would set it, which races the service's other threads)."""
     parent = path.parent if str(path.parent) else Path(".")
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.", suffix=".part", dir=parent)
     except (OSError, ValueError) as err:
         raise OutputError(f"{flag} {path}: cannot write ({_why(err)})") from None
-    umask = os.umask(0)
-    os.umask(umask)
-    os.fchmod(fd, 0o666 & ~umask)
+    os.fchmod(fd, 0o644)
     os.close(fd)
     return tmp
 
