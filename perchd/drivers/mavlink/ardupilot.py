@@ -4,8 +4,9 @@ the parameter and refuses to fly without it."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from perchd.core.errors import ConfigError
 from perchd.drivers.mavlink.dialect import Mode

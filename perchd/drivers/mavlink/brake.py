@@ -4,7 +4,7 @@ Killed mid-approach, the vehicle leans toward the wall at speed, and an autopilo
 does not brake it well: PX4's is jerk-limited from the acceleration it finds (SIH killed at
 0.45-0.50 m/s went on 0.36-0.63 m), and lands where its own braking from the speed it has
 would end (navigator's preproject_stop_point: 1.3-2.4 m further from 1.2 m/s). While perchd
-flies, the driver keeps the sentinel (drivers/mavsentinel.py) supplied with a brake,
+flies, the driver keeps the sentinel (sentinel.py) supplied with a brake,
 renewed from the mocap every WILL_PERIOD_S: lean against the velocity at BRAKE_ACCEL_MPS2
 for |v| / a (the attitude's lag delays the stop but not the velocity the lean takes off),
 then level at hover thrust until the autopilot's own velocity (LOCAL_POSITION_NED) says

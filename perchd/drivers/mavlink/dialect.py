@@ -3,8 +3,9 @@ px4.py), found by the autopilot its heartbeat names (vehicle.dialect_for)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol
 
 from perchd.drivers.mavlink.params import ParamRule
 

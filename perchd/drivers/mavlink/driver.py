@@ -25,12 +25,11 @@ from typing import Any
 
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import ConfigError, LinkError
-from perchd.core.ned import ned_vec
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Setpoint, Vec3
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
-from perchd.drivers.mavlink.brake import WillSchedule, brake_for
-from perchd.drivers.mavlink.dialect import Dialect, rules_for
+from perchd.drivers.mavlink.dialect import rules_for
+from perchd.drivers.mavlink.guard import SentinelGuard
 from perchd.drivers.mavlink.landing import LandRetry
 from perchd.drivers.mavlink.link import (
     ATTITUDE_ID,
@@ -46,13 +45,14 @@ from perchd.drivers.mavlink.link import (
 )
 from perchd.drivers.mavlink.params import check_params
 from perchd.drivers.mavlink.px4 import OFFBOARD_PORT
-from perchd.drivers.mavlink.sentinel import Sentinel
+from perchd.drivers.mavlink.rivals import RivalWatch
 from perchd.drivers.mavlink.setpoints import KEEPALIVE_S, SetpointStream, ned_attitude, ned_yaw
 from perchd.drivers.mavlink.takeover import Takeover
 from perchd.drivers.mavlink.tilt import NO_TILT, TiltCorrection
 from perchd.drivers.mavlink.vehicle import VehicleView
 from perchd.drivers.mavlink.vision import timesync_reply, vision_estimate, vision_message
 from perchd.drivers.mavlink.yaw0 import Yaw0
+from perchd.drivers.targetlock import TargetLock, connect_holding
 from perchd.drivers.thrust import NormalisedThrust
 from perchd.drivers.ticker import Ticker
 
@@ -72,6 +72,9 @@ NO_HEARTBEAT_CAUSES = (
     f"{OFFBOARD_PORT}+N); a PX4 that already heard a udpout: link from another source "
     "port answers only that one (restart it, use udpin:, or keep one port with ?sport=); "
     "ArduPilot SITL: mavlink:tcp:127.0.0.1:5760 or its --out udp port with udpin:")
+RIVAL_LISTEN_S = 0.5
+"""[s] connect() listens at least this long for another GCS's or companion's targets: an
+offboard stream comes at 2 Hz or more (PX4 leaves OFFBOARD below it)."""
 
 
 class MavlinkDriver(DriverBase):
@@ -108,10 +111,11 @@ class MavlinkDriver(DriverBase):
         self._engaging = False  # engage() is under way: a failsafe meanwhile ends it
         self._poses: PoseFeed = no_poses  # engage()'s pose feed, read while it waits
         self._pumped_seq: int | None = None  # the newest pose engage() forwarded
-        self._sentinel: Sentinel | None = None  # lands the vehicle if this process dies
-        self._will = WillSchedule()  # the sentinel's brake, renewed from the mocap
-        self._yaw0_told: float | None = None  # the yaw0 the sentinel last heard
+        self._guard = SentinelGuard(uri)  # lands the vehicle if this process dies
         self._vision_seq: int | None = None  # the newest pose sent to the EKF: each goes once
+        self._lock = TargetLock(uri)  # one agent per vehicle on this machine
+        self._rivals = RivalWatch()  # one on the link: another GCS or companion steering
+        self._listen_from = 0.0  # [s] on self.clock: connect() began to hear the link
 
     @property
     def yaw0(self) -> float | None:
@@ -129,6 +133,10 @@ class MavlinkDriver(DriverBase):
 
     # -- Driver protocol ---------------------------------------------------------------
     def connect(self) -> None:
+        connect_holding(self._lock, self._open, self._release)
+
+    def _open(self) -> None:
+        self._rivals, self._listen_from = RivalWatch(), self.clock.now()
         self._link = open_connection(self.device, self.uri, self.sport, self._on_refused)
         self._refused = ""
         self.vehicle = VehicleView()
@@ -156,7 +164,9 @@ class MavlinkDriver(DriverBase):
             self._airborne_before_arm = steps.prestream(model.hover_fraction)
             self._engaged = True
             steps.switch_mode()
-            self._guard()
+            self._guard.flying(self._link, self.vehicle.target, steps.dialect.land,
+                               self.mocap_uri if self.vision else None,
+                               self.vehicle.flight_mode or 0)
             if self.arm:
                 steps.arm(self.vision, self._fed)
                 if steps.dialect.spools_up and not self._airborne_before_arm:
@@ -259,6 +269,8 @@ class MavlinkDriver(DriverBase):
             self.model = NormalisedThrust(self.mass_kg, hover)
         except ValueError as err:
             raise ConfigError(f"{self.uri}: {err}") from None
+        self.clock.sleep_until(self._listen_from + RIVAL_LISTEN_S)
+        self._rivals.check(self.uri, v, dialect, self._lock.shared)
 
     def _ask_streams(self, link: Connection, target: tuple[int, int]) -> None:
         """The messages the driver reads, at the rates it needs them."""
@@ -268,24 +280,6 @@ class MavlinkDriver(DriverBase):
             link.command(target, CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
 
     # -- engaging ----------------------------------------------------------------------
-    def _guard(self) -> None:
-        """From the acknowledged mode switch on, the sentinel (sentinel.py) lands the
-        vehicle if this process dies."""
-        dialect: Dialect | None = self.vehicle.dialect
-        if self._sentinel is None and self._link is not None and dialect is not None:
-            try:
-                mocap = self.mocap_uri if self.vision else None
-                self._sentinel = Sentinel(self._link, self.vehicle.target,
-                                          (dialect.land.main, dialect.land.sub), mocap,
-                                          self.vehicle.flight_mode or 0)
-                self._yaw0_told = None
-            except (OSError, ValueError) as err:
-                log.warning("%s: no MAVLink sentinel (%s): if this process dies, only the "
-                            "autopilot's own failsafe acts", self.uri, err)
-                return
-        if self._sentinel is not None:
-            self._sentinel.flying(True)
-
     def _fed(self) -> str:
         """What went to the EKF while arming was asked for, for its refusal."""
         if not self.vision:
@@ -304,20 +298,12 @@ class MavlinkDriver(DriverBase):
             self.observe_pose(pose)
 
     def _renew_will(self, pose: Any) -> None:
-        """Every WILL_PERIOD_S while perchd flies, the brake the sentinel is to fly should
-        this process die: against the mocap's velocity (brake.py)."""
-        now = time.monotonic()
-        velocity = self._will.due(pose, now)
-        if (velocity is None or self._sentinel is None or self._stopped or self.yaw0 is None
-                or self.model is None):
-            return
+        """While perchd flies, the brake the sentinel is to fly should this process die:
+        against the mocap's velocity, at the heading flown (guard.py)."""
         level = self._stream.level_yaw if self._stream is not None else None
         heading = level if level is not None else self.vehicle.yaw_ned or 0.0
-        self._sentinel.will(brake_for(ned_vec(velocity, self.yaw0), heading,
-                                      self.model.hover_fraction, now))
-        if self.yaw0 != self._yaw0_told:
-            self._yaw0_told = self.yaw0
-            self._sentinel.yaw0(self.yaw0)
+        hover = None if self._stopped or self.model is None else self.model.hover_fraction
+        self._guard.renew(pose, self.yaw0, heading, hover)  # stopped: no brake to fly
 
     # -- the link's threads ------------------------------------------------------------
     def _receive(self) -> None:
@@ -326,6 +312,7 @@ class MavlinkDriver(DriverBase):
             link.pump(RECEIVE_S, self._on_message)
 
     def _on_message(self, msg: Any) -> None:
+        self._rivals.on_message(msg)
         v = self.vehicle
         if not v.on_message(msg, self.clock.now()):
             return
@@ -353,8 +340,8 @@ class MavlinkDriver(DriverBase):
         if self._stopped:
             taken = self._land_taken()
             self._landing.tick(taken)
-            if taken and self._sentinel is not None:
-                self._sentinel.flying(False)  # landing, or the pilot's: no longer ours to land
+            if taken:
+                self._guard.not_flying()
 
     def _on_refused(self) -> None:
         if self.vehicle.heard_s is not None:  # before the first heartbeat, connect() waits
@@ -383,14 +370,10 @@ class MavlinkDriver(DriverBase):
         return v.mode != v.flight_mode or (self._armed_at_land and not v.armed)
 
     def _release(self, handover: bool = False) -> None:
-        sentinel, self._sentinel = self._sentinel, None
-        if sentinel is not None:
-            if handover:
-                sentinel.hand_over()
-            else:
-                sentinel.release()
+        self._guard.end(handover)
         for ticker in self._tickers:
             ticker.stop()
         link, self._link = self._link, None
         if link is not None:
             link.close()
+        self._lock.release()

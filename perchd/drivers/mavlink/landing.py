@@ -4,7 +4,7 @@ dead link is lost, a link back still delivers it."""
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 LAND_RETRY_S = 0.25
 """[s] LAND is commanded again this often until a heartbeat shows the vehicle took it."""

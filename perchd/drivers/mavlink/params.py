@@ -10,8 +10,8 @@ configure=1 the driver sets them (PARAM_SET, read back, logged) instead.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from perchd.core.errors import ConfigError
 

@@ -4,8 +4,9 @@ second of them; its integer parameters travel bytewise in PARAM_VALUE's float.""
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from perchd.drivers.mavlink.dialect import Mode
 from perchd.drivers.mavlink.link import MAV_PARAM_TYPE_INT32, MAV_PARAM_TYPE_REAL32

@@ -15,8 +15,8 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from perchd.core.errors import LinkError
 from perchd.drivers.mavlink.dialect import Dialect

@@ -20,7 +20,7 @@ and a setpoint rotated by it is flown as asked.
 - Bounded: at most MAX_RAD per axis, and nothing once the estimates stop (STALE_S).
 
 Angles are the autopilot's: body FRD in NED, Z-Y-X (roll, pitch), at the heading yaw0
-aligns (drivers/mavlink.py).
+aligns (yaw0.py).
 """
 
 from __future__ import annotations
