@@ -70,6 +70,7 @@ class TargetLock:
     def __init__(self, uri: str) -> None:
         self.uri = uri
         self.path: Path | None = None  # where, once taken
+        self.shared = False  # taken while this process held it already
 
     @property
     def held(self) -> bool:
@@ -79,7 +80,7 @@ class TargetLock:
         """TargetBusy naming the process that holds the vehicle, if another does."""
         if self.path is None:
             path = lock_path(self.uri)
-            _HELD.take(path, self.uri)
+            self.shared = _HELD.take(path, self.uri) > 1
             self.path = path
 
     def release(self) -> None:
@@ -116,12 +117,13 @@ class _Held:
         self._mutex = threading.Lock()
         self._locks: dict[Path, list[int]] = {}
 
-    def take(self, path: Path, uri: str) -> None:
+    def take(self, path: Path, uri: str) -> int:
+        """How many times this process holds it now."""
         with self._mutex:
-            if path in self._locks:
-                self._locks[path][1] += 1
-                return
-            self._locks[path] = [_flock(path, uri), 1]
+            if path not in self._locks:
+                self._locks[path] = [_flock(path, uri), 0]
+            self._locks[path][1] += 1
+            return self._locks[path][1]
 
     def drop(self, path: Path) -> None:
         with self._mutex:

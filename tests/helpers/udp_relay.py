@@ -38,6 +38,11 @@ class UdpRelay:
         for t in self._threads:
             t.start()
 
+    def inject(self, data: bytes) -> None:
+        """A datagram down to the driver as if from the peer's side: another component behind
+        a router, whose traffic reaches every link."""
+        self._queue("down", data)
+
     def mute(self) -> None:
         self.muted = True
 
