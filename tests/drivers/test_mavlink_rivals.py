@@ -7,7 +7,7 @@ from __future__ import annotations
 import threading
 
 import pytest
-from mavlink_double import ARDUPILOT, VehicleDouble, connected
+from mavlink_double import connected
 from pymavlink import mavutil
 from udp_relay import UdpRelay
 
@@ -40,14 +40,8 @@ class RivalGcs:
         self.thread.join()
 
 
-@pytest.fixture
-def vehicle():
-    v = VehicleDouble(ARDUPILOT)
-    yield v
-    v.close()
-
-
-def test_a_companion_streaming_attitude_targets_is_named_and_nothing_is_flown(vehicle):
+def test_a_companion_streaming_attitude_targets_is_named_and_nothing_is_flown(ardupilot):
+    vehicle = ardupilot
     relay = UdpRelay(vehicle.port)
     uri = f"mavlink:udpout:127.0.0.1:{relay.port}?mass=0.5"
     rival = RivalGcs(relay)
@@ -66,7 +60,8 @@ def test_a_companion_streaming_attitude_targets_is_named_and_nothing_is_flown(ve
     assert vehicle.targets == [] and vehicle.modes == []
 
 
-def test_a_vehicle_armed_in_its_offboard_mode_already_is_refused(vehicle):
+def test_a_vehicle_armed_in_its_offboard_mode_already_is_refused(ardupilot):
+    vehicle = ardupilot
     vehicle.armed, vehicle.custom_mode = True, GUIDED_NOGPS
     with pytest.raises(TargetBusy, match="armed in its offboard mode already .custom mode 20.: "
                                          "another GCS or companion flies it"):
