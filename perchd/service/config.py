@@ -190,7 +190,7 @@ def _public_keys(fields: set[str]) -> list[str]:
 
 def _coerce(tp: Any, raw: Any, name: str, where: str, key: str) -> Any:
     def bad(expected: str) -> ConfigError:
-        return ConfigError(f"{name}: [{where}] {key}: expected {expected}, got {raw!r}")
+        return ConfigError(f"{name}: [{where}] {key}: expected {expected}, got {_shown(raw)}")
 
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
@@ -205,9 +205,9 @@ def _coerce(tp: Any, raw: Any, name: str, where: str, key: str) -> Any:
             raise bad("an integer")
         return raw
     if tp is float:
-        if not _finite(raw):
+        if not _number(raw):
             raise bad("a number")
-        return float(raw)
+        return float(raw)  # NaN and inf too: FlightConfig's range check names them
     if tp is str:
         if not isinstance(raw, str):
             raise bad("a string")
@@ -227,16 +227,20 @@ def _coerce(tp: Any, raw: Any, name: str, where: str, key: str) -> Any:
     raise bad(f"a value of type {tp}")  # a FlightConfig field type this loader lacks
 
 
+def _shown(raw: Any) -> str:
+    """repr(raw), at most 200 characters; a TOML hex integer may have more digits than
+    Python will write in decimal (ValueError)."""
+    try:
+        return repr(raw)[:200]
+    except ValueError:
+        return "a number too long to show"
+
+
 def _number(raw: Any) -> bool:
-    """A number a float holds (NaN and inf too: the geometry check names them)."""
+    """A number a float holds (NaN and inf too: the range check names them)."""
     if isinstance(raw, bool) or not isinstance(raw, (int, float)):
         return False
     return not isinstance(raw, int) or abs(raw) < 1e308
-
-
-def _finite(raw: Any) -> bool:
-    """A finite number a float holds: not a bool, NaN, inf, or an integer beyond a float."""
-    return _number(raw) and math.isfinite(raw)
 
 
 def _coerce_ids(raw: Any, bad: Any) -> tuple[int | str, ...]:
