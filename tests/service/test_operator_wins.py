@@ -18,12 +18,14 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture
 def flying(tmp_path, notify):
-    """A service on sim:// in the middle of a flight; yields it and the flight's log path."""
-    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://")
+    """A service on sim:// in the middle of a flight that hovers 30 s before its approach, so
+    the abort comes before contact however loaded the machine; yields it and the log path."""
+    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://",
+                  tables="[approach]\nhold_s = 30.0\n")
     try:
-        notify.wait_for("READY=1")
+        notify.wait_for("READY=1", timeout=30.0)
         started = ctl(serve.sock, "fly", PLAN.name)
-        serve.wait_phase({"takeoff", "hold", "approach"})
+        serve.wait_phase({"hold"}, timeout=30.0)
         yield serve, started["log"]
     finally:
         serve.kill()
