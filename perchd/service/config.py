@@ -126,13 +126,13 @@ def config_from_dict(doc: dict[str, Any], name: str = "perchd.toml", path: str =
     doc = dict(doc)
     version = doc.pop("version", None)
     if version != VERSION:
-        raise ConfigError(f"{name}: version: expected {VERSION}, got {version!r}"
+        raise ConfigError(f"{name}: version: expected {VERSION}, got {_shown(version)}"
                           + (" (missing)" if version is None else ""))
     service = _build(ServiceConfig, doc.pop("service", {}), name, "service")
     service.peer_policy(name)  # unknown users and groups fail here, not when serving
     flight_doc = doc.pop(FLIGHT_TOP, {})
     if not isinstance(flight_doc, dict):
-        raise ConfigError(f"{name}: [{FLIGHT_TOP}] must be a table, got {flight_doc!r}"[:200])
+        raise ConfigError(f"{name}: [{FLIGHT_TOP}] must be a table, got {_shown(flight_doc)}"[:200])
     flight_doc = dict(flight_doc)
     sections = {f.name for f in dataclasses.fields(FlightConfig)
                 if dataclasses.is_dataclass(_hints(FlightConfig)[f.name])}
@@ -156,7 +156,7 @@ def _build(cls: type, table: Any, name: str, where: str, base: Any = None) -> An
     """A `cls` from a TOML table onto `base` (default cls()): known keys only, values
     coerced to the field's type."""
     if not isinstance(table, dict):
-        raise ConfigError(f"{name}: [{where}] must be a table, got {table!r}")
+        raise ConfigError(f"{name}: [{where}] must be a table, got {_shown(table)}")
     hints = _hints(cls)
     fields = {f.name for f in dataclasses.fields(cls)}
     base = cls() if base is None else base
@@ -233,7 +233,7 @@ def _shown(raw: Any) -> str:
     try:
         return repr(raw)[:200]
     except ValueError:
-        return "a number too long to show"
+        return "a value too long to show"
 
 
 def _number(raw: Any) -> bool:

@@ -144,5 +144,13 @@ def test_a_hex_integer_of_more_digits_than_python_writes_is_one_config_error(tmp
     # found by benchmarks/fuzz.py: the error message's repr() of it raised ValueError
     path = tmp_path / "perchd.toml"
     path.write_text("version = 1\n[vehicle]\nmass_kg = 0x" + "f" * 4000 + "\n")
-    with pytest.raises(ConfigError, match="mass_kg: expected a number, got a number too long"):
+    with pytest.raises(ConfigError, match="mass_kg: expected a number, got a value too long"):
         load_config(path)
+
+
+def test_a_version_or_table_too_long_to_show_is_one_config_error(tmp_path):
+    path = tmp_path / "perchd.toml"
+    for text in ("version = 0x" + "f" * 4000, "version = 1\nvehicle = [0x" + "f" * 4000 + "]"):
+        path.write_text(text + "\n")
+        with pytest.raises(ConfigError, match="too long to show"):
+            load_config(path)
