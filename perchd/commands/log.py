@@ -9,7 +9,6 @@ import json
 import sys
 from pathlib import Path
 
-from perchd.core.errors import PerchdError
 from perchd.core.extras import require
 from perchd.core.safefile import check_output
 from perchd.logs.flightlog import read_log
@@ -44,26 +43,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def _read(path: str):
-
-    try:
-        return read_log(path)
-    except OSError as err:
-        raise PerchdError(f"{path}: cannot read: {err.strerror}") from None
-
-
 def run(args: argparse.Namespace) -> int:
     if args.action == "export":
         return export(args)
     if args.action == "summary":
 
-        s = summarize(_read(args.log))
+        s = summarize(read_log(args.log))
         print(json.dumps(s.to_json()) if args.json else summary_text(s))
         return 0
 
     out = Path(args.out) if args.out else Path(args.log[0]).with_suffix(".png")
     check_output(out, "--out", args.force, inputs=tuple(args.log))
-    logs = [_read(p) for p in args.log]
+    logs = [read_log(p) for p in args.log]
     names = [Path(p).name for p in args.log]
     draw(lambda data, path: plot_flights(data, path, names, args.force), logs, out, "--out")
     print(out)
@@ -74,7 +65,7 @@ def export(args: argparse.Namespace) -> int:
     """`log export`: exit 0 once written, a log cut short included (said on stderr)."""
     require("mcap.writer", "mcap")  # before any work: the one line naming the extra
     out = check_output(args.mcap, "--mcap", args.force, inputs=(args.log,))
-    log = _read(args.log)
+    log = read_log(args.log)
     export_mcap(log, out, args.force)
     if not log.complete:
         print(f"perchd log export: {args.log}: no end line (a flight cut short); exported its "

@@ -84,4 +84,4 @@ def test_plotting_without_matplotlib_names_the_extra_and_summary_never_imports_i
 
 def test_a_missing_log_is_one_line_and_exit_2(tmp_path):
     done = perchd("log", "summary", str(tmp_path / "none.jsonl"))
-    assert done.returncode == 2 and done.stderr.strip().endswith("cannot read: No such file or directory")
+    assert done.returncode == 2 and done.stderr.strip().endswith("cannot read (No such file or directory)")
