@@ -312,8 +312,7 @@ def main() -> int:
                       f"{fmt(f['contact_speed'], '.3f')} m/s, perch time "
                       f"{fmt(f['perch_time'], '.3f')} s, lag {fmt(f['lag'].get('lag_s'), '.3f')} s "
                       f"drag {fmt(f['lag'].get('drag_per_s'), '.3f')} 1/s, stage 1's push "
-                      f"{fmt(f['stage2'].get('departure_mps2'), '+.3f')} m/s^2 (earlier "
-                      f"flights pooled: {f['stage2'].get('prior_flights', 0)})", file=sys.stderr)
+                      f"{fmt(f['stage2'].get('departure_mps2'), '+.3f')} m/s^2", file=sys.stderr)
         out["firmwares"][fw.name] = {
             "load_avg": os.getloadavg(), "firmware": summary(runs["firmware"], plan),
             "sim": summary(runs["sim"], plan), "flights": runs}

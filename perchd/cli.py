@@ -15,7 +15,7 @@ from typing import Sequence
 from perchd import __version__
 from perchd.core.errors import PerchdError
 
-COMMANDS = ("plan", "fly", "mocap", "sim", "serve", "ctl", "failsafe", "log", "bench")
+COMMANDS = ("plan", "fly", "vehicle", "mocap", "sim", "serve", "ctl", "failsafe", "log", "bench")
 
 
 class _Parser(argparse.ArgumentParser):

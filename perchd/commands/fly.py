@@ -6,10 +6,11 @@ report it (docs/contracts.md §2).
 ends, F.mcap from it (`perchd log export`, needs perchd[mcap]); docs/contracts.md §5.
 `--foxglove [HOST:]PORT` serves the same channels live (perchd.logs.foxglove, perchd[foxglove]).
 
-The hover thrust the hold learns and stage 1's push beyond the approach's bias are kept per
-vehicle (--vehicle NAME, default the driver URI) in --state (default
-$XDG_STATE_HOME/perchd/vehicles.json, flight/vehiclestate.py): the next flight's hover guess
-and stage-2 prior.
+What the flight learns of the vehicle (its hover thrust; its lag and drag, to be seen) is
+kept in the vehicle's profile (--vehicle NAME, default the driver URI): --state F, default
+$XDG_STATE_HOME/perchd/vehicles/NAME.json (flight/profile.py, flight/vehiclestate.py); the
+hover is the next flight's guess. The summary names the profile each time (`perchd vehicle
+show NAME`, `perchd vehicle forget NAME`).
 
 While flying, a one-line status on stderr (phase, X, Xdot, tau vs tau_ref); afterwards a
 summary (or with --json exactly one JSON object on stdout). Exit 0 on contact, 1 otherwise;
@@ -36,7 +37,7 @@ from perchd.core.types import EndReason
 from perchd.core.uriparams import params_help
 from perchd.flight.planguard import check_flight_plan
 from perchd.flight.run import FlightAbort, FlightResult
-from perchd.flight.vehiclestate import VehicleStore, default_path
+from perchd.flight.vehiclestate import VehicleStore, profile_path
 from perchd.logs.flightlog import read_log
 from perchd.logs.foxglove import ViewProcess, parse_address
 from perchd.logs.mcapexport import export_mcap
@@ -82,12 +83,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                  "F.mcap: the log is written as F.jsonl beside it during the "
                                  "flight and exported to F.mcap at its end (perchd[mcap])")
     p.add_argument("--force", action="store_true", help="overwrite an existing --log file(s)")
-    p.add_argument("--state", help="per-vehicle memory of learned hover thrusts and stage-2 "
-                                   "priors (JSON; default $XDG_STATE_HOME/perchd/vehicles.json, "
-                                   "i.e. ~/.local/state/perchd/vehicles.json)")
+    p.add_argument("--state", help="the vehicle's profile, what flights learned of it (JSON; "
+                                   "default $XDG_STATE_HOME/perchd/vehicles/NAME.json, i.e. "
+                                   "~/.local/state/perchd/vehicles/NAME.json)")
     p.add_argument("--vehicle", metavar="NAME",
-                   help="the vehicle's name in --state (default: the driver URI; name it when "
-                        "its URI changes between flights, e.g. an ephemeral port)")
+                   help="the vehicle's name, which names its profile (default: the driver URI; "
+                        "name it when its URI changes between flights, e.g. an ephemeral port)")
     p.add_argument("--realtime", nargs="?", type=int, const=realtime.DEFAULT_PRIORITY,
                    default=0, metavar="PRIO",
                    help="run the agent under SCHED_FIFO at priority PRIO (1..99, default "
@@ -168,9 +169,11 @@ def inputs(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def state_store(args: argparse.Namespace) -> VehicleStore:
-    """--state (or the default), refused now unless missing or a state file of perchd's own
-    (it is rewritten after the flight)."""
-    store = VehicleStore(Path(args.state) if args.state else default_path(), _warn)
+    """The vehicle's profile (--state, or the default for --vehicle), refused now unless
+    missing or a profile of perchd's own (it is rewritten after the flight)."""
+    name = args.vehicle or args.driver
+    path = Path(args.state) if args.state else profile_path(name)
+    store = VehicleStore(path, name, _warn)
     store.check()
     return store
 
@@ -207,8 +210,7 @@ def write_mcap(log: Path, out: Path, force: bool) -> bool:
 def run(args: argparse.Namespace) -> int:
     plan = load_plan(args.plan)
     store = state_store(args)
-    key = args.vehicle or args.driver
-    cfg = store.with_learned_guess(key, load_config(args))
+    cfg, visit = store.with_learned_guess(load_config(args))
     check_flight_plan(plan, cfg)  # before any link opens: exit 2 naming the field
     mcap = mcap_path(args)
     if mcap is not None:
@@ -229,11 +231,14 @@ def run(args: argparse.Namespace) -> int:
             status.close()
             if view is not None:
                 view.close()
-    store.remember_flight(key, cfg, res)
+    visit = store.remember_flight(cfg, res, visit)
     out = res.to_json()
+    out["vehicle_profile"] = {"path": str(visit.path), "written": visit.written,
+                              "read": visit.read.to_doc() if visit.read else None}
     if mcap is not None and write_mcap(log, mcap, args.force):
         out["mcap"] = str(mcap)
-    text = summary_text(res) + (f"\nmcap: {mcap}" if "mcap" in out else "")
+    text = "\n".join([summary_text(res), visit.describe()]
+                     + ([f"mcap: {mcap}"] if "mcap" in out else []))
     print(json.dumps(out) if args.json else text)
     caught.say("fly", f"the flight ended {res.outcome.name}; log {log}")
     return caught.exit_code(0 if res.outcome is EndReason.CONTACT else 1)

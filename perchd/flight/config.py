@@ -22,13 +22,17 @@ from perchd.core.vehicle import (
     CRAZYFLIE_THRUST_MIN_N,
     G_M_S2,
 )
+from perchd.flight.bounds import REQUIRED, check_bounds, setting
 
 UNIT_ACCEL = G_M_S2 / CRAZYFLIE_HOVER_UNITS
 """[m/s^2] acceleration of one paper thrust unit (docs/errata.md §8)."""
-STAGE2_PRIOR_MAX_MPS2 = 0.5
-"""[m/s^2] the largest stage-1 push beyond the approach's bias a vehicle's memory keeps or a
-prior may give: the firmwares' steady ones are -0.12..+0.05; beyond, something passing (a
-gust, the wall's own air) that would weigh on the next ten flights."""
+THRUST_MAX_N = 2000.0
+"""[N] the most thrust any setting may name: twice the weight of VehicleConfig's heaviest
+vehicle (50 kg)."""
+ROOM_M = 100.0
+"""[m] the largest distance a geofence setting may name: no flying room is bigger."""
+MAX_COORD_M = 1000.0
+"""[m] largest |coordinate| of a surface point: no flying room is bigger; 1e300 is a typo."""
 
 
 def from_paper_units(units: float) -> float:
@@ -52,11 +56,11 @@ class VehicleConfig:
         initial guess the hold phase refines (HoverConfig, flight/hover.py).
     """
 
-    mass_kg: float = CRAZYFLIE_MASS_KG
-    thrust_min_n: float = CRAZYFLIE_THRUST_MIN_N
-    thrust_max_n: float = CRAZYFLIE_THRUST_MAX_N
-    g: float = G_M_S2
-    hover_thrust_n: float | None = None
+    mass_kg: float = setting(CRAZYFLIE_MASS_KG, "kg", 1e-3, 50.0)
+    thrust_min_n: float = setting(CRAZYFLIE_THRUST_MIN_N, "N", 0.0, THRUST_MAX_N)
+    thrust_max_n: float = setting(CRAZYFLIE_THRUST_MAX_N, "N", 1e-3, THRUST_MAX_N)
+    g: float = setting(G_M_S2, "m/s^2", 9.7, 9.9)
+    hover_thrust_n: float | None = setting(None, "N", 1e-3, THRUST_MAX_N)
 
     @property
     def hover_guess_n(self) -> float:
@@ -79,14 +83,14 @@ class HoverConfig:
     """
 
     learn: bool = True
-    tau_s: float = 0.25
-    settle_s: float = 0.4
-    rel_tol: float = 0.01
-    z_tol_m: float = 0.15
-    vz_tol_mps: float = 0.15
-    timeout_s: float = 6.0
-    ratio_min: float = 0.6
-    ratio_max: float = 1.6
+    tau_s: float = setting(0.25, "s", 0.01, 5.0)
+    settle_s: float = setting(0.4, "s", 0.0, 10.0)
+    rel_tol: float = setting(0.01, "", 0.0, 0.5)
+    z_tol_m: float = setting(0.15, "m", 0.01, 1.0)
+    vz_tol_mps: float = setting(0.15, "m/s", 0.01, 1.0)
+    timeout_s: float = setting(6.0, "s", 0.5, 60.0)
+    ratio_min: float = setting(0.6, "", 0.1, 1.0)
+    ratio_max: float = setting(1.6, "", 1.0, 10.0)
 
 
 @dataclass(frozen=True)
@@ -157,20 +161,20 @@ class TauGains:
         the measured tau, as the paper's experiment.
     """
 
-    kp_fast: float = from_paper_units(38750.0)
-    kp_slow: float = from_paper_units(15500.0)
-    ki: float = 6.0
-    kd: float = from_paper_units(734.0)
-    i_limit: float = 1.0
-    d_filter_s: float = 0.03
-    error_min: float = -1.5
-    error_max: float = 1.0
+    kp_fast: float = setting(from_paper_units(38750.0), "m/s^2", 0.0, 200.0)
+    kp_slow: float = setting(from_paper_units(15500.0), "m/s^2", 0.0, 200.0)
+    ki: float = setting(6.0, "m/s^3", 0.0, 100.0)
+    kd: float = setting(from_paper_units(734.0), "m/s", 0.0, 20.0)
+    i_limit: float = setting(1.0, "m/s^2", 0.0, 20.0)
+    d_filter_s: float = setting(0.03, "s", 0.0, 1.0)
+    error_min: float = setting(-1.5, "", -10.0, 0.0)
+    error_max: float = setting(1.0, "", 0.0, 10.0)
     feedforward: bool = True
-    ff_lead_s: float = 0.1
-    terminal_s: float = 0.15
+    ff_lead_s: float = setting(0.1, "s", 0.0, 1.0)
+    terminal_s: float = setting(0.15, "s", 0.0, 1.0)
     stage2_hold_speed: bool = True
-    v_contact_margin_mps: float = 0.015
-    scale_gain: float = 3.0
+    v_contact_margin_mps: float = setting(0.015, "m/s", 0.0, 0.5)
+    scale_gain: float = setting(3.0, "", 0.0, 10.0)
     end_by_position: bool = True
     switch_predicted: bool = True
     identify: bool = True
@@ -200,22 +204,8 @@ class LagIdGains:
         2 flies (1: all of it; 0: the approach's bias). Stage 1's push reaches stage 2 in
         part only, and differently from flight to flight: on PX4 SIH the contact followed
         the refit's step (r 0.91 over 40 flights) and touched 0.961-0.999 m/s with all of
-        it, 0.975-0.999 with half; ArduCopter needs its mean (docs/firmware.md, "How much
-        of stage 1's push stage 2 meets"). It multiplies the departure pooled with the
-        vehicle's earlier flights (stage2_prior_mps2).
-    stage2_pool: pool the refit's departure with the vehicle's earlier flights'
-        (stage2_prior_mps2) rather than fly this flight's alone. Each vehicle's mean
-        departure is its own (ArduCopter SITL -0.115, PX4 SIH -0.005, the Crazyflie
-        firmware -0.037) while a flight's scatter about it (sd 0.015-0.033) barely carries
-        into stage 2, and flying the mean met the contact and perch-time targets on all
-        three where the flight's own refit, or a fixed share of it, did not
-        (docs/firmware.md, "Each vehicle's own mean").
-    stage2_prior_mps2: [m/s^2] the vehicle's mean departure over its earlier flights (the
-        state file fills it, flight/vehiclestate.py; None: none known); stage 2 flies
-        (n prior + own) / (n + 1), each flight one sample (VehicleResponse.refit_stage2).
-        Within +-STAGE2_PRIOR_MAX_MPS2.
-    stage2_prior_flights: n, the flights stage2_prior_mps2 stands for (1..100 with it, 0
-        without; the state file's is at most vehiclestate.MEMORY_FLIGHTS).
+        it, 0.975-0.999 with half (docs/firmware.md, "How much of stage 1's push stage 2
+        meets"). A push is this flight's own: no earlier flight's is carried over.
     from_attitude: take the delay and the first-order lag from the attitude the mocap
         measures, answering the setpoints' (LagIdentifier.lean_response), drag and bias
         from the positions as before; the positions' own lag fit when the lean swept too
@@ -228,19 +218,16 @@ class LagIdGains:
         an autopilot's attitude estimate that errs with speed reads as drag otherwise.
     """
 
-    window_s: float = 8.0
-    refit_s: float = 0.25
-    lag_max_s: float = 0.5
-    lag_step_s: float = 0.02
-    time_constant_max_s: float = 0.0
-    drag_max_per_s: float = 2.0
-    speed_span_min_mps: float = 0.5
-    rms_max_mps: float = 0.1
+    window_s: float = setting(8.0, "s", 1.0, 60.0)
+    refit_s: float = setting(0.25, "s", 0.02, 3600.0)
+    lag_max_s: float = setting(0.5, "s", 0.01, 2.0)
+    lag_step_s: float = setting(0.02, "s", 0.005, 0.1)
+    time_constant_max_s: float = setting(0.0, "s", 0.0, 1.0)
+    drag_max_per_s: float = setting(2.0, "1/s", 0.0, 20.0)
+    speed_span_min_mps: float = setting(0.5, "m/s", 0.0, 5.0)
+    rms_max_mps: float = setting(0.1, "m/s", 1e-3, 1.0)
     stage2_refit: bool = True
-    stage2_refit_share: float = 1.0
-    stage2_pool: bool = True
-    stage2_prior_mps2: float | None = None
-    stage2_prior_flights: int = 0
+    stage2_refit_share: float = setting(1.0, "", 0.0, 1.0)
     from_attitude: bool = True
     drag_from_attitude: bool = True
 
@@ -251,11 +238,11 @@ class AxisGains:
     kd [m/s^2 per m/s], i_limit [m/s^2] anti-windup clamp, d_filter_s [s] derivative
     low-pass (the derivative is taken of the estimated velocity, which is already smooth)."""
 
-    kp: float
-    ki: float
-    kd: float
-    i_limit: float = 1.0
-    d_filter_s: float = 0.0
+    kp: float = setting(REQUIRED, "1/s^2", 0.0, 100.0)
+    ki: float = setting(REQUIRED, "1/s^3", 0.0, 100.0)
+    kd: float = setting(REQUIRED, "1/s", 0.0, 50.0)
+    i_limit: float = setting(1.0, "m/s^2", 0.0, 20.0)
+    d_filter_s: float = setting(0.0, "s", 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -288,13 +275,13 @@ class ApproachConfig:
         trigger, and the vehicle starts stage 1 a lag behind it; docs/errata.md §10).
     """
 
-    takeoff_height_m: float = 1.0
-    takeoff_speed_mps: float = 0.5
-    hold_s: float = 0.5
-    accel_max_mps2: float = 1.4
-    kv: float = 3.0
-    ki_v: float = 8.0
-    i_limit_mps2: float = 1.0
+    takeoff_height_m: float = setting(1.0, "m", 0.0, TAKEOFF_HEIGHT_MAX_M)
+    takeoff_speed_mps: float = setting(0.5, "m/s", 0.05, 2.0)
+    hold_s: float = setting(0.5, "s", 0.0, 30.0)
+    accel_max_mps2: float = setting(1.4, "m/s^2", 0.1, 20.0)
+    kv: float = setting(3.0, "1/s", 0.0, 50.0)
+    ki_v: float = setting(8.0, "1/s^2", 0.0, 100.0)
+    i_limit_mps2: float = setting(1.0, "m/s^2", 0.0, 20.0)
     lead_into_plan: bool = True
 
 
@@ -342,12 +329,12 @@ class TriggerConfig:
     """
 
     policy: TriggerPolicy = TriggerPolicy.REFUSE
-    x_tol_m: float = 0.05
-    v_tol_mps: float = 0.10
+    x_tol_m: float = setting(0.05, "m", 0.0, 1.0)
+    v_tol_mps: float = setting(0.10, "m/s", 0.0, 2.0)
     library: str | None = None
     fallback: TriggerFallback = TriggerFallback.PLAN
-    solve_max_s: float = 0.25
-    ahead_v_tol_mps: float = 0.05
+    solve_max_s: float = setting(0.25, "s", 0.0, 5.0)
+    ahead_v_tol_mps: float = setting(0.05, "m/s", 0.0, 1.0)
 
     def deadline_s(self, a_peak_mps2: float) -> float:
         """[s] longest wait for the trigger's replan, for a plan whose largest |acceleration|
@@ -407,23 +394,23 @@ class SafetyConfig:
     contact_margin_m: [m] contact is declared within one tick of travel plus this of X = 0.
     """
 
-    stale_periods: float = 3.0
-    stale_timeout_s: float | None = None
-    x_min_m: float = -8.0
-    x_max_m: float = 0.3
-    lateral_max_m: float = 1.0
-    floor_m: float = 0.1
-    ceiling_m: float = 3.0
-    tilt_max_rad: float = math.radians(45.0)
-    speed_max_mps: float = 3.5
-    tau_error_max: float = 0.5
-    tau_error_rel: float = 0.5
-    tau_error_s: float = 0.3
-    overrun_streak: int = 10
-    link_rtt_max_s: float = 0.25
-    timeout_s: float = 30.0
-    plan_grace_s: float = 1.0
-    contact_margin_m: float = 0.005
+    stale_periods: float = setting(3.0, "", 1.0, 100.0)
+    stale_timeout_s: float | None = setting(None, "s", 0.005, 5.0)
+    x_min_m: float = setting(-8.0, "m", -ROOM_M, 0.0)
+    x_max_m: float = setting(0.3, "m", 0.0, ROOM_M)
+    lateral_max_m: float = setting(1.0, "m", 0.01, ROOM_M)
+    floor_m: float = setting(0.1, "m", -ROOM_M, ROOM_M)
+    ceiling_m: float = setting(3.0, "m", -ROOM_M, ROOM_M + CEILING_ABOVE_FLOOR_M)
+    tilt_max_rad: float = setting(math.radians(45.0), "rad", math.radians(1.0), math.radians(80.0))
+    speed_max_mps: float = setting(3.5, "m/s", 0.1, 20.0)
+    tau_error_max: float = setting(0.5, "s", 0.01, 100.0)
+    tau_error_rel: float = setting(0.5, "", 0.0, 10.0)
+    tau_error_s: float = setting(0.3, "s", 0.01, 100.0)
+    overrun_streak: int = setting(10, "", 1, 10000)
+    link_rtt_max_s: float = setting(0.25, "s", 1e-3, 10.0)
+    timeout_s: float = setting(30.0, "s", 0.1, 3600.0)
+    plan_grace_s: float = setting(1.0, "s", 0.0, 60.0)
+    contact_margin_m: float = setting(0.005, "m", 0.0, 0.5)
 
 
 @dataclass(frozen=True)
@@ -437,23 +424,19 @@ class EstimatorConfig:
     min_speed_mps: [m/s] tau is undefined (None) when Xdot is at or below this.
     """
 
-    jerk_psd: float = 2.0
-    meas_std_m: float = 0.001
-    outlier_speed_mps: float = 10.0
-    outlier_max_rejects: int = 5
-    min_speed_mps: float = 0.05
+    jerk_psd: float = setting(2.0, "m^2/s^5", 1e-3, 1e4)
+    meas_std_m: float = setting(0.001, "m", 1e-6, 0.5)
+    outlier_speed_mps: float = setting(10.0, "m/s", 0.5, 1000.0)
+    outlier_max_rejects: int = setting(5, "", 1, 1000)
+    min_speed_mps: float = setting(0.05, "m/s", 0.0, 1.0)
 
 
 @dataclass(frozen=True)
 class SurfaceConfig:
     """point [m] on the surface and its normal (the approach direction), world frame."""
 
-    point: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    normal: tuple[float, float, float] = (1.0, 0.0, 0.0)
-
-
-MAX_COORD_M = 1000.0
-"""[m] largest |coordinate| of a surface point: no flying room is bigger; 1e300 is a typo."""
+    point: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "m", -MAX_COORD_M, MAX_COORD_M)
+    normal: tuple[float, float, float] = setting((1.0, 0.0, 0.0), "", -1e6, 1e6)
 
 
 @dataclass(frozen=True)
@@ -477,12 +460,12 @@ class FlightConfig:
     safety: SafetyConfig = SafetyConfig()
     estimator: EstimatorConfig = EstimatorConfig()
     surface: SurfaceConfig = SurfaceConfig()
-    rate_hz: float = 100.0
+    rate_hz: float = setting(100.0, "Hz", 20.0, 500.0)
     sync: LoopSync = LoopSync.MOCAP
-    tilt_limit_rad: float = math.radians(25.0)
+    tilt_limit_rad: float = setting(math.radians(25.0), "rad", 0.01, math.radians(60.0))
     post_contact: PostContact = PostContact.CUT
-    post_contact_s: float = 0.2
-    idle_thrust_n: float | None = None
+    post_contact_s: float = setting(0.2, "s", 0.0, 10.0)
+    idle_thrust_n: float | None = setting(None, "N", 0.0, THRUST_MAX_N)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -490,62 +473,67 @@ class FlightConfig:
 
 def envelope_checks(cfg: FlightConfig) -> list[tuple[str, float, float, float]]:
     """(key, value, low, high) of the hard envelope (perchd.core.envelope): the ceiling, the
-    take-off height and the surface inside the geofence."""
+    take-off height and the surface inside the geofence (x_max_m's own range is 0 up, so
+    x_min_m < x_max_m)."""
     s = cfg.safety
     return [
-        ("safety.ceiling_m", s.ceiling_m, s.floor_m + 2 * MARGIN_M,
+        ("[safety] ceiling_m", s.ceiling_m, s.floor_m + 2 * MARGIN_M,
          s.floor_m + CEILING_ABOVE_FLOOR_M),
-        (f"approach.takeoff_height_m ({MARGIN_M:g} m inside floor and ceiling, at most "
+        (f"[approach] takeoff_height_m ({MARGIN_M:g} m inside floor and ceiling, at most "
          f"{TAKEOFF_HEIGHT_MAX_M:g} m)", cfg.approach.takeoff_height_m, s.floor_m + MARGIN_M,
          min(s.ceiling_m - MARGIN_M, TAKEOFF_HEIGHT_MAX_M)),
-        ("safety.x_max_m (the surface, X = 0, inside the geofence)", s.x_max_m, 0.0, math.inf),
-        ("safety.x_min_m (the surface, X = 0, inside the geofence)", s.x_min_m, -math.inf,
+        ("[safety] x_min_m (the surface, X = 0, inside the geofence)", s.x_min_m, -math.inf,
          -MARGIN_M),
     ]
 
 
-def validate(cfg: FlightConfig) -> None:
-    """Raise ConfigError naming the first field out of range and by how much."""
-    checks = [
-        ("rate_hz", cfg.rate_hz, 20.0, 500.0),
-        ("tilt_limit_rad", cfg.tilt_limit_rad, 0.01, math.radians(60.0)),
-        ("vehicle.mass_kg", cfg.vehicle.mass_kg, 1e-3, 50.0),
-        ("vehicle.thrust_max_n", cfg.vehicle.thrust_max_n,
-         cfg.vehicle.mass_kg * cfg.vehicle.g, math.inf),
-        ("vehicle.thrust_min_n", cfg.vehicle.thrust_min_n, 0.0, cfg.vehicle.thrust_max_n),
-        ("vehicle.hover_thrust_n", cfg.vehicle.hover_guess_n, 1e-6, cfg.vehicle.thrust_max_n),
-        ("hover.tau_s", cfg.hover.tau_s, 0.01, 5.0),
-        ("hover.timeout_s", cfg.hover.timeout_s, 0.5, 60.0),
-        ("trigger.solve_max_s", cfg.trigger.solve_max_s, 0.0, 5.0),
-        ("trigger.ahead_v_tol_mps", cfg.trigger.ahead_v_tol_mps, 0.0, 1.0),
-        ("lag_id.window_s", cfg.lag_id.window_s, 1.0, 60.0),
-        ("lag_id.lag_step_s", cfg.lag_id.lag_step_s, 0.005, 0.1),
-        ("lag_id.lag_max_s", cfg.lag_id.lag_max_s, 2.0 * cfg.lag_id.lag_step_s, 2.0),
-        ("lag_id.time_constant_max_s", cfg.lag_id.time_constant_max_s, 0.0, 1.0),
-        ("lag_id.stage2_refit_share", cfg.lag_id.stage2_refit_share, 0.0, 1.0),
-        ("lag_id.stage2_prior_mps2", cfg.lag_id.stage2_prior_mps2 or 0.0,
-         -STAGE2_PRIOR_MAX_MPS2, STAGE2_PRIOR_MAX_MPS2),
-        ("lag_id.stage2_prior_flights", cfg.lag_id.stage2_prior_flights, 0, 100),
-        *((f"surface.point[{i}]", c, -MAX_COORD_M, MAX_COORD_M)
-          for i, c in enumerate(cfg.surface.point)),
-        *((f"surface.normal[{i}]", c, -1e6, 1e6) for i, c in enumerate(cfg.surface.normal)),
-        *envelope_checks(cfg),
+def _below(low: tuple[str, float | None], high: tuple[str, float], unit: str,
+           strict: bool = True) -> str | None:
+    """The fault of a (key, value) pair that must be below (strict) or at most the other."""
+    (lo_key, lo), (hi_key, hi) = low, high
+    if lo is None or lo < hi or (not strict and lo == hi):
+        return None
+    return (f"{lo_key} = {lo:g}{unit} must be {'below' if strict else 'at most'} "
+            f"{hi_key} = {hi:g}{unit}")
+
+
+def cross_faults(cfg: FlightConfig) -> list[str | None]:
+    """The rules between settings (each within its own range): min below max, the thrust
+    lifts the vehicle, a lag grid of two steps at least; None where one holds."""
+    v, h, lag = cfg.vehicle, cfg.hover, cfg.lag_id
+    top = ("[vehicle] thrust_max_n", v.thrust_max_n)
+    weight = v.mass_kg * v.g
+    return [
+        _below(("[vehicle] thrust_min_n", v.thrust_min_n), top, " N"),
+        None if v.thrust_max_n > weight else (
+            f"[vehicle] thrust_max_n = {v.thrust_max_n:g} N must lift [vehicle] mass_kg = "
+            f"{v.mass_kg:g} kg: more than its weight {weight:.4g} N"),
+        _below(("[vehicle] hover_thrust_n", v.hover_thrust_n), top, " N", strict=False),
+        _below(("[flight] idle_thrust_n", cfg.idle_thrust_n), top, " N", strict=False),
+        _below(("[hover] ratio_min", h.ratio_min), ("[hover] ratio_max", h.ratio_max), ""),
+        _below(("[tau_gains] error_min", cfg.tau_gains.error_min),
+               ("[tau_gains] error_max", cfg.tau_gains.error_max), ""),
+        _below(("2 x [lag_id] lag_step_s", 2.0 * lag.lag_step_s),
+               ("[lag_id] lag_max_s", lag.lag_max_s), " s", strict=False),
     ]
-    for name, value, lo, hi in checks:
-        if not math.isfinite(value):
-            raise ConfigError(f"{name} = {value:g} is not a finite number")
+
+
+def validate(cfg: FlightConfig) -> None:
+    """Raise ConfigError naming the first setting out of its range (flight/bounds.py), then
+    the first rule between settings broken (cross_faults, the hard envelope, the surface)."""
+    check_bounds(cfg)
+    for fault in cross_faults(cfg):
+        if fault is not None:
+            raise ConfigError(fault)
+    for name, value, lo, hi in envelope_checks(cfg):
         if not lo <= value <= hi:
             side = f"below {lo:g} by {lo - value:g}" if value < lo else f"above {hi:g} by {value - hi:g}"
             raise ConfigError(f"{name} = {value:g} is {side}")
-    lag = cfg.lag_id
-    if (lag.stage2_prior_mps2 is None) != (lag.stage2_prior_flights == 0):
-        raise ConfigError("lag_id.stage2_prior_mps2 and lag_id.stage2_prior_flights go "
-                          "together: the mean and how many flights it is of (>= 1)")
     if cfg.trigger.library is not None and cfg.trigger.policy is not TriggerPolicy.REPLAN:
-        raise ConfigError(f"trigger.library is used by policy 'replan' only, "
+        raise ConfigError(f"[trigger] library is used by policy 'replan' only, "
                           f"not {cfg.trigger.policy.value!r}")
     n = cfg.surface.normal
     horizontal = math.hypot(n[0], n[1])
     if horizontal < 1e-6 or abs(n[2]) > horizontal:
-        raise ConfigError(f"surface.normal {n} must point more sideways than up or down "
+        raise ConfigError(f"[surface] normal {n} must point more sideways than up or down "
                           f"(a wall): |nz| = {abs(n[2]):g} > {horizontal:g}")

@@ -29,7 +29,7 @@ def feed_forward(m: LagModel) -> FeedForward:
 class VehicleResponse:
     """ff: the feed-forward flown now; model: the latest accepted fit (None: none yet or
     refused); identified: the trigger's fit, once made; departure_mps2: stage 1's refit
-    bias less the approach's, once refitted (the vehicle's state file keeps it). events:
+    bias less the approach's, once refitted (this flight's own: never carried over). events:
     where fits are logged."""
 
     def __init__(self, gains: TauGains, cfg: LagIdGains, events: list[LogEvent]) -> None:
@@ -83,10 +83,9 @@ class VehicleResponse:
 
     def refit_stage2(self, t: float, since_t: float, v_hold: float) -> float:
         """At the stage-2 switch: the bias again from stage 1 (since since_t [s]), lag and
-        drag kept. Its departure from the approach's, pooled with the vehicle's earlier
-        flights' (LagIdGains.stage2_prior_mps2) and scaled by stage2_refit_share, is flown
-        from here on (LagIdentifier.refit_bias). Returns the step [m/s^2] this adds at the
-        held speed v_hold [m/s] (0 when refused, logged, or nothing was identified)."""
+        drag kept. Its departure from the approach's, scaled by stage2_refit_share, is
+        flown from here on (LagIdentifier.refit_bias). Returns the step [m/s^2] this adds
+        at the held speed v_hold [m/s] (0 when refused, logged, or nothing was identified)."""
         if self.model is None or not self.cfg.stage2_refit:
             return 0.0
         self._relag(t, since_t)
@@ -97,36 +96,23 @@ class VehicleResponse:
             return 0.0
         fitted, approach = fit.model.bias_mps2, self.model.bias_mps2
         self.departure_mps2 = fitted - approach
-        pooled, n = self._pooled(self.departure_mps2)
-        m = replace(fit.model, bias_mps2=approach + self.cfg.stage2_refit_share * pooled)
+        share = self.cfg.stage2_refit_share
+        m = replace(fit.model, bias_mps2=approach + share * self.departure_mps2)
         ff = feed_forward(m)
         step = ff.step_from(self.ff, 0.0, v_hold)
         self.ff, self.model = ff, m
-        self._log_refit(t, approach, fitted, (pooled, n), step)
+        self._log_refit(t, approach, fitted, step)
         return step
 
-    def _log_refit(self, t: float, approach: float, fitted: float,
-                   pooled: tuple[float, int], step: float) -> None:
-        """The bias-refit event: approach and fitted biases [m/s^2], the departure pooled
-        over n earlier flights, the feed-forward's step [m/s^2] (docs/contracts.md)."""
-        m, (mean, n), own = self.model, pooled, fitted - approach
-        with_earlier = f" pooled with {n} earlier flight{'s' if n > 1 else ''}" if n else ""
+    def _log_refit(self, t: float, approach: float, fitted: float, step: float) -> None:
+        """The bias-refit event: approach and fitted biases [m/s^2], the feed-forward's step
+        [m/s^2] (docs/contracts.md)."""
+        m, own = self.model, fitted - approach
         self._events.append(LogEvent(t, "bias-refit", (
             f"stage 2: bias {m.bias_mps2:.3f} m/s^2 = the approach's {approach:.3f} + "
-            f"{self.cfg.stage2_refit_share:g} x {mean:+.3f} (stage 1's {own:+.3f}"
-            f"{with_earlier})"), {
+            f"{self.cfg.stage2_refit_share:g} x stage 1's {own:+.3f}"), {
                 "bias_mps2": m.bias_mps2, "fitted_mps2": fitted, "departure_mps2": own,
-                "pooled_mps2": mean, "prior_flights": n, "rms_mps": m.rms_mps,
-                "samples": m.samples, "step_mps2": step}))
-
-    def _pooled(self, departure: float) -> tuple[float, int]:
-        """(the departure [m/s^2] stage 2 flies, n): this flight's pooled with the mean of
-        n earlier flights', each flight one sample of the vehicle's (LagIdGains)."""
-        c = self.cfg
-        if not c.stage2_pool or c.stage2_prior_mps2 is None or c.stage2_prior_flights <= 0:
-            return departure, 0
-        n = c.stage2_prior_flights
-        return (n * c.stage2_prior_mps2 + departure) / (n + 1), n
+                "rms_mps": m.rms_mps, "samples": m.samples, "step_mps2": step}))
 
     def _relag(self, t: float, since_t: float) -> None:
         """A lag taken from the attitude is taken again from stage 1's alone (drag and bias

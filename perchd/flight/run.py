@@ -24,6 +24,7 @@ from perchd.core.types import EndReason, Phase, State
 from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
+from perchd.flight.lagid import LagModel
 from perchd.flight.loop import LoopSummary, make_loop
 from perchd.flight.planguard import check_flight_plan
 from perchd.flight.planner_worker import Planner, WorkerPlanner
@@ -64,9 +65,10 @@ class FlightResult:
     loop: timing statistics; failsafe_sent: driver.failsafe was called; hover_n [N]: the
     hover thrust the hold learned (None if it did not settle or learning is off),
     hover_guess_n [N] the guess it started from; stage2_departure_mps2 [m/s^2]: stage 1's
-    bias refit less the approach's (None without one), which the next flights pool;
+    bias refit less the approach's (None without one), this flight's own (never kept);
     log_lost: why the flight log stopped being written (a full disk; None: it was kept),
-    which ends the flight as a software error."""
+    which ends the flight as a software error; lag_model: the lag and drag the hold and
+    approach identified (None: refused or not identified), kept in the vehicle's profile."""
 
     outcome: EndReason
     detail: str
@@ -84,6 +86,7 @@ class FlightResult:
     hover_guess_n: float | None = None
     stage2_departure_mps2: float | None = None
     log_lost: str | None = None
+    lag_model: LagModel | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The `perchd fly --json` object (docs/contracts.md §2 keys first)."""
@@ -319,5 +322,6 @@ def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult
         contact.speed if contact else None, perch, float(sup.plan.duration),
         float(sup.plan.v_contact), trig, true_speed, true_perch, log_path,
         run.loop.summary(), run.failsafe_sent, sup.hover_learned_n, sup.hover.guess_n,
-        sup.response.departure_mps2, lost)
+        sup.response.departure_mps2, lost, sup.response.identified.model
+        if sup.response.identified else None)
 

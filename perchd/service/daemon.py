@@ -48,7 +48,7 @@ from perchd.core.types import EndReason
 from perchd.flight.config import SurfaceConfig
 from perchd.flight.planguard import check_flight_plan
 from perchd.flight.run import FlightAbort, fly
-from perchd.flight.vehiclestate import VehicleStore
+from perchd.flight.vehiclestate import VehicleStore, profile_path
 from perchd.service.activation import activated_socket
 from perchd.service.config import (
     VERSION,
@@ -154,10 +154,11 @@ class FlightJob(threading.Thread):
 
     def run(self) -> None:
         svc = self.cfg.service
-        store = VehicleStore(Path(svc.state_dir or svc.log_dir) / "vehicles.json", say)
         key = f"{svc.vehicle} {svc.driver}"  # the vehicle and the calibration it flies with
+        directory = Path(svc.state_dir or svc.log_dir) / "vehicles"
+        store = VehicleStore(profile_path(key, directory), key, say)
         try:
-            flight = store.with_learned_guess(key, self.cfg.flight)
+            flight, visit = store.with_learned_guess(self.cfg.flight)
             self.links.pause_feed()
             res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
                       self.log, flight, self.abort, self.on_tick, world=self.links.session.world,
@@ -165,7 +166,7 @@ class FlightJob(threading.Thread):
                               "mocap": self.links.mocap_uri, "service": True,
                               "uri_params": self.links.session.applied})
             self.result = res.to_json()
-            store.remember_flight(key, flight, res)
+            say(store.remember_flight(flight, res, visit).describe())
         except BaseException as err:  # fly has already sent the failsafe and closed the log
             why = EndReason.LOST_LINK if isinstance(err, LinkError) else EndReason.SOFTWARE_ERROR
             self.result = {"outcome": why.name, "log": str(self.log),

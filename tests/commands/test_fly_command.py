@@ -90,26 +90,35 @@ def test_the_summary_reports_errors_against_the_plan(tmp_path):
     assert f"{res.contact_speed - res.v_contact_plan:+.3f} m/s" in text
 
 
-def test_the_next_flight_of_a_vehicle_pools_stage_1s_push_with_the_last(tmp_path, capsys):
-    """--state keeps per vehicle (--vehicle, else the driver URI) the mean of stage 1's push
-    beyond the approach's bias; the next flight's stage 2 pools its own with it
-    (docs/errata.md §10). The two flights' URIs differ (another seed), as a harness's
-    ephemeral port does; the name is what keys the memory."""
-    state, flown = tmp_path / "vehicles.json", []
-    for seed in range(2):
-        log = tmp_path / f"f{seed}.jsonl"
-        driver, mocap = "sim://?draught=-2.9,0.2", f"sim://?noise=0.001&seed={seed}"
-        assert main(["fly", str(plan_file(tmp_path)), "--driver", driver, "--mocap", mocap,
-                     "--log", str(log), "--state", str(state), "--vehicle", "lab-1",
-                     "--json"]) == 0
-        res = json.loads(capsys.readouterr().out)
-        refit = next(e for e in read_log(log).events if e.kind == "bias-refit").values
-        assert refit["departure_mps2"] == res["stage2_departure_mps2"]
-        flown.append((res["stage2_departure_mps2"], refit))
-    (first, _), (second, refit) = flown
-    assert refit["prior_flights"] == 1
-    assert refit["pooled_mps2"] == pytest.approx((first + second) / 2, abs=1e-12)
-    kept = json.loads(state.read_text())["vehicles"]
-    assert list(kept) == ["lab-1"] and kept["lab-1"]["stage2_flights"] == 2
-    assert kept["lab-1"]["stage2_departure_mps2"] == pytest.approx((first + second) / 2,
-                                                                   abs=1e-12)
+def test_a_push_met_in_earlier_flights_never_reaches_the_next(tmp_path, capsys):
+    """Two flights of one vehicle through a draught, then a clean one, touch as a fresh
+    vehicle's clean flight does: only the vehicle's own properties are kept (its hover), not
+    the air a flight met (the stage-2 push)."""
+    plan, state = plan_file(tmp_path), tmp_path / "lab-1.json"
+
+    def fly(driver: str, state_file, name: str, i: int) -> dict:
+        assert main(["fly", str(plan), "--driver", driver, "--mocap", "sim://?noise=0.001",
+                     "--log", str(tmp_path / f"f{i}.jsonl"), "--state", str(state_file),
+                     "--vehicle", name, "--json"]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    for i in range(2):
+        pushed = fly("sim://?draught=-2.9,0.3", state, "lab-1", i)
+        assert abs(pushed["stage2_departure_mps2"]) > 0.1  # the draught, met in stage 1
+    clean = fly("sim://", state, "lab-1", 2)
+    fresh = fly("sim://", tmp_path / "fresh.json", "fresh", 3)
+    assert clean["vehicle_profile"]["read"]["hover"]["flights"] == 2
+    assert fresh["vehicle_profile"]["read"] is None
+    assert clean["true_contact_speed"] == pytest.approx(fresh["true_contact_speed"], abs=0.005)
+    kept = json.loads(state.read_text())
+    assert set(kept) == {"schema", "vehicle", "hover", "response"}
+    assert kept["hover"]["flights"] == kept["response"]["flights"] == 3
+
+
+def test_the_summary_names_the_vehicle_profile_each_time(tmp_path, capsys):
+    plan, state = plan_file(tmp_path), tmp_path / "v.json"
+    for i, read in enumerate(("none yet", "read: hover ")):
+        assert main(["fly", str(plan), "--driver", "sim://", "--mocap", "sim://",
+                     "--log", str(tmp_path / f"f{i}.jsonl"), "--state", str(state)]) == 0
+        line = capsys.readouterr().out.splitlines()[-1]
+        assert line.startswith(f"vehicle profile: {state} ({read}") and line.endswith("; written)")

@@ -151,7 +151,7 @@ def test_state_onto_the_plan_is_refused_and_the_plan_kept(tmp_path):
     plan = tmp_path / "P.json"
     shutil.copy(PLAN, plan)
     line = one_line(perchd("fly", plan, *SIM, "--log", tmp_path / "f.jsonl", "--state", plan))
-    assert "--state" in line and "not a perchd vehicle state file" in line
+    assert "--state" in line and "not a perchd vehicle profile" in line
     assert plan.read_bytes() == PLAN.read_bytes() and not (tmp_path / "f.jsonl").exists()
 
 

@@ -37,27 +37,31 @@ def fly_with_config(tmp_path, capsys, toml: str) -> tuple[int, str]:
 
 def test_a_take_off_height_of_100_m_is_refused_naming_key_value_and_bound(tmp_path, capsys):
     code, err = fly_with_config(tmp_path, capsys, "[approach]\ntakeoff_height_m = 100")
-    top = SafetyConfig().ceiling_m - MARGIN_M
     assert code == 2 and len(err.splitlines()) == 1
-    assert "approach.takeoff_height_m" in err and "= 100 " in err
-    assert f"above {top:g} by {100 - top:g}" in err
+    assert f"[approach] takeoff_height_m = 100 m: outside its range 0..{TAKEOFF_HEIGHT_MAX_M:g} m" in err
     assert not (tmp_path / "f.jsonl").exists()
+    code, err = fly_with_config(tmp_path, capsys, "[approach]\ntakeoff_height_m = 3.5")
+    top = SafetyConfig().ceiling_m - MARGIN_M
+    assert code == 2 and "[approach] takeoff_height_m" in err and "= 3.5 " in err
+    assert f"above {top:g} by {3.5 - top:g}" in err
 
 
 def test_no_ceiling_lifts_the_take_off_height_past_its_constant():
     floor = SafetyConfig().floor_m
     high = SafetyConfig(ceiling_m=floor + CEILING_ABOVE_FLOOR_M)
-    with pytest.raises(ConfigError, match=f"above {TAKEOFF_HEIGHT_MAX_M:g}"):
+    with pytest.raises(ConfigError, match=f"outside its range 0..{TAKEOFF_HEIGHT_MAX_M:g} m"):
         FlightConfig(safety=high, approach=ApproachConfig(takeoff_height_m=TAKEOFF_HEIGHT_MAX_M + 1))
-    with pytest.raises(ConfigError, match="safety.ceiling_m = 50 is above"):
+    with pytest.raises(ConfigError, match=r"\[safety\] ceiling_m = 50 is above"):
         FlightConfig(safety=SafetyConfig(ceiling_m=50.0))
 
 
-@pytest.mark.parametrize("key, value", [("x_max_m", -0.5), ("x_min_m", 0.5)])
-def test_a_geofence_that_leaves_the_surface_outside_is_refused(tmp_path, capsys, key, value):
+@pytest.mark.parametrize("key, value, why", [("x_max_m", -0.5, "outside its range 0..100 m"),
+                                            ("x_min_m", -0.1, "surface, X = 0, inside")])
+def test_a_geofence_that_leaves_the_surface_outside_is_refused(tmp_path, capsys, key, value,
+                                                               why):
     code, err = fly_with_config(tmp_path, capsys, f"[safety]\n{key} = {value}")
     assert code == 2 and len(err.splitlines()) == 1
-    assert f"safety.{key}" in err and f"= {value:g}" in err and "surface" in err
+    assert f"[safety] {key}" in err and f"= {value:g}" in err and why in err
 
 
 def high_flight(tmp_path, start_z: float, cfg: FlightConfig = FlightConfig()):

@@ -136,19 +136,12 @@ def test_stage_2_flies_the_share_of_stage_1s_push_it_is_given(tmp_path, share):
         approach + share * (refit["fitted_mps2"] - approach), abs=1e-9)
 
 
-@pytest.mark.parametrize("prior,pool", [(0.0, True), (0.3, True), (0.0, False)])
-def test_stage_2_pools_stage_1s_push_with_the_vehicles_earlier_flights(tmp_path, prior, pool):
-    """`[lag_id] stage2_prior_mps2` over 9 earlier flights (the state file's): this flight's
-    departure from the approach's bias counts as a tenth sample of the vehicle's mean
-    (docs/firmware.md, "Each vehicle's own mean"). With a prior of none, a push met in this
-    stage 1 alone is flown a tenth; with a prior that saw it every time, whole;
-    `stage2_pool = false`: this flight's own, whole. The result carries the departure for
-    the state file."""
-    res, approach, refit = pushed_in_stage_1(tmp_path, LagIdGains(
-        stage2_pool=pool, stage2_prior_mps2=prior, stage2_prior_flights=9))
+def test_stage_2_flies_this_flights_own_push_whole_and_reports_it(tmp_path):
+    """The default share 1: stage 2 flies the refit's departure from the approach's bias
+    whole, and the result carries it; nothing of an earlier flight's enters."""
+    res, approach, refit = pushed_in_stage_1(tmp_path, LagIdGains())
     own = refit["fitted_mps2"] - approach
     assert own == pytest.approx(0.3, abs=0.1)
     assert res.stage2_departure_mps2 == pytest.approx(own, abs=1e-12)
-    assert refit["prior_flights"] == (9 if pool else 0)
-    flown = (9 * prior + own) / 10 if pool else own
-    assert refit["bias_mps2"] == pytest.approx(approach + flown, abs=1e-9)
+    assert refit["bias_mps2"] == pytest.approx(refit["fitted_mps2"], abs=1e-9)
+    assert "pooled_mps2" not in refit and "prior_flights" not in refit

@@ -1,113 +1,102 @@
-"""What a flight learns of its vehicle is kept for the next (flight/vehiclestate.py): the hover
-thrust, and stage 1's push beyond the approach's bias (docs/firmware.md, "Each vehicle's own
-mean"); an unwritable or malformed store is one warning or no memory, never a failed flight."""
+"""What a flight learns of its vehicle is kept in the vehicle's profile (flight/profile.py,
+flight/vehiclestate.py): the hover thrust, the next flight's guess, and the lag and drag
+identified, to be seen; an unwritable or malformed profile is one warning or no memory,
+never a failed flight."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from types import SimpleNamespace
 
 import pytest
 
-from perchd.core.types import EndReason
-from perchd.flight.config import FlightConfig, LagIdGains
-from perchd.flight.vehiclestate import MEMORY_FLIGHTS, VehicleStore
+from perchd.flight.config import FlightConfig, VehicleConfig
+from perchd.flight.lagid import LagModel
+from perchd.flight.profile import SCHEMA
+from perchd.flight.vehiclestate import VehicleStore, file_stem, profile_path
+
+MODEL = LagModel(0.13, 0.25, -0.2, 0.01, 400, 1.0, time_constant_s=0.02)
 
 
-def test_a_learned_hover_is_the_next_flights_guess(tmp_path):
-    store = VehicleStore(tmp_path / "state" / "vehicles.json", print)
-    store.remember("udp://x", FlightConfig(), 0.327)
-    cfg = store.with_learned_guess("udp://x", FlightConfig())
-    assert abs(cfg.vehicle.hover_thrust_n - 0.327) < 1e-9
-    assert store.with_learned_guess("udp://other", FlightConfig()).vehicle.hover_thrust_n is None
+def flown(hover_n: float | None = None, model: LagModel | None = None) -> SimpleNamespace:
+    """What remember_flight reads of a FlightResult."""
+    return SimpleNamespace(hover_n=hover_n, lag_model=model)
 
 
-def test_an_unwritable_store_is_one_warning_not_a_crash(tmp_path):
+def fly(store: VehicleStore, hover_n: float | None = None, model: LagModel | None = None):
+    """One flight's visit: read, then what it learned kept."""
+    cfg, visit = store.with_learned_guess(FlightConfig())
+    return cfg, store.remember_flight(cfg, flown(hover_n, model), visit)
+
+
+def test_a_learned_hover_is_the_next_flights_guess_and_counts_its_flights(tmp_path):
+    store = VehicleStore(tmp_path / "state" / "lab-1.json", "lab-1", print)
+    _, first = fly(store, 0.327, MODEL)
+    assert first.read is None and first.written
+    assert first.describe() == f"vehicle profile: {store.path} (none yet; written)"
+    cfg, second = fly(store, 0.331)
+    assert cfg.vehicle.hover_thrust_n == pytest.approx(0.327, abs=1e-12)
+    assert "read: hover 0.3270 N from 1 flight, lag 0.130 s" in second.describe()
+    doc = json.loads(store.path.read_text())
+    assert doc["schema"] == SCHEMA and doc["vehicle"] == "lab-1"
+    assert doc["hover"]["thrust_n"] == 0.331 and doc["hover"]["flights"] == 2
+    assert doc["response"] == {"lag_s": 0.13, "time_constant_s": 0.02, "drag_per_s": 0.25,
+                               "flights": 1}
+    other = VehicleStore(tmp_path / "state" / "lab-2.json", "lab-2", print)
+    assert other.with_learned_guess(FlightConfig())[0] == FlightConfig()
+
+
+def test_a_configured_hover_overrides_the_profile(tmp_path):
+    store = VehicleStore(tmp_path / "v.json", "v", print)
+    fly(store, 0.327)
+    given = FlightConfig(vehicle=VehicleConfig(hover_thrust_n=0.3))
+    assert store.with_learned_guess(given)[0].vehicle.hover_thrust_n == 0.3
+
+
+def test_nothing_learned_is_nothing_written_and_said_so(tmp_path):
+    store = VehicleStore(tmp_path / "v.json", "v", print)
+    _, visit = fly(store)
+    assert not store.path.exists() and visit.describe().endswith("not written: nothing learned)")
+
+
+def test_an_unwritable_profile_is_one_warning_not_a_crash(tmp_path):
     (tmp_path / "file").write_text("")
     said: list[str] = []
-    store = VehicleStore(tmp_path / "file" / "vehicles.json", said.append)
-    store.remember("udp://x", FlightConfig(), 0.327)
-    assert len(said) == 1 and "not kept" in said[0] and "\n" not in said[0]
-    assert store.with_learned_guess("udp://x", FlightConfig()) == FlightConfig()
+    store = VehicleStore(tmp_path / "file" / "v.json", "v", said.append)
+    cfg, visit = fly(store, 0.327)
+    assert len(said) == 1 and "not written" in said[0] and "\n" not in said[0]
+    assert cfg == FlightConfig() and not visit.written and "not written" in visit.describe()
 
 
-def test_the_stage_2_departure_is_the_mean_of_the_flights_and_the_next_ones_prior(tmp_path):
-    store = VehicleStore(tmp_path / "vehicles.json", print)
-    for d in (-0.10, -0.13, -0.12):
-        store.remember("tcp:5762", FlightConfig(), departure_mps2=d)
-    mean, n = store.stage2_departure("tcp:5762")
-    assert n == 3 and mean == pytest.approx(-0.35 / 3, abs=1e-12)
-    lag = store.with_learned_guess("tcp:5762", FlightConfig()).lag_id
-    assert (lag.stage2_prior_mps2, lag.stage2_prior_flights) == (pytest.approx(mean), 3)
-    given = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(
-        stage2_prior_mps2=0.0, stage2_prior_flights=5))
-    assert store.with_learned_guess("tcp:5762", given).lag_id.stage2_prior_mps2 == 0.0
+@pytest.mark.parametrize("hover", [{"thrust_n": "x", "ratio": 1.0, "mass_kg": 0.03, "flights": 1},
+                                   {"thrust_n": 0.3, "ratio": 10 ** 400, "mass_kg": 0.03,
+                                    "flights": 1},
+                                   {"thrust_n": 0.3, "ratio": 50.0, "mass_kg": 0.03, "flights": 1},
+                                   {"thrust_n": 0.3, "ratio": 1.0, "mass_kg": 0.03, "flights": 0},
+                                   {"thrust_n": 0.3, "ratio": 1.0, "mass_kg": 0.03,
+                                    "flights": True},
+                                   {"thrust_n": 0.3, "ratio": float("nan"), "mass_kg": 0.03,
+                                    "flights": 1},
+                                   {"ratio": 1.0}, []])
+def test_a_malformed_hover_is_no_memory(tmp_path, hover):
+    path = tmp_path / "v.json"
+    path.write_text(json.dumps({"schema": SCHEMA, "vehicle": "v", "hover": hover}))
+    store = VehicleStore(path, "v", print)
+    assert store.read().hover is None
+    assert store.with_learned_guess(FlightConfig())[0] == FlightConfig()
 
 
-def test_a_vehicle_that_changes_is_followed_within_about_ten_flights(tmp_path):
-    """The mean of the first MEMORY_FLIGHTS flights, then each new one weighs a tenth (an
-    exponential mean): ten flights at -0.1 after ten at 0 leave 1 - 0.9^10 of the change."""
-    store = VehicleStore(tmp_path / "vehicles.json", print)
-    for d in [0.0] * 10 + [-0.1] * 10:
-        store.remember("udp://x", FlightConfig(), departure_mps2=d)
-    mean, n = store.stage2_departure("udp://x")
-    assert n == MEMORY_FLIGHTS == 10
-    assert mean == pytest.approx(-0.1 * (1 - 0.9 ** 10), abs=1e-12)
+def test_a_name_that_is_not_a_plain_file_name_stays_in_the_directory(tmp_path):
+    """A driver URI names the vehicle when --vehicle does not: its '/' and '?' never lead
+    out of the directory, and two URIs alike but for those characters never share a file."""
+    a = profile_path("sim://?draught=-2.9,0.3", tmp_path)
+    b = profile_path("sim:/?draught=-2.9,0.3", tmp_path)
+    assert a.parent == b.parent == tmp_path and a != b
+    assert profile_path("lab-1", tmp_path) == tmp_path / "lab-1.json"
+    assert file_stem("..") != ".." and "/" not in file_stem("../../etc/passwd")
 
 
-def test_the_hover_and_the_departure_are_kept_beside_each_other(tmp_path):
-    store = VehicleStore(tmp_path / "vehicles.json", print)
-    store.remember("udp://x", FlightConfig(), departure_mps2=-0.05)
-    store.remember("udp://x", FlightConfig(), hover_n=0.327)
-    before = store.path.read_text()
-    store.remember("udp://x", FlightConfig())  # nothing learned: nothing written
-    assert store.path.read_text() == before
-    assert store.hover_ratio("udp://x") == pytest.approx(0.327 / (0.03 * 9.81))
-    assert store.stage2_departure("udp://x") == (pytest.approx(-0.05), 1)
-
-
-@pytest.mark.parametrize("rec", [{"stage2_departure_mps2": "x", "stage2_flights": 2},
-                                 {"stage2_departure_mps2": -0.1, "stage2_flights": 0},
-                                 {"stage2_departure_mps2": -0.1, "stage2_flights": True},
-                                 {"stage2_departure_mps2": float("nan"), "stage2_flights": 1},
-                                 {"stage2_departure_mps2": 0.6, "stage2_flights": 3},
-                                 {"stage2_departure_mps2": 10 ** 400, "stage2_flights": 3},
-                                 {"hover_ratio": 10 ** 400},
-                                 {"stage2_departure_mps2": -0.1}, []])
-def test_a_malformed_departure_is_no_memory(tmp_path, rec):
-    path = tmp_path / "vehicles.json"
-    path.write_text(json.dumps({"schema": "perchd.vehicles/1", "vehicles": {"k": rec}}))
-    store = VehicleStore(path, print)
-    assert store.stage2_departure("k") is None and store.hover_ratio("k") is None
-    assert store.with_learned_guess("k", FlightConfig()) == FlightConfig()
-
-
-def test_a_count_beyond_the_memory_reads_as_its_cap(tmp_path):
-    path = tmp_path / "vehicles.json"
-    path.write_text(json.dumps({"schema": "perchd.vehicles/1", "vehicles": {
-        "k": {"stage2_departure_mps2": -0.1, "stage2_flights": 250}}}))
-    assert VehicleStore(path, print).stage2_departure("k") == (-0.1, MEMORY_FLIGHTS)
-
-
-def test_a_push_beyond_a_steady_ones_bound_is_not_kept_and_said_once(tmp_path):
-    """A flight whose stage 1 showed 0.8 m/s^2 beyond its approach met something passing
-    (a gust, a wall effect), not the vehicle: it would weigh on ten flights after it."""
-    said: list[str] = []
-    store = VehicleStore(tmp_path / "vehicles.json", said.append)
-    store.remember("k", FlightConfig(), departure_mps2=-0.1)
-    store.remember("k", FlightConfig(), departure_mps2=0.8)
-    assert store.stage2_departure("k") == (pytest.approx(-0.1), 1)
-    assert len(said) == 1 and "0.8" in said[0] and "not kept" in said[0]
-
-
-def test_only_a_flight_that_touched_teaches_the_push(tmp_path):
-    store = VehicleStore(tmp_path / "vehicles.json", print)
-    for outcome, d in ((EndReason.STALE_MOCAP, -0.3), (EndReason.CONTACT, -0.1)):
-        store.remember_flight("k", FlightConfig(), flown(outcome, d))
-    assert store.stage2_departure("k") == (pytest.approx(-0.1), 1)
-
-
-def flown(outcome: EndReason, departure: float) -> SimpleNamespace:
-    """What remember_flight reads of a FlightResult."""
-    return SimpleNamespace(outcome=outcome, hover_n=None, stage2_departure_mps2=departure)
+def test_forget_removes_a_profile_and_nothing_else(tmp_path):
+    store = VehicleStore(tmp_path / "v.json", "v", print)
+    fly(store, 0.327)
+    assert store.forget() and not store.path.exists() and not store.forget()
