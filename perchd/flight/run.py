@@ -184,6 +184,8 @@ class _Run:
             self.driver.failsafe(reason)
 
     def _log(self, k: int, t: float, st: State | None, rep: TickReport) -> None:
+        if isinstance(self.log, NoLog):  # no record kept: no row built either
+            return
         for ev in self.sup.events[self._events:]:
             self.log.event(ev)
         self._events = len(self.sup.events)

@@ -1,8 +1,8 @@
 """A campaign's work units: batches of flights, each flown by one worker, and the loop that
 hands them to an engine (perchd.sim.engine) and their rows back as they end.
 
-A flight takes ~0.1 CPU-s; a unit of tens of flights keeps the engine's cost per unit
-(scheduling, pickling the plan, a round trip) a small share of its work. A flight's row
+A flight takes ~0.1 CPU-s; a unit of up to Engine.most_per_unit flights keeps the engine's
+cost per unit (scheduling, pickling the plan, a round trip) a small share of its work. A flight's row
 depends only on the job and its spec, never on its batch or worker."""
 
 from __future__ import annotations
@@ -21,8 +21,6 @@ from perchd.sim.campaign import FlightRow, FlightSpec, Spread, fly_one
 from perchd.sim.engine import Engine
 from perchd.tau.plan import Plan
 
-MOST_PER_UNIT = 50
-"""Flights in the largest work unit: ~5 CPU-s, so a lost worker costs little to redo."""
 UNITS_PER_WORKER = 4
 """A campaign is cut into at least this many units per worker, so they end together."""
 
@@ -38,13 +36,13 @@ class CampaignJob:
     log_dir: str | None = None
 
 
-def unit_size(flights: int, workers: int) -> int:
-    """Flights per unit for `flights` over `workers`."""
-    return max(1, min(MOST_PER_UNIT, math.ceil(flights / (UNITS_PER_WORKER * workers))))
+def unit_size(flights: int, workers: int, most: int) -> int:
+    """Flights per unit for `flights` over `workers`, at most `most`."""
+    return max(1, min(most, math.ceil(flights / (UNITS_PER_WORKER * workers))))
 
 
-def units(specs: Sequence[FlightSpec], workers: int) -> list[tuple[FlightSpec, ...]]:
-    size = unit_size(len(specs), workers)
+def units(specs: Sequence[FlightSpec], workers: int, most: int) -> list[tuple[FlightSpec, ...]]:
+    size = unit_size(len(specs), workers, most)
     return [tuple(specs[i:i + size]) for i in range(0, len(specs), size)]
 
 
@@ -79,5 +77,6 @@ def fly_campaign(job: CampaignJob, specs: Sequence[FlightSpec], engine: Engine,
     """Fly every spec on `engine`; on_rows(rows) as each unit ends, in no set order."""
     if not specs:
         return
-    for rows in engine.map_unordered(functools.partial(fly_unit, job), units(specs, engine.workers)):
+    work = units(specs, engine.workers, engine.most_per_unit)
+    for rows in engine.map_unordered(functools.partial(fly_unit, job), work):
         on_rows(rows)

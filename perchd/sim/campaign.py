@@ -139,15 +139,15 @@ class FlightRow:
     ticks: int = 0
     mass_kg: float = 0.0
     thrust_max_n: float = 0.0
-    agent_median_ms: float = 0.0
-    agent_max_ms: float = 0.0
-    cpu_s: float = 0.0
+    agent_median_ms: float = dataclasses.field(default=0.0, compare=False)
+    agent_max_ms: float = dataclasses.field(default=0.0, compare=False)
+    cpu_s: float = dataclasses.field(default=0.0, compare=False)
 
 
 COLUMNS = tuple(f.name for f in dataclasses.fields(FlightRow))
 TIMING_COLUMNS = ("agent_median_ms", "agent_max_ms", "cpu_s")
 """Columns that measure the machine, not the flight: the same seed gives the same table
-but for these."""
+but for these (rows compare equal without them)."""
 
 
 # --- what to fly ---------------------------------------------------------------------------

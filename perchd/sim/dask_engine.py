@@ -14,6 +14,7 @@ from typing import Any, Callable, Iterator, Sequence, TypeVar
 from distributed import Client, LocalCluster, as_completed
 
 from perchd.core.errors import ConfigError
+from perchd.sim.engine import MOST_PER_UNIT
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -24,6 +25,8 @@ CONNECT_TIMEOUT_S = 10.0
 
 class DaskEngine:
     """A Dask client, and the LocalCluster it started (None on a remote scheduler)."""
+
+    most_per_unit = MOST_PER_UNIT
 
     def __init__(self, client: Client, cluster: LocalCluster | None, name: str) -> None:
         self.client, self.cluster, self.name = client, cluster, name

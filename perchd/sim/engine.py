@@ -19,6 +19,9 @@ from perchd.core.errors import ConfigError
 T = TypeVar("T")
 R = TypeVar("R")
 
+MOST_PER_UNIT = 25
+"""Flights in the largest unit sent to a worker process: ~2.5 CPU-s, against a few ms to
+send it, and little to fly again when its worker is lost."""
 CLUSTER_EXTRA = "perchd[cluster]"
 """The optional dependencies a Dask engine needs (pyproject.toml)."""
 
@@ -28,6 +31,8 @@ class Engine(Protocol):
 
     name: str
     workers: int
+    most_per_unit: int
+    """Flights a work unit may hold: 1 where a unit costs nothing to send."""
 
     def map_unordered(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[R]: ...
 
@@ -81,6 +86,7 @@ class InProcess:
 
     name = "this process"
     workers = 1
+    most_per_unit = 1  # rows as each flight ends
 
     def map_unordered(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[R]:
         return map(fn, items)
@@ -94,7 +100,7 @@ class ProcessPool:
     (BrokenProcessPool), which Dask's engine survives."""
 
     def __init__(self, workers: int) -> None:
-        self.workers = workers
+        self.workers, self.most_per_unit = workers, MOST_PER_UNIT
         self.name = f"a pool of {workers} processes"
         self._pool = ProcessPoolExecutor(max_workers=workers, initializer=leave_signals)
 

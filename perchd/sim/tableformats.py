@@ -95,12 +95,31 @@ def _parse(text: str, kind: str) -> Any:
     return _PARSE[kind](text)
 
 
-class CsvTable:
+class _Appending:
+    """The file rows are appended to (opened at the first), and the files a table is."""
+
+    path: Path
+    _f: Any = None
+
+    def files(self) -> tuple[Path, ...]:
+        return (self.path,)
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+
+    def remove(self) -> None:
+        self.close()
+        for f in self.files():
+            f.unlink(missing_ok=True)
+
+
+class CsvTable(_Appending):
     """COLUMNS as the header; each row written and flushed as it arrives."""
 
     def __init__(self, path: Path, row_type: type) -> None:
         self.path, self.row_type, self.types = path, row_type, _types(row_type)
-        self._f: Any = None
 
     def exists(self) -> bool:
         return self.path.exists()
@@ -136,14 +155,6 @@ class CsvTable:
         self.close()
         _replace(self.path, lambda tmp: _write_csv(tmp, self.types, rows))
 
-    def close(self) -> None:
-        if self._f is not None:
-            self._f.close()
-            self._f = None
-
-    def remove(self) -> None:
-        self.close()
-        self.path.unlink(missing_ok=True)
 
 
 def _write_csv(path: Path, columns: Iterable[str], rows: list[Any]) -> None:
@@ -157,13 +168,15 @@ def _write_csv(path: Path, columns: Iterable[str], rows: list[Any]) -> None:
 _ARROW = {"int": "int64", "float": "float64", "str": "string", "bool": "bool_"}
 
 
-class ParquetTable:
+class ParquetTable(_Appending):
     """The Parquet file plus its journal of rows not yet in it."""
 
     def __init__(self, path: Path, row_type: type) -> None:
         self.path, self.row_type, self.types = path, row_type, _types(row_type)
         self.journal = path.with_name(path.name + ".journal")
-        self._f: Any = None
+
+    def files(self) -> tuple[Path, ...]:
+        return self.path, self.journal
 
     def exists(self) -> bool:
         return self.path.exists() or self.journal.exists()
@@ -209,12 +222,3 @@ class ParquetTable:
         _replace(self.path, lambda tmp: pq.write_table(table, tmp))
         self.journal.unlink(missing_ok=True)
 
-    def close(self) -> None:
-        if self._f is not None:
-            self._f.close()
-            self._f = None
-
-    def remove(self) -> None:
-        self.close()
-        self.path.unlink(missing_ok=True)
-        self.journal.unlink(missing_ok=True)
