@@ -2,8 +2,8 @@
 
     python benchmarks/family.py [--n N] [--seed S] [--jobs J] [--plan FILE] [--json OUT]
 
-Draws N members (default 2000) and flies each once, on its first flight (no vehicle state
-file: no learned hover, no pooled stage-2 push), on a simulated clock, with the config a lab
+Draws N members (default 2000) and flies each once, on its first flight (no vehicle
+profile: no learned hover), on a simulated clock, with the config a lab
 would write for it (family.lab_config: its mass and thrust, every gain the default's). The
 trigger replans from the measured state (policy "replan", warm from
 plans/libraries/<plan's file name> when that library exists) or, for a robust plan, flies

@@ -7,7 +7,7 @@ cf2; PERCHD_ARDUCOPTER: ArduCopter SITL; PERCHD_PX4: a PX4 SITL build folder; th
 skipped with one line), N flights (default 10) of plans/case1-ipts-n3.json, each as a user
 flies it: `perchd sim firmware ... --noise M` (the harness, perchd/sim/firmware, docs/firmware.md)
 and `perchd fly` with the harness's mocap and driver URIs, no mass or hover in the URI (the
-flight config names the vehicle, the hold learns its hover thrust), one vehicle memory
+flight config names the vehicle, the hold learns its hover thrust), one vehicle profile
 (`--state`) per firmware as a lab's vehicle flown N times has (its first flight knows nothing;
 `--fresh-state`: every flight a first). Printed per firmware:
 flights perched / flown (in the plan's window; on target: in it and within 0.03 m/s of the
@@ -131,7 +131,7 @@ def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str
              ) -> list[str]:
     """`perchd fly` against a started harness, as a user flies it; its flight log is
     tmp/flight.jsonl. config_add: TOML appended to the flight config; driver_add: URI
-    parameters appended to the driver's; state: the vehicle memory shared by the flights,
+    parameters appended to the driver's; state: the vehicle profile shared by the flights,
     named after the firmware (the harness's ports are ephemeral); None: tmp's own, a
     vehicle flown for the first time."""
     driver += ("&" if "?" in driver else "?") + driver_add if driver_add else ""
@@ -141,7 +141,7 @@ def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str
         config = ["--config", str(tmp / "flight.toml")]
     return [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
             mocap, *config, *surface, "--log", str(tmp / "flight.jsonl"),
-            "--state", str(state or tmp / "vehicles.json"),
+            "--state", str(state or tmp / "vehicle.json"),
             *(("--vehicle", fw.name) if state else ()), "--json"]
 
 
@@ -284,7 +284,7 @@ def main() -> int:
                          "e.g. 'tilt=0'")
     ap.add_argument("--fresh-state", action="store_true",
                     help="every flight a vehicle flown for the first time (default: one "
-                         "vehicle memory per firmware, empty at its first flight)")
+                         "vehicle profile per firmware, empty at its first flight)")
     args = ap.parse_args()
     if args.flights < 1 or not 0.0 <= args.noise <= 0.1:
         print("benchmarks/firmware.py: --flights must be >= 1 and --noise 0..0.1 m",
@@ -296,7 +296,7 @@ def main() -> int:
     root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="perchd-fwbench-"))
     for fw, binary in selected(args.only):
         runs: dict[str, list[dict]] = {"firmware": [], "sim": []}
-        state = None if args.fresh_state else root / fw.name / "vehicles.json"
+        state = None if args.fresh_state else root / fw.name / "vehicle.json"
         if state is not None:
             state.unlink(missing_ok=True)
         for i in range(args.flights):

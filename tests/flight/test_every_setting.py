@@ -6,12 +6,13 @@ setting added without a range fails here."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 from simflight import PLANS
 
 from perchd.cli import main
-from perchd.flight.bounds import Leaf, leaves
+from perchd.flight.bounds import Leaf, leaves, table
 from perchd.flight.config import FlightConfig
 
 PLAN = PLANS / "case1-ipts-n3.json"
@@ -88,3 +89,12 @@ def test_serve_and_a_campaign_refuse_a_wrong_sign_gain_before_anything_opens(tmp
     assert code == 2 and err.endswith(
         "bad.toml: [tau_gains] kp_fast = -50 m/s^2: outside its range 0..200 m/s^2"), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
+
+
+def test_the_settings_table_in_the_contracts_is_the_declarations():
+    """docs/contracts.md §8: regenerate it with perchd.flight.bounds.table when a setting
+    changes."""
+    text = (Path(__file__).parents[2] / "docs" / "contracts.md").read_text()
+    documented = text.split("<!-- settings: generated -->\n")[1].split("\n<!-- settings: end")[0]
+    assert documented.splitlines() == table(FlightConfig)
+    assert len(documented.splitlines()) == len(LEAVES) + 2
