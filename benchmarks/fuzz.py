@@ -1,8 +1,9 @@
 """Fuzzing at volume, with a fixed seed: NatNet packets into the parser and the client's
-receive path, and control-socket lines into a running `perchd serve`.
+receive path, control-socket lines into a running `perchd serve`, and plan, config and
+flight-log files into their readers.
 
     python benchmarks/fuzz.py [--natnet 1000000] [--udp 100000] [--requests 1000000]
-                              [--lines 100000] [--seed 8] [--json]
+                              [--lines 100000] [--files 100000] [--seed 8] [--json]
 
 (about a minute; the target is at least 1e5 of each kind of input.)
 
@@ -23,6 +24,13 @@ lines: random bytes, mutated requests, requests with a key given twice, any JSON
     an overlong line (counted as an input too), to `perchd serve` (sim://) over its Unix socket. accepted = {"ok": true} reply,
     rejected = {"ok": false} reply (or the overlong-line drop); crash = a line without its
     reply, a status request unanswered, or the service not exiting 0 on SIGTERM.
+files: --files inputs each for the plan reader (load_plan), the config reader
+    (load_flight_config) and the flight-log reader (read_log), each written to a real file
+    and read from it: shipped plans, the example config and a short flight log, mutated
+    byte-wise (as NatNet packets are) or with their numbers replaced by extreme or ill-typed
+    tokens (1e999, 400 and 5000 digits, NaN, booleans, strings), or random bytes. accepted =
+    read, rejected = one-line PerchdError; crash = any other exception or a multi-line error.
+    A hang would stop the run (the reads are bounded and non-blocking).
 Throughput [inputs/s]: for the in-process NatNet passes the median over chunks of 10^4
 inputs; for UDP and control lines the whole run (their pacing is part of the path).
 """
@@ -58,7 +66,12 @@ from perchd.mocap.natnet.uris import NatNetServer, open_natnet
 from perchd.mocap.natnet.wire import MalformedPacket
 from perchd.service.control_socket import ControlServer
 
-FIXTURES = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet"
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "helpers"))
+from logseed import log_seed  # noqa: E402 - the seeds the fuzz tests use
+from mutate import NASTY_TOKENS, NUMBER  # noqa: E402
+
+FIXTURES = ROOT / "tests" / "fixtures" / "natnet"
 OLD_MOTIVE = {"1.5.0": (2, 5), "1.7.2": (2, 7), "1.9.0": (2, 9)}  # NatNet of each Motive 1.x
 EXTREME_WORDS = [b"\xff\xff\xff\x7f", b"\0\0\0\x80", b"\0\0\0\0", b"\xff\xff\xff\xff", b"\x01\0\0\0"]
 
@@ -159,22 +172,36 @@ def decode(datagram: bytes, version: tuple[int, int]) -> None:
         proto.decode_echo_response(payload)
 
 
+def run_chunk(tally: Tally, inputs: list, judge, show) -> None:
+    """judge(x) for each input: True accepted, False rejected, an exception a crash
+    (show(x) names the input); the chunk's rate kept."""
+    tally.inputs += len(inputs)
+    start = time.perf_counter()
+    for x in inputs:
+        try:
+            if judge(x):
+                tally.accepted += 1
+            else:
+                tally.rejected += 1
+        except Exception as err:  # noqa: BLE001 - this is what is being counted
+            tally.crash(f"{type(err).__name__}: {err} on {show(x)}")
+    took = time.perf_counter() - start
+    tally.seconds += took
+    tally.rates.append(len(inputs) / took)
+
+
+def _decoded(item: tuple[bytes, tuple[int, int]]) -> bool:
+    try:
+        decode(*item)
+    except MalformedPacket:
+        return False
+    return True
+
+
 def fuzz_parser(chunks) -> Tally:
     tally = Tally()
     for inputs in chunks:
-        tally.inputs += len(inputs)
-        start = time.perf_counter()
-        for datagram, version in inputs:
-            try:
-                decode(datagram, version)
-                tally.accepted += 1
-            except MalformedPacket:
-                tally.rejected += 1
-            except Exception as err:  # noqa: BLE001 - this is what is being counted
-                tally.crash(f"{type(err).__name__}: {err} on {datagram.hex()}")
-        took = time.perf_counter() - start
-        tally.seconds += took
-        tally.rates.append(len(inputs) / took)
+        run_chunk(tally, inputs, _decoded, lambda item: item[0].hex())
     return tally
 
 
@@ -436,10 +463,82 @@ def fuzz_lines(rng: random.Random, n: int, batch: int = 25) -> tuple[Tally, int]
     return tally, status_checks
 
 
+# ------------------------------------------------------------------ files
+
+def file_input(rng: random.Random, seeds: list[bytes]) -> bytes:
+    kind = rng.randrange(5)
+    if kind == 0:
+        return rng.randbytes(rng.randint(0, 400))
+    data = rng.choice(seeds)
+    if kind in (1, 2):
+        return mutate(rng, data)
+    for _ in range(rng.randint(1, 3)):  # numbers replaced by extreme or ill-typed tokens
+        spans = [m.span() for m in NUMBER.finditer(data)]
+        if spans:
+            start, end = rng.choice(spans)
+            data = data[:start] + rng.choice(NASTY_TOKENS) + data[end:]
+    return data
+
+
+def fuzz_reader(rng: random.Random, n: int, seeds: list[bytes], read, path: Path) -> Tally:
+    from perchd.core.errors import PerchdError
+
+    def judge(data: bytes) -> bool:
+        path.write_bytes(data)
+        try:
+            read(path)
+        except PerchdError as err:
+            if "\n" in str(err) or not str(err):
+                raise AssertionError(f"an error of {len(str(err).splitlines())} lines") from None
+            return False
+        return True
+
+    tally = Tally()
+    for first in range(0, n, CHUNK):
+        inputs = [file_input(rng, seeds) for _ in range(min(CHUNK, n - first))]
+        run_chunk(tally, inputs, judge, lambda data: repr(data[:200]))
+    return tally
+
+
+def fuzz_files(seed: int, n: int) -> dict[str, Tally]:
+    from perchd.logs.flightlog import read_log
+    from perchd.service.config import load_flight_config
+    from perchd.tau.planfile import load_plan
+    plans = [p.read_bytes() for p in sorted((ROOT / "plans").glob("*.json"))]
+    configs = [(ROOT / "systemd" / "perchd.toml").read_bytes()]
+    shm = "/dev/shm" if os.path.isdir("/dev/shm") else None  # the files, not the disk, are fuzzed
+    with tempfile.TemporaryDirectory(prefix="perchd-fuzz-", dir=shm) as tmp:
+        logs = [log_seed(Path(tmp) / "seed.jsonl")]
+        (Path(tmp) / "seed.jsonl").unlink()
+        return {"plan file": fuzz_reader(random.Random(seed), n, plans, load_plan, Path(tmp) / "p.json"),
+                "config file": fuzz_reader(random.Random(seed + 1), n, configs, load_flight_config,
+                                           Path(tmp) / "perchd.toml"),
+                "log file": fuzz_reader(random.Random(seed + 2), n, logs, read_log, Path(tmp) / "f.jsonl")}
+
+
 # ------------------------------------------------------------------ main
 
 def _without_rates(items) -> dict:
     return {k: v for k, v in items if k != "rates"}
+
+
+NOTES = {"natnet parser": "  (accepted = decoded, rejected = MalformedPacket)",
+         "natnet client": "  (accepted = poses, rejected = dropped)",
+         "natnet udp": "  (then a good pose still arrives)",
+         "control parse": "  (in-process: accepted = ok, rejected = error)",
+         "control lines": "  ({checks} status checks between batches)",
+         "plan file": "  (accepted = read, rejected = one-line PerchdError)",
+         "config file": "  (accepted = read, rejected = one-line PerchdError)",
+         "log file": "  (accepted = read, rejected = one-line PerchdError)"}
+
+
+def _network(args: argparse.Namespace) -> tuple[dict[str, Tally], int]:
+    results = {"natnet parser": fuzz_parser(natnet_chunks(args.seed, args.natnet)),
+               "natnet client": fuzz_client(natnet_chunks(args.seed, args.natnet)),
+               "natnet udp": fuzz_udp([x for c in natnet_chunks(args.seed, args.udp) for x in c]),
+               "control parse": fuzz_requests(random.Random(args.seed + 2), args.requests)}
+    results["control lines"], checks = fuzz_lines(random.Random(args.seed + 1), args.lines)
+    return results, checks
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -449,15 +548,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--requests", type=int, default=1_000_000,
                         help="control lines through the request handling in-process (default 1e6)")
     parser.add_argument("--lines", type=int, default=100_000, help="control lines (default 1e5)")
+    parser.add_argument("--files", type=int, default=100_000,
+                        help="plan, config and flight-log files, each (default 1e5)")
+    parser.add_argument("--only-files", action="store_true", help="the file readers alone")
     parser.add_argument("--seed", type=int, default=8)
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
     args = parser.parse_args(argv)
     logging.getLogger("perchd").setLevel(logging.ERROR)  # every drop is expected here
-    results = {"parser": fuzz_parser(natnet_chunks(args.seed, args.natnet)),
-               "client": fuzz_client(natnet_chunks(args.seed, args.natnet)),
-               "udp": fuzz_udp([x for c in natnet_chunks(args.seed, args.udp) for x in c])}
-    results["requests"] = fuzz_requests(random.Random(args.seed + 2), args.requests)
-    results["lines"], checks = fuzz_lines(random.Random(args.seed + 1), args.lines)
+    results, checks = ({}, 0) if args.only_files else _network(args)
+    results.update(fuzz_files(args.seed + 3, args.files))
     crashes = sum(t.crashes for t in results.values())
     if args.json:
         print(json.dumps({"seed": args.seed, "crashes": crashes, "status_checks": checks,
@@ -465,11 +564,8 @@ def main(argv: list[str] | None = None) -> int:
                              for k, t in results.items()}}))
     else:
         print(f"fuzz, seed {args.seed}")
-        print(results["parser"].line("natnet parser", "  (accepted = decoded, rejected = MalformedPacket)"))
-        print(results["client"].line("natnet client", "  (accepted = poses, rejected = dropped)"))
-        print(results["udp"].line("natnet udp", "  (then a good pose still arrives)"))
-        print(results["requests"].line("control parse", "  (in-process: accepted = ok, rejected = error)"))
-        print(results["lines"].line("control lines", f"  ({checks} status checks between batches)"))
+        for name, t in results.items():
+            print(t.line(name, NOTES.get(name, "").format(checks=checks)))
         for name, t in results.items():
             for example in t.examples:
                 print(f"  {name} crash: {example}")
