@@ -42,8 +42,16 @@ def unit_size(flights: int, workers: int, most: int) -> int:
 
 
 def units(specs: Sequence[FlightSpec], workers: int, most: int) -> list[tuple[FlightSpec, ...]]:
+    """The specs in order, in units of unit_size, the first ones ramping up from one flight
+    (1, 2, 4, ... a round of `workers` units each): the first rows come at once."""
     size = unit_size(len(specs), workers, most)
-    return [tuple(specs[i:i + size]) for i in range(0, len(specs), size)]
+    out: list[tuple[FlightSpec, ...]] = []
+    i, step = 0, 1
+    while i < len(specs):
+        out.append(tuple(specs[i:i + min(step, size)]))
+        i += len(out[-1])
+        step *= 2 if len(out) % workers == 0 else 1
+    return out
 
 
 def fly_unit(job: CampaignJob, specs: Sequence[FlightSpec]) -> list[FlightRow]:
