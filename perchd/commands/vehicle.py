@@ -18,16 +18,22 @@ from perchd.flight.profile import VehicleProfile
 from perchd.flight.vehiclestate import VehicleStore, profile_path
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("vehicle", help="see or forget what flights learned of a vehicle",
-                              description=__doc__.splitlines()[0])
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = subparsers.add_parser(
+        "vehicle",
+        help="see or forget what flights learned of a vehicle",
+        description=__doc__.splitlines()[0],
+    )
     actions = p.add_subparsers(dest="action", required=True)
     show = actions.add_parser("show", help="print the vehicle's profile")
     forget = actions.add_parser("forget", help="remove the vehicle's profile")
     for sub in (show, forget):
         sub.add_argument("name", metavar="NAME", help="the vehicle's name (perchd fly --vehicle)")
-        sub.add_argument("--state", metavar="F", help="the profile file (default "
-                         "$XDG_STATE_HOME/perchd/vehicles/NAME.json)")
+        sub.add_argument(
+            "--state",
+            metavar="F",
+            help="the profile file (default $XDG_STATE_HOME/perchd/vehicles/NAME.json)",
+        )
     show.add_argument("--json", action="store_true", help="print the profile's JSON")
     show.set_defaults(run=run_show)
     forget.set_defaults(run=run_forget)
@@ -55,13 +61,17 @@ def text(path: Path, p: VehicleProfile) -> str:
     lines = [f"vehicle profile: {path}", f"vehicle: {p.name}"]
     if p.hover:
         h = p.hover
-        lines.append(f"hover: {h.thrust_n:.4f} N ({h.ratio:.3f} x the weight of "
-                     f"{h.mass_kg:g} kg) from {h.flights} flight(s)")
+        lines.append(
+            f"hover: {h.thrust_n:.4f} N ({h.ratio:.3f} x the weight of "
+            f"{h.mass_kg:g} kg) from {h.flights} flight(s)"
+        )
     if p.response:
         r = p.response
-        lines.append(f"response: lag {r.lag_s:.3f} s ({r.time_constant_s:.3f} s of it "
-                     f"first-order), drag {r.drag_per_s:.3f} 1/s, the latest of "
-                     f"{r.flights} flight(s) (each flight identifies its own)")
+        lines.append(
+            f"response: lag {r.lag_s:.3f} s ({r.time_constant_s:.3f} s of it "
+            f"first-order), drag {r.drag_per_s:.3f} 1/s, the latest of "
+            f"{r.flights} flight(s) (each flight identifies its own)"
+        )
     return "\n".join(lines if len(lines) > 2 else [*lines, "nothing learned yet"])
 
 

@@ -94,8 +94,8 @@ def leaves(cls: type, path: tuple[str, ...] = ()) -> tuple[Leaf, ...]:
     hints = typing.get_type_hints(cls)
     out: list[Leaf] = []
     for f in dataclasses.fields(cls):
-        tp = hints[f.name]
-        if dataclasses.is_dataclass(tp):
+        tp: Any = hints[f.name]
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
             out.extend(leaves(tp, (*path, f.name)))
         else:
             out.append(Leaf((*path, f.name), f.metadata.get("bound"), tp))
@@ -104,7 +104,8 @@ def leaves(cls: type, path: tuple[str, ...] = ()) -> tuple[Leaf, ...]:
 
 def faults(cfg: Any) -> Iterator[str]:
     """One line per number of cfg outside its declared range."""
-    for leaf in leaves(type(cfg)):
+    cls: Any = type(cfg)
+    for leaf in leaves(cls):
         value = leaf.value(cfg)
         if leaf.bound is None or value is None:
             continue
@@ -129,8 +130,9 @@ def table(cls: type) -> list[str]:
     for leaf in leaves(cls):
         b = leaf.bound
         span = f"{b.lo:g}..{b.hi:g}" if b else _choices(leaf.tp)
-        rows.append(f"| `{leaf.key}` | {b.unit if b else ''} | {span} | "
-                    f"{_default(leaf.value(defaults))} |")
+        rows.append(
+            f"| `{leaf.key}` | {b.unit if b else ''} | {span} | {_default(leaf.value(defaults))} |"
+        )
     return rows
 
 

@@ -15,6 +15,7 @@ bias, a draught, the wall's air) is the air's, not the vehicle's: never kept.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, replace
 from typing import Any
@@ -62,19 +63,23 @@ class VehicleProfile:
             return None
         return min(self.hover.ratio * v.mass_kg * v.g, v.thrust_max_n)
 
-    def learned(self, v: VehicleConfig, hover_n: float | None,
-                model: LagModel | None) -> VehicleProfile:
+    def learned(
+        self, v: VehicleConfig, hover_n: float | None, model: LagModel | None
+    ) -> VehicleProfile:
         """This profile with one more flight's hover [N] and identified response (None:
         not learned)."""
         out = self
         if hover_n is not None:
             count = self.hover.flights if self.hover else 0
-            out = replace(out, hover=Hover(hover_n, hover_n / (v.mass_kg * v.g), v.mass_kg,
-                                           count + 1))
+            out = replace(
+                out, hover=Hover(hover_n, hover_n / (v.mass_kg * v.g), v.mass_kg, count + 1)
+            )
         if model is not None:
             count = self.response.flights if self.response else 0
-            out = replace(out, response=Response(model.lag_s, model.time_constant_s,
-                                                 model.drag_per_s, count + 1))
+            out = replace(
+                out,
+                response=Response(model.lag_s, model.time_constant_s, model.drag_per_s, count + 1),
+            )
         return out
 
     def describe(self) -> str:
@@ -84,8 +89,9 @@ class VehicleProfile:
             parts.append(f"hover {self.hover.thrust_n:.4f} N from {_flights(self.hover.flights)}")
         if self.response:
             r = self.response
-            parts.append(f"lag {r.lag_s:.3f} s, drag {r.drag_per_s:.3f} 1/s from "
-                         f"{_flights(r.flights)}")
+            parts.append(
+                f"lag {r.lag_s:.3f} s, drag {r.drag_per_s:.3f} 1/s from {_flights(r.flights)}"
+            )
         return ", ".join(parts) or "nothing learned yet"
 
     def to_doc(self) -> dict[str, Any]:
@@ -116,7 +122,7 @@ def _part(cls: type, raw: Any) -> Any:
     integer), or None."""
     if not isinstance(raw, dict):
         return None
-    names = cls.__dataclass_fields__
+    names = [f.name for f in dataclasses.fields(cls)]
     if set(raw) != set(names):
         return None
     ok = all(_count(raw[k]) if k == "flights" else _number(raw[k]) for k in names)

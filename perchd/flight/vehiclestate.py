@@ -23,7 +23,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from perchd.core.errors import PerchdError
 from perchd.core.safefile import OutputError, read_regular, write_text
@@ -93,10 +93,12 @@ class VehicleStore:
             why = err.strerror if isinstance(err, OSError) else err
             raise OutputError(f"--state {self.path}: cannot read ({why})") from None
         if self._doc() is None:
-            raise OutputError(f"--state {self.path}: not a perchd vehicle profile "
-                              f"(schema {SCHEMA}); give another path")
+            raise OutputError(
+                f"--state {self.path}: not a perchd vehicle profile "
+                f"(schema {SCHEMA}); give another path"
+            )
 
-    def _doc(self) -> dict | None:
+    def _doc(self) -> dict[str, Any] | None:
         """The profile's JSON; {} when there is none, None when the path holds something
         else (unreadable, not a regular file, not JSON, another schema)."""
         if not os.path.lexists(self.path):
@@ -127,13 +129,15 @@ class VehicleStore:
         if res.hover_n is None and res.lag_model is None:
             return visit
         profile = (self.read() or VehicleProfile(self.name)).learned(
-            cfg.vehicle, res.hover_n, res.lag_model)
+            cfg.vehicle, res.hover_n, res.lag_model
+        )
         try:
             if self._doc() is None:
                 raise OutputError(f"{self.path}: not a perchd vehicle profile; left as it is")
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            write_text(self.path, json.dumps(profile.to_doc(), indent=1) + "\n", "--state",
-                       force=True)
+            write_text(
+                self.path, json.dumps(profile.to_doc(), indent=1) + "\n", "--state", force=True
+            )
         except OSError as err:
             why = str(err) if isinstance(err, PerchdError) else err.strerror or str(err)
             self.warn(f"warning: vehicle profile {self.path} not written: {why}")

@@ -14,8 +14,23 @@ PLAN = PLANS / "case1-ipts-n3.json"
 
 
 def test_a_flown_vehicle_is_shown_then_forgotten(tmp_path, capsys):
-    assert main(["fly", str(PLAN), "--driver", "sim://", "--mocap", "sim://", "--vehicle",
-                 "lab-1", "--log", str(tmp_path / "f.jsonl")]) == 0
+    assert (
+        main(
+            [
+                "fly",
+                str(PLAN),
+                "--driver",
+                "sim://",
+                "--mocap",
+                "sim://",
+                "--vehicle",
+                "lab-1",
+                "--log",
+                str(tmp_path / "f.jsonl"),
+            ]
+        )
+        == 0
+    )
     path = profile_path("lab-1")
     assert f"vehicle profile: {path} (none yet; written)" in capsys.readouterr().out
     assert main(["vehicle", "show", "lab-1"]) == 0

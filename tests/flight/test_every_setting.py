@@ -67,27 +67,46 @@ def test_a_setting_outside_its_range_stops_perchd_fly_naming_it(tmp_path, capsys
     config = tmp_path / "bad.toml"
     config.write_text(toml(leaf, value))
     log = tmp_path / "f.jsonl"
-    code = main(["fly", str(PLAN), "--driver", "sim://", "--mocap", "sim://", "--config",
-                 str(config), "--log", str(log), "--state", str(tmp_path / "v.json")])
+    code = main(
+        [
+            "fly",
+            str(PLAN),
+            "--driver",
+            "sim://",
+            "--mocap",
+            "sim://",
+            "--config",
+            str(config),
+            "--log",
+            str(log),
+            "--state",
+            str(tmp_path / "v.json"),
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1, err
     assert leaf.key in err, err
     assert not log.exists()
 
 
-@pytest.mark.parametrize("command", [
-    ["serve", "--socket", "{tmp}/control.sock"],
-    ["sim", "--campaign", str(PLANS / "robust-n3-table2-box.json"), "--flights", "1"],
-])
-def test_serve_and_a_campaign_refuse_a_wrong_sign_gain_before_anything_opens(tmp_path, capsys,
-                                                                             command):
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["serve", "--socket", "{tmp}/control.sock"],
+        ["sim", "--campaign", str(PLANS / "robust-n3-table2-box.json"), "--flights", "1"],
+    ],
+)
+def test_serve_and_a_campaign_refuse_a_wrong_sign_gain_before_anything_opens(
+    tmp_path, capsys, command
+):
     config = tmp_path / "bad.toml"
     config.write_text("version = 1\n[tau_gains]\nkp_fast = -50\n")
     args = [a.replace("{tmp}", str(tmp_path)) for a in command]
     code = main([*args, "--config", str(config)])
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.endswith(
-        "bad.toml: [tau_gains] kp_fast = -50 m/s^2: outside its range 0..200 m/s^2"), err
+        "bad.toml: [tau_gains] kp_fast = -50 m/s^2: outside its range 0..200 m/s^2"
+    ), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
 
 

@@ -81,7 +81,7 @@ def test_a_refit_hands_its_drag_over_from_the_integral_without_a_step(tmp_path):
                                                                   lead_into_plan=False))
     res = Sim("sim://?drag=1.0").fly(plan, tmp_path / "f.jsonl", base)
     assert res.outcome is EndReason.CONTACT
-    fixed = dataclasses.replace(base, lag_id=LagIdGains(refit_s=1e9))  # no refits
+    fixed = dataclasses.replace(base, lag_id=LagIdGains(refit_s=3600.0))  # no refits
     Sim("sim://?drag=1.0").fly(plan, tmp_path / "once.jsonl", fixed)
     assert largest_approach_step(tmp_path / "f.jsonl") < 0.2
     assert largest_approach_step(tmp_path / "f.jsonl") <= \

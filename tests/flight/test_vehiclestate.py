@@ -40,8 +40,12 @@ def test_a_learned_hover_is_the_next_flights_guess_and_counts_its_flights(tmp_pa
     doc = json.loads(store.path.read_text())
     assert doc["schema"] == SCHEMA and doc["vehicle"] == "lab-1"
     assert doc["hover"]["thrust_n"] == 0.331 and doc["hover"]["flights"] == 2
-    assert doc["response"] == {"lag_s": 0.13, "time_constant_s": 0.02, "drag_per_s": 0.25,
-                               "flights": 1}
+    assert doc["response"] == {
+        "lag_s": 0.13,
+        "time_constant_s": 0.02,
+        "drag_per_s": 0.25,
+        "flights": 1,
+    }
     other = VehicleStore(tmp_path / "state" / "lab-2.json", "lab-2", print)
     assert other.with_learned_guess(FlightConfig())[0] == FlightConfig()
 
@@ -68,16 +72,19 @@ def test_an_unwritable_profile_is_one_warning_not_a_crash(tmp_path):
     assert cfg == FlightConfig() and not visit.written and "not written" in visit.describe()
 
 
-@pytest.mark.parametrize("hover", [{"thrust_n": "x", "ratio": 1.0, "mass_kg": 0.03, "flights": 1},
-                                   {"thrust_n": 0.3, "ratio": 10 ** 400, "mass_kg": 0.03,
-                                    "flights": 1},
-                                   {"thrust_n": 0.3, "ratio": 50.0, "mass_kg": 0.03, "flights": 1},
-                                   {"thrust_n": 0.3, "ratio": 1.0, "mass_kg": 0.03, "flights": 0},
-                                   {"thrust_n": 0.3, "ratio": 1.0, "mass_kg": 0.03,
-                                    "flights": True},
-                                   {"thrust_n": 0.3, "ratio": float("nan"), "mass_kg": 0.03,
-                                    "flights": 1},
-                                   {"ratio": 1.0}, []])
+@pytest.mark.parametrize(
+    "hover",
+    [
+        {"thrust_n": "x", "ratio": 1.0, "mass_kg": 0.03, "flights": 1},
+        {"thrust_n": 0.3, "ratio": 10**400, "mass_kg": 0.03, "flights": 1},
+        {"thrust_n": 0.3, "ratio": 50.0, "mass_kg": 0.03, "flights": 1},
+        {"thrust_n": 0.3, "ratio": 1.0, "mass_kg": 0.03, "flights": 0},
+        {"thrust_n": 0.3, "ratio": 1.0, "mass_kg": 0.03, "flights": True},
+        {"thrust_n": 0.3, "ratio": float("nan"), "mass_kg": 0.03, "flights": 1},
+        {"ratio": 1.0},
+        [],
+    ],
+)
 def test_a_malformed_hover_is_no_memory(tmp_path, hover):
     path = tmp_path / "v.json"
     path.write_text(json.dumps({"schema": SCHEMA, "vehicle": "v", "hover": hover}))
