@@ -4,7 +4,7 @@
                                   [--json OUT]
 
 Flies the same N members of the vehicle family (perchd/sim/family.py, each on its first
-flight, perchd/sim/familyrun.py: fly_member) with the baseline config (benchmarks/family.py:
+flight, perchd/campaign/familyrun.py: fly_member) with the baseline config (benchmarks/family.py:
 base_config, the defaults with the trigger replanning) and with each variant of VARIANTS:
 one layer turned off by its config switches, or a group of them. A variant changes the
 FlightConfig only (dataclasses.replace), never the code. Prints one table, a row a variant:
@@ -45,7 +45,7 @@ from typing import Any
 from perchd.flight.config import FlightConfig
 from perchd.session import open_session
 from perchd.sim.family import FamilyVehicle, sample
-from perchd.sim.familyrun import FamilyRow, fly_member
+from perchd.campaign.familyrun import FamilyRow, fly_member
 from perchd.tau import load_plan
 from perchd.tau.plan import Plan
 

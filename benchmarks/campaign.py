@@ -1,5 +1,5 @@
 """Campaign throughput: flights per second per core on Dask LocalClusters of 1 and 2 worker
-processes (perchd.sim.dask_engine), and one flight's CPU cost in this process.
+processes (perchd.campaign.dask_engine), and one flight's CPU cost in this process.
 
     python benchmarks/campaign.py [--flights N] [--repeat R] [--plan FILE] [--profile K]
 
@@ -21,9 +21,9 @@ import time
 from pathlib import Path
 
 from perchd.flight.config import FlightConfig
-from perchd.sim import campaign as cp
-from perchd.sim.batches import CampaignJob, fly_campaign, fly_unit
-from perchd.sim.dask_engine import DaskEngine
+from perchd.campaign import flights as cp
+from perchd.campaign.batches import CampaignJob, fly_campaign, fly_unit
+from perchd.campaign.dask_engine import DaskEngine
 from perchd.tau import load_plan
 
 ROOT = Path(__file__).resolve().parents[1]

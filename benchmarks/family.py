@@ -30,7 +30,7 @@ from pathlib import Path
 
 from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
 from perchd.sim.family import FAMILY, FamilyVehicle, sample
-from perchd.sim.familyrun import PARAMETERS, FamilyRow, fly_member
+from perchd.campaign.familyrun import PARAMETERS, FamilyRow, fly_member
 from perchd.tau import load_plan
 from perchd.tau.plan import Plan
 

@@ -48,7 +48,7 @@ from typing import Any
 from perchd.core.ports import PoseSource
 from perchd.drivers import cfsink
 from perchd.drivers.cfsink import ClosedSink, Hover, OpenSink, hover_mean
-from perchd.drivers.childproc import say
+from perchd.core.childproc import say
 from perchd.drivers.mavlink.brake import WILL_MAX_AGE_S
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 

@@ -48,7 +48,8 @@ from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, without_query
 from perchd.core.vehicle import CRAZYFLIE_HOVER_UNITS, CRAZYFLIE_MASS_KG
-from perchd.drivers import cflink, childproc
+from perchd.core import childproc
+from perchd.drivers import cflink
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
 from perchd.drivers.mavlink.brake import WillSchedule, lean_for
 from perchd.drivers.targetlock import TargetLock, connect_holding

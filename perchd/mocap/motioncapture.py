@@ -31,7 +31,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import Uri
 from perchd.core.uriparams import float_param
-from perchd.drivers import childproc
+from perchd.core import childproc
 from perchd.mocap import mcbackends, mcworker
 from perchd.mocap.frames import UpAxis, to_world
 from perchd.mocap.stream import Drop, PoseLimits, PoseStream, RateLimitedWarning, ThreadedSource

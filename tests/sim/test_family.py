@@ -15,7 +15,7 @@ from simflight import PLANS
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
 from perchd.sim.family import FAMILY, LAB_THRUST_MIN_SHARE, FamilyVehicle, lab_config, sample
-from perchd.sim.familyrun import PARAMETERS, FamilyRow, fly_member, parameters
+from perchd.campaign.familyrun import PARAMETERS, FamilyRow, fly_member, parameters
 from perchd.tau import load_plan
 
 

@@ -1,5 +1,5 @@
 """`perchd sim --campaign P.json`: the campaign options of `perchd sim`, its progress bar on
-stderr, the outcome table (CSV) and the printed summary. The flying is perchd.sim.campaign.
+stderr, the outcome table (CSV) and the printed summary. The flying is perchd.campaign.flights.
 
     perchd sim --campaign P.json [--flights N | --grid NX NV] [--x0 LO HI] [--v0 LO HI]
                [--latency S] [--noise M] [--gust DV] [--seed N] [--start X Y Z]
@@ -9,7 +9,7 @@ stderr, the outcome table (CSV) and the printed summary. The flying is perchd.si
 
 Each flight is a row of the table, written as it ends, with a JSON summary beside it
 (OUT.summary.json). The same command on an existing table flies only the flights missing
-from it (perchd.sim.results); a different campaign on it is refused. `perchd sim report
+from it (perchd.campaign.results); a different campaign on it is refused. `perchd sim report
 TABLE` prints a table's summary and draws its plots.
 
 Exit 0 when every flight made contact inside its plan's contact window, 1 otherwise.
@@ -35,11 +35,11 @@ from perchd.core.safefile import OutputError, check_output
 from perchd.flight.config import TriggerPolicy
 from perchd.flight.planguard import check_flight_plan
 from perchd.logs.flightlog import jsonable
-from perchd.sim import campaign as cp
-from perchd.sim.batches import CampaignJob, fly_campaign
-from perchd.sim.engine import open_engine, parse_cluster
-from perchd.sim.results import CampaignTable, digest, summary_path
-from perchd.sim.tableformats import have_pyarrow
+from perchd.campaign import flights as cp
+from perchd.campaign.batches import CampaignJob, fly_campaign
+from perchd.campaign.engine import open_engine, parse_cluster
+from perchd.campaign.results import CampaignTable, digest, summary_path
+from perchd.campaign.tableformats import have_pyarrow
 from perchd.tau import load_plan
 
 DEFAULT_FLIGHTS = 20

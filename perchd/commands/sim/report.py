@@ -1,7 +1,7 @@
 """`perchd sim report TABLE [--plots DIR] [--worst N] [--json] [--force]`: a campaign's
 table read back: its summary printed as `perchd sim --campaign` prints it, the worst
 flights listed, and with --plots its figures drawn into an existing directory
-(perchd.logs.campaignplot). Exit 0, or 2 for a table that cannot be read."""
+(perchd.campaign.plot). Exit 0, or 2 for a table that cannot be read."""
 
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ from typing import Any
 
 from perchd.commands.sim.campaign import summary_text
 from perchd.core.safefile import OutputError
-from perchd.logs.campaignplot import WORST_COLUMNS, plot_campaign, text, worst
-from perchd.sim.campaign import FlightRow, summarize
-from perchd.sim.results import summary_path
-from perchd.sim.tableformats import table_format
+from perchd.campaign.plot import WORST_COLUMNS, plot_campaign, text, worst
+from perchd.campaign.flights import FlightRow, summarize
+from perchd.campaign.results import summary_path
+from perchd.campaign.tableformats import table_format
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -20,7 +20,7 @@ from collections.abc import Callable
 from typing import Protocol
 
 from perchd.core.types import Pose
-from perchd.drivers.childproc import say
+from perchd.core.childproc import say
 from perchd.drivers.mavlink.vision import vision_estimate, vision_message
 
 RELAY_MAX_S = 120.0

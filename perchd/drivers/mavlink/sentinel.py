@@ -45,8 +45,8 @@ import time
 from dataclasses import dataclass
 
 from perchd.core.types import Vec3
-from perchd.drivers import childproc
-from perchd.drivers.childproc import say
+from perchd.core import childproc
+from perchd.core.childproc import say
 from perchd.drivers.mavlink.brake import (
     BRAKE_ROUNDS,
     LEVEL_MAX_S,

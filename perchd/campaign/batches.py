@@ -1,5 +1,5 @@
 """A campaign's work units: batches of flights, each flown by one worker, and the loop that
-hands them to an engine (perchd.sim.engine) and their rows back as they end.
+hands them to an engine (perchd.campaign.engine) and their rows back as they end.
 
 A flight takes ~0.1 CPU-s; a unit of up to Engine.most_per_unit flights keeps the engine's
 cost per unit (scheduling, pickling the plan, a round trip) a small share of its work. A flight's row
@@ -17,8 +17,8 @@ from typing import Callable, Sequence
 
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig
-from perchd.sim.campaign import FlightRow, FlightSpec, Spread, fly_one
-from perchd.sim.engine import Engine
+from perchd.campaign.flights import FlightRow, FlightSpec, Spread, fly_one
+from perchd.campaign.engine import Engine
 from perchd.tau.plan import Plan
 
 UNITS_PER_WORKER = 4

@@ -14,7 +14,7 @@ from typing import Any, Callable, Iterator, Sequence, TypeVar
 from distributed import Client, LocalCluster, as_completed
 
 from perchd.core.errors import ConfigError
-from perchd.sim.engine import MOST_PER_UNIT
+from perchd.campaign.engine import MOST_PER_UNIT
 
 T = TypeVar("T")
 R = TypeVar("R")

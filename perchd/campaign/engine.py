@@ -3,7 +3,7 @@ process pool (the standard library's, for machines without Dask).
 
 `--cluster` names the engine: `local[:N]` (Dask's LocalCluster of N processes on 127.0.0.1
 when Dask is installed, else the process pool below) or `tcp://HOST:8786` (a running Dask
-scheduler, perchd.sim.dask_engine). A unit's result does not depend on where it ran, so
+scheduler, perchd.campaign.dask_engine). A unit's result does not depend on where it ran, so
 the table does not depend on the engine."""
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ def open_engine(spec: ClusterSpec, jobs: int) -> Engine:
             raise ConfigError(f"--cluster {spec.address}: needs Dask; pip install "
                               f"'{CLUSTER_EXTRA}'")
         return ProcessPool(workers)
-    from perchd.sim.dask_engine import DaskEngine
+    from perchd.campaign.dask_engine import DaskEngine
     return DaskEngine.start(spec.address, workers)
 
 

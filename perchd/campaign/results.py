@@ -1,4 +1,4 @@
-"""A campaign's results: its table (perchd.sim.tableformats) and the JSON summary beside
+"""A campaign's results: its table (perchd.campaign.tableformats) and the JSON summary beside
 it (`OUT.summary.json`), which names the campaign that made the table.
 
 A campaign is named by its output: opened again with the same campaign (plan, policy,
@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from perchd.core.safefile import OutputError
-from perchd.sim.campaign import COLUMNS, FlightRow, FlightSpec, summarize
-from perchd.sim.tableformats import TableFormat, table_format
+from perchd.campaign.flights import COLUMNS, FlightRow, FlightSpec, summarize
+from perchd.campaign.tableformats import TableFormat, table_format
 
 
 def digest(obj: Any) -> str:

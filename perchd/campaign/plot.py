@@ -1,4 +1,4 @@
-"""A campaign's figures from its table's rows (perchd.sim.campaign.FlightRow): contact
+"""A campaign's figures from its table's rows (perchd.campaign.flights.FlightRow): contact
 speed against the contact window, perch-time error, outcome counts, and the worst flights'
 parameters. matplotlib is imported here, lazily, through perchd.core.extras (extra "plot")."""
 
