@@ -42,10 +42,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from perchd.campaign.familyrun import FamilyRow, fly_member
 from perchd.flight.config import FlightConfig
 from perchd.session import open_session
 from perchd.sim.family import FamilyVehicle, sample
-from perchd.campaign.familyrun import FamilyRow, fly_member
 from perchd.tau import load_plan
 from perchd.tau.plan import Plan
 

@@ -20,10 +20,10 @@ import statistics
 import time
 from pathlib import Path
 
-from perchd.flight.config import FlightConfig
 from perchd.campaign import flights as cp
 from perchd.campaign.batches import CampaignJob, fly_campaign, fly_unit
 from perchd.campaign.dask_engine import DaskEngine
+from perchd.flight.config import FlightConfig
 from perchd.tau import load_plan
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,7 +55,7 @@ def on_cluster(workers: int, job: CampaignJob, specs: list, repeat: int) -> dict
     engine = DaskEngine.start(None, workers)
     try:
         started_s = time.perf_counter() - t0
-        fly_campaign(job, specs[:2 * workers], engine, lambda rows: None)  # warm every worker
+        fly_campaign(job, specs[: 2 * workers], engine, lambda rows: None)  # warm every worker
         rates, cpu = [], []
         for _ in range(repeat):
             rows: list = []
@@ -66,9 +66,14 @@ def on_cluster(workers: int, job: CampaignJob, specs: list, repeat: int) -> dict
     finally:
         engine.close()
     rate = statistics.median(rates)
-    return {"workers": workers, "start_s": started_s, "flights_per_s": rate,
-            "per_core": rate / workers, "cpu_per_flight_s": statistics.median(cpu),
-            "runs": rates}
+    return {
+        "workers": workers,
+        "start_s": started_s,
+        "flights_per_s": rate,
+        "per_core": rate / workers,
+        "cpu_per_flight_s": statistics.median(cpu),
+        "runs": rates,
+    }
 
 
 def profile(job: CampaignJob, specs: list, top: int) -> None:
@@ -95,10 +100,12 @@ def main() -> None:
     found = [on_cluster(w, job, specs, args.repeat) for w in (1, 2)]
     for f in found:
         runs = " ".join(f"{r:.2f}" for r in f["runs"])
-        print(f"LocalCluster {f['workers']}: {f['flights_per_s']:.2f} flights/s = "
-              f"{f['per_core']:.2f} /core (target {TARGET_PER_CORE:g}); "
-              f"{f['cpu_per_flight_s'] * 1e3:.1f} ms CPU per flight in the worker; "
-              f"cluster up in {f['start_s']:.1f} s; runs {runs}")
+        print(
+            f"LocalCluster {f['workers']}: {f['flights_per_s']:.2f} flights/s = "
+            f"{f['per_core']:.2f} /core (target {TARGET_PER_CORE:g}); "
+            f"{f['cpu_per_flight_s'] * 1e3:.1f} ms CPU per flight in the worker; "
+            f"cluster up in {f['start_s']:.1f} s; runs {runs}"
+        )
     ratio = found[1]["flights_per_s"] / found[0]["flights_per_s"]
     print(f"2 workers / 1: {ratio:.2f}x (target >= {TARGET_RATIO:g})")
 

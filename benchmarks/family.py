@@ -28,9 +28,9 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from perchd.campaign.familyrun import PARAMETERS, FamilyRow, fly_member
 from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
 from perchd.sim.family import FAMILY, FamilyVehicle, sample
-from perchd.campaign.familyrun import PARAMETERS, FamilyRow, fly_member
 from perchd.tau import load_plan
 from perchd.tau.plan import Plan
 
@@ -44,8 +44,11 @@ def base_config(plan_path: Path, plan: Plan) -> FlightConfig:
     if plan.robust is not None:
         return FlightConfig(trigger=TriggerConfig(policy=TriggerPolicy.ROBUST))
     library = plan_path.parent / "libraries" / plan_path.name
-    return FlightConfig(trigger=TriggerConfig(
-        policy=TriggerPolicy.REPLAN, library=str(library) if library.exists() else None))
+    return FlightConfig(
+        trigger=TriggerConfig(
+            policy=TriggerPolicy.REPLAN, library=str(library) if library.exists() else None
+        )
+    )
 
 
 def _fly(job: tuple[Plan, FlightConfig, FamilyVehicle, str]) -> FamilyRow:
@@ -53,8 +56,9 @@ def _fly(job: tuple[Plan, FlightConfig, FamilyVehicle, str]) -> FamilyRow:
     return fly_member(plan, member, base, Path(log_dir) / f"member-{member.index:05d}.jsonl")
 
 
-def fly_all(plan: Plan, base: FlightConfig, members: list[FamilyVehicle],
-            jobs: int) -> Iterator[FamilyRow]:
+def fly_all(
+    plan: Plan, base: FlightConfig, members: list[FamilyVehicle], jobs: int
+) -> Iterator[FamilyRow]:
     """Rows in member order; `jobs` processes fed in chunks."""
     with tempfile.TemporaryDirectory(prefix="perchd-family-") as logs:
         work = [(plan, base, m, logs) for m in members]
@@ -89,8 +93,12 @@ def thirds(name: str, rows: list[FamilyRow]) -> dict[str, float | None]:
     low = [r for r in rows if place[id(r)] < 1 / 3]
     high = [r for r in rows if place[id(r)] > 2 / 3]
     rate = lambda rs, key: 100.0 * sum(getattr(r, key) for r in rs) / len(rs) if rs else None  # noqa: E731
-    return {"in_window_low": rate(low, "in_window"), "in_window_high": rate(high, "in_window"),
-            "on_time_low": rate(low, "on_time"), "on_time_high": rate(high, "on_time")}
+    return {
+        "in_window_low": rate(low, "in_window"),
+        "in_window_high": rate(high, "in_window"),
+        "on_time_low": rate(low, "on_time"),
+        "on_time_high": rate(high, "on_time"),
+    }
 
 
 def summarize(rows: list[FamilyRow], wall_s: float) -> dict:
@@ -99,7 +107,8 @@ def summarize(rows: list[FamilyRow], wall_s: float) -> dict:
     errs = sorted(r.perch_error_pct for r in rows if r.perch_error_pct is not None)
     misses = [r for r in rows if not (r.in_window and r.on_time)]
     return {
-        "vehicles": n, "in_window": sum(r.in_window for r in rows),
+        "vehicles": n,
+        "in_window": sum(r.in_window for r in rows),
         "in_window_pct": 100.0 * sum(r.in_window for r in rows) / n,
         "on_time": sum(r.on_time for r in rows),
         "on_time_pct": 100.0 * sum(r.on_time for r in rows) / n,
@@ -109,7 +118,8 @@ def summarize(rows: list[FamilyRow], wall_s: float) -> dict:
         "perch_error_pct": _quantiles(errs),
         "misses": len(misses),
         "by_third": {p: thirds(p, rows) for p in PARAMETERS},
-        "wall_s": wall_s, "flights_per_s": n / wall_s if wall_s > 0 else None,
+        "wall_s": wall_s,
+        "flights_per_s": n / wall_s if wall_s > 0 else None,
     }
 
 
@@ -122,34 +132,49 @@ def _quantiles(xs: list[float]) -> dict[str, float] | None:
 
 
 def print_table(s: dict, worst: list[FamilyRow], out=sys.stdout) -> None:
-    q = lambda d, f: " / ".join(format(d[k], f) for k in ("min", "p5", "median", "p95", "max")) \
-        if d else "-"  # noqa: E731
+    def q(d: dict, f: str) -> str:
+        return (
+            " / ".join(format(d[k], f) for k in ("min", "p5", "median", "p95", "max")) if d else "-"
+        )
+
     print(f"vehicles                       {s['vehicles']}", file=out)
-    print(f"CONTACT in the window          {s['in_window']} ({s['in_window_pct']:.1f} %, "
-          f"target >= {TARGETS['in_window_pct']:g} %)", file=out)
-    print(f"perch time within +-3 %        {s['on_time']} ({s['on_time_pct']:.1f} %, "
-          f"target >= {TARGETS['on_time_pct']:g} %)", file=out)
+    print(
+        f"CONTACT in the window          {s['in_window']} ({s['in_window_pct']:.1f} %, "
+        f"target >= {TARGETS['in_window_pct']:g} %)",
+        file=out,
+    )
+    print(
+        f"perch time within +-3 %        {s['on_time']} ({s['on_time_pct']:.1f} %, "
+        f"target >= {TARGETS['on_time_pct']:g} %)",
+        file=out,
+    )
     print(f"unstable endings               {s['unstable']} (target 0)", file=out)
-    print("outcomes                       " +
-          ", ".join(f"{k} {v}" for k, v in s["outcomes"].items()), file=out)
-    print(f"contact speed [m/s]            {q(s['contact_speed_mps'], '.3f')} "
-          "(min / p5 / median / p95 / max)", file=out)
+    print(
+        "outcomes                       " + ", ".join(f"{k} {v}" for k, v in s["outcomes"].items()),
+        file=out,
+    )
+    print(
+        f"contact speed [m/s]            {q(s['contact_speed_mps'], '.3f')} "
+        "(min / p5 / median / p95 / max)",
+        file=out,
+    )
     print(f"perch time - plan [%]          {q(s['perch_error_pct'], '+.2f')}", file=out)
-    print(f"flights/s                      {s['flights_per_s']:.2f} ({s['wall_s']:.0f} s)",
-          file=out)
+    print(
+        f"flights/s                      {s['flights_per_s']:.2f} ({s['wall_s']:.0f} s)", file=out
+    )
     print(f"misses (outside the window or off time): {s['misses']}", file=out)
     print_thirds(s["by_third"], out)
     print_worst(worst, out)
 
 
 def print_thirds(by_third: dict, out=sys.stdout) -> None:
-    print("rates [%] in the lower / upper third of each range:  in window  |  on time",
-          file=out)
+    print("rates [%] in the lower / upper third of each range:  in window  |  on time", file=out)
     for name, t in by_third.items():
-        cells = [_fmt(t[k], ".1f") for k in ("in_window_low", "in_window_high",
-                                             "on_time_low", "on_time_high")]
-        print(f"  {name:<18} {cells[0]:>6} / {cells[1]:<6} | {cells[2]:>6} / {cells[3]}",
-              file=out)
+        cells = [
+            _fmt(t[k], ".1f")
+            for k in ("in_window_low", "in_window_high", "on_time_low", "on_time_high")
+        ]
+        print(f"  {name:<18} {cells[0]:>6} / {cells[1]:<6} | {cells[2]:>6} / {cells[3]}", file=out)
 
 
 def print_worst(worst: list[FamilyRow], out=sys.stdout) -> None:
@@ -158,8 +183,13 @@ def print_worst(worst: list[FamilyRow], out=sys.stdout) -> None:
     print("worst ten:", file=out)
     print(" ".join(f"{h:>{w}}" for h, w in zip(heads, widths, strict=True)), file=out)
     for r in worst:
-        cells = (r.index, r.outcome, _fmt(r.contact_speed), _fmt(r.perch_error_pct),
-                 *(_fmt(getattr(r, p)) for p in PARAMETERS))
+        cells = (
+            r.index,
+            r.outcome,
+            _fmt(r.contact_speed),
+            _fmt(r.perch_error_pct),
+            *(_fmt(getattr(r, p)) for p in PARAMETERS),
+        )
         print(" ".join(f"{c:>{w}}" for c, w in zip(cells, widths, strict=True)), file=out)
 
 
@@ -186,9 +216,12 @@ def main() -> int:
     s = summarize(rows, time.perf_counter() - t0)
     print_table(s, sorted(rows, key=badness)[:10])
     if args.json:
-        args.json.write_text(json.dumps({"command": sys.argv, "summary": s,
-                                         "rows": [dataclasses.asdict(r) for r in rows]},
-                                        indent=1))
+        args.json.write_text(
+            json.dumps(
+                {"command": sys.argv, "summary": s, "rows": [dataclasses.asdict(r) for r in rows]},
+                indent=1,
+            )
+        )
     return 0
 
 

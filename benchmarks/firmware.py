@@ -61,12 +61,15 @@ SIM_SPEED = os.environ.get("PERCHD_PX4_SIM_SPEED", "1.015")
 """SIH's speed factor: on this 2-core machine its lockstep clock ran at 0.984-0.990 of the
 wall clock at 1 (with the harness's fine timer slack), 0.992-1.005 at 1.015; the summary
 prints the rate each flight reached (docs/firmware.md, "PX4 SIH")."""
-PX4_CONFIG = """version = 1
+PX4_CONFIG = (
+    """version = 1
 [vehicle]
 mass_kg = 1.0
 thrust_min_n = 2.0
 thrust_max_n = 18.0
-""" + STALE
+"""
+    + STALE
+)
 """SIH's quadrotor (1 kg, 4 x 5 N)."""
 
 
@@ -84,17 +87,36 @@ class Firmware:
 
 
 FIRMWARES = (
-    Firmware("cf2", "PERCHD_CF2", "--cf2", ("--link", "udp://127.0.0.1:0"),
-             config="version = 1\n" + STALE),
-    Firmware("arducopter", "PERCHD_ARDUCOPTER", "--arducopter",
-             config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text()),  # has it
-    Firmware("px4", "PERCHD_PX4", "--px4", ("--ahead", "4.5", "--heading", HEADING_DEG,
-                                            "--sim-speed", SIM_SPEED), config=PX4_CONFIG),
+    Firmware(
+        "cf2",
+        "PERCHD_CF2",
+        "--cf2",
+        ("--link", "udp://127.0.0.1:0"),
+        config="version = 1\n" + STALE,
+    ),
+    Firmware(
+        "arducopter",
+        "PERCHD_ARDUCOPTER",
+        "--arducopter",
+        config=(ROOT / "tests" / "firmware" / "arducopter-3kg.toml").read_text(),
+    ),  # has it
+    Firmware(
+        "px4",
+        "PERCHD_PX4",
+        "--px4",
+        ("--ahead", "4.5", "--heading", HEADING_DEG, "--sim-speed", SIM_SPEED),
+        config=PX4_CONFIG,
+    ),
     # PX4's other start: on the ground, GPS off, EKF2 on the mocap perchd forwards;
     # perchd arms and takes off. The same 1.5 m run-up to x0 as in the air (with 4.5 m,
     # 4 of 10 reached x0 0.11-0.2 m/s fast and the trigger refused: docs/firmware.md).
-    Firmware("px4-ground", "PERCHD_PX4", "--px4", ("--vision", "--ahead", "4.5",
-                                                   "--sim-speed", SIM_SPEED), config=PX4_CONFIG),
+    Firmware(
+        "px4-ground",
+        "PERCHD_PX4",
+        "--px4",
+        ("--vision", "--ahead", "4.5", "--sim-speed", SIM_SPEED),
+        config=PX4_CONFIG,
+    ),
 )
 
 
@@ -109,26 +131,44 @@ def driver_uri(ready: str) -> str:
 def start_harness(fw: Firmware, binary: str, noise: float, tmp: Path):
     """`perchd sim firmware`: its process, mocap URI, driver URI and surface options."""
     from fwharness import start_placed
+
     instance = ("--instance", INSTANCE) if INSTANCE and fw.name != "cf2" else ()
     proc, mocap, driver, surface = start_placed(
-        fw.flag, binary, *fw.extra, *instance, "--noise", str(noise), "--fw-log",
-        str(tmp / "fw.log"), env=ENV)
+        fw.flag,
+        binary,
+        *fw.extra,
+        *instance,
+        "--noise",
+        str(noise),
+        "--fw-log",
+        str(tmp / "fw.log"),
+        env=ENV,
+    )
     return proc, mocap, driver_uri(driver), surface
 
 
 def stop_harness(proc: subprocess.Popen) -> dict:
     from fwharness import stop_harness as stop
+
     return stop(proc, 30.0)
 
 
 def lag_event(log: Path) -> dict:
     from fwharness import lag_event as event
+
     return event(log)
 
 
-def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str],
-             config_add: str = "", driver_add: str = "", state: Path | None = None
-             ) -> list[str]:
+def fly_argv(
+    fw: Firmware,
+    tmp: Path,
+    mocap: str,
+    driver: str,
+    surface: list[str],
+    config_add: str = "",
+    driver_add: str = "",
+    state: Path | None = None,
+) -> list[str]:
     """`perchd fly` against a started harness, as a user flies it; its flight log is
     tmp/flight.jsonl. config_add: TOML appended to the flight config; driver_add: URI
     parameters appended to the driver's; state: the vehicle profile shared by the flights,
@@ -139,41 +179,74 @@ def fly_argv(fw: Firmware, tmp: Path, mocap: str, driver: str, surface: list[str
     if fw.config is not None or config_add.strip():
         (tmp / "flight.toml").write_text((fw.config or "version = 1\n") + config_add)
         config = ["--config", str(tmp / "flight.toml")]
-    return [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
-            mocap, *config, *surface, "--log", str(tmp / "flight.jsonl"),
-            "--state", str(state or tmp / "vehicle.json"),
-            *(("--vehicle", fw.name) if state else ()), "--json"]
+    return [
+        sys.executable,
+        "-m",
+        "perchd",
+        "fly",
+        str(PLAN),
+        "--driver",
+        driver,
+        "--mocap",
+        mocap,
+        *config,
+        *surface,
+        "--log",
+        str(tmp / "flight.jsonl"),
+        "--state",
+        str(state or tmp / "vehicle.json"),
+        *(("--vehicle", fw.name) if state else ()),
+        "--json",
+    ]
 
 
-def fly_firmware(fw: Firmware, binary: str, noise: float, seed: int, tmp: Path,
-                 config_add: str = "", driver_add: str = "", state: Path | None = None
-                 ) -> dict:
+def fly_firmware(
+    fw: Firmware,
+    binary: str,
+    noise: float,
+    seed: int,
+    tmp: Path,
+    config_add: str = "",
+    driver_add: str = "",
+    state: Path | None = None,
+) -> dict:
     proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
     from fwharness import YawWatch, first_event, flight_window, heading_error
+
     watch = YawWatch(mocap)
     try:
-        done = subprocess.run(fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add,
-                                       state),
-                              check=False,
-                              capture_output=True, text=True, timeout=180, env=ENV)
+        done = subprocess.run(
+            fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add, state),
+            check=False,
+            capture_output=True,
+            text=True,
+            timeout=180,
+            env=ENV,
+        )
     finally:
         watch.close()
         sim = stop_harness(proc)
-    fly = json.loads(done.stdout) if done.stdout.strip() else {
-        "outcome": "NO_RESULT", "detail": done.stderr.strip()[-300:]}
+    fly = (
+        json.loads(done.stdout)
+        if done.stdout.strip()
+        else {"outcome": "NO_RESULT", "detail": done.stderr.strip()[-300:]}
+    )
     yaws = watch.between(*flight_window(tmp / "flight.jsonl"))
     heading = sim.get("start_heading_rad")
     heading = yaws[0] if heading is None and yaws else heading or 0.0
     return {
-        "outcome": fly["outcome"], "detail": fly.get("detail"),
+        "outcome": fly["outcome"],
+        "detail": fly.get("detail"),
         "contact_speed": (sim.get("contact") or {}).get("speed"),
-        "agent_contact_speed": fly.get("contact_speed"), "perch_time": fly.get("perch_time"),
+        "agent_contact_speed": fly.get("contact_speed"),
+        "perch_time": fly.get("perch_time"),
         "trigger_v": (fly.get("trigger") or {}).get("v"),
         "yaw_dev_deg": math.degrees(heading_error(yaws, heading)) if yaws else None,
         "lag": lag_event(tmp / "flight.jsonl"),
         "stage2": first_event(tmp / "flight.jsonl", "bias-refit"),
         "sim_clock_rate": sim.get("sim_clock_rate"),
-        "attitude_push": sim.get("attitude_push_mps2")}
+        "attitude_push": sim.get("attitude_push_mps2"),
+    }
 
 
 def fly_sim(noise: float, seed: int, tmp: Path) -> dict:
@@ -182,10 +255,16 @@ def fly_sim(noise: float, seed: int, tmp: Path) -> dict:
     from simflight import Sim
 
     from perchd.tau.planfile import load_plan
+
     res = Sim(f"sim://?noise={noise}&seed={seed}").fly(load_plan(PLAN), tmp / "sim.jsonl")
-    return {"outcome": res.outcome.name, "contact_speed": res.true_contact_speed,
-            "perch_time": res.true_perch_time, "trigger_v": res.trigger and res.trigger.v,
-            "yaw_dev_deg": 0.0, "lag": lag_event(tmp / "sim.jsonl")}
+    return {
+        "outcome": res.outcome.name,
+        "contact_speed": res.true_contact_speed,
+        "perch_time": res.true_perch_time,
+        "trigger_v": res.trigger and res.trigger.v,
+        "yaw_dev_deg": 0.0,
+        "lag": lag_event(tmp / "sim.jsonl"),
+    }
 
 
 def summary(flights: list[dict], plan: dict) -> dict:
@@ -201,24 +280,30 @@ def summary(flights: list[dict], plan: dict) -> dict:
     pushes = [f["attitude_push"] for f in flights if f.get("attitude_push") is not None]
     med = statistics.median
     return {
-        "flights": len(flights), "perched": len(ok),
+        "flights": len(flights),
+        "perched": len(ok),
         "in_window": sum(lo <= s <= hi for s in speeds),
-        "on_target": sum(lo <= s <= hi and abs(s - plan["v_contact"]) <= CONTACT_TOL_MPS
-                         for s in speeds),
+        "on_target": sum(
+            lo <= s <= hi and abs(s - plan["v_contact"]) <= CONTACT_TOL_MPS for s in speeds
+        ),
         "outcomes": sorted({f["outcome"] for f in flights}),
         "contact_median": med(speeds) if speeds else None,
-        "contact_min": min(speeds, default=None), "contact_max": max(speeds, default=None),
+        "contact_min": min(speeds, default=None),
+        "contact_max": max(speeds, default=None),
         "contact_err_maxabs": max((abs(s - plan["v_contact"]) for s in speeds), default=None),
         "perch_time_median": med(times) if times else None,
         "perch_time_err_pct": 100 * (med(times) / plan["duration"] - 1) if times else None,
-        "perch_time_err_pct_maxabs": max((100 * abs(t / plan["duration"] - 1) for t in times),
-                                         default=None),
+        "perch_time_err_pct_maxabs": max(
+            (100 * abs(t / plan["duration"] - 1) for t in times), default=None
+        ),
         "yaw_dev_deg_max": max(yaws, default=None),
         "trigger_v_err_median": med(trig) if trig else None,
         "trigger_v_err_maxabs": max(map(abs, trig), default=None),
-        "lag_s": [round(x, 3) for x in lags], "drag_per_s": [round(x, 3) for x in drags],
+        "lag_s": [round(x, 3) for x in lags],
+        "drag_per_s": [round(x, 3) for x in drags],
         "sim_clock_rate": [round(x, 4) for x in rates],
-        "attitude_push_mps2": [round(x, 3) for x in pushes]}
+        "attitude_push_mps2": [round(x, 3) for x in pushes],
+    }
 
 
 def fmt(v, spec: str) -> str:
@@ -226,34 +311,43 @@ def fmt(v, spec: str) -> str:
 
 
 def print_row(name: str, s: dict, plan: dict) -> None:
-    print(f"  {name:9s} perched {s['perched']}/{s['flights']} (in window {s['in_window']}, "
-          f"on target {s['on_target']}); "
-          f"contact {fmt(s['contact_median'], '.3f')} [{fmt(s['contact_min'], '.3f')}.."
-          f"{fmt(s['contact_max'], '.3f')}] vs {plan['v_contact']:.3f} m/s "
-          f"(max |err| {fmt(s['contact_err_maxabs'], '.3f')}); perch time "
-          f"{fmt(s['perch_time_median'], '.3f')} s vs {plan['duration']:.4f} s "
-          f"({fmt(s['perch_time_err_pct'], '+.2f')} %, max |err| "
-          f"{fmt(s['perch_time_err_pct_maxabs'], '.2f')} %); yaw within "
-          f"{fmt(s['yaw_dev_deg_max'], '.2f')} deg; trigger v err median "
-          f"{fmt(s['trigger_v_err_median'], '+.3f')} (max |err| "
-          f"{fmt(s['trigger_v_err_maxabs'], '.3f')}) m/s")
+    print(
+        f"  {name:9s} perched {s['perched']}/{s['flights']} (in window {s['in_window']}, "
+        f"on target {s['on_target']}); "
+        f"contact {fmt(s['contact_median'], '.3f')} [{fmt(s['contact_min'], '.3f')}.."
+        f"{fmt(s['contact_max'], '.3f')}] vs {plan['v_contact']:.3f} m/s "
+        f"(max |err| {fmt(s['contact_err_maxabs'], '.3f')}); perch time "
+        f"{fmt(s['perch_time_median'], '.3f')} s vs {plan['duration']:.4f} s "
+        f"({fmt(s['perch_time_err_pct'], '+.2f')} %, max |err| "
+        f"{fmt(s['perch_time_err_pct_maxabs'], '.2f')} %); yaw within "
+        f"{fmt(s['yaw_dev_deg_max'], '.2f')} deg; trigger v err median "
+        f"{fmt(s['trigger_v_err_median'], '+.3f')} (max |err| "
+        f"{fmt(s['trigger_v_err_maxabs'], '.3f')}) m/s"
+    )
     if s["lag_s"]:
-        print(f"            identified lag {min(s['lag_s'])}..{max(s['lag_s'])} s, drag "
-              f"{min(s['drag_per_s'])}..{max(s['drag_per_s'])} 1/s")
+        print(
+            f"            identified lag {min(s['lag_s'])}..{max(s['lag_s'])} s, drag "
+            f"{min(s['drag_per_s'])}..{max(s['drag_per_s'])} 1/s"
+        )
     if s["sim_clock_rate"]:
-        print(f"            simulation clock {min(s['sim_clock_rate'])}.."
-              f"{max(s['sim_clock_rate'])} s per wall-clock s")
+        print(
+            f"            simulation clock {min(s['sim_clock_rate'])}.."
+            f"{max(s['sim_clock_rate'])} s per wall-clock s"
+        )
     if s["attitude_push_mps2"]:
-        print(f"            the autopilot's attitude estimate's push in stage 2 "
-              f"{min(s['attitude_push_mps2'])}..{max(s['attitude_push_mps2'])} m/s^2")
+        print(
+            f"            the autopilot's attitude estimate's push in stage 2 "
+            f"{min(s['attitude_push_mps2'])}..{max(s['attitude_push_mps2'])} m/s^2"
+        )
     if set(s["outcomes"]) - {"CONTACT"}:
         print(f"            outcomes: {', '.join(s['outcomes'])}")
 
 
 def add_selection(ap: argparse.ArgumentParser, what: str) -> None:
     """--only, --keep and --json, as every firmware benchmark takes them."""
-    ap.add_argument("--only", nargs="*", choices=[f.name for f in FIRMWARES],
-                    help="these firmwares only")
+    ap.add_argument(
+        "--only", nargs="*", choices=[f.name for f in FIRMWARES], help="these firmwares only"
+    )
     ap.add_argument("--keep", metavar="DIR", help=f"keep each {what}'s logs under DIR")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -276,23 +370,37 @@ def main() -> int:
     ap.add_argument("--flights", type=int, default=10, help="flights per firmware (10)")
     ap.add_argument("--noise", type=float, default=0.001, help="[m] mocap noise std (0.001)")
     add_selection(ap, "flight")
-    ap.add_argument("--config-add", default="", metavar="TOML",
-                    help="TOML tables appended to every firmware flight's config, e.g. "
-                         "'[tau_gains]\\npredict = false' (the sim:// flights keep the default)")
-    ap.add_argument("--driver-add", default="", metavar="PARAMS",
-                    help="URI parameters appended to every firmware flight's driver, "
-                         "e.g. 'tilt=0'")
-    ap.add_argument("--fresh-state", action="store_true",
-                    help="every flight a vehicle flown for the first time (default: one "
-                         "vehicle profile per firmware, empty at its first flight)")
+    ap.add_argument(
+        "--config-add",
+        default="",
+        metavar="TOML",
+        help="TOML tables appended to every firmware flight's config, e.g. "
+        "'[tau_gains]\\npredict = false' (the sim:// flights keep the default)",
+    )
+    ap.add_argument(
+        "--driver-add",
+        default="",
+        metavar="PARAMS",
+        help="URI parameters appended to every firmware flight's driver, e.g. 'tilt=0'",
+    )
+    ap.add_argument(
+        "--fresh-state",
+        action="store_true",
+        help="every flight a vehicle flown for the first time (default: one "
+        "vehicle profile per firmware, empty at its first flight)",
+    )
     args = ap.parse_args()
     if args.flights < 1 or not 0.0 <= args.noise <= 0.1:
-        print("benchmarks/firmware.py: --flights must be >= 1 and --noise 0..0.1 m",
-              file=sys.stderr)
+        print(
+            "benchmarks/firmware.py: --flights must be >= 1 and --noise 0..0.1 m", file=sys.stderr
+        )
         return 2
     plan = json.loads(PLAN.read_text())
-    out: dict = {"plan": {"duration": plan["duration"], "v_contact": plan["v_contact"],
-                          "v0": plan["v0"]}, "noise_m": args.noise, "firmwares": {}}
+    out: dict = {
+        "plan": {"duration": plan["duration"], "v_contact": plan["v_contact"], "v0": plan["v0"]},
+        "noise_m": args.noise,
+        "firmwares": {},
+    }
     root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="perchd-fwbench-"))
     for fw, binary in selected(args.only):
         runs: dict[str, list[dict]] = {"firmware": [], "sim": []}
@@ -302,24 +410,40 @@ def main() -> int:
         for i in range(args.flights):
             tmp = root / fw.name / str(i)
             tmp.mkdir(parents=True, exist_ok=True)
-            runs["firmware"].append(fly_firmware(fw, binary, args.noise, i, tmp,
-                                                 args.config_add.replace("\\n", "\n") + "\n",
-                                                 args.driver_add, state))
+            runs["firmware"].append(
+                fly_firmware(
+                    fw,
+                    binary,
+                    args.noise,
+                    i,
+                    tmp,
+                    args.config_add.replace("\\n", "\n") + "\n",
+                    args.driver_add,
+                    state,
+                )
+            )
             runs["sim"].append(fly_sim(args.noise, i, tmp))
             if not args.json:
                 f = runs["firmware"][-1]
-                print(f"{fw.name} flight {i + 1}: {f['outcome']} contact "
-                      f"{fmt(f['contact_speed'], '.3f')} m/s, perch time "
-                      f"{fmt(f['perch_time'], '.3f')} s, lag {fmt(f['lag'].get('lag_s'), '.3f')} s "
-                      f"drag {fmt(f['lag'].get('drag_per_s'), '.3f')} 1/s, stage 1's push "
-                      f"{fmt(f['stage2'].get('departure_mps2'), '+.3f')} m/s^2", file=sys.stderr)
+                print(
+                    f"{fw.name} flight {i + 1}: {f['outcome']} contact "
+                    f"{fmt(f['contact_speed'], '.3f')} m/s, perch time "
+                    f"{fmt(f['perch_time'], '.3f')} s, lag {fmt(f['lag'].get('lag_s'), '.3f')} s "
+                    f"drag {fmt(f['lag'].get('drag_per_s'), '.3f')} 1/s, stage 1's push "
+                    f"{fmt(f['stage2'].get('departure_mps2'), '+.3f')} m/s^2",
+                    file=sys.stderr,
+                )
         out["firmwares"][fw.name] = {
-            "load_avg": os.getloadavg(), "firmware": summary(runs["firmware"], plan),
-            "sim": summary(runs["sim"], plan), "flights": runs}
+            "load_avg": os.getloadavg(),
+            "firmware": summary(runs["firmware"], plan),
+            "sim": summary(runs["sim"], plan),
+            "flights": runs,
+        }
         if not args.json:
             res = out["firmwares"][fw.name]
-            print(f"{fw.name} (load average {res['load_avg'][0]:.2f}, mocap noise "
-                  f"{args.noise:g} m):")
+            print(
+                f"{fw.name} (load average {res['load_avg'][0]:.2f}, mocap noise {args.noise:g} m):"
+            )
             print_row("firmware", res["firmware"], plan)
             print_row("sim://", res["sim"], plan)
     if args.json:

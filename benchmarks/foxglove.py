@@ -27,22 +27,42 @@ sys.path.insert(0, str(ROOT / "tests" / "helpers"))
 from foxglove_client import serving_url, watch  # noqa: E402
 from svc import PLAN, SimProcess  # noqa: E402
 
-FIGURES = (("agent_median_s", 1e6, "agent tick median [us]"),
-           ("agent_p99_s", 1e6, "agent tick p99 [us]"),
-           ("compute_median_s", 1e6, "whole tick median [us]"),
-           ("compute_p99_s", 1e6, "whole tick p99 [us]"),
-           ("jitter_p99_s", 1e6, "start jitter p99 [us]"),
-           ("overruns", 1, "overruns per flight"),
-           ("cpu_fraction", 100, "agent process CPU [%]"))
+FIGURES = (
+    ("agent_median_s", 1e6, "agent tick median [us]"),
+    ("agent_p99_s", 1e6, "agent tick p99 [us]"),
+    ("compute_median_s", 1e6, "whole tick median [us]"),
+    ("compute_p99_s", 1e6, "whole tick p99 [us]"),
+    ("jitter_p99_s", 1e6, "start jitter p99 [us]"),
+    ("overruns", 1, "overruns per flight"),
+    ("cpu_fraction", 100, "agent process CPU [%]"),
+)
 
 
 def fly(sim: SimProcess, log: Path, view: bool) -> tuple[dict, int]:
     """One perch: (its --json loop summary, messages a subscribed client received)."""
     extra = ["--foxglove", "127.0.0.1:0"] if view else []
-    proc = subprocess.Popen([sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver",
-                             sim.driver, "--mocap", sim.mocap, "--log", str(log), "--force",
-                             "--json", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=ROOT)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "fly",
+            str(PLAN),
+            "--driver",
+            sim.driver,
+            "--mocap",
+            sim.mocap,
+            "--log",
+            str(log),
+            "--force",
+            "--json",
+            *extra,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
     got: list = []
     if view:
         url = serving_url(proc)
@@ -70,20 +90,32 @@ def measure(flights: int) -> dict:
                 runs[mode].append(loop)
                 if mode == "on":
                     received.append(n)
-    return {"flights": flights, "load_before": load, "load_after": os.getloadavg(),
-            "messages_received_median": statistics.median(received),
-            **{mode: {key: statistics.median(r[key] for r in loops) * scale
-                      for key, scale, _ in FIGURES} for mode, loops in runs.items()}}
+    return {
+        "flights": flights,
+        "load_before": load,
+        "load_after": os.getloadavg(),
+        "messages_received_median": statistics.median(received),
+        **{
+            mode: {
+                key: statistics.median(r[key] for r in loops) * scale for key, scale, _ in FIGURES
+            }
+            for mode, loops in runs.items()
+        },
+    }
 
 
 def text(fig: dict) -> str:
-    lines = [f"{fig['flights']} real-time perches per mode; load average before "
-             f"{fig['load_before'][0]:.2f}, after {fig['load_after'][0]:.2f}",
-             f"{'median over flights':<26} {'no view':>10} {'--foxglove':>11}"]
+    lines = [
+        f"{fig['flights']} real-time perches per mode; load average before "
+        f"{fig['load_before'][0]:.2f}, after {fig['load_after'][0]:.2f}",
+        f"{'median over flights':<26} {'no view':>10} {'--foxglove':>11}",
+    ]
     for key, _, label in FIGURES:
         lines.append(f"{label:<26} {fig['off'][key]:>10.1f} {fig['on'][key]:>11.1f}")
-    lines.append(f"messages received by the subscribed client per flight: "
-                 f"{fig['messages_received_median']:.0f}")
+    lines.append(
+        f"messages received by the subscribed client per flight: "
+        f"{fig['messages_received_median']:.0f}"
+    )
     return "\n".join(lines)
 
 

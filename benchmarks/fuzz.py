@@ -73,7 +73,13 @@ from mutate import NASTY_TOKENS, NUMBER  # noqa: E402
 
 FIXTURES = ROOT / "tests" / "fixtures" / "natnet"
 OLD_MOTIVE = {"1.5.0": (2, 5), "1.7.2": (2, 7), "1.9.0": (2, 9)}  # NatNet of each Motive 1.x
-EXTREME_WORDS = [b"\xff\xff\xff\x7f", b"\0\0\0\x80", b"\0\0\0\0", b"\xff\xff\xff\xff", b"\x01\0\0\0"]
+EXTREME_WORDS = [
+    b"\xff\xff\xff\x7f",
+    b"\0\0\0\x80",
+    b"\0\0\0\0",
+    b"\xff\xff\xff\xff",
+    b"\x01\0\0\0",
+]
 
 
 @dataclass
@@ -99,11 +105,14 @@ class Tally:
         return self.inputs / self.seconds if self.seconds else 0.0
 
     def line(self, name: str, extra: str = "") -> str:
-        return (f"{name:14s} inputs {self.inputs:7d}  accepted {self.accepted:7d}  rejected "
-                f"{self.rejected:7d}  crashes {self.crashes}  {self.rate:9.0f} /s{extra}")
+        return (
+            f"{name:14s} inputs {self.inputs:7d}  accepted {self.accepted:7d}  rejected "
+            f"{self.rejected:7d}  crashes {self.crashes}  {self.rate:9.0f} /s{extra}"
+        )
 
 
 # ------------------------------------------------------------------ NatNet inputs
+
 
 def seeds() -> list[tuple[bytes, tuple[int, int]]]:
     """Every recorded server-to-client packet with the NatNet version it was sent in."""
@@ -125,11 +134,11 @@ def mutate(rng: random.Random, data: bytes) -> bytes:
         if kind == 0 and data:
             data[at] ^= 1 << rng.randrange(8)
         elif kind == 1:
-            del data[at:at + rng.randint(1, 64)]
+            del data[at : at + rng.randint(1, 64)]
         elif kind == 2:
             data[at:at] = rng.randbytes(rng.randint(1, 16))
         elif kind == 3:
-            data[at:at + 4] = rng.choice(EXTREME_WORDS)
+            data[at : at + 4] = rng.choice(EXTREME_WORDS)
         elif len(data) >= 4:  # the length field lies
             data[2:4] = rng.randrange(0x10000).to_bytes(2, "little")
     return bytes(data)
@@ -145,7 +154,9 @@ def natnet_chunks(seed: int, n: int):
         yield natnet_inputs(rng, pool, first, min(n, first + CHUNK))
 
 
-def natnet_inputs(rng: random.Random, pool, first: int, end: int) -> list[tuple[bytes, tuple[int, int]]]:
+def natnet_inputs(
+    rng: random.Random, pool, first: int, end: int
+) -> list[tuple[bytes, tuple[int, int]]]:
     out = []
     for i in range(first, end):
         if i % 5 == 4:  # one in five: random bytes, sometimes behind a valid frame header
@@ -274,8 +285,22 @@ def fuzz_udp(inputs) -> Tally:
 
 # ------------------------------------------------------------------ control lines
 
-HOSTILE_PLANS = ["../../../etc/passwd", "/etc/shadow", "/dev/zero", "/dev/stdin", "/proc/self/environ",
-                 "", ".", "..", "/", "a" * 4000, "x\0y", "~root/p.json", "*.json", "fifo"]
+HOSTILE_PLANS = [
+    "../../../etc/passwd",
+    "/etc/shadow",
+    "/dev/zero",
+    "/dev/stdin",
+    "/proc/self/environ",
+    "",
+    ".",
+    "..",
+    "/",
+    "a" * 4000,
+    "x\0y",
+    "~root/p.json",
+    "*.json",
+    "fifo",
+]
 GOOD = [b'{"cmd": "status"}', b'{"cmd": "abort"}', b'{"cmd": "status", "extra": [1, 2]}']
 
 
@@ -286,13 +311,15 @@ def random_json(rng: random.Random, depth: int = 0):
     if kind == 1:
         return rng.random() < 0.5
     if kind == 2:
-        return rng.choice([0, -1, 2 ** 64, 1e308, -1e-308, rng.randint(-10 ** 9, 10 ** 9)])
+        return rng.choice([0, -1, 2**64, 1e308, -1e-308, rng.randint(-(10**9), 10**9)])
     if kind == 3:
         return rng.uniform(-1e6, 1e6)
     if kind in (4, 5):
         return "".join(chr(rng.randrange(1, 0x2FF)) for _ in range(rng.randint(0, 12)))
     if kind in (6, 7):
-        return {str(rng.random())[2:6]: random_json(rng, depth + 1) for _ in range(rng.randint(0, 4))}
+        return {
+            str(rng.random())[2:6]: random_json(rng, depth + 1) for _ in range(rng.randint(0, 4))
+        }
     return [random_json(rng, depth + 1) for _ in range(rng.randint(0, 4))]
 
 
@@ -322,7 +349,9 @@ def control_line(rng: random.Random) -> bytes:
             req["plan"] = rng.choice(HOSTILE_PLANS + [random_json(rng)])
         return json.dumps(req).encode()
     if kind == 5:
-        return rng.choice([b"[" * 60000, b"{" * 1000, b'{"cmd":' * 3000, b"\xff\xfe\xfd", b"\0" * 64])
+        return rng.choice(
+            [b"[" * 60000, b"{" * 1000, b'{"cmd":' * 3000, b"\xff\xfe\xfd", b"\0" * 64]
+        )
     return rng.choice(GOOD)
 
 
@@ -375,11 +404,16 @@ class Service:
         os.mkfifo(self.dir / "plans" / "fifo")
         self.sock = self.dir / "control.sock"
         config = self.dir / "perchd.toml"
-        config.write_text(f'version = 1\n[service]\nsocket = "{self.sock}"\n'
-                          f'plan_dir = "{self.dir / "plans"}"\nlog_dir = "{self.dir / "logs"}"\n')
+        config.write_text(
+            f'version = 1\n[service]\nsocket = "{self.sock}"\n'
+            f'plan_dir = "{self.dir / "plans"}"\nlog_dir = "{self.dir / "logs"}"\n'
+        )
         self.log = open(self.dir / "stderr", "wb")
-        self.proc = subprocess.Popen([sys.executable, "-m", "perchd", "serve", "--config", str(config)],
-                                     stdout=subprocess.DEVNULL, stderr=self.log)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "perchd", "serve", "--config", str(config)],
+            stdout=subprocess.DEVNULL,
+            stderr=self.log,
+        )
         deadline = time.monotonic() + 30
         while not self.sock.exists():
             if self.proc.poll() is not None or time.monotonic() > deadline:
@@ -432,7 +466,7 @@ def fuzz_lines(rng: random.Random, n: int, batch: int = 25) -> tuple[Tally, int]
     start = time.perf_counter()
     try:
         for i in range(0, n, batch):
-            chunk = lines[i:i + batch]
+            chunk = lines[i : i + batch]
             try:
                 replies = service.exchange(chunk)
             except OSError as err:
@@ -464,6 +498,7 @@ def fuzz_lines(rng: random.Random, n: int, batch: int = 25) -> tuple[Tally, int]
 
 
 # ------------------------------------------------------------------ files
+
 
 def file_input(rng: random.Random, seeds: list[bytes]) -> bytes:
     kind = rng.randrange(5)
@@ -504,52 +539,77 @@ def fuzz_files(seed: int, n: int) -> dict[str, Tally]:
     from perchd.logs.flightlog import read_log
     from perchd.service.config import load_flight_config
     from perchd.tau.planfile import load_plan
+
     plans = [p.read_bytes() for p in sorted((ROOT / "plans").glob("*.json"))]
     configs = [(ROOT / "systemd" / "perchd.toml").read_bytes()]
     shm = "/dev/shm" if os.path.isdir("/dev/shm") else None  # the files, not the disk, are fuzzed
     with tempfile.TemporaryDirectory(prefix="perchd-fuzz-", dir=shm) as tmp:
         logs = [log_seed(Path(tmp) / "seed.jsonl")]
         (Path(tmp) / "seed.jsonl").unlink()
-        return {"plan file": fuzz_reader(random.Random(seed), n, plans, load_plan, Path(tmp) / "p.json"),
-                "config file": fuzz_reader(random.Random(seed + 1), n, configs, load_flight_config,
-                                           Path(tmp) / "perchd.toml"),
-                "log file": fuzz_reader(random.Random(seed + 2), n, logs, read_log, Path(tmp) / "f.jsonl")}
+        return {
+            "plan file": fuzz_reader(
+                random.Random(seed), n, plans, load_plan, Path(tmp) / "p.json"
+            ),
+            "config file": fuzz_reader(
+                random.Random(seed + 1), n, configs, load_flight_config, Path(tmp) / "perchd.toml"
+            ),
+            "log file": fuzz_reader(
+                random.Random(seed + 2), n, logs, read_log, Path(tmp) / "f.jsonl"
+            ),
+        }
 
 
 # ------------------------------------------------------------------ main
+
 
 def _without_rates(items) -> dict:
     return {k: v for k, v in items if k != "rates"}
 
 
-NOTES = {"natnet parser": "  (accepted = decoded, rejected = MalformedPacket)",
-         "natnet client": "  (accepted = poses, rejected = dropped)",
-         "natnet udp": "  (then a good pose still arrives)",
-         "control parse": "  (in-process: accepted = ok, rejected = error)",
-         "control lines": "  ({checks} status checks between batches)",
-         "plan file": "  (accepted = read, rejected = one-line PerchdError)",
-         "config file": "  (accepted = read, rejected = one-line PerchdError)",
-         "log file": "  (accepted = read, rejected = one-line PerchdError)"}
+NOTES = {
+    "natnet parser": "  (accepted = decoded, rejected = MalformedPacket)",
+    "natnet client": "  (accepted = poses, rejected = dropped)",
+    "natnet udp": "  (then a good pose still arrives)",
+    "control parse": "  (in-process: accepted = ok, rejected = error)",
+    "control lines": "  ({checks} status checks between batches)",
+    "plan file": "  (accepted = read, rejected = one-line PerchdError)",
+    "config file": "  (accepted = read, rejected = one-line PerchdError)",
+    "log file": "  (accepted = read, rejected = one-line PerchdError)",
+}
 
 
 def _network(args: argparse.Namespace) -> tuple[dict[str, Tally], int]:
-    results = {"natnet parser": fuzz_parser(natnet_chunks(args.seed, args.natnet)),
-               "natnet client": fuzz_client(natnet_chunks(args.seed, args.natnet)),
-               "natnet udp": fuzz_udp([x for c in natnet_chunks(args.seed, args.udp) for x in c]),
-               "control parse": fuzz_requests(random.Random(args.seed + 2), args.requests)}
+    results = {
+        "natnet parser": fuzz_parser(natnet_chunks(args.seed, args.natnet)),
+        "natnet client": fuzz_client(natnet_chunks(args.seed, args.natnet)),
+        "natnet udp": fuzz_udp([x for c in natnet_chunks(args.seed, args.udp) for x in c]),
+        "control parse": fuzz_requests(random.Random(args.seed + 2), args.requests),
+    }
     results["control lines"], checks = fuzz_lines(random.Random(args.seed + 1), args.lines)
     return results, checks
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--natnet", type=int, default=1_000_000, help="NatNet packets (default 1e6)")
-    parser.add_argument("--udp", type=int, default=100_000, help="of them also sent over UDP (default 1e5)")
-    parser.add_argument("--requests", type=int, default=1_000_000,
-                        help="control lines through the request handling in-process (default 1e6)")
+    parser.add_argument(
+        "--natnet", type=int, default=1_000_000, help="NatNet packets (default 1e6)"
+    )
+    parser.add_argument(
+        "--udp", type=int, default=100_000, help="of them also sent over UDP (default 1e5)"
+    )
+    parser.add_argument(
+        "--requests",
+        type=int,
+        default=1_000_000,
+        help="control lines through the request handling in-process (default 1e6)",
+    )
     parser.add_argument("--lines", type=int, default=100_000, help="control lines (default 1e5)")
-    parser.add_argument("--files", type=int, default=100_000,
-                        help="plan, config and flight-log files, each (default 1e5)")
+    parser.add_argument(
+        "--files",
+        type=int,
+        default=100_000,
+        help="plan, config and flight-log files, each (default 1e5)",
+    )
     parser.add_argument("--only-files", action="store_true", help="the file readers alone")
     parser.add_argument("--seed", type=int, default=8)
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
@@ -559,9 +619,19 @@ def main(argv: list[str] | None = None) -> int:
     results.update(fuzz_files(args.seed + 3, args.files))
     crashes = sum(t.crashes for t in results.values())
     if args.json:
-        print(json.dumps({"seed": args.seed, "crashes": crashes, "status_checks": checks,
-                          **{k: {**asdict(t, dict_factory=_without_rates), "rate": t.rate}
-                             for k, t in results.items()}}))
+        print(
+            json.dumps(
+                {
+                    "seed": args.seed,
+                    "crashes": crashes,
+                    "status_checks": checks,
+                    **{
+                        k: {**asdict(t, dict_factory=_without_rates), "rate": t.rate}
+                        for k, t in results.items()
+                    },
+                }
+            )
+        )
     else:
         print(f"fuzz, seed {args.seed}")
         for name, t in results.items():

@@ -51,7 +51,7 @@ def modes_after(sim: dict) -> list[str]:
     harness keeps them with their times)."""
     names = [m["mode"] if isinstance(m, dict) else m for m in sim.get("modes", [])]
     last = max((i for i, m in enumerate(names) if m in OFFBOARD_MODES), default=-1)
-    return names[last + 1:]
+    return names[last + 1 :]
 
 
 def motors_off_after(sim: dict, killed: float) -> float | None:
@@ -63,12 +63,17 @@ def motors_off_after(sim: dict, killed: float) -> float | None:
 
 def kill_once(fw: Firmware, binary: str, speed: float, tmp: Path) -> dict:
     from fwharness import YawWatch, after_kill, kill_at_speed, surface_normal
+
     proc, mocap, driver, surface = start_harness(fw, binary, NOISE_M, tmp)
     watch = YawWatch(mocap)
     try:
         with open(tmp / "fly.err", "w") as err:
-            fly = subprocess.Popen(fly_argv(fw, tmp, mocap, driver, surface), env=ENV,
-                                   stdout=subprocess.DEVNULL, stderr=err)
+            fly = subprocess.Popen(
+                fly_argv(fw, tmp, mocap, driver, surface),
+                env=ENV,
+                stdout=subprocess.DEVNULL,
+                stderr=err,
+            )
             killed = kill_at_speed(fly, tmp / "flight.jsonl", speed, 90.0)
             if killed is not None:
                 time.sleep(AFTER_S)
@@ -78,31 +83,43 @@ def kill_once(fw: Firmware, binary: str, speed: float, tmp: Path) -> dict:
     said = (tmp / "fly.err").read_text()
     if killed is None:
         return {"killed": False, "said": said[-300:]}
-    return {"killed": True, **after_kill(watch.positions, killed, surface_normal(surface)),
-            "modes_after": modes_after(sim), "motors_off_s": motors_off_after(sim, killed),
-            "sentinel": [ln.strip() for ln in said.splitlines() if "mavsentinel" in ln]}
+    return {
+        "killed": True,
+        **after_kill(watch.positions, killed, surface_normal(surface)),
+        "modes_after": modes_after(sim),
+        "motors_off_s": motors_off_after(sim, killed),
+        "sentinel": [ln.strip() for ln in said.splitlines() if "mavsentinel" in ln],
+    }
 
 
 def summary(kills: list[dict]) -> dict:
     done = [k for k in kills if k["killed"]]
     further = [k["further_toward_wall_m"] for k in done]
-    return {"kills": len(kills), "killed": len(done),
-            "within_target": sum(f <= TARGET_M for f in further),
-            "further_median_m": statistics.median(further) if further else None,
-            "further_max_m": max(further, default=None),
-            "speed_mps": [round(k["speed_at_kill_mps"], 2) for k in done],
-            "height_change_m": [round(k["final_height_m"] - k["height_at_kill_m"], 2)
-                                for k in done],
-            "ends": sorted({" > ".join(k["modes_after"]) or "-" for k in done}),
-            "motors_off_s": [round(k["motors_off_s"], 2) for k in done
-                             if k["motors_off_s"] is not None]}
+    return {
+        "kills": len(kills),
+        "killed": len(done),
+        "within_target": sum(f <= TARGET_M for f in further),
+        "further_median_m": statistics.median(further) if further else None,
+        "further_max_m": max(further, default=None),
+        "speed_mps": [round(k["speed_at_kill_mps"], 2) for k in done],
+        "height_change_m": [round(k["final_height_m"] - k["height_at_kill_m"], 2) for k in done],
+        "ends": sorted({" > ".join(k["modes_after"]) or "-" for k in done}),
+        "motors_off_s": [
+            round(k["motors_off_s"], 2) for k in done if k["motors_off_s"] is not None
+        ],
+    }
+
+
+def fmt(v: float | None) -> str:
+    return "-" if v is None else f"{v:.3f}"
 
 
 def print_row(name: str, s: dict) -> None:
-    fmt = lambda v: "-" if v is None else f"{v:.3f}"
-    print(f"{name}: killed {s['killed']}/{s['kills']} at {s['speed_mps']} m/s; further toward "
-          f"the wall {fmt(s['further_median_m'])} m median, {fmt(s['further_max_m'])} max "
-          f"({s['within_target']} within {TARGET_M} m); height change {s['height_change_m']} m")
+    print(
+        f"{name}: killed {s['killed']}/{s['kills']} at {s['speed_mps']} m/s; further toward "
+        f"the wall {fmt(s['further_median_m'])} m median, {fmt(s['further_max_m'])} max "
+        f"({s['within_target']} within {TARGET_M} m); height change {s['height_change_m']} m"
+    )
     if s["motors_off_s"]:
         print(f"    motors off {s['motors_off_s']} s after the kill")
     else:
@@ -112,13 +129,18 @@ def print_row(name: str, s: dict) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--kills", type=int, default=3, help="kills per firmware (3)")
-    ap.add_argument("--speed", type=float, default=0.5,
-                    help="[m/s] kill once the approach flies this fast toward the wall (0.5)")
+    ap.add_argument(
+        "--speed",
+        type=float,
+        default=0.5,
+        help="[m/s] kill once the approach flies this fast toward the wall (0.5)",
+    )
     add_selection(ap, "kill")
     args = ap.parse_args()
     if args.kills < 1 or not 0.1 <= args.speed <= 1.5:
-        print("benchmarks/fwkill.py: --kills must be >= 1 and --speed 0.1..1.5 m/s",
-              file=sys.stderr)
+        print(
+            "benchmarks/fwkill.py: --kills must be >= 1 and --speed 0.1..1.5 m/s", file=sys.stderr
+        )
         return 2
     root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="perchd-fwkill-"))
     out: dict = {"speed_mps": args.speed, "firmwares": {}}
@@ -128,8 +150,11 @@ def main() -> int:
             tmp = root / fw.name / str(i)
             tmp.mkdir(parents=True, exist_ok=True)
             kills.append(kill_once(fw, binary, args.speed, tmp))
-        out["firmwares"][fw.name] = {"load_avg": os.getloadavg(), "summary": summary(kills),
-                                     "kills": kills}
+        out["firmwares"][fw.name] = {
+            "load_avg": os.getloadavg(),
+            "summary": summary(kills),
+            "kills": kills,
+        }
         if not args.json:
             print_row(f"{fw.name} (load average {os.getloadavg()[0]:.2f})", summary(kills))
     if args.json:

@@ -22,8 +22,9 @@ from perchd.flight.lagid import LagIdentifier
 DT, G = 0.01, 9.81
 
 
-def recorded(cfg: LagIdGains, delay_s: float = 0.11, tc_s: float = 0.24,
-             drag: float = 0.25) -> LagIdentifier:
+def recorded(
+    cfg: LagIdGains, delay_s: float = 0.11, tc_s: float = 0.24, drag: float = 0.25
+) -> LagIdentifier:
     """An 8 s window: a hold, a run-up and a brake, answered delay_s late through tc_s."""
     ident = LagIdentifier(cfg)
     x, v, lean, sent = -6.0, 0.0, 0.0, []

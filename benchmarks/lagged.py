@@ -47,8 +47,9 @@ def configured(sets: list[str]) -> FlightConfig:
         path, _, raw = item.partition("=")
         section, _, key = path.partition(".")
         part = getattr(cfg, section)
-        cfg = dataclasses.replace(cfg, **{section: dataclasses.replace(
-            part, **{key: json.loads(raw)})})
+        cfg = dataclasses.replace(
+            cfg, **{section: dataclasses.replace(part, **{key: json.loads(raw)})}
+        )
     return cfg
 
 
@@ -59,10 +60,13 @@ def fly(query: str, seed: int, cfg: FlightConfig) -> dict:
     rows = [r for r in read_log(log).rows if r.phase == "stage2"]
     lo, hi = plan.limits.v_contact
     v = res.true_contact_speed
-    return {"outcome": res.outcome.name, "contact": v,
-            "switch_speed": rows[0].xdot if rows else None,
-            "perch_pct": 100 * (res.true_perch_time / plan.duration - 1) if v else None,
-            "on_target": v is not None and lo <= v <= hi and abs(v - plan.v_contact) <= 0.03}
+    return {
+        "outcome": res.outcome.name,
+        "contact": v,
+        "switch_speed": rows[0].xdot if rows else None,
+        "perch_pct": 100 * (res.true_perch_time / plan.duration - 1) if v else None,
+        "on_target": v is not None and lo <= v <= hi and abs(v - plan.v_contact) <= 0.03,
+    }
 
 
 def report(out: dict[str, list[dict]], sets: list[str]) -> None:
@@ -75,9 +79,11 @@ def report(out: dict[str, list[dict]], sets: list[str]) -> None:
         c = [f["contact"] for f in ok]
         sw = [f["switch_speed"] for f in ok if f["switch_speed"]]
         pt = [f["perch_pct"] for f in ok]
-        print(f"  {name:34s} contact {min(c):.3f}..{max(c):.3f}  switch "
-              f"{min(sw):.2f}..{max(sw):.2f} m/s  perch {min(pt):+.1f}..{max(pt):+.1f} %"
-              f"  {len(ok)}/{len(runs)} perched")
+        print(
+            f"  {name:34s} contact {min(c):.3f}..{max(c):.3f}  switch "
+            f"{min(sw):.2f}..{max(sw):.2f} m/s  perch {min(pt):+.1f}..{max(pt):+.1f} %"
+            f"  {len(ok)}/{len(runs)} perched"
+        )
 
 
 def main() -> int:

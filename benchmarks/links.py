@@ -17,11 +17,11 @@ import time
 
 sys.path.insert(0, os.path.dirname(__file__))
 
-from perchd.drivers.base import open_driver  # noqa: E402
-from perchd.drivers.thrust import G  # noqa: E402
 from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig  # noqa: E402
 
 from perchd.core.types import Phase, Setpoint  # noqa: E402
+from perchd.drivers.base import open_driver  # noqa: E402
+from perchd.drivers.thrust import G  # noqa: E402
 
 
 def arrivals(rig) -> list[float]:
@@ -43,8 +43,9 @@ def bench(rig_cls, n: int) -> dict[str, float]:
         for k in range(n):
             before = len(arrivals(rig))
             t0 = time.monotonic()
-            driver.send(Setpoint(t0, 0.01, 0.0, 0.0, MASS * G * (1 + 1e-4 * (k % 7 + 1)), k,
-                                 Phase.STAGE1))
+            driver.send(
+                Setpoint(t0, 0.01, 0.0, 0.0, MASS * G * (1 + 1e-4 * (k % 7 + 1)), k, Phase.STAGE1)
+            )
             t1 = time.monotonic()
             send_us.append((t1 - t0) * 1e6)
             deadline = t1 + 0.2
@@ -57,11 +58,13 @@ def bench(rig_cls, n: int) -> dict[str, float]:
     finally:
         driver.close()
         rig.close()
-    return {"send_median_us": statistics.median(send_us),
-            "send_p99_us": statistics.quantiles(send_us, n=100)[98],
-            "arrival_median_us": statistics.median(latency_us),
-            "arrival_p99_us": statistics.quantiles(latency_us, n=100)[98],
-            "delivered": len(latency_us) / n}
+    return {
+        "send_median_us": statistics.median(send_us),
+        "send_p99_us": statistics.quantiles(send_us, n=100)[98],
+        "arrival_median_us": statistics.median(latency_us),
+        "arrival_p99_us": statistics.quantiles(latency_us, n=100)[98],
+        "delivered": len(latency_us) / n,
+    }
 
 
 def main() -> None:
@@ -69,15 +72,23 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=2000)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    results = {name: bench(cls, args.n) for name, cls in
-               (("crazyflie-udp", CrazyflieRig), ("mavlink-udp", MavlinkRig), ("zmq-tcp", ZmqRig))}
+    results = {
+        name: bench(cls, args.n)
+        for name, cls in (
+            ("crazyflie-udp", CrazyflieRig),
+            ("mavlink-udp", MavlinkRig),
+            ("zmq-tcp", ZmqRig),
+        )
+    }
     if args.json:
         print(json.dumps(results))
         return
     for name, r in results.items():
-        print(f"{name:14s} send {r['send_median_us']:7.1f} us (p99 {r['send_p99_us']:7.1f})  "
-              f"at vehicle {r['arrival_median_us']:7.1f} us (p99 {r['arrival_p99_us']:7.1f})  "
-              f"delivered {100 * r['delivered']:.1f}%")
+        print(
+            f"{name:14s} send {r['send_median_us']:7.1f} us (p99 {r['send_p99_us']:7.1f})  "
+            f"at vehicle {r['arrival_median_us']:7.1f} us (p99 {r['arrival_p99_us']:7.1f})  "
+            f"delivered {100 * r['delivered']:.1f}%"
+        )
 
 
 if __name__ == "__main__":

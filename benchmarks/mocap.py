@@ -40,8 +40,14 @@ from perchd.mocap.natnet.frame import (
 from perchd.mocap.natnet.uris import NatNetServer, open_natnet
 from perchd.mocap.zmq import ZmqPosePublisher
 
-SESSION = Path(__file__).resolve().parents[1] / "tests" / "fixtures" / "natnet" / \
-    "motive-2.1-session" / "packets"
+SESSION = (
+    Path(__file__).resolve().parents[1]
+    / "tests"
+    / "fixtures"
+    / "natnet"
+    / "motive-2.1-session"
+    / "packets"
+)
 
 
 def recorded_frames() -> list[bytes]:
@@ -69,12 +75,13 @@ def arrival_to_pose_us(datagrams: list[bytes]) -> float:
     source.info = proto.ServerInfo("Motive", (2, 1, 0, 0), (3, 0, 0, 0), 3312787)
     source._body_id, source._sync = 2, ClockSync(3312787)
     arrival = 1.0e6  # later than every recorded stamp, so no pose is refused as old
-    seq = iter(range(10 ** 9))
+    seq = iter(range(10**9))
 
     def handle(datagram: bytes) -> None:
         # each datagram gets a fresh frame number so none is dropped as out of order
         n = next(seq)
         source.handle_datagram(datagram[:4] + n.to_bytes(4, "little") + datagram[8:], arrival)
+
     us = per_call_us(handle, datagrams[:100], batches=100)
     assert source.stats().dropped == 0, source.drops()
     return us
@@ -91,6 +98,7 @@ def loopback_ms(send, source, n: int) -> tuple[float, float]:
             result["pose"] = source.wait(after, 1.0)
             result["t"] = time.perf_counter()
             woke.set()
+
         thread = threading.Thread(target=waiter)
         thread.start()
         time.sleep(0.0005)  # let the waiter block first
@@ -111,11 +119,16 @@ def natnet_loopback(n: int) -> tuple[float, float]:
         source = open_natnet(parse_uri(server.uri + "&body=cf1&up=z"), Runtime(clock))
         source.start()
         try:
+
             def send(number: int) -> None:
                 now = server.ticks(clock.now())
-                frame = Frame(number, (RigidBodySample(1, (1.0, 2.0, 3.0), (0, 0, 0, 1.0)),),
-                              Timing(1.0, now, now, now))
+                frame = Frame(
+                    number,
+                    (RigidBodySample(1, (1.0, 2.0, 3.0), (0, 0, 0, 1.0)),),
+                    Timing(1.0, now, now, now),
+                )
                 server.send_raw(proto.pack(proto.NAT_FRAMEOFDATA, encode_frame(frame, (4, 1))))
+
             return loopback_ms(send, source, n)
         finally:
             source.close()
@@ -128,8 +141,13 @@ def zmq_loopback(n: int) -> tuple[float, float]:
     source.start()
     try:
         publisher.wait_for_subscriber(2.0)
-        return loopback_ms(lambda seq: publisher.publish(
-            Pose("cf1", seq, clock.now(), (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0))), source, n)
+        return loopback_ms(
+            lambda seq: publisher.publish(
+                Pose("cf1", seq, clock.now(), (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0))
+            ),
+            source,
+            n,
+        )
     finally:
         source.close()
         publisher.close()
@@ -146,17 +164,29 @@ def main(argv: list[str] | None = None) -> int:
     figures = {
         "parse_real_frame_us": round(parse_us(datagrams), 2),
         "arrival_to_pose_us": round(arrival_to_pose_us(datagrams), 2),
-        "natnet_loopback_ms": round(nat_med, 3), "natnet_loopback_p99_ms": round(nat_p99, 3),
-        "zmq_loopback_ms": round(zmq_med, 3), "zmq_loopback_p99_ms": round(zmq_p99, 3),
-        "frames": len(datagrams), "samples": args.frames, "python": sys.version.split()[0],
+        "natnet_loopback_ms": round(nat_med, 3),
+        "natnet_loopback_p99_ms": round(nat_p99, 3),
+        "zmq_loopback_ms": round(zmq_med, 3),
+        "zmq_loopback_p99_ms": round(zmq_p99, 3),
+        "frames": len(datagrams),
+        "samples": args.frames,
+        "python": sys.version.split()[0],
     }
     if args.json:
         print(json.dumps(figures))
         return 0
-    print(f"parse one real NatNet 3.0 frame (332 B)   median {figures['parse_real_frame_us']:8.2f} us")
-    print(f"packet arrival -> Pose (client path)      median {figures['arrival_to_pose_us']:8.2f} us")
-    print(f"NatNet send -> waiting loop has the Pose  median {nat_med:8.3f} ms   p99 {nat_p99:.3f} ms")
-    print(f"ZMQ send -> waiting loop has the Pose     median {zmq_med:8.3f} ms   p99 {zmq_p99:.3f} ms")
+    print(
+        f"parse one real NatNet 3.0 frame (332 B)   median {figures['parse_real_frame_us']:8.2f} us"
+    )
+    print(
+        f"packet arrival -> Pose (client path)      median {figures['arrival_to_pose_us']:8.2f} us"
+    )
+    print(
+        f"NatNet send -> waiting loop has the Pose  median {nat_med:8.3f} ms   p99 {nat_p99:.3f} ms"
+    )
+    print(
+        f"ZMQ send -> waiting loop has the Pose     median {zmq_med:8.3f} ms   p99 {zmq_p99:.3f} ms"
+    )
     return 0
 
 

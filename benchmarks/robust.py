@@ -44,14 +44,28 @@ def certify_figures(repeat: int) -> list[dict]:
     for name, rec in cases:
         box = Box(tuple(rec["robust"]["x0"]), tuple(rec["robust"]["v0"]))
         sec, cert = _median_time(lambda: LIM.certify(rec["stage1"]["k"][1:], box), repeat)
-        rows.append({"case": name, "area": box.area, "certified": cert.certified,
-                     "cells": cert.cells, "median_ms": 1e3 * sec})
+        rows.append(
+            {
+                "case": name,
+                "area": box.area,
+                "certified": cert.certified,
+                "cells": cert.cells,
+                "median_ms": 1e3 * sec,
+            }
+        )
     for order, (k, x0, v0) in TABLE2.items():
         box = Box(x0, v0)
         sec, cert = _median_time(lambda: LIM.certify(k, box), repeat)
-        rows.append({"case": f"paper Table 2 n={order}", "area": box.area,
-                     "certified": cert.certified, "verdict": cert.reason,
-                     "contact_ratio": contact_ratio(box)[0], "median_ms": 1e3 * sec})
+        rows.append(
+            {
+                "case": f"paper Table 2 n={order}",
+                "area": box.area,
+                "certified": cert.certified,
+                "verdict": cert.reason,
+                "contact_ratio": contact_ratio(box)[0],
+                "median_ms": 1e3 * sec,
+            }
+        )
     return rows
 
 
@@ -61,10 +75,18 @@ def search_figures(maxiter: int) -> list[dict]:
         t = time.perf_counter()
         r = largest_box(order, LIM, maxiter=maxiter, start=prev)
         prev = r
-        rows.append({"order": order, "k": r.k, "x0": list(r.box.x0), "v0": list(r.box.v0),
-                     "area": r.box.area, "paper_area": Box(*TABLE2[order][1:]).area,
-                     "worst_duration": r.certificate.duration[1],
-                     "search_s": time.perf_counter() - t})
+        rows.append(
+            {
+                "order": order,
+                "k": r.k,
+                "x0": list(r.box.x0),
+                "v0": list(r.box.v0),
+                "area": r.box.area,
+                "paper_area": Box(*TABLE2[order][1:]).area,
+                "worst_duration": r.certificate.duration[1],
+                "search_s": time.perf_counter() - t,
+            }
+        )
     return rows
 
 
@@ -83,12 +105,16 @@ def main() -> None:
         return
     for row in out["certify"]:
         verdict = "certified" if row["certified"] else row.get("verdict", "not certified")
-        print(f"certify {row['case']:<34} area {row['area']:.4f}  median {row['median_ms']:8.2f} ms  {verdict}")
+        print(
+            f"certify {row['case']:<34} area {row['area']:.4f}  median {row['median_ms']:8.2f} ms  {verdict}"
+        )
     for row in out.get("search", []):
-        print(f"order {row['order']}: area {row['area']:.4f} (paper {row['paper_area']:.3f})  "
-              f"x0 {row['x0'][0]:.4f}..{row['x0'][1]:.4f}  v0 {row['v0'][0]:.4f}..{row['v0'][1]:.4f}  "
-              f"worst duration {row['worst_duration']:.4f} s  k {', '.join(f'{k:.5g}' for k in row['k'])}"
-              f"  ({row['search_s']:.0f} s)")
+        print(
+            f"order {row['order']}: area {row['area']:.4f} (paper {row['paper_area']:.3f})  "
+            f"x0 {row['x0'][0]:.4f}..{row['x0'][1]:.4f}  v0 {row['v0'][0]:.4f}..{row['v0'][1]:.4f}  "
+            f"worst duration {row['worst_duration']:.4f} s  k {', '.join(f'{k:.5g}' for k in row['k'])}"
+            f"  ({row['search_s']:.0f} s)"
+        )
 
 
 if __name__ == "__main__":

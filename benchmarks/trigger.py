@@ -28,8 +28,8 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from perchd.core.clock import MonotonicClock
 from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
@@ -61,20 +61,29 @@ def hogs(n: int) -> Iterator[None]:
 
 def one_flight(mode: str, library: bool, log: Path) -> dict:
     plan = load_plan(PLAN)
-    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN,
-                                             library=str(LIBRARY) if library else None))
-    planner = InlinePlanner(plan, load_library(LIBRARY) if library else None) \
-        if mode == "in the tick" else None
+    cfg = FlightConfig(
+        trigger=TriggerConfig(TriggerPolicy.REPLAN, library=str(LIBRARY) if library else None)
+    )
+    planner = (
+        InlinePlanner(plan, load_library(LIBRARY) if library else None)
+        if mode == "in the tick"
+        else None
+    )
     res = open_session(URI, clock=MonotonicClock()).fly(plan, log, cfg, planner=planner)
-    return {"outcome": res.outcome.name, **trigger_window(read_log(log), 0.01),
-            "overruns": res.loop.overruns, "missed": res.loop.missed,
-            "action": res.trigger.action.split(":")[0] if res.trigger else res.detail[:60]}
+    return {
+        "outcome": res.outcome.name,
+        **trigger_window(read_log(log), 0.01),
+        "overruns": res.loop.overruns,
+        "missed": res.loop.missed,
+        "action": res.trigger.action.split(":")[0] if res.trigger else res.detail[:60],
+    }
 
 
 def trigger_window(log, period: float) -> dict:
     """Ticks missed and the longest tick [ms] around the trigger (its first event)."""
-    t = next((e.t for e in log.events if e.kind in ("stage1", "trigger-wait", "end")
-              and e.t > 0), None)
+    t = next(
+        (e.t for e in log.events if e.kind in ("stage1", "trigger-wait", "end") and e.t > 0), None
+    )
     # A row carries the tick before it's compute time (the loop's `last`), and a tick held
     # up shows as a jump in k: the first row past the window is in it too.
     later = [r for r in log.rows if r.t > t + AFTER_S][:1]
@@ -91,8 +100,9 @@ def run(flights: int, n_hogs: int, library: bool) -> list[dict]:
                 for mode in ("in the tick", "worker"):
                     for i in range(flights):
                         row = one_flight(mode, library, Path(tmp) / f"{mode}-{load}-{i}.jsonl")
-                        out.append({"mode": mode, "hogs": load, "loadavg": os.getloadavg()[0],
-                                    **row})
+                        out.append(
+                            {"mode": mode, "hogs": load, "loadavg": os.getloadavg()[0], **row}
+                        )
     return out
 
 
@@ -117,6 +127,7 @@ def thread_figure() -> None:
         for v in (1.40, 1.42, 1.44, 1.46, 1.48):
             retarget(plan, -3.0, v)
         done.set()
+
     alone = lateness(0.01, None)
     worker = threading.Thread(target=solve)
     worker.start()
@@ -124,9 +135,11 @@ def thread_figure() -> None:
     worker.join()
     for name, late in (("100 Hz loop alone", alone), ("with a solver thread", shared)):
         n = len(late)
-        print(f"{name:<22} ticks {n:4d}  lateness median {1e3 * late[n // 2]:6.2f} ms  "
-              f"p99 {1e3 * late[int(0.99 * n)]:6.2f} ms  max {1e3 * late[-1]:6.2f} ms  "
-              f"later than a period: {sum(x > 0.01 for x in late)}")
+        print(
+            f"{name:<22} ticks {n:4d}  lateness median {1e3 * late[n // 2]:6.2f} ms  "
+            f"p99 {1e3 * late[int(0.99 * n)]:6.2f} ms  max {1e3 * late[-1]:6.2f} ms  "
+            f"later than a period: {sum(x > 0.01 for x in late)}"
+        )
     print(f"load average {os.getloadavg()[0]:.2f}")
 
 
@@ -136,8 +149,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hogs", type=int, default=3, help="CPU-bound processes beside (3)")
     ap.add_argument("--library", action="store_true", help="replan from the plan library")
     ap.add_argument("--json", action="store_true", help="one JSON object per flight")
-    ap.add_argument("--thread", action="store_true",
-                    help="only the loop's lateness beside a solver thread in its process")
+    ap.add_argument(
+        "--thread",
+        action="store_true",
+        help="only the loop's lateness beside a solver thread in its process",
+    )
     args = ap.parse_args(argv)
     if args.thread:
         thread_figure()
@@ -147,12 +163,16 @@ def main(argv: list[str] | None = None) -> int:
         for row in rows:
             print(json.dumps(row))
         return 0
-    print(f"{'mode':<12} {'hogs':>4} {'load':>5} {'missed@trig':>11} {'longest ms':>10} "
-          f"{'overruns':>8} {'missed':>6}  outcome / plan")
+    print(
+        f"{'mode':<12} {'hogs':>4} {'load':>5} {'missed@trig':>11} {'longest ms':>10} "
+        f"{'overruns':>8} {'missed':>6}  outcome / plan"
+    )
     for r in rows:
-        print(f"{r['mode']:<12} {r['hogs']:>4} {r['loadavg']:>5.2f} {r['trigger_missed']:>11} "
-              f"{r['trigger_longest_ms']:>10.1f} {r['overruns']:>8} {r['missed']:>6}  "
-              f"{r['outcome']} / {r['action']}")
+        print(
+            f"{r['mode']:<12} {r['hogs']:>4} {r['loadavg']:>5.2f} {r['trigger_missed']:>11} "
+            f"{r['trigger_longest_ms']:>10.1f} {r['overruns']:>8} {r['missed']:>6}  "
+            f"{r['outcome']} / {r['action']}"
+        )
     return 0
 
 

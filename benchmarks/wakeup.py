@@ -14,10 +14,10 @@ import json
 import os
 import time
 
+from perchd.bench.loop import StealMeter, stats_us
 from perchd.core.clock import MonotonicClock
 from perchd.core.realtime import RealtimeConfig, apply
 from perchd.flight.loop import FixedRateLoop
-from perchd.bench.loop import StealMeter, stats_us
 
 
 class SpinningClock(MonotonicClock):
@@ -46,11 +46,22 @@ def main() -> int:
     end = time.monotonic() + args.seconds
     stats = loop.run(lambda k, t: t < end)
     late = stats_us(stats.jitter)
-    print(json.dumps({"rate_hz": args.rate, "spin_ms": args.spin_ms, "fifo": args.fifo,
-                      "seconds": stats.wall_s, "overruns": stats.overruns,
-                      "lateness_p99_us": late["p99_us"], "lateness_max_us": late["max_us"],
-                      "cpu_fraction": (time.process_time() - cpu0) / stats.wall_s,
-                      "steal_ms": steal.ms(), "load": os.getloadavg()[0]}))
+    print(
+        json.dumps(
+            {
+                "rate_hz": args.rate,
+                "spin_ms": args.spin_ms,
+                "fifo": args.fifo,
+                "seconds": stats.wall_s,
+                "overruns": stats.overruns,
+                "lateness_p99_us": late["p99_us"],
+                "lateness_max_us": late["max_us"],
+                "cpu_fraction": (time.process_time() - cpu0) / stats.wall_s,
+                "steal_ms": steal.ms(),
+                "load": os.getloadavg()[0],
+            }
+        )
+    )
     return 0
 
 

@@ -9,9 +9,9 @@ URI registries whether they are real or simulated.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from perchd.core.clock import Clock, ManualClock
 from perchd.core.errors import UriError
@@ -47,18 +47,34 @@ class Session:
     def clock(self) -> Clock:
         return self.runtime.clock
 
-    def fly(self, plan: Plan, log_path: str | Path, cfg: FlightConfig = FlightConfig(),
-            abort: FlightAbort | None = None,
-            on_tick: Callable[[TickStatus], None] | None = None,
-            header: dict | None = None, planner: Planner | None = None,
-            log_force: bool = False) -> FlightResult:
+    def fly(
+        self,
+        plan: Plan,
+        log_path: str | Path,
+        cfg: FlightConfig = FlightConfig(),
+        abort: FlightAbort | None = None,
+        on_tick: Callable[[TickStatus], None] | None = None,
+        header: dict | None = None,
+        planner: Planner | None = None,
+        log_force: bool = False,
+    ) -> FlightResult:
         """One flight on this vehicle, then its links closed (planner, log_force: see
         flight.run.fly)."""
         try:
-            return fly(plan, self.driver, self.source, self.clock, log_path, cfg, abort,
-                       on_tick, world=self.world,
-                       header={"uri_params": self.applied, **(header or {})}, planner=planner,
-                       log_force=log_force)
+            return fly(
+                plan,
+                self.driver,
+                self.source,
+                self.clock,
+                log_path,
+                cfg,
+                abort,
+                on_tick,
+                world=self.world,
+                header={"uri_params": self.applied, **(header or {})},
+                planner=planner,
+                log_force=log_force,
+            )
         finally:
             self.close()
 
@@ -70,8 +86,13 @@ class Session:
             self.source.close()
 
 
-def open_links(driver_uri: str, mocap_uri: str, surface: SurfaceConfig | None = None,
-               simulated_clock: Clock | None = None, mass_kg: float | None = None) -> Session:
+def open_links(
+    driver_uri: str,
+    mocap_uri: str,
+    surface: SurfaceConfig | None = None,
+    simulated_clock: Clock | None = None,
+    mass_kg: float | None = None,
+) -> Session:
     """The flight's links from the user's URIs. mass_kg: the flight config's vehicle mass,
     given to the driver before it connects (Driver.bind_mass refuses a URI mass= that
     disagrees before anything is armed). sim:// on both flies a fresh simulated world
@@ -80,8 +101,10 @@ def open_links(driver_uri: str, mocap_uri: str, surface: SurfaceConfig | None = 
     reverse."""
     sims = parse_uri(driver_uri).scheme == "sim", parse_uri(mocap_uri).scheme == "sim"
     if sims[0] != sims[1]:
-        raise UriError("sim:// flies only with sim:// on both driver and mocap "
-                       f"(got {driver_uri} and {mocap_uri})")
+        raise UriError(
+            "sim:// flies only with sim:// on both driver and mocap "
+            f"(got {driver_uri} and {mocap_uri})"
+        )
     if sims[0]:  # one world: the vehicle's options from --driver, the mocap's from --mocap
         wp = world_params_from_uri(parse_uri(driver_uri), kind="driver")
         wp = world_params_from_uri(parse_uri(mocap_uri), wp, kind="mocap")
@@ -89,8 +112,13 @@ def open_links(driver_uri: str, mocap_uri: str, surface: SurfaceConfig | None = 
     return _connect(Runtime.real(), None, driver_uri, mocap_uri, mass_kg)
 
 
-def _connect(runtime: Runtime, world: SimWorld | None, driver_uri: str,
-             mocap_uri: str, mass_kg: float | None = None) -> Session:
+def _connect(
+    runtime: Runtime,
+    world: SimWorld | None,
+    driver_uri: str,
+    mocap_uri: str,
+    mass_kg: float | None = None,
+) -> Session:
     """Open and connect: the vehicle is checked (a refusal comes here), not taken."""
     driver = open_driver(driver_uri, runtime)
     if mass_kg is not None:
@@ -109,8 +137,13 @@ def _connect(runtime: Runtime, world: SimWorld | None, driver_uri: str,
     return Session(runtime, world, driver, source, applied)
 
 
-def open_session(uri: str = "sim://", *, surface: SurfaceConfig | None = None,
-                 params: WorldParams | None = None, clock: Clock | None = None) -> Session:
+def open_session(
+    uri: str = "sim://",
+    *,
+    surface: SurfaceConfig | None = None,
+    params: WorldParams | None = None,
+    clock: Clock | None = None,
+) -> Session:
     """A connected simulated vehicle.
 
     uri: the sim:// URI whose options (latency, noise, start, ...) apply over `params`:
@@ -122,8 +155,13 @@ def open_session(uri: str = "sim://", *, surface: SurfaceConfig | None = None,
     return _simulate(world_params_from_uri(parsed, params), *split_sim(parsed), surface, clock)
 
 
-def _simulate(wp: WorldParams, driver_uri: str, mocap_uri: str,
-              surface: SurfaceConfig | None, clock: Clock | None) -> Session:
+def _simulate(
+    wp: WorldParams,
+    driver_uri: str,
+    mocap_uri: str,
+    surface: SurfaceConfig | None,
+    clock: Clock | None,
+) -> Session:
     """A fresh world of `wp` on `clock`, its two links connected."""
     if surface is not None:
         wp = dataclasses.replace(wp, surface_point=surface.point, surface_normal=surface.normal)

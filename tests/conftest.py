@@ -5,8 +5,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import perchd  # noqa: F401  (first: it limits BLAS threads before numpy loads)
 import pytest
+
+import perchd  # noqa: F401  (first: it limits BLAS threads before numpy loads)
 
 HELPERS = Path(__file__).resolve().parent / "helpers"
 if str(HELPERS) not in sys.path:

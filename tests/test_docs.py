@@ -22,34 +22,87 @@ ROOT = Path(__file__).resolve().parents[1]
 
 TOP_DIRS = ("perchd", "tests", "benchmarks", "plans", "docs", "systemd")
 """A path whose first segment is one of these is a path in the repository."""
-PERCHD_DIRS = ("flight", "drivers", "core", "sim", "service", "mocap", "tau", "logs",
-               "commands", "console", "bench", "session")
+PERCHD_DIRS = (
+    "flight",
+    "drivers",
+    "core",
+    "sim",
+    "service",
+    "mocap",
+    "tau",
+    "logs",
+    "commands",
+    "console",
+    "bench",
+    "session",
+)
 """...and so is one whose first segment is a perchd subpackage (`flight/run.py`), resolved
 under perchd/; those that exist now count as well."""
-EXTENSIONS = (".py", ".md", ".json", ".jsonl", ".toml", ".service", ".socket", ".rules",
-              ".csv", ".bin", ".pcapng", ".txt", ".png")
+EXTENSIONS = (
+    ".py",
+    ".md",
+    ".json",
+    ".jsonl",
+    ".toml",
+    ".service",
+    ".socket",
+    ".rules",
+    ".csv",
+    ".bin",
+    ".pcapng",
+    ".txt",
+    ".png",
+)
 SKIP_DIRS = {".git", "__pycache__", "node_modules", ".venv", "venv", "build", "dist"}
 
 PATH_TOKEN = re.compile(r"^[\w.*{},/-]+$")
 PLAIN_PATH = re.compile(
-    r"(?<![\w/.-])((?:" + "|".join(TOP_DIRS) + r")/[\w./*-]*?(?:"
-    + "|".join(re.escape(e) for e in EXTENSIONS) + r"))(?![\w/])")
+    r"(?<![\w/.-])((?:"
+    + "|".join(TOP_DIRS)
+    + r")/[\w./*-]*?(?:"
+    + "|".join(re.escape(e) for e in EXTENSIONS)
+    + r"))(?![\w/])"
+)
 BACKTICK = re.compile(r"(?<!`)`([^`\n]+)`(?!`)")
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 FENCE = re.compile(r"^```[^\n]*\n(.*?)^```", re.M | re.S)
 
 FORBIDDEN = re.compile(
     r"\b(issue \d+|the issue|this session|(first|second|third|\w+th) session|the review"
-    r"|after review|the brief)\b|20\d\d-\d\d-\d\d", re.I)
+    r"|after review|the brief)\b|20\d\d-\d\d-\d\d",
+    re.I,
+)
 FORBIDDEN_ALLOWED = {"tests/test_docs.py"}
 """Tracked files allowed to match FORBIDDEN: this file states the pattern."""
 
 PLACEHOLDERS = {
-    "N": "1", "PRIO": "50", "HZ": "100", "S": "1", "M": "0.001", "V": "0.5", "PORT": "5555",
-    "X": "0", "Y": "0", "Z": "0", "NX": "1", "NY": "0", "NZ": "0", "GYRO": "0.001",
-    "ACC": "0.01", "LEVEL_S": "0.5", "CUT_S": "2", "FILE": "f.json", "F": "f.json",
-    "DIR": "out", "OUT": "out.mcap", "URI": "sim://", "NAME": "cf1", "HOST": "127.0.0.1",
-    "DEG": "60", "TOML": "[lag_id]", "BUILD_DIR": "build/px4_sitl_default",
+    "N": "1",
+    "PRIO": "50",
+    "HZ": "100",
+    "S": "1",
+    "M": "0.001",
+    "V": "0.5",
+    "PORT": "5555",
+    "X": "0",
+    "Y": "0",
+    "Z": "0",
+    "NX": "1",
+    "NY": "0",
+    "NZ": "0",
+    "GYRO": "0.001",
+    "ACC": "0.01",
+    "LEVEL_S": "0.5",
+    "CUT_S": "2",
+    "FILE": "f.json",
+    "F": "f.json",
+    "DIR": "out",
+    "OUT": "out.mcap",
+    "URI": "sim://",
+    "NAME": "cf1",
+    "HOST": "127.0.0.1",
+    "DEG": "60",
+    "TOML": "[lag_id]",
+    "BUILD_DIR": "build/px4_sitl_default",
 }
 """Placeholder words in the docs' commands, each replaced by a value of its kind."""
 
@@ -57,24 +110,29 @@ PLACEHOLDERS = {
 def markdown_files() -> list[Path]:
     out = []
     for dirpath, dirnames, filenames in os.walk(ROOT):
-        dirnames[:] = sorted(d for d in dirnames
-                             if d not in SKIP_DIRS and not d.startswith(".")
-                             and not d.endswith(".egg-info"))
+        dirnames[:] = sorted(
+            d
+            for d in dirnames
+            if d not in SKIP_DIRS and not d.startswith(".") and not d.endswith(".egg-info")
+        )
         out += [Path(dirpath) / f for f in sorted(filenames) if f.endswith(".md")]
     return out
 
 
 def _perchd_dirs() -> set[str]:
     pkg = ROOT / "perchd"
-    return set(PERCHD_DIRS) | {p.name for p in pkg.iterdir() if p.is_dir()} | {
-        p.stem for p in pkg.glob("*.py")}
+    return (
+        set(PERCHD_DIRS)
+        | {p.name for p in pkg.iterdir() if p.is_dir()}
+        | {p.stem for p in pkg.glob("*.py")}
+    )
 
 
 def _clean(token: str) -> str | None:
     """A repository path from a backtick or link token, or None if it is not one."""
     token = token.strip().strip("<>").split("#", 1)[0]
-    token = re.sub(r"::.*$", "", token)                     # pytest node ids
-    token = re.sub(r"(\.py):[\w.]+$", r"\1", token)          # module:function
+    token = re.sub(r"::.*$", "", token)  # pytest node ids
+    token = re.sub(r"(\.py):[\w.]+$", r"\1", token)  # module:function
     token = token.rstrip(".,;:)")
     if not token or "://" in token or not PATH_TOKEN.match(token) or "/" not in token:
         return None
@@ -114,8 +172,11 @@ def _brace_expand(s: str) -> list[str]:
     m = re.search(r"\{([^{}]*)\}", s)
     if not m:
         return [s]
-    return [x for opt in m.group(1).split(",")
-            for x in _brace_expand(s[:m.start()] + opt + s[m.end():])]
+    return [
+        x
+        for opt in m.group(1).split(",")
+        for x in _brace_expand(s[: m.start()] + opt + s[m.end() :])
+    ]
 
 
 def test_every_path_the_docs_name_exists():
@@ -131,8 +192,12 @@ def test_every_path_the_docs_name_exists():
 # -- commands ------------------------------------------------------------------------------
 
 ASSIGN = re.compile(r"^([A-Z_][A-Z0-9_]*)=(.*)$")
-MENTION = ("arguments are required", "is required", "expected one argument",
-           "expected at least one argument")
+MENTION = (
+    "arguments are required",
+    "is required",
+    "expected one argument",
+    "expected at least one argument",
+)
 """Why a mention (an inline `perchd fly`, `perchd sim --campaign`, or a block's elided
 `perchd plan library ... --out L.json`) fails to parse: it names a valid command or option
 without all its arguments. Anything else (an unknown command, option or choice, a bad
@@ -149,27 +214,41 @@ def _commands_in_blocks(text: str) -> list[str]:
             if m:
                 env[m.group(1)] = " ".join(shlex.split(m.group(2)))
             elif line.startswith("perchd "):
-                out.append(re.sub(r"\$\{?([A-Z_][A-Z0-9_]*)\}?",
-                                  lambda v: env.get(v.group(1), v.group(0)), line))
+                out.append(
+                    re.sub(
+                        r"\$\{?([A-Z_][A-Z0-9_]*)\}?",
+                        lambda v: env.get(v.group(1), v.group(0)),
+                        line,
+                    )
+                )
     return out
 
 
 def _commands_inline(text: str) -> list[str]:
     text = FENCE.sub("", text)
-    return [m.group(1).strip() for m in BACKTICK.finditer(text)
-            if m.group(1).strip().startswith("perchd ")]
+    return [
+        m.group(1).strip()
+        for m in BACKTICK.finditer(text)
+        if m.group(1).strip().startswith("perchd ")
+    ]
 
 
 def _alternatives(command: str) -> list[str]:
     """`perchd log {summary|plot} F` -> both; `bench planner|loop` -> both."""
     m = re.search(r"\{([^{}]*\|[^{}]*)\}", command)
     if m:
-        return [c for alt in m.group(1).split("|")
-                for c in _alternatives(command[:m.start()] + alt.strip() + command[m.end():])]
+        return [
+            c
+            for alt in m.group(1).split("|")
+            for c in _alternatives(command[: m.start()] + alt.strip() + command[m.end() :])
+        ]
     m = re.search(r"(?<=\s)([\w-]+(?:\|[\w-]+)+)(?=\s|$)", command)
     if m:
-        return [c for alt in m.group(1).split("|")
-                for c in _alternatives(command[:m.start()] + alt + command[m.end():])]
+        return [
+            c
+            for alt in m.group(1).split("|")
+            for c in _alternatives(command[: m.start()] + alt + command[m.end() :])
+        ]
     return [command]
 
 
@@ -232,10 +311,12 @@ def test_every_perchd_command_the_docs_quote_parses():
 
 # -- words ---------------------------------------------------------------------------------
 
+
 def _tracked_files() -> list[str]:
     try:
-        out = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True,
-                             check=True).stdout
+        out = subprocess.run(
+            ["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True
+        ).stdout
     except (OSError, subprocess.CalledProcessError):
         pytest.skip("not a git checkout")
     return [p for p in out.decode().split("\0") if p]
@@ -250,12 +331,14 @@ def test_no_tracked_file_speaks_of_sessions_issues_reviews_briefs_or_dates():
         try:
             data = path.read_bytes()
         except OSError:
-            continue          # listed but moved or deleted in the working tree
+            continue  # listed but moved or deleted in the working tree
         if b"\0" in data[:8192]:
-            continue          # binary
+            continue  # binary
         for n, line in enumerate(data.decode("utf-8", "replace").splitlines(), 1):
             m = FORBIDDEN.search(line)
             if m:
                 hits.append(f"{rel}:{n}: {m.group(0)!r}: {line.strip()[:120]}")
-    assert not hits, "tracked files that speak of sessions, issues, reviews, briefs or " \
-                     "dates:\n  " + "\n  ".join(hits)
+    assert not hits, (
+        "tracked files that speak of sessions, issues, reviews, briefs or "
+        "dates:\n  " + "\n  ".join(hits)
+    )

@@ -32,10 +32,12 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
+from perchd.bench.cpuload import cpu_hogs
 from perchd.core.clock import MonotonicClock
 from perchd.core.runtime import Runtime
 from perchd.core.types import LinkHealth, Phase, Pose, Setpoint
@@ -48,7 +50,6 @@ from perchd.flight.loop import NO_SEQ, FixedRateLoop, LoopStats, spread
 from perchd.flight.supervisor import Conditions, Supervisor
 from perchd.mocap.base import open_source
 from perchd.mocap.zmq import ZmqPosePublisher
-from perchd.bench.cpuload import cpu_hogs
 from perchd.sim.receiver import bind_setpoint_socket
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 from perchd.tau import plan_ipts, save_plan
@@ -68,6 +69,7 @@ def stats_us(values_s: list[float]) -> dict[str, float]:
 
 
 # ------------------------------------------------------------------ the agent's own work
+
 
 class SyntheticAgent:
     """Estimator + supervisor + controller fed poses of a synthetic perch (accelerate to the
@@ -98,12 +100,16 @@ class SyntheticAgent:
 
     def tick(self, k: int = 0, t_now: float = 0.0) -> bool:
         t = self.k * self.period
-        pose = Pose("cf1", self.k + 1, t - 0.004, (self._x(t), 0.0, 1.0),
-                    (0.0, 0.0, 0.0, 1.0), True, 0.004)
+        pose = Pose(
+            "cf1", self.k + 1, t - 0.004, (self._x(t), 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), True, 0.004
+        )
         w0 = time.perf_counter()
         self.est.offer(pose)
-        rep = self.sup.tick(t, self.est.state(t), Conditions(
-            self.ok, mocap_period_s=self.est.mocap_period, arrival_age_s=0.004))
+        rep = self.sup.tick(
+            t,
+            self.est.state(t),
+            Conditions(self.ok, mocap_period_s=self.est.mocap_period, arrival_age_s=0.004),
+        )
         self.compute.append(time.perf_counter() - w0)
         self.k += 1
         if rep.finished or self.k * self.period > 6.0:
@@ -123,15 +129,25 @@ def fixed_rate_figures(plan: Plan, seconds: float, rate_hz: float = LOOP_HZ) -> 
         starts.append(t)
         agent.tick()
         return t < end
+
     stats = loop.run(tick)
     period = 1.0 / rate_hz
     deviation = [abs(b - a - period) for a, b in zip(starts, starts[1:])]
-    return {"rate_hz": rate_hz, "seconds": stats.wall_s, "ticks": len(stats.jitter),
-            "overruns": stats.overruns, "overruns_per_min": per_minute(stats),
-            "missed": stats.missed, "steal_ms": steal.ms(), "gc_collections": stats.gc_collections,
-            "lateness": stats_us(stats.jitter), "period_deviation": stats_us(deviation),
-            "agent_compute": stats_us(agent.compute), "tick_compute": stats_us(stats.compute),
-            "cpu_fraction": stats.cpu_s / stats.wall_s}
+    return {
+        "rate_hz": rate_hz,
+        "seconds": stats.wall_s,
+        "ticks": len(stats.jitter),
+        "overruns": stats.overruns,
+        "overruns_per_min": per_minute(stats),
+        "missed": stats.missed,
+        "steal_ms": steal.ms(),
+        "gc_collections": stats.gc_collections,
+        "lateness": stats_us(stats.jitter),
+        "period_deviation": stats_us(deviation),
+        "agent_compute": stats_us(agent.compute),
+        "tick_compute": stats_us(stats.compute),
+        "cpu_fraction": stats.cpu_s / stats.wall_s,
+    }
 
 
 def per_minute(stats: LoopStats) -> float:
@@ -165,9 +181,15 @@ def idle_loop_figures(seconds: float) -> dict[str, Any]:
     end = time.monotonic() + seconds
     steal = StealMeter()
     stats = loop.run(lambda k, t: t < end)
-    return {"seconds": stats.wall_s, "ticks": len(stats.jitter), "overruns": stats.overruns,
-            "overruns_per_min": per_minute(stats), "missed": stats.missed,
-            "steal_ms": steal.ms(), "lateness": stats_us(stats.jitter)}
+    return {
+        "seconds": stats.wall_s,
+        "ticks": len(stats.jitter),
+        "overruns": stats.overruns,
+        "overruns_per_min": per_minute(stats),
+        "missed": stats.missed,
+        "steal_ms": steal.ms(),
+        "lateness": stats_us(stats.jitter),
+    }
 
 
 def hot_compute(plan: Plan, ticks: int = 5000) -> dict[str, Any]:
@@ -179,6 +201,7 @@ def hot_compute(plan: Plan, ticks: int = 5000) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ ZMQ rig and agent process
+
 
 @dataclass
 class Flight:
@@ -219,8 +242,7 @@ class Rig:
                 sent[pose.seq], last_seq = time.monotonic(), pose.seq
                 self.pub.publish(pose)
             now = time.monotonic()
-            if first is not None and now >= max(stop_at, first + MIN_FLIGHT_S) \
-                    and not interrupted:
+            if first is not None and now >= max(stop_at, first + MIN_FLIGHT_S) and not interrupted:
                 agent.send_signal(signal.SIGINT)
                 interrupted = True
             wait_s = max(0.0, min(world.next_arrival() - world.clock.now(), 0.05))
@@ -243,23 +265,43 @@ class Rig:
         return flight
 
 
-def _agent(plan_file: Path, rig: Rig, sync: str, rate_hz: float, tmp: Path,
-           n: int, realtime: int = 0) -> subprocess.Popen:
+def _agent(
+    plan_file: Path, rig: Rig, sync: str, rate_hz: float, tmp: Path, n: int, realtime: int = 0
+) -> subprocess.Popen:
     if sync == "echo":
         cmd = [sys.executable, "-m", "perchd.bench.loop", "echo", rig.mocap_uri, rig.driver_uri]
-        return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                text=True)
+        return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     config = tmp / f"{sync}.toml"
     config.write_text(f'version = 1\n[flight]\nsync = "{sync}"\nrate_hz = {rate_hz}\n')
-    cmd = [sys.executable, "-m", "perchd", "fly", str(plan_file), "--driver", rig.driver_uri,
-           "--mocap", rig.mocap_uri, "--config", str(config), "--json",
-           "--log", str(tmp / f"{sync}-{n}.jsonl"), *([f"--realtime={realtime}"] * (realtime > 0))]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    cmd = [
+        sys.executable,
+        "-m",
+        "perchd",
+        "fly",
+        str(plan_file),
+        "--driver",
+        rig.driver_uri,
+        "--mocap",
+        rig.mocap_uri,
+        "--config",
+        str(config),
+        "--json",
+        "--log",
+        str(tmp / f"{sync}-{n}.jsonl"),
+        *([f"--realtime={realtime}"] * (realtime > 0)),
+    ]
+    return subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
 
 
-def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path,
-                     realtime: int = 0) -> dict[str, Any]:
+def zmq_mode_figures(
+    plan_file: Path, sync: str, seconds: float, tmp: Path, realtime: int = 0
+) -> dict[str, Any]:
     """Fly perches back to back over ZMQ in one loop mode for `seconds` (at least one);
     realtime: the agent's `perchd fly --realtime` priority (0: none)."""
     mocap_hz = 120.0 if sync == "fixed" else RIG_HZ
@@ -278,17 +320,22 @@ def zmq_mode_figures(plan_file: Path, sync: str, seconds: float, tmp: Path,
     finally:
         rig.close()
     loops = [f.result["loop"] for f in flights if f.result]
-    return {"sync": sync, "rate_hz": RIG_HZ, "mocap_hz": mocap_hz, "flights": len(flights),
-            "outcomes": [f.result.get("outcome") for f in flights],
-            "setpoints_matched": sum(len(f.latency) for f in flights),
-            "latency_sockets": stats_us([x for f in flights for x in f.latency]),
-            "latency_agent": _loop_us(loops, "latency"),
-            "tick_compute": _loop_us(loops, "compute"),
-            "agent_compute": _loop_us(loops, "agent"),
-            "jitter": _loop_us(loops, "jitter"),
-            "overruns": sum(lp["overruns"] for lp in loops),
-            "gc_collections": sum(lp.get("gc_collections", 0) for lp in loops),
-            "cpu_fraction": _weighted_cpu(loops)}
+    return {
+        "sync": sync,
+        "rate_hz": RIG_HZ,
+        "mocap_hz": mocap_hz,
+        "flights": len(flights),
+        "outcomes": [f.result.get("outcome") for f in flights],
+        "setpoints_matched": sum(len(f.latency) for f in flights),
+        "latency_sockets": stats_us([x for f in flights for x in f.latency]),
+        "latency_agent": _loop_us(loops, "latency"),
+        "tick_compute": _loop_us(loops, "compute"),
+        "agent_compute": _loop_us(loops, "agent"),
+        "jitter": _loop_us(loops, "jitter"),
+        "overruns": sum(lp["overruns"] for lp in loops),
+        "gc_collections": sum(lp.get("gc_collections", 0) for lp in loops),
+        "cpu_fraction": _weighted_cpu(loops),
+    }
 
 
 def echo(mocap_uri: str, driver_uri: str) -> None:
@@ -321,9 +368,12 @@ def _loop_us(loops: list[dict], name: str) -> dict[str, float]:
     if not loops:
         return {"min_us": 0.0, "median_us": 0.0, "p99_us": 0.0, "max_us": 0.0}
     main = max(loops, key=lambda lp: lp["ticks"])
-    return {"min_us": 1e6 * min(lp[f"{name}_min_s"] for lp in loops),
-            "median_us": 1e6 * main[f"{name}_median_s"], "p99_us": 1e6 * main[f"{name}_p99_s"],
-            "max_us": 1e6 * max(lp[f"{name}_max_s"] for lp in loops)}
+    return {
+        "min_us": 1e6 * min(lp[f"{name}_min_s"] for lp in loops),
+        "median_us": 1e6 * main[f"{name}_median_s"],
+        "p99_us": 1e6 * main[f"{name}_p99_s"],
+        "max_us": 1e6 * max(lp[f"{name}_max_s"] for lp in loops),
+    }
 
 
 def _weighted_cpu(loops: list[dict]) -> float:
@@ -346,31 +396,41 @@ def bench_plan() -> Iterator[tuple[Plan, Path, Path]]:
 def measure(seconds: float, realtime: int = 0) -> dict[str, Any]:
     with bench_plan() as (plan, plan_file, tmp):
         load = os.getloadavg()[0]
-        return {"seconds": seconds, "load_before": load,
-                "agent_compute_hot": hot_compute(plan),
-                "fixed_500hz": fixed_rate_figures(plan, seconds),
-                "fixed_100hz": fixed_rate_figures(plan, seconds, 100.0),
-                "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp, realtime),
-                "zmq_fixed": zmq_mode_figures(plan_file, "fixed", seconds, tmp, realtime),
-                "zmq_echo": zmq_mode_figures(plan_file, "echo", min(seconds, 20.0), tmp),
-                "idle_500hz": idle_loop_figures(min(seconds, 20.0)),
-                "load_after": os.getloadavg()[0]}
+        return {
+            "seconds": seconds,
+            "load_before": load,
+            "agent_compute_hot": hot_compute(plan),
+            "fixed_500hz": fixed_rate_figures(plan, seconds),
+            "fixed_100hz": fixed_rate_figures(plan, seconds, 100.0),
+            "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp, realtime),
+            "zmq_fixed": zmq_mode_figures(plan_file, "fixed", seconds, tmp, realtime),
+            "zmq_echo": zmq_mode_figures(plan_file, "echo", min(seconds, 20.0), tmp),
+            "idle_500hz": idle_loop_figures(min(seconds, 20.0)),
+            "load_after": os.getloadavg()[0],
+        }
 
 
-def load_figures(plan: Plan, plan_file: Path, seconds: float, tmp: Path,
-                 realtime: int) -> dict[str, Any]:
+def load_figures(
+    plan: Plan, plan_file: Path, seconds: float, tmp: Path, realtime: int
+) -> dict[str, Any]:
     """What load changes: overruns at 100 and 500 Hz, and the default (mocap-synchronous)
     loop's pose-to-setpoint latency over ZMQ."""
-    return {"fixed_100hz": fixed_rate_figures(plan, seconds, 100.0),
-            "fixed_500hz": fixed_rate_figures(plan, seconds, LOOP_HZ),
-            "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp, realtime)}
+    return {
+        "fixed_100hz": fixed_rate_figures(plan, seconds, 100.0),
+        "fixed_500hz": fixed_rate_figures(plan, seconds, LOOP_HZ),
+        "zmq_mocap": zmq_mode_figures(plan_file, "mocap", seconds, tmp, realtime),
+    }
 
 
 def measure_under_load(seconds: float, hogs: int, realtime: int = 0) -> dict[str, Any]:
     """load_figures without load, then with `hogs` CPU-bound processes beside them."""
     with bench_plan() as (plan, plan_file, tmp):
-        out: dict[str, Any] = {"seconds": seconds, "hogs": hogs, "realtime": realtime,
-                               "load_before": os.getloadavg()[0]}
+        out: dict[str, Any] = {
+            "seconds": seconds,
+            "hogs": hogs,
+            "realtime": realtime,
+            "load_before": os.getloadavg()[0],
+        }
         for name in ("idle", "loaded"):  # each run's flight logs in a folder of its own
             (tmp / name).mkdir()
         out["idle"] = load_figures(plan, plan_file, seconds, tmp / "idle", realtime)
@@ -382,8 +442,13 @@ def measure_under_load(seconds: float, hogs: int, realtime: int = 0) -> dict[str
 
 # ------------------------------------------------------------------ report
 
-TARGETS = {"lateness": "p99 <= 500", "period_deviation": "p99 <= 500", "agent": "median <= 50",
-           "latency_mocap": "p99 <= 1000", "latency_fixed": "<= 10000 (one period)"}
+TARGETS = {
+    "lateness": "p99 <= 500",
+    "period_deviation": "p99 <= 500",
+    "agent": "median <= 50",
+    "latency_mocap": "p99 <= 1000",
+    "latency_fixed": "<= 10000 (one period)",
+}
 
 
 def rows(fig: dict[str, Any]) -> list[tuple[str, dict[str, float], str]]:
@@ -407,57 +472,80 @@ def rows(fig: dict[str, Any]) -> list[tuple[str, dict[str, float], str]]:
 
 def text(fig: dict[str, Any]) -> str:
     f5, zm, zf = fig["fixed_500hz"], fig["zmq_mocap"], fig["zmq_fixed"]
-    out = [f"load average {fig['load_before']:.2f} before, {fig['load_after']:.2f} after "
-           f"({os.cpu_count()} cores; targets are for an idle machine)",
-           f"{'figure [us]':36} {'min':>8} {'median':>8} {'p99':>8} {'max':>8}   target"]
+    out = [
+        f"load average {fig['load_before']:.2f} before, {fig['load_after']:.2f} after "
+        f"({os.cpu_count()} cores; targets are for an idle machine)",
+        f"{'figure [us]':36} {'min':>8} {'median':>8} {'p99':>8} {'max':>8}   target",
+    ]
     for name, s, target in rows(fig):
-        out.append(f"{name:36} {s['min_us']:8.1f} {s['median_us']:8.1f} {s['p99_us']:8.1f} "
-                   f"{s['max_us']:8.1f}   {target}")
+        out.append(
+            f"{name:36} {s['min_us']:8.1f} {s['median_us']:8.1f} {s['p99_us']:8.1f} "
+            f"{s['max_us']:8.1f}   {target}"
+        )
     for f in (f5, fig["fixed_100hz"]):
         out.append(overrun_line(f) + f", CPU {100 * f['cpu_fraction']:.1f} % of a core")
     idle = fig["idle_500hz"]
-    out.append(f"500 Hz loop with an empty tick: {idle['ticks']} ticks in {idle['seconds']:.1f} "
-               f"s, {idle['overruns']} overruns ({idle['overruns_per_min']:.1f} per minute; the "
-               f"machine's own wake-up tail; hypervisor steal {idle['steal_ms']:.0f} ms)")
+    out.append(
+        f"500 Hz loop with an empty tick: {idle['ticks']} ticks in {idle['seconds']:.1f} "
+        f"s, {idle['overruns']} overruns ({idle['overruns_per_min']:.1f} per minute; the "
+        f"machine's own wake-up tail; hypervisor steal {idle['steal_ms']:.0f} ms)"
+    )
     for z in (zm, zf):
-        out.append(f"ZMQ {z['sync']:5} {z['rate_hz']:g} Hz loop, {z['mocap_hz']:g} Hz mocap: "
-                   f"{z['flights']} flight(s) {', '.join(map(str, z['outcomes']))}; "
-                   f"{z['setpoints_matched']} poses matched; {z['overruns']} overruns; agent "
-                   f"CPU {100 * z['cpu_fraction']:.1f} % of a core (target <= 10 %)")
+        out.append(
+            f"ZMQ {z['sync']:5} {z['rate_hz']:g} Hz loop, {z['mocap_hz']:g} Hz mocap: "
+            f"{z['flights']} flight(s) {', '.join(map(str, z['outcomes']))}; "
+            f"{z['setpoints_matched']} poses matched; {z['overruns']} overruns; agent "
+            f"CPU {100 * z['cpu_fraction']:.1f} % of a core (target <= 10 %)"
+        )
     return "\n".join(out)
 
 
 def overrun_line(f: dict[str, Any]) -> str:
-    return (f"{f['rate_hz']:g} Hz loop: {f['ticks']} ticks in {f['seconds']:.1f} s, "
-            f"{f['overruns']} overruns ({f['overruns_per_min']:.1f} per minute, target 0), "
-            f"{f['missed']} missed deadlines, hypervisor steal {f['steal_ms']:.0f} ms, "
-            f"{f['gc_collections']} garbage collections")
+    return (
+        f"{f['rate_hz']:g} Hz loop: {f['ticks']} ticks in {f['seconds']:.1f} s, "
+        f"{f['overruns']} overruns ({f['overruns_per_min']:.1f} per minute, target 0), "
+        f"{f['missed']} missed deadlines, hypervisor steal {f['steal_ms']:.0f} ms, "
+        f"{f['gc_collections']} garbage collections"
+    )
 
 
 def load_text(fig: dict[str, Any]) -> str:
     """Each figure without load beside the same figure with the hogs running."""
     rt = f"SCHED_FIFO {fig['realtime']} (bench and agent)" if fig["realtime"] else "none"
     idle, busy = fig["idle"], fig["loaded"]
-    out = [f"{fig['hogs']} CPU-bound processes beside the loaded run; {os.cpu_count()} cores; "
-           f"load average {fig['load_before']:.2f} before, {fig['load_during']:.2f} loaded; "
-           f"--realtime: {rt}",
-           f"{'figure':44} {'no load':>16} {'loaded':>16}"]
+    out = [
+        f"{fig['hogs']} CPU-bound processes beside the loaded run; {os.cpu_count()} cores; "
+        f"load average {fig['load_before']:.2f} before, {fig['load_during']:.2f} loaded; "
+        f"--realtime: {rt}",
+        f"{'figure':44} {'no load':>16} {'loaded':>16}",
+    ]
 
     def row(name: str, get) -> None:
         out.append(f"{name:44} {get(idle):>16} {get(busy):>16}")
+
     for key in ("fixed_100hz", "fixed_500hz"):
         hz = idle[key]["rate_hz"]
-        row(f"{hz:g} Hz loop: overruns (per minute)",
-            lambda f, k=key: f"{f[k]['overruns']} ({f[k]['overruns_per_min']:.1f})")
-        row(f"{hz:g} Hz loop: lateness p50 / p99 [us]",
-            lambda f, k=key: f"{f[k]['lateness']['median_us']:.0f} / "
-                             f"{f[k]['lateness']['p99_us']:.0f}")
+        row(
+            f"{hz:g} Hz loop: overruns (per minute)",
+            lambda f, k=key: f"{f[k]['overruns']} ({f[k]['overruns_per_min']:.1f})",
+        )
+        row(
+            f"{hz:g} Hz loop: lateness p50 / p99 [us]",
+            lambda f, k=key: (
+                f"{f[k]['lateness']['median_us']:.0f} / {f[k]['lateness']['p99_us']:.0f}"
+            ),
+        )
     for name, key in (("in agent", "latency_agent"), ("sockets", "latency_sockets")):
-        row(f"pose->setpoint, mocap-sync, {name} p50 / p99 [us]",
-            lambda f, k=key: f"{f['zmq_mocap'][k]['median_us']:.0f} / "
-                             f"{f['zmq_mocap'][k]['p99_us']:.0f}")
-    row("ZMQ flights: agent overruns / poses matched",
-        lambda f: f"{f['zmq_mocap']['overruns']} / {f['zmq_mocap']['setpoints_matched']}")
+        row(
+            f"pose->setpoint, mocap-sync, {name} p50 / p99 [us]",
+            lambda f, k=key: (
+                f"{f['zmq_mocap'][k]['median_us']:.0f} / {f['zmq_mocap'][k]['p99_us']:.0f}"
+            ),
+        )
+    row(
+        "ZMQ flights: agent overruns / poses matched",
+        lambda f: f"{f['zmq_mocap']['overruns']} / {f['zmq_mocap']['setpoints_matched']}",
+    )
     return "\n".join(out)
 
 

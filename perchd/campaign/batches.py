@@ -11,14 +11,14 @@ import dataclasses
 import functools
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
 
+from perchd.campaign.engine import Engine
+from perchd.campaign.flights import FlightRow, FlightSpec, Spread, fly_one
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig
-from perchd.campaign.flights import FlightRow, FlightSpec, Spread, fly_one
-from perchd.campaign.engine import Engine
 from perchd.tau.plan import Plan
 
 UNITS_PER_WORKER = 4
@@ -48,7 +48,7 @@ def units(specs: Sequence[FlightSpec], workers: int, most: int) -> list[tuple[Fl
     out: list[tuple[FlightSpec, ...]] = []
     i, step = 0, 1
     while i < len(specs):
-        out.append(tuple(specs[i:i + min(step, size)]))
+        out.append(tuple(specs[i : i + min(step, size)]))
         i += len(out[-1])
         step *= 2 if len(out) % workers == 0 else 1
     return out
@@ -67,21 +67,47 @@ def fly_spec(job: CampaignJob, spec: FlightSpec) -> FlightRow:
     except Exception as err:  # one broken flight is a row of the table, not a lost campaign
         row = failed_row(job, spec, f"{type(err).__name__}: {err}")
     v = job.cfg.vehicle
-    return dataclasses.replace(row, mass_kg=v.mass_kg, thrust_max_n=v.thrust_max_n,
-                               cpu_s=time.process_time() - t0)
+    return dataclasses.replace(
+        row, mass_kg=v.mass_kg, thrust_max_n=v.thrust_max_n, cpu_s=time.process_time() - t0
+    )
 
 
 def failed_row(job: CampaignJob, spec: FlightSpec, detail: str) -> FlightRow:
     plan, spread = job.plan, job.spread
     lo, hi = plan.limits.v_contact
-    return FlightRow(spec.index, spec.x0, spec.v0, spread.latency_s, spread.noise_m,
-                     spec.gust_s, *spec.gust_dv, spec.seed, EndReason.SOFTWARE_ERROR.name,
-                     None, None, None, None, None, float(plan.duration),
-                     float(plan.v_contact), lo, hi, False, None, "", detail, plan.strategy)
+    return FlightRow(
+        spec.index,
+        spec.x0,
+        spec.v0,
+        spread.latency_s,
+        spread.noise_m,
+        spec.gust_s,
+        *spec.gust_dv,
+        spec.seed,
+        EndReason.SOFTWARE_ERROR.name,
+        None,
+        None,
+        None,
+        None,
+        None,
+        float(plan.duration),
+        float(plan.v_contact),
+        lo,
+        hi,
+        False,
+        None,
+        "",
+        detail,
+        plan.strategy,
+    )
 
 
-def fly_campaign(job: CampaignJob, specs: Sequence[FlightSpec], engine: Engine,
-                 on_rows: Callable[[list[FlightRow]], None]) -> None:
+def fly_campaign(
+    job: CampaignJob,
+    specs: Sequence[FlightSpec],
+    engine: Engine,
+    on_rows: Callable[[list[FlightRow]], None],
+) -> None:
     """Fly every spec on `engine`; on_rows(rows) as each unit ends, in no set order."""
     if not specs:
         return

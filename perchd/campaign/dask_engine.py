@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import logging
 import os
-from typing import Any, Callable, Iterator, Sequence, TypeVar
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, TypeVar
 
 from distributed import Client, LocalCluster, as_completed
 
-from perchd.core.errors import ConfigError
 from perchd.campaign.engine import MOST_PER_UNIT
+from perchd.core.errors import ConfigError
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -32,12 +33,17 @@ class DaskEngine:
         self.client, self.cluster, self.name = client, cluster, name
 
     @classmethod
-    def start(cls, address: str | None, workers: int) -> "DaskEngine":
+    def start(cls, address: str | None, workers: int) -> DaskEngine:
         if address is None:
             os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")  # workers: no chatter
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address=None,
-                                   silence_logs=logging.ERROR)
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
             try:
                 return cls(Client(cluster), cluster, f"a local Dask cluster of {workers}")
             except BaseException:

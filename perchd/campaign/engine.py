@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import importlib.util
 import signal
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from typing import Callable, Iterator, Protocol, Sequence, TypeVar
+from typing import Protocol, TypeVar
 
 from perchd.core.errors import ConfigError
 
@@ -74,10 +75,12 @@ def open_engine(spec: ClusterSpec, jobs: int) -> Engine:
         return InProcess()
     if not have_dask():
         if spec.address is not None:
-            raise ConfigError(f"--cluster {spec.address}: needs Dask; pip install "
-                              f"'{CLUSTER_EXTRA}'")
+            raise ConfigError(
+                f"--cluster {spec.address}: needs Dask; pip install '{CLUSTER_EXTRA}'"
+            )
         return ProcessPool(workers)
     from perchd.campaign.dask_engine import DaskEngine
+
     return DaskEngine.start(spec.address, workers)
 
 

@@ -20,11 +20,21 @@ from perchd.tau.plan import Plan
 PERCH_TOLERANCE_PCT = 3.0
 """[%] a perch time this close to the plan's duration is on time."""
 
-UNSTABLE = frozenset({
-    EndReason.SPEED_LIMIT, EndReason.GEOFENCE, EndReason.TILT_LIMIT,
-    EndReason.TAU_DIVERGENCE, EndReason.STALE_MOCAP, EndReason.LOST_LINK,
-    EndReason.DEADLINE_OVERRUN, EndReason.TIMEOUT, EndReason.SOFTWARE_ERROR,
-    EndReason.SIGNAL, EndReason.OPERATOR_ABORT})
+UNSTABLE = frozenset(
+    {
+        EndReason.SPEED_LIMIT,
+        EndReason.GEOFENCE,
+        EndReason.TILT_LIMIT,
+        EndReason.TAU_DIVERGENCE,
+        EndReason.STALE_MOCAP,
+        EndReason.LOST_LINK,
+        EndReason.DEADLINE_OVERRUN,
+        EndReason.TIMEOUT,
+        EndReason.SOFTWARE_ERROR,
+        EndReason.SIGNAL,
+        EndReason.OPERATOR_ABORT,
+    }
+)
 """Endings that are the safety net catching a vehicle out of control, or aborts that on a
 simulated link and mocap cannot be the vehicle's doing. The rest end safely: CONTACT,
 PLAN_COMPLETE (no contact in time), TRIGGER_REFUSED and HOVER_UNLEARNED (refusals)."""
@@ -75,22 +85,33 @@ PARAMETERS = tuple(f.name for f in dataclasses.fields(FamilyRow))[2:14]
 def parameters(member: FamilyVehicle) -> dict[str, float]:
     """The member's PARAMETERS by name."""
     p, m = member.plant, member.mocap
-    return {"mass_kg": p.mass_kg, "thrust_to_weight": member.thrust_to_weight,
-            "attitude_tau_s": p.attitude_tau_s, "latency_s": p.latency_s,
-            "motor_tau_s": p.motor_tau_s, "drag_per_s": p.drag_per_s,
-            "qdrag_per_m": p.qdrag_per_m, "mocap_rate_hz": m.rate_hz,
-            "mocap_latency_s": m.latency_s, "mocap_noise_m": m.noise_m,
-            "draught_mps2": p.draught_mps2, "draught_reach_m": member.draught_reach_m}
+    return {
+        "mass_kg": p.mass_kg,
+        "thrust_to_weight": member.thrust_to_weight,
+        "attitude_tau_s": p.attitude_tau_s,
+        "latency_s": p.latency_s,
+        "motor_tau_s": p.motor_tau_s,
+        "drag_per_s": p.drag_per_s,
+        "qdrag_per_m": p.qdrag_per_m,
+        "mocap_rate_hz": m.rate_hz,
+        "mocap_latency_s": m.latency_s,
+        "mocap_noise_m": m.noise_m,
+        "draught_mps2": p.draught_mps2,
+        "draught_reach_m": member.draught_reach_m,
+    }
 
 
-def fly_member(plan: Plan, member: FamilyVehicle, base: FlightConfig,
-               log_path: str | Path) -> FamilyRow:
+def fly_member(
+    plan: Plan, member: FamilyVehicle, base: FlightConfig, log_path: str | Path
+) -> FamilyRow:
     """Fly `plan` once on `member` with lab_config(member, base); its row. A flight the
     software refuses or breaks off with an error is a SOFTWARE_ERROR row, not an exception:
     a family run reports every member."""
     cfg = lab_config(member, base)
-    session = open_session(params=WorldParams(plant=member.plant, mocap=member.mocap,
-                                              seed=member.seed), surface=cfg.surface)
+    session = open_session(
+        params=WorldParams(plant=member.plant, mocap=member.mocap, seed=member.seed),
+        surface=cfg.surface,
+    )
     try:
         res = session.fly(plan, log_path, cfg)
     except PerchdError as err:
@@ -107,10 +128,20 @@ def _row(member: FamilyVehicle, plan: Plan, res: FlightResult | None, detail: st
     duration = res.plan_duration if res else float(plan.duration)
     err = None if perch is None else 100.0 * (perch - duration) / duration
     return FamilyRow(
-        member.index, member.seed, **parameters(member), outcome=outcome.name, detail=detail,
-        contact_speed=speed, contact_speed_est=res.contact_speed if hit else None,
-        perch_time=perch, plan_duration=duration,
-        plan_v_contact=res.v_contact_plan if res else float(plan.v_contact), v_lo=lo, v_hi=hi,
+        member.index,
+        member.seed,
+        **parameters(member),
+        outcome=outcome.name,
+        detail=detail,
+        contact_speed=speed,
+        contact_speed_est=res.contact_speed if hit else None,
+        perch_time=perch,
+        plan_duration=duration,
+        plan_v_contact=res.v_contact_plan if res else float(plan.v_contact),
+        v_lo=lo,
+        v_hi=hi,
         in_window=hit and lo <= speed <= hi,
         on_time=err is not None and abs(err) <= PERCH_TOLERANCE_PCT,
-        perch_error_pct=err, unstable=outcome in UNSTABLE)
+        perch_error_pct=err,
+        unstable=outcome in UNSTABLE,
+    )

@@ -19,10 +19,11 @@ import signal
 import statistics
 import tempfile
 from collections import Counter
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -32,8 +33,8 @@ from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.frame import PerchFrame
 from perchd.flight.planguard import check_flight_plan
 from perchd.flight.run import FlightResult, TickStatus
-from perchd.sim.plant import PlantParams
 from perchd.session import open_session
+from perchd.sim.plant import PlantParams
 from perchd.sim.world import MocapParams, SimWorld, WorldParams
 from perchd.tau import retarget
 from perchd.tau.plan import Plan
@@ -72,8 +73,7 @@ class Spread:
     def __post_init__(self) -> None:
         for name, (lo, hi) in (("x0", self.x0), ("v0", self.v0)):
             if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-                raise ConfigError(f"--{name} {lo:g} {hi:g}: LO must not exceed HI "
-                                  f"(by {lo - hi:g})")
+                raise ConfigError(f"--{name} {lo:g} {hi:g}: LO must not exceed HI (by {lo - hi:g})")
         if self.x0[1] >= 0.0:
             raise ConfigError(f"--x0 up to {self.x0[1]:g} m: a trigger gap must be < 0 m")
         if self.v0[0] <= 0.0:
@@ -175,7 +175,7 @@ def _spec(spread: Spread, index: int, x0: float, v0: float, duration: float) -> 
     rng = _rng(spread.seed, 1, index)
     frac = rng.uniform(*GUST_WINDOW)
     dv = tuple(float(v) for v in rng.uniform(-spread.gust_mps, spread.gust_mps, 3))
-    noise_seed = int(rng.integers(0, 2 ** 31))
+    noise_seed = int(rng.integers(0, 2**31))
     if spread.gust_mps == 0.0:
         frac, dv = 0.0, (0.0, 0.0, 0.0)
     return FlightSpec(index, float(x0), float(v0), frac * duration, dv, noise_seed)
@@ -223,8 +223,9 @@ def campaign_config(cfg: FlightConfig, policy: TriggerPolicy) -> FlightConfig:
     return dataclasses.replace(cfg, trigger=dataclasses.replace(cfg.trigger, policy=policy))
 
 
-def fly_one(plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
-            log_path: str | Path) -> FlightRow:
+def fly_one(
+    plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec, log_path: str | Path
+) -> FlightRow:
     """Fly `plan` aimed at spec's trigger state in a fresh simulated world; one table row."""
 
     try:
@@ -234,16 +235,28 @@ def fly_one(plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
     return _row(spec, spread, aimed, _simulate(aimed, cfg, spread, spec, log_path), "")
 
 
-def _simulate(plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec,
-              log_path: str | Path) -> FlightResult:
-    session = open_session(params=WorldParams(
-        plant=PlantParams(latency_s=spread.latency_s), mocap=MocapParams(noise_m=spread.noise_m),
-        start=spread.start or start_for(spec.x0, spec.v0, cfg), seed=spec.seed),
-        surface=cfg.surface)
+def _simulate(
+    plan: Plan, cfg: FlightConfig, spread: Spread, spec: FlightSpec, log_path: str | Path
+) -> FlightResult:
+    session = open_session(
+        params=WorldParams(
+            plant=PlantParams(latency_s=spread.latency_s),
+            mocap=MocapParams(noise_m=spread.noise_m),
+            start=spread.start or start_for(spec.x0, spec.v0, cfg),
+            seed=spec.seed,
+        ),
+        surface=cfg.surface,
+    )
     # log_force: --logs was checked by the command (an existing log there only with --force,
     # or a resumed campaign's torn one); a replaced log is still renamed into place whole
-    return session.fly(plan, log_path, cfg, on_tick=_gust_hook(session.world, spec),
-                       header={"campaign_flight": dataclasses.asdict(spec)}, log_force=True)
+    return session.fly(
+        plan,
+        log_path,
+        cfg,
+        on_tick=_gust_hook(session.world, spec),
+        header={"campaign_flight": dataclasses.asdict(spec)},
+        log_force=True,
+    )
 
 
 def _gust_hook(world: SimWorld, spec: FlightSpec) -> Callable[[TickStatus], None] | None:
@@ -264,28 +277,53 @@ def _gust_hook(world: SimWorld, spec: FlightSpec) -> Callable[[TickStatus], None
     return on_tick
 
 
-def _row(spec: FlightSpec, spread: Spread, plan: Plan, res: FlightResult | None, why: str) -> FlightRow:
+def _row(
+    spec: FlightSpec, spread: Spread, plan: Plan, res: FlightResult | None, why: str
+) -> FlightRow:
     """The table row of a flight result, or (res None) of an aim no plan could be made for."""
     lo, hi = plan.limits.v_contact
     trig = res.trigger if res else None
-    hit = res is not None and res.outcome is EndReason.CONTACT and res.true_contact_speed is not None
+    hit = (
+        res is not None and res.outcome is EndReason.CONTACT and res.true_contact_speed is not None
+    )
     speed, perch = (res.true_contact_speed, res.true_perch_time) if hit else (None, None)
     duration = res.plan_duration if res else float(plan.duration)
     return FlightRow(
-        spec.index, spec.x0, spec.v0, spread.latency_s, spread.noise_m, spec.gust_s,
-        *spec.gust_dv, spec.seed, res.outcome.name if res else EndReason.TRIGGER_REFUSED.name,
-        trig and trig.x, trig and trig.v, speed, res.contact_speed if hit else None, perch,
-        duration, res.v_contact_plan if res else float(plan.v_contact), lo, hi,
-        hit and lo <= speed <= hi, None if perch is None else perch - duration,
-        trig.action if trig else "", res.detail if res else why, plan.strategy,
+        spec.index,
+        spec.x0,
+        spec.v0,
+        spread.latency_s,
+        spread.noise_m,
+        spec.gust_s,
+        *spec.gust_dv,
+        spec.seed,
+        res.outcome.name if res else EndReason.TRIGGER_REFUSED.name,
+        trig and trig.x,
+        trig and trig.v,
+        speed,
+        res.contact_speed if hit else None,
+        perch,
+        duration,
+        res.v_contact_plan if res else float(plan.v_contact),
+        lo,
+        hi,
+        hit and lo <= speed <= hi,
+        None if perch is None else perch - duration,
+        trig.action if trig else "",
+        res.detail if res else why,
+        plan.strategy,
         None if speed is None else speed - res.v_contact_plan,
-        **(_loop_figures(res.loop) if res else {}))
+        **(_loop_figures(res.loop) if res else {}),
+    )
 
 
 def _loop_figures(loop: Any) -> dict[str, Any]:
     """The row's figures of the flight's flight.loop.LoopSummary."""
-    return {"ticks": loop.ticks, "agent_median_ms": loop.agent_median_s * 1e3,
-            "agent_max_ms": loop.agent_max_s * 1e3}
+    return {
+        "ticks": loop.ticks,
+        "agent_median_ms": loop.agent_median_s * 1e3,
+        "agent_max_ms": loop.agent_max_s * 1e3,
+    }
 
 
 def _fly_logged(args: tuple) -> FlightRow:
@@ -294,9 +332,15 @@ def _fly_logged(args: tuple) -> FlightRow:
     return fly_one(plan, cfg, spread, spec, Path(log_dir) / f"flight-{spec.index:04d}.jsonl")
 
 
-def run_campaign(plan: Plan, cfg: FlightConfig, spread: Spread, specs: Iterable[FlightSpec],
-                 jobs: int = 1, log_dir: str | Path | None = None,
-                 on_row: Callable[[FlightRow], None] | None = None) -> list[FlightRow]:
+def run_campaign(
+    plan: Plan,
+    cfg: FlightConfig,
+    spread: Spread,
+    specs: Iterable[FlightSpec],
+    jobs: int = 1,
+    log_dir: str | Path | None = None,
+    on_row: Callable[[FlightRow], None] | None = None,
+) -> list[FlightRow]:
     """Fly every spec (in `jobs` processes); rows in spec order. on_row(row) as each ends.
     log_dir keeps each flight's log (flight-NNNN.jsonl); None: logs go to a temporary
     directory and are removed."""
@@ -360,7 +404,7 @@ class TableWriter:
     def close(self) -> None:
         self._f.close()
 
-    def __enter__(self) -> "TableWriter":
+    def __enter__(self) -> TableWriter:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -382,7 +426,7 @@ class Stat:
     max: float | None
 
     @classmethod
-    def of(cls, values: list[float]) -> "Stat":
+    def of(cls, values: list[float]) -> Stat:
         if not values:
             return cls(None, None, None)
         return cls(min(values), statistics.median(values), max(values))
@@ -409,10 +453,13 @@ def summarize(rows: list[FlightRow]) -> Summary:
     hits = [r for r in rows if r.contact_speed is not None]
     trig = [r for r in rows if r.trigger_x is not None]
     return Summary(
-        len(rows), dict(Counter(r.outcome for r in rows).most_common()),
-        sum(r.in_window for r in rows), Stat.of([r.contact_speed for r in hits]),
+        len(rows),
+        dict(Counter(r.outcome for r in rows).most_common()),
+        sum(r.in_window for r in rows),
+        Stat.of([r.contact_speed for r in hits]),
         Stat.of([r.contact_speed - r.plan_v_contact for r in hits]),
         Stat.of([r.perch_error_s for r in hits]),
         Stat.of([100.0 * r.perch_error_s / r.plan_duration for r in hits]),
         Stat.of([r.trigger_x - r.x0_aim for r in trig]),
-        Stat.of([r.trigger_v - r.v0_aim for r in trig]))
+        Stat.of([r.trigger_v - r.v0_aim for r in trig]),
+    )

@@ -5,22 +5,33 @@ parameters. matplotlib is imported here, lazily, through perchd.core.extras (ext
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from perchd.core.extras import require
 from perchd.logs.figsave import save_figure
 
 DPI = 110
-WORST_COLUMNS = (("index", "d"), ("outcome", "s"), ("x0_aim", ".3f"), ("v0_aim", ".3f"),
-                 ("gust_dvx", "+.2f"), ("gust_dvy", "+.2f"), ("gust_dvz", "+.2f"),
-                 ("contact_speed", ".3f"), ("perch_error_s", "+.4f"))
+WORST_COLUMNS = (
+    ("index", "d"),
+    ("outcome", "s"),
+    ("x0_aim", ".3f"),
+    ("v0_aim", ".3f"),
+    ("gust_dvx", "+.2f"),
+    ("gust_dvy", "+.2f"),
+    ("gust_dvz", "+.2f"),
+    ("contact_speed", ".3f"),
+    ("perch_error_s", "+.4f"),
+)
 
 
 def worst(rows: Sequence[Any], n: int) -> list[Any]:
     """The n worst flights: those outside their window first, then by contact-speed error."""
+
     def badness(r: Any) -> tuple[bool, float]:
         return r.in_window, -abs(r.speed_error_mps or 0.0)
+
     return sorted(rows, key=badness)[:n]
 
 
@@ -51,8 +62,11 @@ def _speeds(ax: Any, rows: Sequence[Any]) -> None:
     ax.hist(speeds, bins=30, color="tab:blue")
     for edge in sorted({r.v_lo for r in rows} | {r.v_hi for r in rows}):
         ax.axvline(edge, color="tab:red", linestyle="--")
-    ax.set(xlabel="contact speed [m/s] (dashed: the plan's window)", ylabel="flights",
-           title=f"{len(speeds)} contacts of {len(rows)} flights")
+    ax.set(
+        xlabel="contact speed [m/s] (dashed: the plan's window)",
+        ylabel="flights",
+        title=f"{len(speeds)} contacts of {len(rows)} flights",
+    )
 
 
 def _perch_errors(ax: Any, rows: Sequence[Any]) -> None:

@@ -11,12 +11,13 @@ import dataclasses
 import hashlib
 import json
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
-from perchd.core.safefile import OutputError
 from perchd.campaign.flights import COLUMNS, FlightRow, FlightSpec, summarize
 from perchd.campaign.tableformats import TableFormat, table_format
+from perchd.core.safefile import OutputError
 
 
 def digest(obj: Any) -> str:
@@ -64,11 +65,14 @@ class CampaignTable:
                 raise OutputError(f"--table {self.path}: exists (pass --force to overwrite)")
             return []
         theirs = json.loads(made.read_text()).get("campaign", {})
-        differ = sorted(k for k in self.identity.keys() | theirs.keys()
-                        if self.identity.get(k) != theirs.get(k))
+        differ = sorted(
+            k for k in self.identity.keys() | theirs.keys() if self.identity.get(k) != theirs.get(k)
+        )
         if differ:
-            raise OutputError(f"--table {self.path}: made by another campaign (its "
-                              f"{', '.join(differ)} differ); name another table or pass --force")
+            raise OutputError(
+                f"--table {self.path}: made by another campaign (its "
+                f"{', '.join(differ)} differ); name another table or pass --force"
+            )
         try:
             return self.store.load() if self.store.exists() else []
         except (OSError, ValueError) as err:
@@ -93,11 +97,16 @@ class CampaignTable:
         return self.rows
 
     def _write_summary(self, complete: bool, **extra: Any) -> None:
-        doc = {"campaign": self.identity, "table": str(self.path), "columns": list(COLUMNS),
-               "complete": complete, "rows": len(self.rows), **extra,
-               "summary": dataclasses.asdict(summarize(self.rows))}
+        doc = {
+            "campaign": self.identity,
+            "table": str(self.path),
+            "columns": list(COLUMNS),
+            "complete": complete,
+            "rows": len(self.rows),
+            **extra,
+            "summary": dataclasses.asdict(summarize(self.rows)),
+        }
         out = summary_path(self.path)
         tmp = out.with_name(f".{out.name}.tmp")
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
         os.replace(tmp, out)
-

@@ -13,8 +13,9 @@ import dataclasses
 import importlib.util
 import json
 import os
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable, Protocol
+from typing import Any, Protocol
 
 PARQUET_EXTRA = "perchd[cluster]"
 
@@ -48,8 +49,10 @@ def table_format(path: Path, row_type: type) -> TableFormat:
     """By suffix: .parquet (needs pyarrow) or anything else as CSV."""
     if path.suffix == ".parquet":
         if not have_pyarrow():
-            raise ImportError(f"a .parquet table needs pyarrow; pip install '{PARQUET_EXTRA}' "
-                              "or name a .csv table")
+            raise ImportError(
+                f"a .parquet table needs pyarrow; pip install '{PARQUET_EXTRA}' "
+                "or name a .csv table"
+            )
         return ParquetTable(path, row_type)
     return CsvTable(path, row_type)
 
@@ -156,7 +159,6 @@ class CsvTable(_Appending):
         _replace(self.path, lambda tmp: _write_csv(tmp, self.types, rows))
 
 
-
 def _write_csv(path: Path, columns: Iterable[str], rows: list[Any]) -> None:
     with open(path, "w", newline="") as f:
         out = csv.writer(f)
@@ -183,8 +185,10 @@ class ParquetTable(_Appending):
 
     def schema(self) -> Any:
         import pyarrow as pa
-        return pa.schema([(name, getattr(pa, _ARROW[kind.split()[0]])())
-                          for name, kind in self.types.items()])
+
+        return pa.schema(
+            [(name, getattr(pa, _ARROW[kind.split()[0]])()) for name, kind in self.types.items()]
+        )
 
     def load(self) -> list[Any]:
         rows = self._load_parquet() if self.path.exists() else []
@@ -192,6 +196,7 @@ class ParquetTable(_Appending):
 
     def _load_parquet(self) -> list[Any]:
         import pyarrow.parquet as pq
+
         table = pq.read_table(self.path)
         if tuple(table.column_names) != tuple(self.types):
             raise ValueError(f"{self.path}: not this table's columns")
@@ -217,8 +222,8 @@ class ParquetTable(_Appending):
     def finish(self, rows: list[Any]) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq
+
         self.close()
         table = pa.Table.from_pylist([dataclasses.asdict(r) for r in rows], schema=self.schema())
         _replace(self.path, lambda tmp: pq.write_table(table, tmp))
         self.journal.unlink(missing_ok=True)
-

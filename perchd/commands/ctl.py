@@ -25,20 +25,28 @@ WAIT_POLL_S = 0.2
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("ctl", help="control a running perchd serve",
-                              description=__doc__.splitlines()[0])
-    p.add_argument("--socket", default=DEFAULT_SOCKET, help=f"control socket (default {DEFAULT_SOCKET})")
+    p = subparsers.add_parser(
+        "ctl", help="control a running perchd serve", description=__doc__.splitlines()[0]
+    )
+    p.add_argument(
+        "--socket", default=DEFAULT_SOCKET, help=f"control socket (default {DEFAULT_SOCKET})"
+    )
     p.add_argument("--json", action="store_true", help="print the reply as one JSON object")
     sub = p.add_subparsers(dest="cmd", required=True)
     fly = sub.add_parser("fly", help="start a flight along a plan file")
-    fly.add_argument("plan", help="plan file inside the service's plan_dir: a name there, or a path under it")
-    fly.add_argument("--wait", action="store_true", help="wait for the flight to end; print its outcome")
+    fly.add_argument(
+        "plan", help="plan file inside the service's plan_dir: a name there, or a path under it"
+    )
+    fly.add_argument(
+        "--wait", action="store_true", help="wait for the flight to end; print its outcome"
+    )
     sub.add_parser("abort", help="abort the flight (failsafe), or make an idle vehicle safe")
     sub.add_parser("status", help="the service's state and the flight in progress")
     for q in sub.choices.values():  # `ctl fly P --socket S` works as well as `ctl --socket S fly P`
         q.add_argument("--socket", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
-        q.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
-                       help=argparse.SUPPRESS)
+        q.add_argument(
+            "--json", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS
+        )
     p.set_defaults(run=run)
 
 
@@ -77,8 +85,9 @@ def abort(socket_path: str, timeout_s: float = TIMEOUT_S) -> dict:
     try:
         os.kill(pid, signal.SIGUSR1)
     except OSError as err:
-        raise LinkError(f"abort not delivered: {why}; SIGUSR1 to perchd serve (pid {pid}): "
-                        f"{err.strerror}") from None
+        raise LinkError(
+            f"abort not delivered: {why}; SIGUSR1 to perchd serve (pid {pid}): {err.strerror}"
+        ) from None
     return {"ok": True, "signalled": pid, "signal": "SIGUSR1", "socket_refused": why}
 
 

@@ -24,13 +24,19 @@ SERVICE_VARS = ("SERVICE_RESULT", "EXIT_CODE", "EXIT_STATUS")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("failsafe", help="make the service's vehicle safe after the "
-                              "service stopped or died (ExecStopPost)",
-                              description=__doc__.splitlines()[0])
+    p = subparsers.add_parser(
+        "failsafe",
+        help="make the service's vehicle safe after the service stopped or died (ExecStopPost)",
+        description=__doc__.splitlines()[0],
+    )
     p.add_argument("--config", help="the service's configuration (its [service] driver)")
     p.add_argument("--driver", help="vehicle URI (overrides [service] driver)")
-    p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S,
-                   help=f"[s] give up after this long (default {DEFAULT_TIMEOUT_S:g})")
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=DEFAULT_TIMEOUT_S,
+        help=f"[s] give up after this long (default {DEFAULT_TIMEOUT_S:g})",
+    )
     p.set_defaults(run=run)
 
 
@@ -68,8 +74,7 @@ def bounded(uri: str, timeout_s: float) -> Outcome:
     worker.start()
     worker.join(timeout_s + 1.0)  # the action's own deadline first, this as the backstop
     if not result:
-        print(f"perchd failsafe: {uri}: gave up after {timeout_s:g} s", file=sys.stderr,
-              flush=True)
+        print(f"perchd failsafe: {uri}: gave up after {timeout_s:g} s", file=sys.stderr, flush=True)
         os._exit(1)  # a hung link library's threads would hold the interpreter's exit
     if isinstance(result[0], BaseException):
         raise result[0]

@@ -64,43 +64,76 @@ against the URIs it prints, or use sim:// links under `perchd serve`."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("fly", help="fly a perch along a plan",
-                              description="Fly a perch along a plan file, e.g. "
-                                          "perchd fly plans/case1-ipts-n3.json "
-                                          "--driver sim:// --mocap sim://",
-                              epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "fly",
+        help="fly a perch along a plan",
+        description="Fly a perch along a plan file, e.g. "
+        "perchd fly plans/case1-ipts-n3.json "
+        "--driver sim:// --mocap sim://",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     numbers_as_values(p)
     p.add_argument("plan", help="plan file (perchd.plan/1 JSON)")
     p.add_argument("--driver", required=True, help="vehicle URI (sim://, radio://..., ...)")
     p.add_argument("--mocap", required=True, help="mocap URI (sim://, natnet://..., ...)")
     p.add_argument("--config", help="flight configuration file (TOML)")
-    p.add_argument("--surface", nargs=3, type=float, metavar=("X", "Y", "Z"),
-                   help="[m] a point on the surface, world frame (default 0 0 0)")
-    p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
-                   help="surface normal along the approach, world frame (default 1 0 0)")
-    p.add_argument("--log", help="flight log path; its directory must exist "
-                                 "(default ./flightlogs/<time>-<strategy>.jsonl, directory made). "
-                                 "F.mcap: the log is written as F.jsonl beside it during the "
-                                 "flight and exported to F.mcap at its end (perchd[mcap])")
+    p.add_argument(
+        "--surface",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="[m] a point on the surface, world frame (default 0 0 0)",
+    )
+    p.add_argument(
+        "--normal",
+        nargs=3,
+        type=float,
+        metavar=("NX", "NY", "NZ"),
+        help="surface normal along the approach, world frame (default 1 0 0)",
+    )
+    p.add_argument(
+        "--log",
+        help="flight log path; its directory must exist "
+        "(default ./flightlogs/<time>-<strategy>.jsonl, directory made). "
+        "F.mcap: the log is written as F.jsonl beside it during the "
+        "flight and exported to F.mcap at its end (perchd[mcap])",
+    )
     p.add_argument("--force", action="store_true", help="overwrite an existing --log file(s)")
-    p.add_argument("--state", help="the vehicle's profile, what flights learned of it (JSON; "
-                                   "default $XDG_STATE_HOME/perchd/vehicles/NAME.json, i.e. "
-                                   "~/.local/state/perchd/vehicles/NAME.json)")
-    p.add_argument("--vehicle", metavar="NAME",
-                   help="the vehicle's name, which names its profile (default: the driver URI; "
-                        "name it when its URI changes between flights, e.g. an ephemeral port)")
-    p.add_argument("--realtime", nargs="?", type=int, const=realtime.DEFAULT_PRIORITY,
-                   default=0, metavar="PRIO",
-                   help="run the agent under SCHED_FIFO at priority PRIO (1..99, default "
-                        f"{realtime.DEFAULT_PRIORITY}) with its memory locked; refused in one "
-                        "line, nothing flown, if the system does not permit it "
-                        "(CAP_SYS_NICE or ulimit -r; docs/safety.md)")
-    p.add_argument("--cpu", type=int, default=-1, metavar="N",
-                   help="with --realtime: pin the agent to CPU N")
-    p.add_argument("--foxglove", metavar="[HOST:]PORT",
-                   help="serve the flight live over the Foxglove WebSocket protocol (the MCAP "
-                        "export's channels, docs/contracts.md §5) on HOST (default 127.0.0.1), "
-                        "PORT 0 for any free one; needs perchd[foxglove]")
+    p.add_argument(
+        "--state",
+        help="the vehicle's profile, what flights learned of it (JSON; "
+        "default $XDG_STATE_HOME/perchd/vehicles/NAME.json, i.e. "
+        "~/.local/state/perchd/vehicles/NAME.json)",
+    )
+    p.add_argument(
+        "--vehicle",
+        metavar="NAME",
+        help="the vehicle's name, which names its profile (default: the driver URI; "
+        "name it when its URI changes between flights, e.g. an ephemeral port)",
+    )
+    p.add_argument(
+        "--realtime",
+        nargs="?",
+        type=int,
+        const=realtime.DEFAULT_PRIORITY,
+        default=0,
+        metavar="PRIO",
+        help="run the agent under SCHED_FIFO at priority PRIO (1..99, default "
+        f"{realtime.DEFAULT_PRIORITY}) with its memory locked; refused in one "
+        "line, nothing flown, if the system does not permit it "
+        "(CAP_SYS_NICE or ulimit -r; docs/safety.md)",
+    )
+    p.add_argument(
+        "--cpu", type=int, default=-1, metavar="N", help="with --realtime: pin the agent to CPU N"
+    )
+    p.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        help="serve the flight live over the Foxglove WebSocket protocol (the MCAP "
+        "export's channels, docs/contracts.md §5) on HOST (default 127.0.0.1), "
+        "PORT 0 for any free one; needs perchd[foxglove]",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object with the outcome")
     p.set_defaults(run=run)
 
@@ -119,9 +152,11 @@ class StatusLine:
             return
         self._next = st.t + self.every
         fmt = lambda v, f: "  --  " if v is None else format(v, f)  # noqa: E731
-        line = (f"t {st.t:6.2f} s  {st.phase.value:<8} X {fmt(st.x, '+7.3f')} m  "
-                f"Xdot {fmt(st.xdot, '+6.3f')} m/s  tau {fmt(st.tau, '+7.3f')} / "
-                f"ref {fmt(st.tau_ref, '+7.3f')} s")
+        line = (
+            f"t {st.t:6.2f} s  {st.phase.value:<8} X {fmt(st.x, '+7.3f')} m  "
+            f"Xdot {fmt(st.xdot, '+6.3f')} m/s  tau {fmt(st.tau, '+7.3f')} / "
+            f"ref {fmt(st.tau_ref, '+7.3f')} s"
+        )
         self.stream.write(("\r" + line) if self.tty else line + "\n")
         self.stream.flush()
 
@@ -132,20 +167,34 @@ class StatusLine:
 
 def summary_text(res: FlightResult) -> str:
     """The flight's summary: logs/summary.py's head, then what only a live flight knows."""
-    lines = figure_lines(res.outcome.name, res.detail, res.contact_speed, res.v_contact_plan,
-                         res.perch_time, res.plan_duration)
+    lines = figure_lines(
+        res.outcome.name,
+        res.detail,
+        res.contact_speed,
+        res.v_contact_plan,
+        res.perch_time,
+        res.plan_duration,
+    )
     if res.true_contact_speed is not None:
-        lines.append(f"simulator: contact at {res.true_contact_speed:.3f} m/s"
-                     + (f", {res.true_perch_time:.3f} s after the trigger"
-                        if res.true_perch_time is not None else ""))
+        lines.append(
+            f"simulator: contact at {res.true_contact_speed:.3f} m/s"
+            + (
+                f", {res.true_perch_time:.3f} s after the trigger"
+                if res.true_perch_time is not None
+                else ""
+            )
+        )
     if res.hover_n is not None:
         lines.append(f"hover thrust learned: {res.hover_n:.4f} N (guess {res.hover_guess_n:.4f} N)")
     if res.trigger is not None:
-        lines.append(f"trigger: x {res.trigger.x:.3f} m, v {res.trigger.v:.3f} m/s; "
-                     f"{res.trigger.action}")
+        lines.append(
+            f"trigger: x {res.trigger.x:.3f} m, v {res.trigger.v:.3f} m/s; {res.trigger.action}"
+        )
     lp = res.loop
-    lines.append(f"loop: {lp.ticks} ticks, compute median {lp.compute_median_s * 1e6:.0f} us "
-                 f"(p99 {lp.compute_p99_s * 1e6:.0f} us), {lp.overruns} overruns")
+    lines.append(
+        f"loop: {lp.ticks} ticks, compute median {lp.compute_median_s * 1e6:.0f} us "
+        f"(p99 {lp.compute_p99_s * 1e6:.0f} us), {lp.overruns} overruns"
+    )
     lines.append(f"log: {res.log}" + (f" (LOST: {res.log_lost})" if res.log_lost else ""))
     return "\n".join(lines)
 
@@ -224,21 +273,35 @@ def run(args: argparse.Namespace) -> int:
     with catching(lambda: abort.request(EndReason.SIGNAL)) as caught:
         try:
             links = open_links(args.driver, args.mocap, cfg.surface, mass_kg=cfg.vehicle.mass_kg)
-            res = links.fly(plan, log, cfg, abort, status,
-                            header={"plan_file": str(args.plan), "mocap": args.mocap,
-                                    "scheduling": rt.describe()}, log_force=args.force)
+            res = links.fly(
+                plan,
+                log,
+                cfg,
+                abort,
+                status,
+                header={
+                    "plan_file": str(args.plan),
+                    "mocap": args.mocap,
+                    "scheduling": rt.describe(),
+                },
+                log_force=args.force,
+            )
         finally:
             status.close()
             if view is not None:
                 view.close()
     visit = store.remember_flight(cfg, res, visit)
     out = res.to_json()
-    out["vehicle_profile"] = {"path": str(visit.path), "written": visit.written,
-                              "read": visit.read.to_doc() if visit.read else None}
+    out["vehicle_profile"] = {
+        "path": str(visit.path),
+        "written": visit.written,
+        "read": visit.read.to_doc() if visit.read else None,
+    }
     if mcap is not None and write_mcap(log, mcap, args.force):
         out["mcap"] = str(mcap)
-    text = "\n".join([summary_text(res), visit.describe()]
-                     + ([f"mcap: {mcap}"] if "mcap" in out else []))
+    text = "\n".join(
+        [summary_text(res), visit.describe()] + ([f"mcap: {mcap}"] if "mcap" in out else [])
+    )
     print(json.dumps(out) if args.json else text)
     caught.say("fly", f"the flight ended {res.outcome.name}; log {log}")
     return caught.exit_code(0 if res.outcome is EndReason.CONTACT else 1)

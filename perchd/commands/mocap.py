@@ -15,15 +15,25 @@ from perchd.mocap.base import open_source
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
-        "mocap", help="print the poses a mocap source delivers",
+        "mocap",
+        help="print the poses a mocap source delivers",
         description="Print poses as they arrive, e.g. natnet://10.0.0.5?body=cf1 or "
-                    "zmq://127.0.0.1:5555?body=cf1.")
+        "zmq://127.0.0.1:5555?body=cf1.",
+    )
     parser.add_argument("uri", help="mocap source URI")
-    parser.add_argument("--count", type=_positive_int, default=None,
-                        help="stop after N poses (default: until interrupted)")
+    parser.add_argument(
+        "--count",
+        type=_positive_int,
+        default=None,
+        help="stop after N poses (default: until interrupted)",
+    )
     parser.add_argument("--json", action="store_true", help="one JSON object per pose")
-    parser.add_argument("--timeout", type=_positive_float, default=5.0,
-                        help="[s] give up when no pose arrives for this long (default 5)")
+    parser.add_argument(
+        "--timeout",
+        type=_positive_float,
+        default=5.0,
+        help="[s] give up when no pose arrives for this long (default 5)",
+    )
     parser.set_defaults(run=run)
 
 
@@ -42,16 +52,27 @@ def _positive_float(text: str) -> float:
 
 
 def pose_json(pose: Pose) -> str:
-    return json.dumps({"body": pose.body, "seq": pose.seq, "t": pose.t, "p": list(pose.p),
-                       "q": list(pose.q), "valid": pose.valid, "latency": pose.latency})
+    return json.dumps(
+        {
+            "body": pose.body,
+            "seq": pose.seq,
+            "t": pose.t,
+            "p": list(pose.p),
+            "q": list(pose.q),
+            "valid": pose.valid,
+            "latency": pose.latency,
+        }
+    )
 
 
 def pose_line(pose: Pose) -> str:
     p = " ".join(f"{v:+.4f}" for v in pose.p)
     q = " ".join(f"{v:+.4f}" for v in pose.q)
     state = "valid" if pose.valid else "NOT TRACKED"
-    return (f"{pose.body} #{pose.seq} t={pose.t:.4f} s  p=[{p}] m  q=[{q}]  {state}  "
-            f"latency {pose.latency * 1000:.2f} ms")
+    return (
+        f"{pose.body} #{pose.seq} t={pose.t:.4f} s  p=[{p}] m  q=[{q}]  {state}  "
+        f"latency {pose.latency * 1000:.2f} ms"
+    )
 
 
 def with_timeout(uri: str, timeout: float) -> str:
@@ -66,13 +87,14 @@ def run(args: argparse.Namespace) -> int:
 
     source = open_source(with_timeout(args.uri, args.timeout), Runtime.real())
     source.start()
-    shown, seq = 0, -(2 ** 63)
+    shown, seq = 0, -(2**63)
     try:
         while args.count is None or shown < args.count:
             pose = source.wait(seq, args.timeout)
             if pose is None:
-                raise LinkError(f"no pose from {args.uri} within {args.timeout:g} s "
-                                f"({_summary(source)})")
+                raise LinkError(
+                    f"no pose from {args.uri} within {args.timeout:g} s ({_summary(source)})"
+                )
             if pose.seq < seq:  # the sender restarted its numbering
                 seq = pose.seq
             print(pose_json(pose) if args.json else pose_line(pose), flush=True)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
-from typing import Iterable
+from collections.abc import Iterable
 
 from perchd.core.errors import ConfigError, PerchdError
 
@@ -22,8 +22,14 @@ def numbers_as_values(parser: argparse.ArgumentParser) -> argparse.ArgumentParse
     return parser
 
 
-def within(flag: str, values: float | Iterable[float] | None, lo: float, hi: float, unit: str,
-           error: type[PerchdError] = ConfigError) -> None:
+def within(
+    flag: str,
+    values: float | Iterable[float] | None,
+    lo: float,
+    hi: float,
+    unit: str,
+    error: type[PerchdError] = ConfigError,
+) -> None:
     """`error` unless every value is finite and in [lo, hi]; None (an unset flag) passes."""
     if values is None:
         return

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 from perchd.console.argcheck import within
 from perchd.core.errors import ConfigError
@@ -26,18 +26,23 @@ def load_config(args: argparse.Namespace) -> FlightConfig:
     if args.normal:
         surface = dataclasses.replace(surface, normal=tuple(args.normal))
     where = f"in --config {args.config}" if args.config else "default"
-    check_geometry(surface.point, surface.normal,
-                   "--surface" if args.surface else f"[surface] point ({where})",
-                   "--normal" if args.normal else f"[surface] normal ({where})")
+    check_geometry(
+        surface.point,
+        surface.normal,
+        "--surface" if args.surface else f"[surface] point ({where})",
+        "--normal" if args.normal else f"[surface] normal ({where})",
+    )
     return dataclasses.replace(cfg, surface=SurfaceConfig(surface.point, surface.normal))
 
 
-def check_geometry(point: Sequence[float], normal: Sequence[float], point_flag: str,
-                   normal_flag: str) -> None:
+def check_geometry(
+    point: Sequence[float], normal: Sequence[float], point_flag: str, normal_flag: str
+) -> None:
     """Refuse non-finite or absurd geometry before any link opens (a NaN surface used to start
     a flight that ended STALE_MOCAP)."""
     within(point_flag, point, -MAX_COORD_M, MAX_COORD_M, "m")
     within(normal_flag, normal, -1e6, 1e6, "")
     if math.sqrt(sum(c * c for c in normal)) < 1e-9:
-        raise ConfigError(f"{normal_flag} {' '.join(f'{c:g}' for c in normal)}: "
-                          "must be a non-zero direction")
+        raise ConfigError(
+            f"{normal_flag} {' '.join(f'{c:g}' for c in normal)}: must be a non-zero direction"
+        )

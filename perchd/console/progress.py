@@ -14,8 +14,16 @@ class Progress:
 
     WIDTH = 30
 
-    def __init__(self, total: int, unit: str, command: str, stream: TextIO | None = None,
-                 lines: bool = True, rates: bool = False, done: int = 0) -> None:
+    def __init__(
+        self,
+        total: int,
+        unit: str,
+        command: str,
+        stream: TextIO | None = None,
+        lines: bool = True,
+        rates: bool = False,
+        done: int = 0,
+    ) -> None:
         """rates: the line also gives failures, steps per second and the time left;
         done: steps done before this run (a resumed campaign's), not counted in its rate."""
         self.stream = sys.stderr if stream is None else stream
@@ -29,8 +37,9 @@ class Progress:
         self.t0 = time.monotonic()
         self._step = max(1, self.total // 10)
 
-    def __call__(self, outcome: str | None = None, done: int | None = None,
-                 failed: bool = False) -> None:
+    def __call__(
+        self, outcome: str | None = None, done: int | None = None, failed: bool = False
+    ) -> None:
         """One step more (or `done` steps in all), with its outcome if steps have one;
         failed: the step counts as a failure."""
         before, self.done = self.done, self.done + 1 if done is None else min(done, self.total)
@@ -53,8 +62,10 @@ class Progress:
     def line(self) -> str:
         counts = ", ".join(f"{k} {v}" for k, v in self.outcomes.most_common())
         elapsed = time.monotonic() - self.t0
-        return (f"{self.done}/{self.total} {self.unit}{f' ({counts})' if counts else ''} "
-                f"{elapsed:.1f} s{self._rates(elapsed) if self.rates else ''}")
+        return (
+            f"{self.done}/{self.total} {self.unit}{f' ({counts})' if counts else ''} "
+            f"{elapsed:.1f} s{self._rates(elapsed) if self.rates else ''}"
+        )
 
     def _rates(self, elapsed: float) -> str:
         """', F failed, R unit/s, ETA S s' (no rate before a step ends)."""

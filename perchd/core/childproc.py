@@ -15,13 +15,16 @@ from pathlib import Path
 import perchd
 
 
-def start(module: str, args: list[str], fds: tuple[int, ...]) -> subprocess.Popen:
+def start(module: str, args: list[str], fds: tuple[int, ...]) -> subprocess.Popen[bytes]:
     """`python -m MODULE ARGS`, inheriting the file descriptors `fds`."""
     root = str(Path(perchd.__file__).resolve().parents[1])
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        p for p in (root, os.environ.get("PYTHONPATH", "")) if p)}
-    return subprocess.Popen([sys.executable, "-m", module, *args], pass_fds=fds, env=env,
-                            stdin=subprocess.DEVNULL)
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p),
+    }
+    return subprocess.Popen(
+        [sys.executable, "-m", module, *args], pass_fds=fds, env=env, stdin=subprocess.DEVNULL
+    )
 
 
 def say(who: str, text: str) -> None:
@@ -51,12 +54,12 @@ def let_go_of_pipes() -> None:
         os.close(null)
 
 
-def reap_later(proc: subprocess.Popen, timeout_s: float, name: str) -> None:
+def reap_later(proc: subprocess.Popen[bytes], timeout_s: float, name: str) -> None:
     """Wait for `proc` in a background thread; killed if still running after timeout_s [s]."""
     threading.Thread(target=_reap, args=(proc, timeout_s), name=name, daemon=True).start()
 
 
-def _reap(proc: subprocess.Popen, timeout_s: float) -> None:
+def _reap(proc: subprocess.Popen[bytes], timeout_s: float) -> None:
     try:
         proc.wait(timeout_s)
     except subprocess.TimeoutExpired:

@@ -25,8 +25,7 @@ class MissingExtraError(PerchdError, ImportError):
     """An optional dependency is missing; the message names the extra to install."""
 
     def __init__(self, module: str, extra: str) -> None:
-        super().__init__(
-            f"{module} is not installed: pip install 'perchd[{extra}]'")
+        super().__init__(f"{module} is not installed: pip install 'perchd[{extra}]'")
         self.module = module
         self.extra = extra
 

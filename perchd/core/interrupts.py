@@ -7,7 +7,7 @@ import contextlib
 import signal
 import sys
 import threading
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -34,8 +34,9 @@ class Caught:
     def say(self, command: str, what: str) -> None:
         """One line on stderr when a signal stopped `command`: what became of its work."""
         if self.signum is not None:
-            print(f"perchd {command}: interrupted by {self.name}; {what}", file=sys.stderr,
-                  flush=True)
+            print(
+                f"perchd {command}: interrupted by {self.name}; {what}", file=sys.stderr, flush=True
+            )
 
 
 @contextlib.contextmanager
@@ -51,6 +52,7 @@ def catching(on_signal: Callable[[], None]) -> Iterator[Caught]:
         if caught.signum is None:
             caught.signum = signum
         threading.Thread(target=on_signal, name="perchd-signal", daemon=True).start()
+
     previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
     try:
         yield caught

@@ -30,8 +30,10 @@ def is_loopback(host: str) -> bool:
 def check_bind(host: str, public: bool, what: str) -> None:
     """UriError unless `host` is a loopback address or the caller opted in (`public`)."""
     if not public and not is_loopback(host):
-        raise UriError(f"{what}: refusing to bind {host}, which is not loopback; add "
-                       f"{PUBLIC}=1 to the URI to listen on the network")
+        raise UriError(
+            f"{what}: refusing to bind {host}, which is not loopback; add "
+            f"{PUBLIC}=1 to the URI to listen on the network"
+        )
 
 
 def port_error(what: str, err: Exception) -> Exception:
@@ -39,6 +41,8 @@ def port_error(what: str, err: Exception) -> Exception:
     failures to listen stay what they were (an OSError or LinkError becomes a LinkError)."""
     text = getattr(err, "strerror", None) or str(err)
     if getattr(err, "errno", None) == errno.EADDRINUSE or "Address already in use" in text:
-        return UriError(f"{what}: the port is taken (another perchd sim, Motive or server is "
-                        "listening there); choose another PORT, or 0 for any free one")
+        return UriError(
+            f"{what}: the port is taken (another perchd sim, Motive or server is "
+            "listening there); choose another PORT, or 0 for any free one"
+        )
     return err if isinstance(err, LinkError) else LinkError(f"{what}: cannot listen: {text}")

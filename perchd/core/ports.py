@@ -5,8 +5,9 @@ service and the plug-ins share them while none imports another's package
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 
@@ -67,7 +68,6 @@ class Driver(Protocol):
         no ceiling known); the flight's saturation uses min(config, this)."""
 
 
-
 @dataclass(frozen=True, slots=True)
 class SourceStats:
     """Counters a source keeps; dropped packets are counted, never raised."""
@@ -91,8 +91,6 @@ class PoseSource(Protocol):
     def wait(self, after_seq: int, timeout: float) -> Pose | None:
         """Block up to `timeout` [s] for a pose newer than `after_seq` (mocap-synchronous mode)."""
 
-    def stats(self) -> SourceStats:
-        ...
+    def stats(self) -> SourceStats: ...
 
-    def close(self) -> None:
-        ...
+    def close(self) -> None: ...

@@ -19,9 +19,9 @@ import gc
 import os
 import resource
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from perchd.core.errors import ConfigError, PerchdError
 
@@ -58,8 +58,9 @@ class RealtimeConfig:
 
     def __post_init__(self) -> None:
         if not 0 <= self.priority <= PRIORITY_MAX:
-            raise ConfigError(f"realtime priority {self.priority} is outside 0..{PRIORITY_MAX} "
-                              "(0: off)")
+            raise ConfigError(
+                f"realtime priority {self.priority} is outside 0..{PRIORITY_MAX} (0: off)"
+            )
         if self.cpu < -1:
             raise ConfigError(f"realtime cpu {self.cpu}: a CPU number, or -1 for any")
 
@@ -112,8 +113,10 @@ def _each_thread(call: Callable[[int], None]) -> None:
 def _pin(cpu: int) -> Callable[[], None]:
     allowed = os.sched_getaffinity(0)
     if cpu not in allowed:
-        raise RealtimeRefused(f"CPU {cpu} is not one this process may run on (allowed: "
-                              f"{_cpu_list(allowed)}; the unit's CPUAffinity= or taskset)")
+        raise RealtimeRefused(
+            f"CPU {cpu} is not one this process may run on (allowed: "
+            f"{_cpu_list(allowed)}; the unit's CPUAffinity= or taskset)"
+        )
     _each_thread(lambda tid: os.sched_setaffinity(tid, {cpu}))
     return lambda: _each_thread(lambda tid: os.sched_setaffinity(tid, allowed))
 
@@ -125,18 +128,21 @@ def _lock_memory() -> Callable[[], None]:
         soft, _ = resource.getrlimit(resource.RLIMIT_MEMLOCK)
         limit = "unlimited" if soft == resource.RLIM_INFINITY else f"{soft // 1024} KiB"
         cap = "" if _has_cap(CAP_IPC_LOCK) else "no CAP_IPC_LOCK, "
-        raise RealtimeRefused(f"mlockall refused ({errno.errorcode.get(err, err)}): this "
-                              f"process has {cap}RLIMIT_MEMLOCK {limit}; raise it (ulimit -l "
-                              "unlimited, the unit's LimitMEMLOCK=infinity) or set "
-                              "lock_memory = false")
+        raise RealtimeRefused(
+            f"mlockall refused ({errno.errorcode.get(err, err)}): this "
+            f"process has {cap}RLIMIT_MEMLOCK {limit}; raise it (ulimit -l "
+            "unlimited, the unit's LimitMEMLOCK=infinity) or set "
+            "lock_memory = false"
+        )
     return lambda: libc.munlockall()
 
 
 def _fifo(priority: int) -> None:
     before = {tid: (os.sched_getscheduler(tid), os.sched_getparam(tid)) for tid in _threads()}
     try:
-        _each_thread(lambda tid: os.sched_setscheduler(tid, os.SCHED_FIFO,
-                                                       os.sched_param(priority)))
+        _each_thread(
+            lambda tid: os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+        )
     except PermissionError:
         for tid, (policy, param) in before.items():
             try:
@@ -151,14 +157,18 @@ def _fifo_missing(priority: int) -> str:
     soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
     rtprio = "unlimited" if soft == resource.RLIM_INFINITY else str(soft)
     if _has_cap(CAP_SYS_NICE) or (soft != resource.RLIM_INFINITY and soft >= priority):
-        return (f"SCHED_FIFO priority {priority} refused although this process may ask for "
-                f"it (RLIMIT_RTPRIO {rtprio}): the kernel gives its cgroup no real-time "
-                "time (cpu.rt_runtime_us), or it runs in a container without it")
-    return (f"SCHED_FIFO priority {priority} refused: it needs CAP_SYS_NICE or "
-            f"RLIMIT_RTPRIO >= {priority}, and this process has no CAP_SYS_NICE and "
-            f"RLIMIT_RTPRIO {rtprio} (under systemd: CPUSchedulingPolicy=fifo and "
-            f"LimitRTPRIO={priority} in the unit; else ulimit -r {priority} or "
-            "setcap cap_sys_nice)")
+        return (
+            f"SCHED_FIFO priority {priority} refused although this process may ask for "
+            f"it (RLIMIT_RTPRIO {rtprio}): the kernel gives its cgroup no real-time "
+            "time (cpu.rt_runtime_us), or it runs in a container without it"
+        )
+    return (
+        f"SCHED_FIFO priority {priority} refused: it needs CAP_SYS_NICE or "
+        f"RLIMIT_RTPRIO >= {priority}, and this process has no CAP_SYS_NICE and "
+        f"RLIMIT_RTPRIO {rtprio} (under systemd: CPUSchedulingPolicy=fifo and "
+        f"LimitRTPRIO={priority} in the unit; else ulimit -r {priority} or "
+        "setcap cap_sys_nice)"
+    )
 
 
 def _has_cap(bit: int) -> bool:

@@ -22,5 +22,5 @@ class Runtime:
     sim: Any = None
 
     @classmethod
-    def real(cls) -> "Runtime":
+    def real(cls) -> Runtime:
         return cls(MonotonicClock())

@@ -31,21 +31,27 @@ MAX_FILE_BYTES = 1 << 20
 """[bytes] largest plan or config file read (a plan is ~1 kB, the full config ~6 kB)."""
 
 
-def confine(name: str | os.PathLike[str], root: str | os.PathLike[str], what: str,
-            error: type[PerchdError]) -> Path:
+def confine(
+    name: str | os.PathLike[str], root: str | os.PathLike[str], what: str, error: type[PerchdError]
+) -> Path:
     """`name` (relative to `root`, or absolute) resolved; `error` unless it lies inside root."""
     base = Path(os.path.realpath(root))
     given = Path(root) / name  # an absolute name stays as given
     real = Path(os.path.realpath(given))
     if not real.is_relative_to(base):
         via = f" (a symlink to {real})" if real != Path(os.path.abspath(given)) else ""
-        raise error(f"{what} {given}{via}: outside the plan directory {base} "
-                    "(plan_dir in [service])")
+        raise error(
+            f"{what} {given}{via}: outside the plan directory {base} (plan_dir in [service])"
+        )
     return real
 
 
-def read_regular(path: str | os.PathLike[str], what: str, error: type[PerchdError],
-                 max_bytes: int = MAX_FILE_BYTES) -> str:
+def read_regular(
+    path: str | os.PathLike[str],
+    what: str,
+    error: type[PerchdError],
+    max_bytes: int = MAX_FILE_BYTES,
+) -> str:
     """The UTF-8 text of a regular file of at most `max_bytes`; `error` naming why not,
     as "WHAT PATH: why" (or "PATH: why" when `what` is empty)."""
     what = f"{what} {path}" if what else str(path)
@@ -58,8 +64,10 @@ def read_regular(path: str | os.PathLike[str], what: str, error: type[PerchdErro
         if not stat.S_ISREG(st.st_mode):
             raise error(f"{what}: not a regular file ({_kind(st.st_mode)})")
         if st.st_size > max_bytes:
-            raise error(f"{what}: {st.st_size} bytes, over the {max_bytes} byte limit "
-                        f"by {st.st_size - max_bytes}")
+            raise error(
+                f"{what}: {st.st_size} bytes, over the {max_bytes} byte limit "
+                f"by {st.st_size - max_bytes}"
+            )
         with os.fdopen(os.dup(fd), "rb") as f:
             data = f.read(max_bytes + 1)
     finally:
@@ -80,9 +88,13 @@ def _why(err: OSError | ValueError) -> str:
 
 
 def _kind(mode: int) -> str:
-    for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
-                       (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device")):
+    for test, name in (
+        (stat.S_ISDIR, "a directory"),
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+    ):
         if test(mode):
             return name
     return "not a file"
@@ -103,8 +115,12 @@ def _stat(path: Path, flag: str) -> os.stat_result | None:
         raise OutputError(f"{flag} {path}: cannot write ({_why(err)})") from None
 
 
-def check_output(path: str | os.PathLike, flag: str, force: bool = False,
-                 inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
+def check_output(
+    path: str | os.PathLike[str],
+    flag: str,
+    force: bool = False,
+    inputs: tuple[str | os.PathLike[str], ...] = (),
+) -> Path:
     """`path` if writing it destroys nothing: its directory exists (none is created), it is
     a regular file or missing, not one of `inputs`, and absent unless `force`; else
     OutputError naming `flag`."""
@@ -115,13 +131,16 @@ def check_output(path: str | os.PathLike, flag: str, force: bool = False,
     parent = out.parent if str(out.parent) else Path(".")
     up = _stat(parent, flag)
     if up is None or not stat.S_ISDIR(up.st_mode):
-        raise OutputError(f"{flag} {out}: directory {parent} does not exist "
-                          "(perchd creates none; make it first)")
+        raise OutputError(
+            f"{flag} {out}: directory {parent} does not exist (perchd creates none; make it first)"
+        )
     if st is None:
         return out
     if not stat.S_ISREG(st.st_mode):
-        raise OutputError(f"{flag} {out}: not a regular file ({_kind(st.st_mode)}); "
-                          "perchd writes only regular files")
+        raise OutputError(
+            f"{flag} {out}: not a regular file ({_kind(st.st_mode)}); "
+            "perchd writes only regular files"
+        )
     for given in inputs:
         if _same(st, given):
             raise OutputError(f"{flag} {out}: is the input {given}; give another path")
@@ -130,7 +149,7 @@ def check_output(path: str | os.PathLike, flag: str, force: bool = False,
     return out
 
 
-def _same(st: os.stat_result, other: str | os.PathLike) -> bool:
+def _same(st: os.stat_result, other: str | os.PathLike[str]) -> bool:
     try:
         ost = os.stat(other)
     except (OSError, ValueError):
@@ -140,7 +159,7 @@ def _same(st: os.stat_result, other: str | os.PathLike) -> bool:
 
 def write_text(path: Path, text: str, flag: str, force: bool) -> None:
     """`text` written to `path` (checked by check_output) by write_atomic."""
-    write_atomic(path, lambda f: f.write(text.encode("utf-8")), flag, force)
+    write_atomic(path, lambda f: _write_all(f, text.encode("utf-8")), flag, force)
 
 
 def write_atomic(path: Path, write: Callable[[IO[bytes]], None], flag: str, force: bool) -> None:
@@ -191,8 +210,15 @@ def _place(tmp: str, path: Path, flag: str, force: bool) -> None:
         raise OutputError(f"{flag} {path}: exists (pass --force to overwrite)") from None
 
 
-NEW_FILE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_NONBLOCK \
-    | os.O_CLOEXEC | os.O_NOCTTY
+NEW_FILE = (
+    os.O_WRONLY
+    | os.O_CREAT
+    | os.O_EXCL
+    | os.O_NOFOLLOW
+    | os.O_NONBLOCK
+    | os.O_CLOEXEC
+    | os.O_NOCTTY
+)
 """A new regular file only: whatever exists at the name (a file, a FIFO, a device, a
 symlink) is EEXIST, before anything could block or be truncated."""
 
@@ -203,7 +229,7 @@ class Stream:
     finds it) and a temporary file beside it when it replaces one (`force`); finish() puts
     it in place, abandon() drops a replacement and leaves the old file as it was."""
 
-    def __init__(self, target: str | os.PathLike, flag: str, force: bool) -> None:
+    def __init__(self, target: str | os.PathLike[str], flag: str, force: bool) -> None:
         self.target, self.flag = Path(target), flag
         replacing = _stat(check_output(self.target, flag, force), flag) is not None
         self.writing = Path(_temp_beside(self.target, flag)) if replacing else self.target
@@ -216,8 +242,9 @@ class Stream:
             else:
                 fd = os.open(self.writing, NEW_FILE, 0o666)
         except FileExistsError:
-            raise OutputError(f"{self.flag} {self.target}: exists "
-                              "(pass --force to overwrite)") from None
+            raise OutputError(
+                f"{self.flag} {self.target}: exists (pass --force to overwrite)"
+            ) from None
         except (OSError, ValueError) as err:
             raise OutputError(f"{self.flag} {self.target}: cannot write ({_why(err)})") from None
         os.set_blocking(fd, True)
@@ -244,9 +271,20 @@ def safe_name(name: object, what: str, error: type[PerchdError]) -> str:
     """`name` if it is a plain file-name component (letters, digits, '.', '_', '-', at most
     64, not starting with '.'), so a file named after it stays in its directory; `error`
     otherwise. Refused, not sanitised: two names sanitised alike would share files."""
-    ok = isinstance(name, str) and 0 < len(name) <= 64 and not name.startswith(".") \
+    if not isinstance(name, str):
+        raise error(f"{what}: {name!r} is not a plain name: it names files")
+    ok = (
+        0 < len(name) <= 64
+        and not name.startswith(".")
         and all(c.isascii() and (c.isalnum() or c in "._-") for c in name)
+    )
     if not ok:
-        raise error(f"{what}: {name!r} is not a plain name (letters, digits, '.', '_', '-'; "
-                    "at most 64, not starting with '.'): it names files")
+        raise error(
+            f"{what}: {name!r} is not a plain name (letters, digits, '.', '_', '-'; "
+            "at most 64, not starting with '.'): it names files"
+        )
     return name
+
+
+def _write_all(f: IO[bytes], data: bytes) -> None:
+    f.write(data)

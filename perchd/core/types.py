@@ -127,7 +127,7 @@ class Setpoint:
     phase: Phase
 
     @staticmethod
-    def stop(t: float, pose_seq: int = -1) -> "Setpoint":
+    def stop(t: float, pose_seq: int = -1) -> Setpoint:
         """Motors off, level: what a failsafe sends when nothing better is possible."""
         return Setpoint(t, 0.0, 0.0, 0.0, 0.0, pose_seq, Phase.ABORT)
 

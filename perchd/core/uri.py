@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Generic, TypeVar
+from typing import Any, Generic, TypeVar
 from urllib.parse import parse_qsl, urlsplit
 
 from perchd.core.errors import UriError
@@ -71,5 +72,6 @@ class Registry(Generic[T]):
         uri = parse_uri(text)
         factory = self.factory(uri.scheme)
         from perchd.core.uriparams import check_params  # imports this module
+
         check_params(self.kind, uri)  # a misspelt key is refused, not ignored (contracts §7)
         return factory(uri, runtime)

@@ -19,8 +19,9 @@ def without_query(uri: Uri) -> str:
     return uri.raw.partition("?")[0]
 
 
-def float_param(uri: Uri, key: str, default: float | None, lo: float, hi: float,
-                unit: str = "") -> float | None:
+def float_param(
+    uri: Uri, key: str, default: float | None, lo: float, hi: float, unit: str = ""
+) -> float | None:
     """Read `key` as a float in [lo, hi]; a bad value is one UriError naming the key."""
     text = uri.param(key)
     if text is None:
@@ -91,13 +92,20 @@ PARAMS: dict[tuple[str, str], tuple[tuple[str, str, str, str], ...]] = {
         ("configure", "", "0", "1: set the autopilot's parameters perchd needs (docs/safety.md)"),
         ("sport", "", "any", "fixed local UDP source port of a udpout: link"),
         ("vision", "", "1", "0: neither forward mocap to the autopilot nor check its EKF set-up"),
-        ("tilt", "", "1", "0: do not lean setpoints by the change in the autopilot's tilt "
-                          "error (its attitude estimate less the mocap's)")),
+        (
+            "tilt",
+            "",
+            "1",
+            "0: do not lean setpoints by the change in the autopilot's tilt "
+            "error (its attitude estimate less the mocap's)",
+        ),
+    ),
     ("driver", "zmq"): (
         ("vehicle", "", "cf1", "vehicle name in setpoints"),
         ("bind", "", "0", "1: bind instead of connect"),
         ("public", "", "0", "1: allow a non-loopback bind"),
-        ("wait", "s", "2", "connect() waits this long for a subscriber, 0..60")),
+        ("wait", "s", "2", "connect() waits this long for a subscriber, 0..60"),
+    ),
     ("mocap", "sim"): SIM_MOCAP,
     ("mocap", "natnet"): (
         ("body", "", "required", "rigid body name"),
@@ -107,13 +115,15 @@ PARAMS: dict[tuple[str, str], tuple[tuple[str, str, str, str], ...]] = {
         ("local", "", "0.0.0.0", "local interface address"),
         ("up", "", "y", "the server's up axis, y or z"),
         ("timeout", "s", "2", "server reply timeout, 0.05..60"),
-        ("max_age", "s", "0.5", "a pose older than this is stale, 0.001..10")),
+        ("max_age", "s", "0.5", "a pose older than this is stale, 0.001..10"),
+    ),
     ("mocap", "zmq"): (
         ("body", "", "required", "rigid body name"),
         ("bind", "", "0", "1: bind instead of connect"),
         ("public", "", "0", "1: allow a non-loopback bind"),
         ("clock", "", "local", "local or remote: whose clock stamps poses"),
-        ("max_age", "s", "0.5", "a pose older than this is stale, 0.001..10")),
+        ("max_age", "s", "0.5", "a pose older than this is stale, 0.001..10"),
+    ),
 }
 
 
@@ -134,9 +144,11 @@ def check_params(kind: str, uri: Uri) -> None:
         return
     other = "mocap" if kind == "driver" else "driver"
     if unknown[0] in names_of(PARAMS.get((other, uri.scheme), ())):
-        raise UriError(f"{uri.raw}: {unknown[0]!r} is a --{other} parameter of {uri.scheme}:// "
-                       f"(--{other} {uri.scheme}://?{unknown[0]}=...); --{kind} takes "
-                       f"{', '.join(names)}")
+        raise UriError(
+            f"{uri.raw}: {unknown[0]!r} is a --{other} parameter of {uri.scheme}:// "
+            f"(--{other} {uri.scheme}://?{unknown[0]}=...); --{kind} takes "
+            f"{', '.join(names)}"
+        )
     check_known(uri, names)
 
 
@@ -144,8 +156,10 @@ def check_known(uri: Uri, names: tuple[str, ...] | list[str]) -> None:
     """UriError naming the URI's first key not in `names`, and listing them."""
     unknown = sorted(set(query_of(uri)) - set(names))
     if unknown:
-        raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; {uri.scheme}:// takes "
-                       f"{', '.join(names)} (perchd fly --help)")
+        raise UriError(
+            f"{uri.raw}: unknown parameter {unknown[0]!r}; {uri.scheme}:// takes "
+            f"{', '.join(names)} (perchd fly --help)"
+        )
 
 
 def names_of(params: tuple[tuple[str, str, str, str], ...]) -> tuple[str, ...]:
@@ -155,9 +169,14 @@ def names_of(params: tuple[tuple[str, str, str, str], ...]) -> tuple[str, ...]:
 def split_sim(uri: Uri) -> tuple[str, str]:
     """A whole-world sim:// URI as (the driver's URI, the mocap's), each with its own keys."""
     query = query_of(uri)
-    return tuple("sim://" + ("?" + urlencode(part, safe=",") if part else "")
-                 for part in ({k: v for k, v in query.items() if k in names_of(side)}
-                              for side in (SIM_VEHICLE, SIM_MOCAP)))
+    vehicle, mocap = (
+        "sim://" + ("?" + urlencode(part, safe=",") if part else "")
+        for part in (
+            {k: v for k, v in query.items() if k in names_of(side)}
+            for side in (SIM_VEHICLE, SIM_MOCAP)
+        )
+    )
+    return vehicle, mocap
 
 
 def params_help() -> str:

@@ -58,17 +58,21 @@ def agreed_mass(uri: str, uri_mass: float | None, flight_mass_kg: float) -> floa
         raise ConfigError(
             f"{uri}: mass={uri_mass:g} kg in the driver URI disagrees with the flight config's "
             f"vehicle.mass_kg = {flight_mass_kg:g} kg; give the mass once, as [vehicle] mass_kg "
-            f"in --config, and drop mass= from the URI")
+            f"in --config, and drop mass= from the URI"
+        )
     return flight_mass_kg
 
 
-DRIVERS: Registry[Driver] = Registry("driver", {
-    "sim": "perchd.sim.loopback:open_loopback",
-    "radio": "perchd.drivers.crazyflie:open_crazyflie",
-    "udp": "perchd.drivers.crazyflie:open_crazyflie",
-    "mavlink": "perchd.drivers.mavlink:open_mavlink",
-    "zmq": "perchd.drivers.zmq:open_zmq_driver",
-})
+DRIVERS: Registry[Driver] = Registry(
+    "driver",
+    {
+        "sim": "perchd.sim.loopback:open_loopback",
+        "radio": "perchd.drivers.crazyflie:open_crazyflie",
+        "udp": "perchd.drivers.crazyflie:open_crazyflie",
+        "mavlink": "perchd.drivers.mavlink:open_mavlink",
+        "zmq": "perchd.drivers.zmq:open_zmq_driver",
+    },
+)
 
 
 def open_driver(uri: str, runtime: Runtime) -> Driver:

@@ -45,10 +45,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from perchd.core.childproc import say
 from perchd.core.ports import PoseSource
 from perchd.drivers import cfsink
 from perchd.drivers.cfsink import ClosedSink, Hover, OpenSink, hover_mean
-from perchd.core.childproc import say
 from perchd.drivers.mavlink.brake import WILL_MAX_AGE_S
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
 
@@ -107,8 +107,9 @@ class Descent:
     brake's lean first (its tilt compensated, for at most LEAN_MAX_S), level after; the
     level thrust from the closed loop while it has the mocap, else from the open loop."""
 
-    def __init__(self, t0_s: float, open_sink: OpenSink, closed: ClosedSink | None,
-                 lean: Lean = NO_LEAN) -> None:
+    def __init__(
+        self, t0_s: float, open_sink: OpenSink, closed: ClosedSink | None, lean: Lean = NO_LEAN
+    ) -> None:
         self.t0_s = t0_s
         self.open = open_sink
         self.closed = closed
@@ -154,8 +155,14 @@ MocapOpener = Callable[[str], PoseSource]
 
 
 class Keeper:
-    def __init__(self, sock: socket.socket, link_uri: str, repeat_s: float,
-                 model: CrazyflieThrust | None = None, mocap: PoseSource | None = None) -> None:
+    def __init__(
+        self,
+        sock: socket.socket,
+        link_uri: str,
+        repeat_s: float,
+        model: CrazyflieThrust | None = None,
+        mocap: PoseSource | None = None,
+    ) -> None:
         self.sock = sock
         self.link_uri = link_uri
         self.repeat_s = repeat_s
@@ -184,6 +191,7 @@ class Keeper:
         import cflib.crtp
         from cflib.crazyflie.commander import Commander
         from cflib.crazyflie.localization import Localization
+
         cflib.crtp.init_drivers()
         link = cflib.crtp.get_link_driver(self.link_uri, None, self._on_link_error)
         if link is None:
@@ -209,7 +217,10 @@ class Keeper:
 
     def ping(self) -> None:
         from cflib.crtp.crtpstack import CRTPPacket
-        self.port.send_packet(CRTPPacket(ECHO_HEADER, PING_TAG + struct.pack("<d", time.monotonic())))
+
+        self.port.send_packet(
+            CRTPPacket(ECHO_HEADER, PING_TAG + struct.pack("<d", time.monotonic()))
+        )
 
     # -- to the driver -----------------------------------------------------------------
     def report(self) -> None:
@@ -275,8 +286,11 @@ class Keeper:
             hover = Hover(self.model, self.hover_n)
             opened = self.start_mocap()
             self.descent = Descent(
-                now, OpenSink(now, self.hold_units, hover, self.known_height(now)),
-                ClosedSink(now, hover) if opened else None, self.lean if fresh else NO_LEAN)
+                now,
+                OpenSink(now, self.hold_units, hover, self.known_height(now)),
+                ClosedSink(now, hover) if opened else None,
+                self.lean if fresh else NO_LEAN,
+            )
 
     def known_height(self, now: float) -> float | None:
         """[m] above the floor, from the driver's last height if recent."""

@@ -78,15 +78,24 @@ class OpenSink:
     up to hover less SINK_MARGIN, until the bound from `height_m` [m] above the floor
     (None: unknown) at `sink_mps` [m/s] already reached (a kick is then not flown)."""
 
-    def __init__(self, t0_s: float, hold_units: int, hover: Hover, height_m: float | None,
-                 sink_mps: float = 0.0) -> None:
+    def __init__(
+        self,
+        t0_s: float,
+        hold_units: int,
+        hover: Hover,
+        height_m: float | None,
+        sink_mps: float = 0.0,
+    ) -> None:
         self.t0_s = t0_s
         self.hold_units = hold_units
         self.kick_s = 0.0 if sink_mps >= SINK_LOW_MPS else KICK_S
         self.low_units = int(KICK_FRACTION * hold_units)
         self.sink_units = hover.units(-SINK_MARGIN * G)
-        sink_s = OPEN_UNKNOWN_S if height_m is None else \
-            max(0.0, height_m) / OPEN_SINK_MPS + OPEN_SPARE_S
+        sink_s = (
+            OPEN_UNKNOWN_S
+            if height_m is None
+            else max(0.0, height_m) / OPEN_SINK_MPS + OPEN_SPARE_S
+        )
         self.end_s = t0_s + min(self.kick_s + sink_s, DESCENT_MAX_S)
 
     def level_units(self, now: float) -> int | None:
@@ -151,8 +160,9 @@ class ClosedSink:
         dt = 0.0 if self.last_s is None else min(now - self.last_s, 0.1)
         self.last_s = now
         error = -self.target_mps() - self.vz_mps
-        self.integral_mps2 = max(-INTEGRAL_MAX_MPS2, min(INTEGRAL_MAX_MPS2,
-                                                         self.integral_mps2 + KI_PER_S2 * error * dt))
+        self.integral_mps2 = max(
+            -INTEGRAL_MAX_MPS2, min(INTEGRAL_MAX_MPS2, self.integral_mps2 + KI_PER_S2 * error * dt)
+        )
         accel = max(ACCEL_MIN_MPS2, min(ACCEL_MAX_MPS2, KP_PER_S * error + self.integral_mps2))
         return self.hover.units(accel)
 

@@ -40,6 +40,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+from perchd.core import childproc
 from perchd.core.errors import ConfigError, LinkError, UriError
 from perchd.core.extras import require
 from perchd.core.ned import ned_vec
@@ -48,7 +49,6 @@ from perchd.core.types import EndReason, LinkHealth, Pose, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param, without_query
 from perchd.core.vehicle import CRAZYFLIE_HOVER_UNITS, CRAZYFLIE_MASS_KG
-from perchd.core import childproc
 from perchd.drivers import cflink
 from perchd.drivers.base import DriverBase, PoseFeed, agreed_mass, no_poses
 from perchd.drivers.mavlink.brake import WillSchedule, lean_for
@@ -91,9 +91,15 @@ def open_crazyflie(uri: Uri, runtime: Runtime) -> CrazyflieDriver:
     mass = float_param(uri, "mass", None, 0.010, 0.100, " kg")
     timeout = float_param(uri, "timeout", 0.5, 0.01, 10.0, " s")
     model = CrazyflieThrust(hover_units=hover, mass_kg=mass or CRAZYFLIE_MASS_KG)
-    driver = CrazyflieDriver(uri.raw, without_query(uri), runtime, model, timeout,
-                             extpose=bool_param(uri, "extpose"),
-                             wait=float_param(uri, "wait", 2.0, 0.05, 60.0, " s"))
+    driver = CrazyflieDriver(
+        uri.raw,
+        without_query(uri),
+        runtime,
+        model,
+        timeout,
+        extpose=bool_param(uri, "extpose"),
+        wait=float_param(uri, "wait", 2.0, 0.05, 60.0, " s"),
+    )
     driver.uri_mass = mass
     return driver
 
@@ -102,14 +108,21 @@ def _check_radio(uri: Uri) -> None:
     """radio://DONGLE/CHANNEL/RATE[/ADDRESS], checked here: cflib would only say "connection
     failed" at connect time for a typo."""
     parts = uri.path.strip("/").split("/") if uri.path.strip("/") else []
-    ok = ((uri.host.isdigit() or uri.host == "*") and len(parts) in (2, 3) and parts[0].isdigit()
-          and 0 <= int(parts[0]) <= 125 and parts[1] in ("250K", "1M", "2M"))
+    ok = (
+        (uri.host.isdigit() or uri.host == "*")
+        and len(parts) in (2, 3)
+        and parts[0].isdigit()
+        and 0 <= int(parts[0]) <= 125
+        and parts[1] in ("250K", "1M", "2M")
+    )
     if ok and len(parts) == 3:
         ok = len(parts[2]) == 10 and all(c in "0123456789abcdefABCDEF" for c in parts[2])
     if not ok:
-        raise UriError(f"{uri.raw}: expected radio://DONGLE/CHANNEL/RATE[/ADDRESS], e.g. "
-                       "radio://0/80/2M/E7E7E7E7E7 (channel 0..125, rate 250K, 1M or 2M, "
-                       "address 10 hex digits)")
+        raise UriError(
+            f"{uri.raw}: expected radio://DONGLE/CHANNEL/RATE[/ADDRESS], e.g. "
+            "radio://0/80/2M/E7E7E7E7E7 (channel 0..125, rate 250K, 1M or 2M, "
+            "address 10 hex digits)"
+        )
 
 
 def wrap_angle(a: float) -> float:
@@ -126,8 +139,16 @@ def yaw_of(q: tuple[float, float, float, float]) -> float:
 class CrazyflieDriver(DriverBase):
     """Converts SI setpoints; the link itself lives in the keeper process (drivers/cflink.py)."""
 
-    def __init__(self, uri: str, link_uri: str, runtime: Runtime, model: CrazyflieThrust,
-                 timeout: float, extpose: bool = False, wait: float = 2.0) -> None:
+    def __init__(
+        self,
+        uri: str,
+        link_uri: str,
+        runtime: Runtime,
+        model: CrazyflieThrust,
+        timeout: float,
+        extpose: bool = False,
+        wait: float = 2.0,
+    ) -> None:
         self.uri = uri
         self.link_uri = link_uri
         self.clock = runtime.clock
@@ -203,8 +224,11 @@ class CrazyflieDriver(DriverBase):
         if self._link_error:
             return LinkHealth(False, age, f"connection lost: {self._link_error}")
         if st is not None and time.monotonic() - st.at > self.timeout:
-            return LinkHealth(False, age, "connection lost: link keeper silent for "
-                              f"{time.monotonic() - st.at:.3f} s")
+            return LinkHealth(
+                False,
+                age,
+                f"connection lost: link keeper silent for {time.monotonic() - st.at:.3f} s",
+            )
         if age > self.timeout:
             return LinkHealth(False, age, f"connection lost: silent for {age:.3f} s")
         return LinkHealth(True, age, rtt_s=st.rtt_s if st else None)
@@ -241,8 +265,12 @@ class CrazyflieDriver(DriverBase):
         if self._yaw is not None:
             err = math.degrees(wrap_angle(sp.yaw - self._yaw))
             yawrate = max(-YAW_RATE_MAX, min(YAW_RATE_MAX, K_YAW * err))
-        return (math.degrees(sp.roll), math.degrees(sp.pitch), -yawrate,  # clockwise-positive
-                self.model.units(sp.thrust))
+        return (
+            math.degrees(sp.roll),
+            math.degrees(sp.pitch),
+            -yawrate,  # clockwise-positive
+            self.model.units(sp.thrust),
+        )
 
     def observe_pose(self, pose: Pose) -> None:
         """The newest mocap pose: its yaw closes the yaw-rate loop; with extpose=1 it also
@@ -265,10 +293,15 @@ class CrazyflieDriver(DriverBase):
         self._send(b"Z" + cflink.HEIGHT.pack(pose.p[2], now))
         roll, pitch, duration = lean_for(ned_vec(v, 0.0), -self._yaw)
         level = self.model.units(self._hold_n)
-        factor = self.model.units(self._hold_n / (math.cos(roll) * math.cos(pitch))) / level \
-            if level > 0 else 1.0
-        self._send(b"B" + cflink.BRAKE.pack(math.degrees(roll), -math.degrees(pitch),
-                                            duration, factor, now))
+        factor = (
+            self.model.units(self._hold_n / (math.cos(roll) * math.cos(pitch))) / level
+            if level > 0
+            else 1.0
+        )
+        self._send(
+            b"B"
+            + cflink.BRAKE.pack(math.degrees(roll), -math.degrees(pitch), duration, factor, now)
+        )
 
     # -- the keeper ------------------------------------------------------------------
     def _start_keeper(self) -> None:
@@ -276,11 +309,17 @@ class CrazyflieDriver(DriverBase):
         end of a socket pair; this very perchd first on its path, so the keeper runs the
         same code."""
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        args = [str(theirs.fileno()), self.link_uri, repr(FAILSAFE_REPEAT_S),
-                repr(self.model.hover_units), repr(self.model.mass_kg)]
+        args = [
+            str(theirs.fileno()),
+            self.link_uri,
+            repr(FAILSAFE_REPEAT_S),
+            repr(self.model.hover_units),
+            repr(self.model.mass_kg),
+        ]
         try:
-            self._keeper = childproc.start(KEEPER_MODULE, args + [self.mocap_uri or ""],
-                                           (theirs.fileno(),))
+            self._keeper = childproc.start(
+                KEEPER_MODULE, args + [self.mocap_uri or ""], (theirs.fileno(),)
+            )
         finally:
             theirs.close()
         ours.settimeout(0.05)
@@ -290,8 +329,10 @@ class CrazyflieDriver(DriverBase):
         self._link_error = ""
         self._status = None
         # receive: recv blocks up to 50 ms, so a zero period is no busy loop
-        self._tickers = [Ticker(0.0, self._receive, "crazyflie-receive").start(),
-                         Ticker(PING_S, lambda: self._send(b"A"), "crazyflie-alive").start()]
+        self._tickers = [
+            Ticker(0.0, self._receive, "crazyflie-receive").start(),
+            Ticker(PING_S, lambda: self._send(b"A"), "crazyflie-alive").start(),
+        ]
 
     def _send(self, msg: bytes) -> None:
         sock = self._sock
@@ -329,7 +370,7 @@ class CrazyflieDriver(DriverBase):
             self._opened.set()
         elif msg[:1] == b"H":
             age, rtt = cflink.STATUS.unpack_from(msg, 1)
-            error = msg[1 + cflink.STATUS.size:].decode(errors="replace")
+            error = msg[1 + cflink.STATUS.size :].decode(errors="replace")
             self._status = KeeperStatus(time.monotonic(), age, rtt if rtt >= 0 else None, error)
             if error:
                 self._link_error = error
@@ -340,8 +381,9 @@ class CrazyflieDriver(DriverBase):
         """The keeper is the link: without it the link is lost, and named so."""
         if not self._link_error:
             code = self._keeper.poll() if self._keeper else None
-            self._link_error = (f"link keeper exited ({why}"
-                                + (f", exit code {code})" if code is not None else ")"))
+            self._link_error = f"link keeper exited ({why}" + (
+                f", exit code {code})" if code is not None else ")"
+            )
         self._opened.set()
         time.sleep(0.05)  # the receive ticker would spin on a closed socket
 

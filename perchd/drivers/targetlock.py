@@ -89,8 +89,9 @@ class TargetLock:
             _HELD.drop(path)
 
 
-def connect_holding(lock: TargetLock, open_link: Callable[[], None],
-                    close_link: Callable[[], None]) -> None:
+def connect_holding(
+    lock: TargetLock, open_link: Callable[[], None], close_link: Callable[[], None]
+) -> None:
     """A driver's connect(): the lock taken first (refused: nothing opened), then the link;
     a link that fails to open is closed and the lock released, so a failed connect holds
     nothing."""
@@ -150,8 +151,10 @@ def _flock(path: Path, uri: str) -> int:
     except BlockingIOError:
         holder = read_holder(path)
         os.close(fd)
-        raise TargetBusy(f"{uri}: the vehicle is in use by another perchd, {holder.describe()}; "
-                         f"stop that one first (lock {path})") from None
+        raise TargetBusy(
+            f"{uri}: the vehicle is in use by another perchd, {holder.describe()}; "
+            f"stop that one first (lock {path})"
+        ) from None
     if named:
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n{_command()}\n".encode())

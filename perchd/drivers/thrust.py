@@ -96,8 +96,7 @@ class NormalisedThrust:
         if not 0.0 < self.mass_kg <= 50.0:
             raise ValueError(f"vehicle mass {self.mass_kg} kg is outside (0, 50] kg")
         if not 0.05 <= self.hover_fraction <= 0.95:
-            raise ValueError(
-                f"hover thrust fraction {self.hover_fraction} is outside 0.05..0.95")
+            raise ValueError(f"hover thrust fraction {self.hover_fraction} is outside 0.05..0.95")
 
     def fraction(self, newtons: float) -> float:
         """Normalised thrust in 0..1 (clamped; NaN and negative thrust give 0)."""

@@ -18,7 +18,6 @@ import time
 from typing import Any
 
 import zmq
-from perchd.drivers.base import DriverBase, PoseFeed, no_poses
 
 from perchd.core.errors import LinkError, UriError
 from perchd.core.netbind import check_bind, port_error
@@ -26,28 +25,41 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
 from perchd.core.uri import Uri
 from perchd.core.uriparams import bool_param, float_param
+from perchd.drivers.base import DriverBase, PoseFeed, no_poses
 from perchd.drivers.targetlock import TargetLock, connect_holding
 
 SETPOINT, STOP = b"setpoint", b"stop"
 
 
-def open_zmq_driver(uri: Uri, runtime: Runtime) -> "ZmqSetpointDriver":
+def open_zmq_driver(uri: Uri, runtime: Runtime) -> ZmqSetpointDriver:
     if not uri.host or uri.port is None:
         raise UriError(f"{uri.raw}: a zmq driver needs host and port, e.g. zmq://127.0.0.1:5556")
     if bool_param(uri, "bind"):
         check_bind(uri.host, bool_param(uri, "public"), uri.raw)
     return ZmqSetpointDriver(
-        uri.raw, f"tcp://{uri.host}:{uri.port}", runtime,
+        uri.raw,
+        f"tcp://{uri.host}:{uri.port}",
+        runtime,
         vehicle=uri.param("vehicle", "cf1") or "cf1",
         bind=bool_param(uri, "bind"),
-        wait=float_param(uri, "wait", 2.0, 0.0, 60.0, " s"))
+        wait=float_param(uri, "wait", 2.0, 0.0, 60.0, " s"),
+    )
 
 
 def setpoint_message(vehicle: str, seq: int, sp: Setpoint, sender: str = "") -> dict[str, Any]:
     """The docs/contracts.md §3 setpoint body: radians, newtons, world-frame Z-Y-X attitude."""
-    return {"vehicle": vehicle, "seq": seq, "t": sp.t, "pose_seq": sp.pose_seq,
-            "roll": sp.roll, "pitch": sp.pitch, "yaw": sp.yaw, "thrust": sp.thrust,
-            "phase": sp.phase.value, "sender": sender}
+    return {
+        "vehicle": vehicle,
+        "seq": seq,
+        "t": sp.t,
+        "pose_seq": sp.pose_seq,
+        "roll": sp.roll,
+        "pitch": sp.pitch,
+        "yaw": sp.yaw,
+        "thrust": sp.thrust,
+        "phase": sp.phase.value,
+        "sender": sender,
+    }
 
 
 def new_sender_id() -> str:
@@ -93,14 +105,22 @@ def parse_setpoint_message(body: bytes) -> tuple[str, int, Setpoint]:
     seq, pose_seq = msg.get("seq", -1), msg.get("pose_seq", -1)
     if not isinstance(seq, int) or not isinstance(pose_seq, int):
         raise BadSetpoint("setpoint fields 'seq' and 'pose_seq' must be integers")
-    sp = Setpoint(values["t"], values["roll"], values["pitch"], values["yaw"], values["thrust"],
-                  pose_seq, phase)
+    sp = Setpoint(
+        values["t"],
+        values["roll"],
+        values["pitch"],
+        values["yaw"],
+        values["thrust"],
+        pose_seq,
+        phase,
+    )
     return str(msg.get("vehicle", "")), seq, sp
 
 
 class ZmqSetpointDriver(DriverBase):
-    def __init__(self, uri: str, endpoint: str, runtime: Runtime, vehicle: str,
-                 bind: bool, wait: float) -> None:
+    def __init__(
+        self, uri: str, endpoint: str, runtime: Runtime, vehicle: str, bind: bool, wait: float
+    ) -> None:
         self.uri = uri
         self.endpoint = endpoint
         self.clock = runtime.clock
@@ -172,8 +192,16 @@ class ZmqSetpointDriver(DriverBase):
     def _stop(self, reason: str, code: str) -> None:
         self._stopped = True
         if self._sock is not None:
-            self._publish(STOP, {"vehicle": self.vehicle, "reason": reason, "code": code,
-                                 "t": self.clock.now(), "sender": self.sender})
+            self._publish(
+                STOP,
+                {
+                    "vehicle": self.vehicle,
+                    "reason": reason,
+                    "code": code,
+                    "t": self.clock.now(),
+                    "sender": self.sender,
+                },
+            )
 
     def _publish(self, topic: bytes, body: dict[str, Any]) -> None:
         try:

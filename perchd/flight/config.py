@@ -250,10 +250,12 @@ class LateralGains:
     """y: paper k_py, k_iy, k_dy = 14500, 2000, 4500 units = 3.95, 0.545, 1.23 SI.
     z: paper k_pz, k_iz, k_dz = 20000, 1500, 3500 units = 5.45, 0.409, 0.954 SI."""
 
-    y: AxisGains = AxisGains(from_paper_units(14500.0), from_paper_units(2000.0),
-                             from_paper_units(4500.0))
-    z: AxisGains = AxisGains(from_paper_units(20000.0), from_paper_units(1500.0),
-                             from_paper_units(3500.0))
+    y: AxisGains = AxisGains(
+        from_paper_units(14500.0), from_paper_units(2000.0), from_paper_units(4500.0)
+    )
+    z: AxisGains = AxisGains(
+        from_paper_units(20000.0), from_paper_units(1500.0), from_paper_units(3500.0)
+    )
 
 
 @dataclass(frozen=True)
@@ -341,8 +343,11 @@ class TriggerConfig:
         is a_peak_mps2 [m/s^2] (see the class docstring)."""
         if a_peak_mps2 <= 0.0:
             return self.solve_max_s
-        return min(self.solve_max_s, self.v_tol_mps / a_peak_mps2,
-                   math.sqrt(2.0 * self.x_tol_m / a_peak_mps2))
+        return min(
+            self.solve_max_s,
+            self.v_tol_mps / a_peak_mps2,
+            math.sqrt(2.0 * self.x_tol_m / a_peak_mps2),
+        )
 
 
 class LoopSync(enum.Enum):
@@ -477,24 +482,39 @@ def envelope_checks(cfg: FlightConfig) -> list[tuple[str, float, float, float]]:
     x_min_m < x_max_m)."""
     s = cfg.safety
     return [
-        ("[safety] ceiling_m", s.ceiling_m, s.floor_m + 2 * MARGIN_M,
-         s.floor_m + CEILING_ABOVE_FLOOR_M),
-        (f"[approach] takeoff_height_m ({MARGIN_M:g} m inside floor and ceiling, at most "
-         f"{TAKEOFF_HEIGHT_MAX_M:g} m)", cfg.approach.takeoff_height_m, s.floor_m + MARGIN_M,
-         min(s.ceiling_m - MARGIN_M, TAKEOFF_HEIGHT_MAX_M)),
-        ("[safety] x_min_m (the surface, X = 0, inside the geofence)", s.x_min_m, -math.inf,
-         -MARGIN_M),
+        (
+            "[safety] ceiling_m",
+            s.ceiling_m,
+            s.floor_m + 2 * MARGIN_M,
+            s.floor_m + CEILING_ABOVE_FLOOR_M,
+        ),
+        (
+            f"[approach] takeoff_height_m ({MARGIN_M:g} m inside floor and ceiling, at most "
+            f"{TAKEOFF_HEIGHT_MAX_M:g} m)",
+            cfg.approach.takeoff_height_m,
+            s.floor_m + MARGIN_M,
+            min(s.ceiling_m - MARGIN_M, TAKEOFF_HEIGHT_MAX_M),
+        ),
+        (
+            "[safety] x_min_m (the surface, X = 0, inside the geofence)",
+            s.x_min_m,
+            -math.inf,
+            -MARGIN_M,
+        ),
     ]
 
 
-def _below(low: tuple[str, float | None], high: tuple[str, float], unit: str,
-           strict: bool = True) -> str | None:
+def _below(
+    low: tuple[str, float | None], high: tuple[str, float], unit: str, strict: bool = True
+) -> str | None:
     """The fault of a (key, value) pair that must be below (strict) or at most the other."""
     (lo_key, lo), (hi_key, hi) = low, high
     if lo is None or lo < hi or (not strict and lo == hi):
         return None
-    return (f"{lo_key} = {lo:g}{unit} must be {'below' if strict else 'at most'} "
-            f"{hi_key} = {hi:g}{unit}")
+    return (
+        f"{lo_key} = {lo:g}{unit} must be {'below' if strict else 'at most'} "
+        f"{hi_key} = {hi:g}{unit}"
+    )
 
 
 def cross_faults(cfg: FlightConfig) -> list[str | None]:
@@ -505,16 +525,26 @@ def cross_faults(cfg: FlightConfig) -> list[str | None]:
     weight = v.mass_kg * v.g
     return [
         _below(("[vehicle] thrust_min_n", v.thrust_min_n), top, " N"),
-        None if v.thrust_max_n > weight else (
+        None
+        if v.thrust_max_n > weight
+        else (
             f"[vehicle] thrust_max_n = {v.thrust_max_n:g} N must lift [vehicle] mass_kg = "
-            f"{v.mass_kg:g} kg: more than its weight {weight:.4g} N"),
+            f"{v.mass_kg:g} kg: more than its weight {weight:.4g} N"
+        ),
         _below(("[vehicle] hover_thrust_n", v.hover_thrust_n), top, " N", strict=False),
         _below(("[flight] idle_thrust_n", cfg.idle_thrust_n), top, " N", strict=False),
         _below(("[hover] ratio_min", h.ratio_min), ("[hover] ratio_max", h.ratio_max), ""),
-        _below(("[tau_gains] error_min", cfg.tau_gains.error_min),
-               ("[tau_gains] error_max", cfg.tau_gains.error_max), ""),
-        _below(("2 x [lag_id] lag_step_s", 2.0 * lag.lag_step_s),
-               ("[lag_id] lag_max_s", lag.lag_max_s), " s", strict=False),
+        _below(
+            ("[tau_gains] error_min", cfg.tau_gains.error_min),
+            ("[tau_gains] error_max", cfg.tau_gains.error_max),
+            "",
+        ),
+        _below(
+            ("2 x [lag_id] lag_step_s", 2.0 * lag.lag_step_s),
+            ("[lag_id] lag_max_s", lag.lag_max_s),
+            " s",
+            strict=False,
+        ),
     ]
 
 
@@ -527,13 +557,20 @@ def validate(cfg: FlightConfig) -> None:
             raise ConfigError(fault)
     for name, value, lo, hi in envelope_checks(cfg):
         if not lo <= value <= hi:
-            side = f"below {lo:g} by {lo - value:g}" if value < lo else f"above {hi:g} by {value - hi:g}"
+            side = (
+                f"below {lo:g} by {lo - value:g}"
+                if value < lo
+                else f"above {hi:g} by {value - hi:g}"
+            )
             raise ConfigError(f"{name} = {value:g} is {side}")
     if cfg.trigger.library is not None and cfg.trigger.policy is not TriggerPolicy.REPLAN:
-        raise ConfigError(f"[trigger] library is used by policy 'replan' only, "
-                          f"not {cfg.trigger.policy.value!r}")
+        raise ConfigError(
+            f"[trigger] library is used by policy 'replan' only, not {cfg.trigger.policy.value!r}"
+        )
     n = cfg.surface.normal
     horizontal = math.hypot(n[0], n[1])
     if horizontal < 1e-6 or abs(n[2]) > horizontal:
-        raise ConfigError(f"[surface] normal {n} must point more sideways than up or down "
-                          f"(a wall): |nz| = {abs(n[2]):g} > {horizontal:g}")
+        raise ConfigError(
+            f"[surface] normal {n} must point more sideways than up or down "
+            f"(a wall): |nz| = {abs(n[2]):g} > {horizontal:g}"
+        )

@@ -70,8 +70,9 @@ class Pid:
     def reset(self) -> None:
         self.integral, self._prev, self._d = 0.0, None, 0.0
 
-    def step(self, kp: float, e: float, dt: float, freeze: bool = False,
-             de: float | None = None) -> float:
+    def step(
+        self, kp: float, e: float, dt: float, freeze: bool = False, de: float | None = None
+    ) -> float:
         """Output for error e over dt [s]; `de` is a known error rate (else differenced)."""
         if de is None:
             raw = 0.0 if self._prev is None or dt <= 0 else (e - self._prev) / dt
@@ -98,8 +99,9 @@ class TauController:
         """Start afresh, the integral supplying held [m/s^2] (within i_limit)."""
         self.pid.reset()
         if self.gains.ki > 0.0:
-            self.pid.integral = min(max(held, -self.gains.i_limit), self.gains.i_limit) \
-                / self.gains.ki
+            self.pid.integral = (
+                min(max(held, -self.gains.i_limit), self.gains.i_limit) / self.gains.ki
+            )
 
     def give_back(self, step: float) -> None:
         """A feed-forward grows by step [m/s^2]: the integral gives back what it holds of
@@ -111,8 +113,15 @@ class TauController:
         give = max(min(step, held), 0.0) if step > 0.0 else min(max(step, held), 0.0)
         self.pid.integral -= give / self.gains.ki
 
-    def step(self, state: State, tau_ref: float, a_plan: float, dt: float,
-             saturated: bool = False, schedule: bool = True) -> float:
+    def step(
+        self,
+        state: State,
+        tau_ref: float,
+        a_plan: float,
+        dt: float,
+        saturated: bool = False,
+        schedule: bool = True,
+    ) -> float:
         """schedule=False uses kp_slow both ways (eq. 20's argument, a shrinking |X| under
         a tau reference, does not hold when the reference is a speed)."""
         g = self.gains
@@ -130,13 +139,27 @@ class AxisController:
         self.gains = gains
         self.pid = Pid(gains.ki, gains.kd, gains.i_limit, gains.d_filter_s)
 
-    def step(self, ref: float, pos: float, vel: float, dt: float, saturated: bool = False,
-             vel_ref: float = 0.0) -> float:
+    def step(
+        self,
+        ref: float,
+        pos: float,
+        vel: float,
+        dt: float,
+        saturated: bool = False,
+        vel_ref: float = 0.0,
+    ) -> float:
         return self.pid.step(self.gains.kp, ref - pos, dt, saturated, de=vel_ref - vel)
 
 
-def map_attitude(a: Vec3, yaw: float, mass_kg: float, g: float, tilt_max: float,
-                 thrust_min: float, thrust_max: float) -> Attitude:
+def map_attitude(
+    a: Vec3,
+    yaw: float,
+    mass_kg: float,
+    g: float,
+    tilt_max: float,
+    thrust_min: float,
+    thrust_max: float,
+) -> Attitude:
     """Eq. 19: world-frame acceleration command a [m/s^2] -> roll, pitch, thrust at `yaw`,
     with eq. 25 (|roll|, |pitch| <= tilt_max) and eq. 26 (thrust in thrust_min..thrust_max)."""
     ux, uy = a[0], a[1]
@@ -180,8 +203,9 @@ class Controller:
         self.last_lean_sent = 0.0
         self._yaw = frame.yaw_facing
 
-    def lateral(self, state: State, y_ref: float, z_ref: float, dt: float,
-                vz_ref: float = 0.0) -> tuple[float, float]:
+    def lateral(
+        self, state: State, y_ref: float, z_ref: float, dt: float, vz_ref: float = 0.0
+    ) -> tuple[float, float]:
         uy = self.y.step(y_ref, state.y, state.ydot, dt, self.saturated)
         uz = self.z.step(z_ref, state.z, state.zdot, dt, self.saturated, vz_ref)
         return uy, uz
@@ -189,8 +213,15 @@ class Controller:
     def setpoint(self, u: Vec3, t: float, pose_seq: int, phase: Phase) -> Setpoint:
         """Map the perching-frame acceleration u [m/s^2] to an attitude/thrust setpoint."""
         v = self.cfg.vehicle
-        att = map_attitude(self.frame.rotate_out(u), self._yaw, self.hover_n / v.g, v.g,
-                           self.cfg.tilt_limit_rad, v.thrust_min_n, v.thrust_max_n)
+        att = map_attitude(
+            self.frame.rotate_out(u),
+            self._yaw,
+            self.hover_n / v.g,
+            v.g,
+            self.cfg.tilt_limit_rad,
+            v.thrust_min_n,
+            v.thrust_max_n,
+        )
         self.saturated = att.saturated
         self.last_u = u
         bz = body_z(att.roll, att.pitch, att.yaw)

@@ -40,13 +40,21 @@ def _predict_cov(P: Cov, dt: float, q: float) -> Cov:
     a0, a1, a2 = p00 + dt * p10 + h * p20, p01 + dt * p11 + h * p21, p02 + dt * p12 + h * p22
     b0, b1, b2 = p10 + dt * p20, p11 + dt * p21, p12 + dt * p22
     c0, c1, c2 = p20, p21, p22
-    d2, d3, d4, d5 = dt * dt, dt ** 3, dt ** 4, dt ** 5
+    d2, d3, d4, d5 = dt * dt, dt**3, dt**4, dt**5
     q00, q01, q02 = q * (d5 / 20), q * (d4 / 8), q * (d3 / 6)
     q11, q12, q22 = q * (d3 / 3), q * (d2 / 2), q * dt
     # (F P) F^T: column 0 = r0 + dt r1 + h r2, column 1 = r1 + dt r2, column 2 = r2
-    return (a0 + dt * a1 + h * a2 + q00, a1 + dt * a2 + q01, a2 + q02,
-            b0 + dt * b1 + h * b2 + q01, b1 + dt * b2 + q11, b2 + q12,
-            c0 + dt * c1 + h * c2 + q02, c1 + dt * c2 + q12, c2 + q22)
+    return (
+        a0 + dt * a1 + h * a2 + q00,
+        a1 + dt * a2 + q01,
+        a2 + q02,
+        b0 + dt * b1 + h * b2 + q01,
+        b1 + dt * b2 + q11,
+        b2 + q12,
+        c0 + dt * c1 + h * c2 + q02,
+        c1 + dt * c2 + q12,
+        c2 + q22,
+    )
 
 
 class Estimator:
@@ -69,7 +77,7 @@ class Estimator:
         self.rejected = 0
         self.accepted = 0
         self._period = None  # [s] smoothed interval between accepted poses
-        self._r = cfg.meas_std_m ** 2
+        self._r = cfg.meas_std_m**2
         self._gate = 6.0 * cfg.meas_std_m
 
     @property
@@ -129,9 +137,17 @@ class Estimator:
             innovation = z[i] - p
             pos[i], vel[i], acc[i] = p + k0 * innovation, v + k1 * innovation, a + k2 * innovation
         r0, r1, r2 = P[0], P[1], P[2]
-        self._P = (P[0] - k0 * r0, P[1] - k0 * r1, P[2] - k0 * r2,
-                   P[3] - k1 * r0, P[4] - k1 * r1, P[5] - k1 * r2,
-                   P[6] - k2 * r0, P[7] - k2 * r1, P[8] - k2 * r2)
+        self._P = (
+            P[0] - k0 * r0,
+            P[1] - k0 * r1,
+            P[2] - k0 * r2,
+            P[3] - k1 * r0,
+            P[4] - k1 * r1,
+            P[5] - k1 * r2,
+            P[6] - k2 * r0,
+            P[7] - k2 * r1,
+            P[8] - k2 * r2,
+        )
         self._t = pose.t
         # per source frame: frames the loop never saw (it polls slower than mocap sends)
         # do not make the mocap slower, or the stale limit grows with the loop's period
@@ -148,8 +164,11 @@ class Estimator:
         qx, qy, qz, qw = pose.q
         self._yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
         s = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)  # a tracker's q may be off unit
-        bz = (s * (qx * qz + qw * qy), s * (qy * qz - qw * qx),
-              1.0 - s * (qx * qx + qy * qy))  # the body z axis in the world
+        bz = (
+            s * (qx * qz + qw * qy),
+            s * (qy * qz - qw * qx),
+            1.0 - s * (qx * qx + qy * qy),
+        )  # the body z axis in the world
         self._tilt = math.acos(max(-1.0, min(1.0, bz[2])))
         self._lean_x = self.frame.rotate_in(bz)[0]
 
@@ -162,6 +181,21 @@ class Estimator:
         (px, py, pz), (vx, vy, vz), (ax, ay, az) = self._pos, self._vel, self._acc
         X, Xd = px + dt * vx + h * ax, vx + dt * ax
         tau = X / Xd if Xd > self.cfg.min_speed_mps else None
-        return State(t, X, Xd, ax, py + dt * vy + h * ay, pz + dt * vz + h * az, vy + dt * ay,
-                     vz + dt * az, tau, self._yaw, self._tilt, t - self._last.t, self._last.seq,
-                     self._last.t - self._moved_t, az, self._lean_x)
+        return State(
+            t,
+            X,
+            Xd,
+            ax,
+            py + dt * vy + h * ay,
+            pz + dt * vz + h * az,
+            vy + dt * ay,
+            vz + dt * az,
+            tau,
+            self._yaw,
+            self._tilt,
+            t - self._last.t,
+            self._last.seq,
+            self._last.t - self._moved_t,
+            az,
+            self._lean_x,
+        )

@@ -32,12 +32,15 @@ class PerchFrame:
     ez: Vec3
 
     @classmethod
-    def from_surface(cls, point: Vec3, normal: Vec3) -> "PerchFrame":
+    def from_surface(cls, point: Vec3, normal: Vec3) -> PerchFrame:
         ex = _unit(normal)
         up_dot = ex[2]
         ez = _unit((-up_dot * ex[0], -up_dot * ex[1], 1.0 - up_dot * ex[2]))
-        ey = (ez[1] * ex[2] - ez[2] * ex[1], ez[2] * ex[0] - ez[0] * ex[2],
-              ez[0] * ex[1] - ez[1] * ex[0])
+        ey = (
+            ez[1] * ex[2] - ez[2] * ex[1],
+            ez[2] * ex[0] - ez[0] * ex[2],
+            ez[0] * ex[1] - ez[1] * ex[0],
+        )
         return cls(tuple(point), ex, ey, ez)
 
     @property
@@ -54,13 +57,17 @@ class PerchFrame:
     def rotate_in(self, v: Vec3) -> Vec3:
         """World vector -> perching-frame components."""
         ex, ey, ez = self.ex, self.ey, self.ez
-        return (v[0] * ex[0] + v[1] * ex[1] + v[2] * ex[2],
-                v[0] * ey[0] + v[1] * ey[1] + v[2] * ey[2],
-                v[0] * ez[0] + v[1] * ez[1] + v[2] * ez[2])
+        return (
+            v[0] * ex[0] + v[1] * ex[1] + v[2] * ex[2],
+            v[0] * ey[0] + v[1] * ey[1] + v[2] * ey[2],
+            v[0] * ez[0] + v[1] * ez[1] + v[2] * ez[2],
+        )
 
     def rotate_out(self, v: Vec3) -> Vec3:
         """Perching-frame components -> world vector."""
         ex, ey, ez = self.ex, self.ey, self.ez
-        return (v[0] * ex[0] + v[1] * ey[0] + v[2] * ez[0],
-                v[0] * ex[1] + v[1] * ey[1] + v[2] * ez[1],
-                v[0] * ex[2] + v[1] * ey[2] + v[2] * ez[2])
+        return (
+            v[0] * ex[0] + v[1] * ey[0] + v[2] * ez[0],
+            v[0] * ex[1] + v[1] * ey[1] + v[2] * ez[1],
+            v[0] * ex[2] + v[1] * ey[2] + v[2] * ez[2],
+        )

@@ -161,11 +161,15 @@ class LagIdentifier:
         # One fine grid about the coarse best: its residual's valley runs along delay + T
         # (the two trade), and the coarse best keeps the fit where the hold's and the
         # approach's swings put it from flight to flight (docs/firmware.md).
-        axes = [np.unique(np.clip(ax[k] + np.arange(-4, 5) * step, 0.0, top))
-                for ax, k, step, top in zip(axes, (i, j), LEAN_FINE_S, bounds)]
+        axes = [
+            np.unique(np.clip(ax[k] + np.arange(-4, 5) * step, 0.0, top))
+            for ax, k, step, top in zip(axes, (i, j), LEAN_FINE_S, bounds)
+        ]
         mse, gain, j, i = _lean_best(data, axes, LEAN_POINTS[1], since_t)
-        if not np.sqrt(mse[j, i]) <= LEAN_RMS_MAX * sweep \
-                or not LEAN_GAIN[0] <= gain[j, i] <= LEAN_GAIN[1]:
+        if (
+            not np.sqrt(mse[j, i]) <= LEAN_RMS_MAX * sweep
+            or not LEAN_GAIN[0] <= gain[j, i] <= LEAN_GAIN[1]
+        ):
             return None
         delay, tc = _refine(axes[0], mse[j], i), max(_refine(axes[1], mse[:, i], j), 0.0)
         return (delay, tc) if delay + tc < bounds[0] else None
@@ -177,13 +181,19 @@ class LagIdentifier:
         t, u, x, v = (np.array(col) for col in zip(*self._rows))
         span = float(v.max() - v.min())
         if span < c.speed_span_min_mps:
-            return LagFit(None, f"the approach changed speed by {span:.2f} m/s, less than "
-                                f"the {c.speed_span_min_mps:g} m/s needed to fit the lag")
+            return LagFit(
+                None,
+                f"the approach changed speed by {span:.2f} m/s, less than "
+                f"the {c.speed_span_min_mps:g} m/s needed to fit the lag",
+            )
         lean = self.lean_response() if c.from_attitude else None
         if lean is not None:
             drag = self.lean_drag(t, x) if c.drag_from_attitude else None
-            m = replace(_model_at(t, u, x, v, *lean, span, c, drag), from_attitude=True,
-                        drag_from_attitude=drag is not None)
+            m = replace(
+                _model_at(t, u, x, v, *lean, span, c, drag),
+                from_attitude=True,
+                drag_from_attitude=drag is not None,
+            )
             fit = _checked(m, c)
             if fit.model is not None:
                 return fit  # refused at the attitude's lag: the positions' own may serve
@@ -231,13 +241,19 @@ class LagIdentifier:
             return LagFit(None, f"{n} ticks since {since_t:.3f} s, too few to fit")
         # The ticks before since_t stay in: the commands still in flight at since_t.
         span = float(v[first:].max() - v[first:].min())
-        m = _model_at(t, u, x, v, base.delay_s, base.time_constant_s, span, self.cfg,
-                      base.drag_per_s, first)
-        return _checked(replace(m, from_attitude=base.from_attitude,
-                                drag_from_attitude=base.drag_from_attitude), self.cfg)
+        m = _model_at(
+            t, u, x, v, base.delay_s, base.time_constant_s, span, self.cfg, base.drag_per_s, first
+        )
+        return _checked(
+            replace(
+                m, from_attitude=base.from_attitude, drag_from_attitude=base.drag_from_attitude
+            ),
+            self.cfg,
+        )
 
-    def predict(self, t: float, x: float, xdot: float, model: LagModel,
-                horizon_s: float) -> tuple[float, float]:
+    def predict(
+        self, t: float, x: float, xdot: float, model: LagModel, horizon_s: float
+    ) -> tuple[float, float]:
         """(X [m], Xdot [m/s]) horizon_s (<= the lag) after t, from the state measured at t
         and the commands recorded that the vehicle answers within the horizon: those sent
         between lag and lag - horizon_s ago (a Smith predictor). A model with a first-order
@@ -249,8 +265,7 @@ class LagIdentifier:
         else:
             dv, dx = self._landing_delayed(t, model.lag_s, horizon_s)
         push = model.bias_mps2 - model.drag_per_s * xdot
-        return (x + xdot * horizon_s + dx + 0.5 * push * horizon_s ** 2,
-                xdot + dv + push * horizon_s)
+        return (x + xdot * horizon_s + dx + 0.5 * push * horizon_s**2, xdot + dv + push * horizon_s)
 
     def _landing_delayed(self, t: float, lag: float, horizon_s: float) -> tuple[float, float]:
         """(speed [m/s], distance [m]) the commands in flight add over the horizon, each
@@ -268,8 +283,7 @@ class LagIdentifier:
             dx += u_k * held * (t + horizon_s - (t_k + lag + 0.5 * held))
         return dv, dx
 
-    def _landing(self, t: float, delay: float, tc: float, horizon_s: float
-                 ) -> tuple[float, float]:
+    def _landing(self, t: float, delay: float, tc: float, horizon_s: float) -> tuple[float, float]:
         """(speed [m/s], distance [m]) over the horizon from the acceleration the vehicle
         reaches through the first-order lag tc [s], `delay` [s] behind the commands: the
         commands held between ticks (the last one beyond t), filtered on a 1 ms grid from
@@ -290,8 +304,10 @@ class LagIdentifier:
         inside = grid >= lo
         a = _first_order(grid, u, np.array([tc]), FINE_S)[0][inside]
         # Each fine step's mean acceleration, at its midpoint for the distance.
-        return (float(a.sum() * FINE_S),
-                float((a * (hi - grid[inside] - 0.5 * FINE_S)).sum() * FINE_S))
+        return (
+            float(a.sum() * FINE_S),
+            float((a * (hi - grid[inside] - 0.5 * FINE_S)).sum() * FINE_S),
+        )
 
 
 def _keep_window(rows: deque, since_t: float) -> None:
@@ -300,8 +316,18 @@ def _keep_window(rows: deque, since_t: float) -> None:
         rows.popleft()
 
 
-def _model_at(t, u, x, v, delay_s: float, tc_s: float, span: float, c: LagIdGains,
-              drag: float | None = None, start: int = 0) -> LagModel:
+def _model_at(
+    t,
+    u,
+    x,
+    v,
+    delay_s: float,
+    tc_s: float,
+    span: float,
+    c: LagIdGains,
+    drag: float | None = None,
+    start: int = 0,
+) -> LagModel:
     """Drag (unless given) and bias at delay_s [s] and time constant tc_s [s], integrated
     from tick start; rms_mps is how far the speed they predict from the fitted Xdot(s)
     strays from the speed measured. A slightly negative drag (noise about none; down to a
@@ -312,8 +338,7 @@ def _model_at(t, u, x, v, delay_s: float, tc_s: float, span: float, c: LagIdGain
     sol = _solve(t, a, x, delay, drag, start)[1][0, :, 0]
     if drag is None and -0.1 * c.drag_max_per_s <= sol[0] < 0.0:
         sol = _solve(t, a, x, delay, 0.0, start)[1][0, :, 0]
-    m = LagModel(delay_s + tc_s, float(sol[0]), float(sol[1]), 0.0, len(t) - start, span,
-                 tc_s)
+    m = LagModel(delay_s + tc_s, float(sol[0]), float(sol[1]), 0.0, len(t) - start, span, tc_s)
     err = _speed_errors(t, u, x, v, m, start, float(sol[2]))
     return replace(m, rms_mps=float(np.sqrt(np.mean(err * err))))
 
@@ -321,11 +346,11 @@ def _model_at(t, u, x, v, delay_s: float, tc_s: float, span: float, c: LagIdGain
 def _checked(m: LagModel, c: LagIdGains) -> LagFit:
     """The fit, refused when its drag is out of bounds or its residual large."""
     if not 0.0 <= m.drag_per_s <= c.drag_max_per_s:
-        return LagFit(None, f"identified drag {m.drag_per_s:.3f} 1/s outside "
-                            f"0..{c.drag_max_per_s:g} 1/s")
+        return LagFit(
+            None, f"identified drag {m.drag_per_s:.3f} 1/s outside 0..{c.drag_max_per_s:g} 1/s"
+        )
     if m.rms_mps > c.rms_max_mps:
-        return LagFit(None, f"the fit's residual {m.rms_mps:.3f} m/s exceeds "
-                            f"{c.rms_max_mps:g} m/s")
+        return LagFit(None, f"the fit's residual {m.rms_mps:.3f} m/s exceeds {c.rms_max_mps:g} m/s")
     return LagFit(m)
 
 
@@ -334,12 +359,17 @@ def _speed_errors(t, u, x, v, m: LagModel, k: int, v_k: float) -> np.ndarray:
     at tick k."""
     a = _first_order(t, u, np.array([m.time_constant_s]))
     big_a = _delayed(t, _integrals(t, a)[0], t[None, k:] - m.delay_s, a, 1)[0, 0]
-    return (v[k:] - v_k) - (big_a - big_a[0]) + m.drag_per_s * (x[k:] - x[k]) \
+    return (
+        (v[k:] - v_k)
+        - (big_a - big_a[0])
+        + m.drag_per_s * (x[k:] - x[k])
         - m.bias_mps2 * (t[k:] - t[k])
+    )
 
 
-def _first_order(t: np.ndarray, u: np.ndarray, tc_s: np.ndarray,
-                 dt: float | None = None) -> np.ndarray:
+def _first_order(
+    t: np.ndarray, u: np.ndarray, tc_s: np.ndarray, dt: float | None = None
+) -> np.ndarray:
     """The commands u through first-order lags of time constants tc_s [s] (one row each):
     each tick's mean over the interval to the next (the command held across it), settled
     on the first command before t[0] (the hold's commands are steady); the ticks taken as
@@ -365,13 +395,15 @@ def _integrals(t: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     dt = np.diff(t)
     zero = np.zeros((len(a), 1))
     big_a = np.cumsum(np.concatenate((zero, a[:, :-1] * dt), axis=1), axis=1)
-    big_w = np.cumsum(np.concatenate((zero, (big_a[:, :-1] + 0.5 * a[:, :-1] * dt) * dt),
-                                     axis=1), axis=1)
+    big_w = np.cumsum(
+        np.concatenate((zero, (big_a[:, :-1] + 0.5 * a[:, :-1] * dt) * dt), axis=1), axis=1
+    )
     return big_a, big_w
 
 
-def _delayed(t: np.ndarray, big: np.ndarray, times: np.ndarray, a: np.ndarray,
-             order: int) -> np.ndarray:
+def _delayed(
+    t: np.ndarray, big: np.ndarray, times: np.ndarray, a: np.ndarray, order: int
+) -> np.ndarray:
     """big (inputs, ticks), the order-th integral of a (1: A, 2: W), at times (lags,
     points), shaped (inputs, lags, points): linear between ticks (W's error there is
     a dt^2 / 8, micrometres) and, before t[0], what a held at its first value adds. The
@@ -383,8 +415,9 @@ def _delayed(t: np.ndarray, big: np.ndarray, times: np.ndarray, a: np.ndarray,
     return big[:, i] * (1.0 - w) + big[:, i + 1] * w + held
 
 
-def _solve(t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
-           ) -> tuple[np.ndarray, np.ndarray]:
+def _solve(
+    t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
     """For each row of a (inputs, ticks) and each lag (its delay): the mean squared
     residual [m^2], shaped (inputs, lags), and the least-squares (drag, bias, Xdot(s),
     offset), shaped (inputs, 4, lags), integrated from tick s = `start` (a given drag
@@ -421,8 +454,9 @@ def _lean_best(data, axes: list[np.ndarray], points: int, since_t: float):
     return mse, gain, int(j), int(i)
 
 
-def _lean_mse(t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray,
-              points: int, since_t: float = -np.inf) -> tuple[np.ndarray, np.ndarray]:
+def _lean_mse(
+    t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray, points: int, since_t: float = -np.inf
+) -> tuple[np.ndarray, np.ndarray]:
     """Mean squared residual, shaped (taus, delays), of the lean measured at tm (since
     since_t) against the lean sent at t through each first-order lag and delay, a constant
     offset (the markers' trim) removed; and the gain by which the measured lean's swing

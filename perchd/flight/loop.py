@@ -36,8 +36,9 @@ import statistics
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from perchd.core.clock import Clock
 
@@ -67,13 +68,13 @@ class TickTiming:
 @dataclass(frozen=True, slots=True)
 class LoopSummary:
     """Over a run: ticks, overruns, missed deadlines, longest overrun streak; jitter and
-    compute time [s] (the whole tick) as min, median, 99th percentile and maximum; agent_* [s]:
-    the estimator + supervisor + controller part of the tick; latency_* [s]: from a pose's
-    arrival to the setpoint computed from it handed to the driver (each pose's first; the
-flight records it);
-    cpu_fraction: process CPU time / wall time over the run (1.0 = one core);
-    wall_s [s]; sync: "fixed" or "mocap"; gc_collections: garbage collections that ran
-    during the run (0 unless some thread forced one: the loop turns the collector off)."""
+        compute time [s] (the whole tick) as min, median, 99th percentile and maximum; agent_* [s]:
+        the estimator + supervisor + controller part of the tick; latency_* [s]: from a pose's
+        arrival to the setpoint computed from it handed to the driver (each pose's first; the
+    flight records it);
+        cpu_fraction: process CPU time / wall time over the run (1.0 = one core);
+        wall_s [s]; sync: "fixed" or "mocap"; gc_collections: garbage collections that ran
+        during the run (0 unless some thread forced one: the loop turns the collector off)."""
 
     ticks: int
     overruns: int
@@ -138,11 +139,22 @@ class LoopStats:
 
     def summary(self, sync: str = "fixed") -> LoopSummary:
         (j0, *jitter), (c0, *compute) = spread(self.jitter), spread(self.compute)
-        return LoopSummary(len(self.jitter), self.overruns, self.missed, self.max_streak,
-                           *jitter, *compute, j0, c0, *spread(self.agent),
-                           *spread(self.latency),
-                           self.cpu_s / self.wall_s if self.wall_s > 0 else 0.0,
-                           self.wall_s, sync, self.gc_collections)
+        return LoopSummary(
+            len(self.jitter),
+            self.overruns,
+            self.missed,
+            self.max_streak,
+            *jitter,
+            *compute,
+            j0,
+            c0,
+            *spread(self.agent),
+            *spread(self.latency),
+            self.cpu_s / self.wall_s if self.wall_s > 0 else 0.0,
+            self.wall_s,
+            sync,
+            self.gc_collections,
+        )
 
 
 @contextlib.contextmanager
@@ -175,6 +187,7 @@ was on when the first of them started: it comes back on when the last one ends."
 def no_collections(stats: LoopStats) -> Iterator[None]:
     """The cyclic garbage collector off inside the block (and back as it was once no loop
     runs); every collection that runs anyway is counted in stats.gc_collections."""
+
     def count(phase: str, info: dict) -> None:
         if phase == "start":
             stats.gc_collections += 1
@@ -202,8 +215,9 @@ class _Loop:
 
     def __init__(self, clock: Clock, rate_hz: float, timer: Callable[[], float]) -> None:
         if not RATE_MIN_HZ <= rate_hz <= RATE_MAX_HZ:
-            raise ValueError(f"loop rate {rate_hz:g} Hz is outside "
-                             f"{RATE_MIN_HZ:g}..{RATE_MAX_HZ:g} Hz")
+            raise ValueError(
+                f"loop rate {rate_hz:g} Hz is outside {RATE_MIN_HZ:g}..{RATE_MAX_HZ:g} Hz"
+            )
         self.clock = clock
         self.period = 1.0 / rate_hz
         self.timer = timer
@@ -228,16 +242,18 @@ class _Loop:
     def _run(self, tick: Callable[[int, float], bool]) -> None:
         raise NotImplementedError
 
-    def _timed(self, tick: Callable[[int, float], bool], k: int,
-               start: float) -> tuple[bool, float, float]:
+    def _timed(
+        self, tick: Callable[[int, float], bool], k: int, start: float
+    ) -> tuple[bool, float, float]:
         """Run tick k at clock time `start`: (go on, its end on the clock, compute time [s])."""
         w0 = self.timer()
         go_on = tick(k, start)
         compute = self.timer() - w0
         return go_on, self.clock.now(), compute
 
-    def _record(self, k: int, deadline: float, start: float, compute: float, overrun: bool,
-                missed: int) -> None:
+    def _record(
+        self, k: int, deadline: float, start: float, compute: float, overrun: bool, missed: int
+    ) -> None:
         self.last = TickTiming(k, deadline, start, start - deadline, compute, overrun, missed)
         self.stats.add(self.last)
 
@@ -245,8 +261,9 @@ class _Loop:
 class FixedRateLoop(_Loop):
     """Calls tick(k, t) at rate_hz on absolute deadlines."""
 
-    def __init__(self, clock: Clock, rate_hz: float,
-                 timer: Callable[[], float] = time.perf_counter) -> None:
+    def __init__(
+        self, clock: Clock, rate_hz: float, timer: Callable[[], float] = time.perf_counter
+    ) -> None:
         super().__init__(clock, rate_hz, timer)
 
     def _run(self, tick: Callable[[int, float], bool]) -> None:
@@ -260,8 +277,9 @@ class FixedRateLoop(_Loop):
             nxt = k + 1
             while origin + nxt * self.period < end:
                 nxt += 1
-            self._record(k, deadline, start, compute, end > origin + (k + 1) * self.period,
-                         nxt - k - 1)
+            self._record(
+                k, deadline, start, compute, end > origin + (k + 1) * self.period, nxt - k - 1
+            )
             if not go_on:
                 return
             k = nxt
@@ -275,9 +293,14 @@ class MocapSyncLoop(_Loop):
 
     sync = "mocap"
 
-    def __init__(self, clock: Clock, rate_hz: float, source: Any,
-                 timer: Callable[[], float] = time.perf_counter,
-                 timeout_periods: float = 1.5) -> None:
+    def __init__(
+        self,
+        clock: Clock,
+        rate_hz: float,
+        source: Any,
+        timer: Callable[[], float] = time.perf_counter,
+        timeout_periods: float = 1.5,
+    ) -> None:
         super().__init__(clock, rate_hz, timer)
         if timeout_periods <= 0:
             raise ValueError(f"timeout_periods {timeout_periods:g} must be positive")

@@ -18,16 +18,22 @@ def envelope_faults(plan: Plan, cfg: FlightConfig) -> list[str]:
     s, found = cfg.safety, []
     speed = max(plan.peaks.v, plan.v0, plan.limits.v_contact[1])
     if speed > s.speed_max_mps:
-        found.append(f"plan speed {speed:.4g} m/s (peak, v0 or v_contact) exceeds [safety] "
-                     f"speed_max_mps = {s.speed_max_mps:g} m/s by {speed - s.speed_max_mps:.4g} m/s")
+        found.append(
+            f"plan speed {speed:.4g} m/s (peak, v0 or v_contact) exceeds [safety] "
+            f"speed_max_mps = {s.speed_max_mps:g} m/s by {speed - s.speed_max_mps:.4g} m/s"
+        )
     tilt = math.atan2(plan.peaks.a, cfg.vehicle.g)
     if tilt > cfg.tilt_limit_rad:
-        found.append(f"plan peaks.a = {plan.peaks.a:.4g} m/s^2 needs {math.degrees(tilt):.1f} deg "
-                     f"of tilt, above tilt_limit_rad = {math.degrees(cfg.tilt_limit_rad):.1f} "
-                     f"deg by {math.degrees(tilt - cfg.tilt_limit_rad):.1f} deg")
+        found.append(
+            f"plan peaks.a = {plan.peaks.a:.4g} m/s^2 needs {math.degrees(tilt):.1f} deg "
+            f"of tilt, above tilt_limit_rad = {math.degrees(cfg.tilt_limit_rad):.1f} "
+            f"deg by {math.degrees(tilt - cfg.tilt_limit_rad):.1f} deg"
+        )
     if plan.x0 < s.x_min_m:
-        found.append(f"plan x0 = {plan.x0:g} m is outside the geofence [safety] x_min_m = "
-                     f"{s.x_min_m:g} m by {s.x_min_m - plan.x0:.4g} m")
+        found.append(
+            f"plan x0 = {plan.x0:g} m is outside the geofence [safety] x_min_m = "
+            f"{s.x_min_m:g} m by {s.x_min_m - plan.x0:.4g} m"
+        )
     return found
 
 

@@ -80,6 +80,7 @@ class Planner(Protocol):
 def solve(plan: Plan, x0_m: float, v0_mps: float, library: Any) -> tuple[Plan | None, str, float]:
     """(plan, error, solve time [s]) of one retarget; a PlanError is an answer, not a crash."""
     from perchd.tau import retarget
+
     t0 = time.perf_counter()
     try:
         out, why = retarget(plan, x0_m, v0_mps, library=library), ""
@@ -119,6 +120,7 @@ class InlinePlanner:
 
 def plan_to_wire(plan: Plan) -> dict:
     from perchd.tau.planfile import plan_to_json
+
     return plan_to_json(plan)
 
 
@@ -127,15 +129,24 @@ def plan_from_wire(doc: dict) -> Plan:
     re-deriving its figures (plan_from_json) would cost the loop milliseconds."""
     from perchd.tau.limits import Limits
     from perchd.tau.plan import Peaks, Plan
+
     lim = doc["limits"]
     stage1 = doc["stage1"]
     robust = doc.get("robust")
-    return Plan(doc["strategy"], doc["x0"], doc["v0"], doc["tau_s"], stage1.get("c"),
-                None if "k" not in stage1 else tuple(stage1["k"]), doc["t_switch"],
-                doc["duration"], doc["v_contact"],
-                Limits(tuple(lim["v_contact"]), lim["v_max"], lim["a_max"]),
-                Peaks(doc["peaks"]["v"], doc["peaks"]["a"]),
-                None if robust is None else (tuple(robust["x0"]), tuple(robust["v0"])))
+    return Plan(
+        doc["strategy"],
+        doc["x0"],
+        doc["v0"],
+        doc["tau_s"],
+        stage1.get("c"),
+        None if "k" not in stage1 else tuple(stage1["k"]),
+        doc["t_switch"],
+        doc["duration"],
+        doc["v_contact"],
+        Limits(tuple(lim["v_contact"]), lim["v_max"], lim["a_max"]),
+        Peaks(doc["peaks"]["v"], doc["peaks"]["a"]),
+        None if robust is None else (tuple(robust["x0"]), tuple(robust["v0"])),
+    )
 
 
 class WorkerPlanner:
@@ -145,8 +156,9 @@ class WorkerPlanner:
     it loads (seconds on a busy PC) while the vehicle takes off and holds; `ready` says when
     it has. A worker that died answers every request with why (never an exception in a tick)."""
 
-    def __init__(self, plan: Plan, library: str | None = None, *, delay_s: float = 0.0,
-                 instant: bool = False) -> None:
+    def __init__(
+        self, plan: Plan, library: str | None = None, *, delay_s: float = 0.0, instant: bool = False
+    ) -> None:
         self.instant = instant
         self._n = 0
         self._asked: int | None = None  # id of the newest request not yet answered
@@ -154,7 +166,10 @@ class WorkerPlanner:
         self._dead = ""  # why it can answer no more
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "perchd.flight.planner_worker", str(os.getpid())],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, close_fds=True)
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            close_fds=True,
+        )
         self._lines = _Lines(self.proc.stdout.fileno())
         self._send({"plan": plan_to_wire(plan), "library": library, "delay_s": delay_s})
 
@@ -242,17 +257,25 @@ class WorkerPlanner:
 
 def _reply(doc: dict) -> PlanReply:
     plan = None if doc.get("plan") is None else plan_from_wire(doc["plan"])
-    return PlanReply(doc["id"], doc.get("x0", math.nan), doc.get("v0", math.nan), plan,
-                     doc.get("error", ""), doc.get("solve_s", math.nan))
+    return PlanReply(
+        doc["id"],
+        doc.get("x0", math.nan),
+        doc.get("v0", math.nan),
+        plan,
+        doc.get("error", ""),
+        doc.get("solve_s", math.nan),
+    )
 
 
 # --------------------------------------------------------------------------- the worker
+
 
 def _die_with_parent(parent: int) -> None:
     """SIGKILL this process when the agent dies, however it dies (Linux prctl)."""
     if not sys.platform.startswith("linux"):
         return
     import ctypes
+
     PR_SET_PDEATHSIG = 1
     ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
     if os.getppid() != parent:  # the parent died before prctl took effect
@@ -305,11 +328,13 @@ def main(argv: list[str]) -> int:
     except EOFError:
         return 0
     from perchd.tau.planfile import plan_from_json
+
     try:
         plan = plan_from_json(first["plan"])
         library = None
         if first["library"] is not None:
             from perchd.tau.library import load_library
+
             library = load_library(first["library"])
     except PerchdError as err:
         _emit({"ready": False, "error": str(err)})
@@ -326,8 +351,16 @@ def main(argv: list[str]) -> int:
         if delay > 0.0:
             time.sleep(delay)
             took += delay
-        _emit({"id": req["id"], "x0": req["x0"], "v0": req["v0"], "error": why,
-               "solve_s": took, "plan": None if out is None else plan_to_wire(out)})
+        _emit(
+            {
+                "id": req["id"],
+                "x0": req["x0"],
+                "v0": req["v0"],
+                "error": why,
+                "solve_s": took,
+                "plan": None if out is None else plan_to_wire(out),
+            }
+        )
 
 
 if __name__ == "__main__":

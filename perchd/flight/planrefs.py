@@ -56,12 +56,22 @@ class PlanSampler:
     def at(self, s: float) -> PlanPoint:
         plan = self.plan
         if self._stage1 is None or (s >= plan.t_switch and plan.tau_s is None):
-            return PlanPoint(int(plan.stage(s)), float(plan.tau_ref(s)), float(plan.x(s)),
-                             float(plan.v(s)), float(plan.a(s)))
+            return PlanPoint(
+                int(plan.stage(s)),
+                float(plan.tau_ref(s)),
+                float(plan.x(s)),
+                float(plan.v(s)),
+                float(plan.a(s)),
+            )
         if s < plan.t_switch:
             return PlanPoint(1, *self._stage1(s))
-        return PlanPoint(2, plan.tau_s + (s - plan.t_switch),
-                         -plan.v_contact * (plan.duration - s), plan.v_contact, 0.0)
+        return PlanPoint(
+            2,
+            plan.tau_s + (s - plan.t_switch),
+            -plan.v_contact * (plan.duration - s),
+            plan.v_contact,
+            0.0,
+        )
 
 
 class _InversePolynomial:
@@ -84,15 +94,19 @@ class _ConstantTauDot:
 
     def __init__(self, profile: Any) -> None:
         self.x0, self.v0, self.c, self.tau0 = profile.x0, profile.v0, profile.c, profile.tau0
-        self.a_scale = self.v0 ** 2 / self.x0 * (1.0 - self.c)
+        self.a_scale = self.v0**2 / self.x0 * (1.0 - self.c)
 
     def __call__(self, t: float) -> tuple[float, float, float, float]:
         c = self.c
         base = max(1.0 + c * t / self.tau0, 0.0)
-        return (c * t + self.tau0, self.x0 * _power(base, 1.0 / c),
-                self.v0 * _power(base, 1.0 / c - 1.0), self.a_scale * _power(base, 1.0 / c - 2.0))
+        return (
+            c * t + self.tau0,
+            self.x0 * _power(base, 1.0 / c),
+            self.v0 * _power(base, 1.0 / c - 1.0),
+            self.a_scale * _power(base, 1.0 / c - 2.0),
+        )
 
 
 def _power(base: float, exponent: float) -> float:
     """base ** exponent, infinite (as numpy has it) where a negative power meets 0."""
-    return math.inf if base == 0.0 and exponent < 0.0 else base ** exponent
+    return math.inf if base == 0.0 and exponent < 0.0 else base**exponent

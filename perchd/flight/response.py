@@ -66,20 +66,40 @@ class VehicleResponse:
         self.model = m = fit.model
         if m is None:
             self.ff = FeedForward(self.gains.ff_lead_s)
-            self._events.append(LogEvent(t, "lag-unidentified", (
-                f"{fit.why}: flying the configured lead {self.ff.lead_s:g} s and no drag term"),
-                {"lead_s": self.ff.lead_s}))
+            self._events.append(
+                LogEvent(
+                    t,
+                    "lag-unidentified",
+                    (
+                        f"{fit.why}: flying the configured lead {self.ff.lead_s:g} s and no drag term"
+                    ),
+                    {"lead_s": self.ff.lead_s},
+                )
+            )
             return
         self.ff = feed_forward(m)
-        self._events.append(LogEvent(t, "lag-identified", (
-            f"lag {m.lag_s:.3f} s ({m.time_constant_s:.3f} s of it first-order) from the "
-            f"{'attitude' if m.from_attitude else 'positions'}, drag {m.drag_per_s:.3f} 1/s "
-            f"from the {'lean measured' if m.drag_from_attitude else 'commands'}"), {
-                "lag_s": m.lag_s, "time_constant_s": m.time_constant_s,
-                "from_attitude": m.from_attitude, "drag_from_attitude": m.drag_from_attitude,
-                "drag_per_s": m.drag_per_s, "bias_mps2": m.bias_mps2,
-                "rms_mps": m.rms_mps, "samples": m.samples,
-                "speed_span_mps": m.speed_span_mps}))
+        self._events.append(
+            LogEvent(
+                t,
+                "lag-identified",
+                (
+                    f"lag {m.lag_s:.3f} s ({m.time_constant_s:.3f} s of it first-order) from the "
+                    f"{'attitude' if m.from_attitude else 'positions'}, drag {m.drag_per_s:.3f} 1/s "
+                    f"from the {'lean measured' if m.drag_from_attitude else 'commands'}"
+                ),
+                {
+                    "lag_s": m.lag_s,
+                    "time_constant_s": m.time_constant_s,
+                    "from_attitude": m.from_attitude,
+                    "drag_from_attitude": m.drag_from_attitude,
+                    "drag_per_s": m.drag_per_s,
+                    "bias_mps2": m.bias_mps2,
+                    "rms_mps": m.rms_mps,
+                    "samples": m.samples,
+                    "speed_span_mps": m.speed_span_mps,
+                },
+            )
+        )
 
     def refit_stage2(self, t: float, since_t: float, v_hold: float) -> float:
         """At the stage-2 switch: the bias again from stage 1 (since since_t [s]), lag and
@@ -91,8 +111,13 @@ class VehicleResponse:
         self._relag(t, since_t)
         fit = self.lagid.refit_bias(self.model, since_t)
         if fit.model is None:
-            self._events.append(LogEvent(t, "bias-unrefitted", f"{fit.why}: stage 2 keeps "
-                                         f"bias {self.ff.bias_mps2:.3f} m/s^2"))
+            self._events.append(
+                LogEvent(
+                    t,
+                    "bias-unrefitted",
+                    f"{fit.why}: stage 2 keeps bias {self.ff.bias_mps2:.3f} m/s^2",
+                )
+            )
             return 0.0
         fitted, approach = fit.model.bias_mps2, self.model.bias_mps2
         self.departure_mps2 = fitted - approach
@@ -108,11 +133,24 @@ class VehicleResponse:
         """The bias-refit event: approach and fitted biases [m/s^2], the feed-forward's step
         [m/s^2] (docs/contracts.md)."""
         m, own = self.model, fitted - approach
-        self._events.append(LogEvent(t, "bias-refit", (
-            f"stage 2: bias {m.bias_mps2:.3f} m/s^2 = the approach's {approach:.3f} + "
-            f"{self.cfg.stage2_refit_share:g} x stage 1's {own:+.3f}"), {
-                "bias_mps2": m.bias_mps2, "fitted_mps2": fitted, "departure_mps2": own,
-                "rms_mps": m.rms_mps, "samples": m.samples, "step_mps2": step}))
+        self._events.append(
+            LogEvent(
+                t,
+                "bias-refit",
+                (
+                    f"stage 2: bias {m.bias_mps2:.3f} m/s^2 = the approach's {approach:.3f} + "
+                    f"{self.cfg.stage2_refit_share:g} x stage 1's {own:+.3f}"
+                ),
+                {
+                    "bias_mps2": m.bias_mps2,
+                    "fitted_mps2": fitted,
+                    "departure_mps2": own,
+                    "rms_mps": m.rms_mps,
+                    "samples": m.samples,
+                    "step_mps2": step,
+                },
+            )
+        )
 
     def _relag(self, t: float, since_t: float) -> None:
         """A lag taken from the attitude is taken again from stage 1's alone (drag and bias
@@ -127,11 +165,17 @@ class VehicleResponse:
         # its speed from the switch on), so the feed-forward does not step.
         self.model = replace(m, lag_s=lean[0] + lean[1], time_constant_s=lean[1])
         self.ff = feed_forward(self.model)
-        self._events.append(LogEvent(t, "lag-refit", (
-            f"stage 2: lag {self.model.lag_s:.3f} s ({lean[1]:.3f} s of it first-order) "
-            f"from stage 1's attitude, {m.lag_s:.3f} s before"), {
-                "lag_s": self.model.lag_s, "time_constant_s": lean[1],
-                "was_lag_s": m.lag_s}))
+        self._events.append(
+            LogEvent(
+                t,
+                "lag-refit",
+                (
+                    f"stage 2: lag {self.model.lag_s:.3f} s ({lean[1]:.3f} s of it first-order) "
+                    f"from stage 1's attitude, {m.lag_s:.3f} s before"
+                ),
+                {"lag_s": self.model.lag_s, "time_constant_s": lean[1], "was_lag_s": m.lag_s},
+            )
+        )
 
     @property
     def horizon_s(self) -> float:

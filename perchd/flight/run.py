@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import ConfigError, LinkError
@@ -90,17 +91,25 @@ class FlightResult:
 
     def to_json(self) -> dict[str, Any]:
         """The `perchd fly --json` object (docs/contracts.md §2 keys first)."""
-        return {"outcome": self.outcome.name, "message": self.outcome.value,
-                "detail": self.detail, "contact_speed": self.contact_speed,
-                "perch_time": self.perch_time, "plan_duration": self.plan_duration,
-                "v_contact_plan": self.v_contact_plan, "log": self.log,
-                "true_contact_speed": self.true_contact_speed,
-                "true_perch_time": self.true_perch_time,
-                "trigger": jsonable(self.trigger), "loop": jsonable(self.loop),
-                "failsafe_sent": self.failsafe_sent, "hover_n": self.hover_n,
-                "hover_guess_n": self.hover_guess_n,
-                "stage2_departure_mps2": self.stage2_departure_mps2,
-                "log_lost": self.log_lost}
+        return {
+            "outcome": self.outcome.name,
+            "message": self.outcome.value,
+            "detail": self.detail,
+            "contact_speed": self.contact_speed,
+            "perch_time": self.perch_time,
+            "plan_duration": self.plan_duration,
+            "v_contact_plan": self.v_contact_plan,
+            "log": self.log,
+            "true_contact_speed": self.true_contact_speed,
+            "true_perch_time": self.true_perch_time,
+            "trigger": jsonable(self.trigger),
+            "loop": jsonable(self.loop),
+            "failsafe_sent": self.failsafe_sent,
+            "hover_n": self.hover_n,
+            "hover_guess_n": self.hover_guess_n,
+            "stage2_departure_mps2": self.stage2_departure_mps2,
+            "log_lost": self.log_lost,
+        }
 
 
 def plan_summary(plan: Plan) -> dict[str, Any]:
@@ -133,10 +142,17 @@ _NO_STATE = _NoState()
 class _Run:
     """The per-tick wiring, kept apart from `fly` so the tick is one short method."""
 
-    def __init__(self, plan: Plan, driver: Driver, source: PoseSource, clock: Clock,
-                 cfg: FlightConfig, abort: FlightAbort,
-                 on_tick: Callable[[TickStatus], None] | None,
-                 planner: Planner | None = None) -> None:
+    def __init__(
+        self,
+        plan: Plan,
+        driver: Driver,
+        source: PoseSource,
+        clock: Clock,
+        cfg: FlightConfig,
+        abort: FlightAbort,
+        on_tick: Callable[[TickStatus], None] | None,
+        planner: Planner | None = None,
+    ) -> None:
         self.frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
         self.est = Estimator(cfg.estimator, self.frame)
         self.sup = Supervisor(plan, cfg, self.frame, planner)
@@ -161,9 +177,17 @@ class _Run:
         state = self.est.state(t)
         last = self.est.last_pose
         arrival_age = None if last is None else t - (last.t + last.latency)
-        rep = self.sup.tick(t, state, Conditions(health, self.loop.stats.streak,
-                                                 self.abort.reason, self.est.mocap_period,
-                                                 arrival_age))
+        rep = self.sup.tick(
+            t,
+            state,
+            Conditions(
+                health,
+                self.loop.stats.streak,
+                self.abort.reason,
+                self.est.mocap_period,
+                arrival_age,
+            ),
+        )
         self.loop.stats.agent.append(time.perf_counter() - w0)
         if rep.end is not None and rep.end is not EndReason.CONTACT:
             self.failsafe(rep.end)
@@ -174,8 +198,16 @@ class _Run:
                 self.loop.stats.latency.append(self.clock.now() - (last.t + last.latency))
         self._log(k, t, state, rep)
         if self.on_tick is not None:
-            self.on_tick(TickStatus(t - self.t0, rep.phase, state and state.x,
-                                    state and state.xdot, state and state.tau, rep.refs.tau_ref))
+            self.on_tick(
+                TickStatus(
+                    t - self.t0,
+                    rep.phase,
+                    state and state.x,
+                    state and state.xdot,
+                    state and state.tau,
+                    rep.refs.tau_ref,
+                )
+            )
         return not rep.finished
 
     def failsafe(self, reason: EndReason) -> None:
@@ -186,7 +218,7 @@ class _Run:
     def _log(self, k: int, t: float, st: State | None, rep: TickReport) -> None:
         if isinstance(self.log, NoLog):  # no record kept: no row built either
             return
-        for ev in self.sup.events[self._events:]:
+        for ev in self.sup.events[self._events :]:
             self.log.event(ev)
         self._events = len(self.sup.events)
         st = st if st is not None else _NO_STATE
@@ -196,15 +228,35 @@ class _Run:
 
     def _log_row(self, k: int, t: float, st: State | _NoState, rep: TickReport) -> None:
         sp, timing = rep.setpoint, self.loop.last
-        self.log.row(LogRow(
-            t=t, k=k, phase=rep.phase.value, x=st.x, xdot=st.xdot, tau=st.tau,
-            tau_ref=rep.refs.tau_ref, x_plan=rep.refs.x, v_plan=rep.refs.v, a_plan=rep.refs.a,
-            y=st.y, z=st.z, roll=sp.roll if sp else 0.0, pitch=sp.pitch if sp else 0.0,
-            yaw=sp.yaw if sp else 0.0, thrust=sp.thrust if sp else 0.0,
-            ux=rep.u[0], uy=rep.u[1], uz=rep.u[2], e=rep.e, age=st.age, pose_seq=st.pose_seq,
-            jitter_s=timing.jitter_s if timing else 0.0,
-            compute_s=timing.compute_s if timing else 0.0,
-            end=rep.end.name if rep.finished and rep.end else None))
+        self.log.row(
+            LogRow(
+                t=t,
+                k=k,
+                phase=rep.phase.value,
+                x=st.x,
+                xdot=st.xdot,
+                tau=st.tau,
+                tau_ref=rep.refs.tau_ref,
+                x_plan=rep.refs.x,
+                v_plan=rep.refs.v,
+                a_plan=rep.refs.a,
+                y=st.y,
+                z=st.z,
+                roll=sp.roll if sp else 0.0,
+                pitch=sp.pitch if sp else 0.0,
+                yaw=sp.yaw if sp else 0.0,
+                thrust=sp.thrust if sp else 0.0,
+                ux=rep.u[0],
+                uy=rep.u[1],
+                uz=rep.u[2],
+                e=rep.e,
+                age=st.age,
+                pose_seq=st.pose_seq,
+                jitter_s=timing.jitter_s if timing else 0.0,
+                compute_s=timing.compute_s if timing else 0.0,
+                end=rep.end.name if rep.finished and rep.end else None,
+            )
+        )
 
 
 class TrueContact(Protocol):
@@ -232,9 +284,11 @@ def bind_vehicle(driver: Driver, cfg: FlightConfig) -> FlightConfig:
     if ceiling is None or ceiling >= v.thrust_max_n:
         return cfg
     if ceiling < v.hover_guess_n:
-        raise ConfigError(f"{driver.uri}: its thrust ceiling "
-                          f"{ceiling:.4f} N is below the hover thrust {v.hover_guess_n:.4f} N "
-                          f"of vehicle.mass_kg = {v.mass_kg:g} kg")
+        raise ConfigError(
+            f"{driver.uri}: its thrust ceiling "
+            f"{ceiling:.4f} N is below the hover thrust {v.hover_guess_n:.4f} N "
+            f"of vehicle.mass_kg = {v.mass_kg:g} kg"
+        )
     return dataclasses.replace(cfg, vehicle=dataclasses.replace(v, thrust_max_n=ceiling))
 
 
@@ -242,16 +296,25 @@ def needs_worker(cfg: FlightConfig, clock: Clock) -> bool:
     """The trigger solves in a worker process: its policy retargets and the clock is real
     (on a simulated clock a solve in the tick takes no simulated time, and is reproducible;
     docs/architecture.md "Planning in flight")."""
-    return cfg.trigger.policy in (TriggerPolicy.REPLAN, TriggerPolicy.ROBUST) \
-        and isinstance(clock, MonotonicClock)
+    return cfg.trigger.policy in (TriggerPolicy.REPLAN, TriggerPolicy.ROBUST) and isinstance(
+        clock, MonotonicClock
+    )
 
 
-def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: str | Path | None,
-        cfg: FlightConfig = FlightConfig(), abort: FlightAbort | None = None,
-        on_tick: Callable[[TickStatus], None] | None = None,
-        world: GroundTruth | None = None,
-        header: dict[str, Any] | None = None,
-        planner: Planner | None = None, log_force: bool = False) -> FlightResult:
+def fly(
+    plan: Plan,
+    driver: Driver,
+    source: PoseSource,
+    clock: Clock,
+    log_path: str | Path | None,
+    cfg: FlightConfig = FlightConfig(),
+    abort: FlightAbort | None = None,
+    on_tick: Callable[[TickStatus], None] | None = None,
+    world: GroundTruth | None = None,
+    header: dict[str, Any] | None = None,
+    planner: Planner | None = None,
+    log_force: bool = False,
+) -> FlightResult:
     """Fly `plan` (a perchd.tau.Plan) with a connected driver and a started pose source;
     a plan that fails check_flight_plan is refused (PlanError) before anything engages.
 
@@ -270,35 +333,64 @@ def fly(plan: Plan, driver: Driver, source: PoseSource, clock: Clock, log_path: 
         planner = WorkerPlanner(plan, cfg.trigger.library)  # loads while the vehicle holds
         below_loop(planner.pid)  # a solve must never hold the loop's CPU (docs/safety.md)
     try:
-        return _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world,
-                    header, planner, log_force)
+        return _fly(
+            plan,
+            driver,
+            source,
+            clock,
+            log_path,
+            cfg,
+            abort,
+            on_tick,
+            world,
+            header,
+            planner,
+            log_force,
+        )
     finally:
         if planner is not None:
             planner.close()  # every way out: the worker never outlives its flight
 
 
-def _fly(plan, driver, source, clock, log_path, cfg, abort, on_tick, world, header,
-         planner, log_force) -> FlightResult:
+def _fly(
+    plan, driver, source, clock, log_path, cfg, abort, on_tick, world, header, planner, log_force
+) -> FlightResult:
     run = _Run(plan, driver, source, clock, cfg, abort, on_tick, planner)  # may refuse
-    log = run.log = NoLog() if log_path is None else FlightLogWriter(log_path, {"plan": plan_summary(plan),
-                                               "config": jsonable(cfg),
-                                               "driver": driver.uri,
-                                               "mocap_body": source.body,
-                                               **(header or {})}, log_force)
+    log = run.log = (
+        NoLog()
+        if log_path is None
+        else FlightLogWriter(
+            log_path,
+            {
+                "plan": plan_summary(plan),
+                "config": jsonable(cfg),
+                "driver": driver.uri,
+                "mocap_body": source.body,
+                **(header or {}),
+            },
+            log_force,
+        )
+    )
     try:
         engage(driver, source)
         run.loop.run(run.tick)
     except BaseException as err:
-        reason = EndReason.SIGNAL if isinstance(err, KeyboardInterrupt) else \
-            EndReason.LOST_LINK if isinstance(err, LinkError) else EndReason.SOFTWARE_ERROR
+        reason = (
+            EndReason.SIGNAL
+            if isinstance(err, KeyboardInterrupt)
+            else EndReason.LOST_LINK
+            if isinstance(err, LinkError)
+            else EndReason.SOFTWARE_ERROR
+        )
         try:
             run.failsafe(reason)
         finally:
             log.close({"outcome": reason.name, "detail": f"{type(err).__name__}: {err}"})
         raise
     result = _result(run, world, "" if log_path is None else str(log_path))
-    log.close({"outcome": result.outcome.name, "detail": result.detail,
-               "summary": result.to_json()})
+    log.close(
+        {"outcome": result.outcome.name, "detail": result.detail, "summary": result.to_json()}
+    )
     # the end line or the rename may be what failed
     return dataclasses.replace(result, log_lost=log.lost) if log.lost else result
 
@@ -320,10 +412,21 @@ def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult
     lost = run.log.lost
     detail = f"the flight log was lost: {lost}" if lost and not sup.end_detail else sup.end_detail
     return FlightResult(
-        sup.end or EndReason.SOFTWARE_ERROR, detail,
-        contact.speed if contact else None, perch, float(sup.plan.duration),
-        float(sup.plan.v_contact), trig, true_speed, true_perch, log_path,
-        run.loop.summary(), run.failsafe_sent, sup.hover_learned_n, sup.hover.guess_n,
-        sup.response.departure_mps2, lost, sup.response.identified.model
-        if sup.response.identified else None)
-
+        sup.end or EndReason.SOFTWARE_ERROR,
+        detail,
+        contact.speed if contact else None,
+        perch,
+        float(sup.plan.duration),
+        float(sup.plan.v_contact),
+        trig,
+        true_speed,
+        true_perch,
+        log_path,
+        run.loop.summary(),
+        run.failsafe_sent,
+        sup.hover_learned_n,
+        sup.hover.guess_n,
+        sup.response.departure_mps2,
+        lost,
+        sup.response.identified.model if sup.response.identified else None,
+    )

@@ -136,8 +136,9 @@ class Supervisor:
     """planner: where the trigger's ROBUST and REPLAN get their plans (TriggerDesk); None:
     solved in the tick. The caller owns it (starts and closes it)."""
 
-    def __init__(self, plan: Plan, cfg: FlightConfig, frame: PerchFrame,
-                 planner: Planner | None = None) -> None:
+    def __init__(
+        self, plan: Plan, cfg: FlightConfig, frame: PerchFrame, planner: Planner | None = None
+    ) -> None:
         self.plan = plan
         self.cfg = cfg
         self.frame = frame
@@ -179,7 +180,9 @@ class Supervisor:
     def _finish(self, reason: EndReason, t: float, detail: str = "") -> None:
         if self.end is None:
             self.end, self.end_detail, self._t_end = reason, detail, t
-            self.events.append(LogEvent(t, "end", f"{reason.value}{': ' if detail else ''}{detail}"))
+            self.events.append(
+                LogEvent(t, "end", f"{reason.value}{': ' if detail else ''}{detail}")
+            )
 
     # --- the tick ---------------------------------------------------------------------------
     def tick(self, t: float, state: State | None, cond: Conditions) -> TickReport:
@@ -199,8 +202,9 @@ class Supervisor:
             return TickReport(self.phase, None, None, False, NO_REFS, NO_U, None)
         return self._fly(t, dt, state)
 
-    def _check(self, t: float, state: State | None, cond: Conditions
-               ) -> tuple[EndReason | None, str]:
+    def _check(
+        self, t: float, state: State | None, cond: Conditions
+    ) -> tuple[EndReason | None, str]:
         s, health, arrival_age = self.cfg.safety, cond.health, cond.arrival_age_s
         if cond.abort is not None:
             return cond.abort, ""
@@ -211,13 +215,16 @@ class Supervisor:
         elif arrival_age is not None and arrival_age > limit:
             return EndReason.STALE_MOCAP, f"newest pose arrived {arrival_age * 1000:.0f} ms ago"
         elif self.phase in _MOVING and min(state.frozen_s, t - self._t_moving) > FROZEN_MAX_S:
-            return EndReason.STALE_MOCAP, (f"mocap frozen: the same position for "
-                                           f"{state.frozen_s * 1000:.0f} ms while flying")
+            return EndReason.STALE_MOCAP, (
+                f"mocap frozen: the same position for {state.frozen_s * 1000:.0f} ms while flying"
+            )
         if not health.ok:
             return EndReason.LOST_LINK, health.detail
         if health.rtt_s is not None and health.rtt_s > s.link_rtt_max_s:
-            return EndReason.LOST_LINK, (f"link too slow: round trip {health.rtt_s * 1000:.0f} ms"
-                                         f" > {s.link_rtt_max_s * 1000:.0f} ms")
+            return EndReason.LOST_LINK, (
+                f"link too slow: round trip {health.rtt_s * 1000:.0f} ms"
+                f" > {s.link_rtt_max_s * 1000:.0f} ms"
+            )
         if state is not None:
             why = self._limits(state)
             if why is not None:
@@ -228,8 +235,10 @@ class Supervisor:
         if cond.overrun_streak >= s.overrun_streak:
             return EndReason.DEADLINE_OVERRUN, f"{cond.overrun_streak} deadlines missed in a row"
         if t - self.t_start > s.timeout_s:
-            return EndReason.TIMEOUT, (f"flying {t - self.t_start:.3f} s, longer than "
-                                       f"[safety] timeout_s = {s.timeout_s:g} s")
+            return EndReason.TIMEOUT, (
+                f"flying {t - self.t_start:.3f} s, longer than "
+                f"[safety] timeout_s = {s.timeout_s:g} s"
+            )
         if state is not None and self._contact(t, state):
             return EndReason.CONTACT, f"at {self.contact.speed:.3f} m/s"
         since = None if self.trigger is None else t - self.trigger.t
@@ -246,16 +255,22 @@ class Supervisor:
         if self._hold is not None:
             dy, dz = st.y - self._hold[1], st.z - self._z_ref
             if airborne and max(abs(dy), abs(dz)) > s.lateral_max_m:
-                return EndReason.GEOFENCE, (f"{math.hypot(dy, dz):.2f} m off the approach line "
-                                            f"(limit {s.lateral_max_m:g} m)")
+                return EndReason.GEOFENCE, (
+                    f"{math.hypot(dy, dz):.2f} m off the approach line "
+                    f"(limit {s.lateral_max_m:g} m)"
+                )
         if airborne and height < s.floor_m:
-            return EndReason.GEOFENCE, f"height {height:.3f} m below the floor limit {s.floor_m:g} m"
+            return (
+                EndReason.GEOFENCE,
+                f"height {height:.3f} m below the floor limit {s.floor_m:g} m",
+            )
         if height > s.ceiling_m:
             return EndReason.GEOFENCE, f"height {height:.3f} m above the ceiling {s.ceiling_m:g} m"
         if st.tilt > s.tilt_max_rad:
-            return EndReason.TILT_LIMIT, (f"tilt {math.degrees(st.tilt):.1f} deg > "
-                                          f"{math.degrees(s.tilt_max_rad):.1f} deg")
-        speed = math.sqrt(st.xdot ** 2 + st.ydot ** 2 + st.zdot ** 2)
+            return EndReason.TILT_LIMIT, (
+                f"tilt {math.degrees(st.tilt):.1f} deg > {math.degrees(s.tilt_max_rad):.1f} deg"
+            )
+        speed = math.sqrt(st.xdot**2 + st.ydot**2 + st.zdot**2)
         if speed > s.speed_max_mps:
             return EndReason.SPEED_LIMIT, f"{speed:.2f} m/s > {s.speed_max_mps:g} m/s"
         return None
@@ -312,8 +327,12 @@ class Supervisor:
         if self.phase is Phase.TAKEOFF and self._takeoff.done and st.z >= self._z_ref - 0.05:
             self._enter(Phase.HOLD, t)
         self._learn_hover(t, dt, st)
-        if self.phase is Phase.HOLD and t - self._t_phase >= self.cfg.approach.hold_s \
-                and self._hover_ready(t, st) and self.desk.ready(t):
+        if (
+            self.phase is Phase.HOLD
+            and t - self._t_phase >= self.cfg.approach.hold_s
+            and self._hover_ready(t, st)
+            and self.desk.ready(t)
+        ):
             self._begin_approach(t, st)
         if self.end is not None:
             return self._ended(t, st)
@@ -329,8 +348,11 @@ class Supervisor:
         if self.phase in (Phase.STAGE1, Phase.STAGE2):
             refs = self._refs(t)
             g = self.cfg.tau_gains
-            if self.phase is Phase.STAGE2 and not g.stage2_hold_speed \
-                    and refs.tau_ref > -g.terminal_s:
+            if (
+                self.phase is Phase.STAGE2
+                and not g.stage2_hold_speed
+                and refs.tau_ref > -g.terminal_s
+            ):
                 ux = 0.0  # terminal: constant speed (see TauGains.terminal_s)
             else:
                 hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
@@ -338,8 +360,9 @@ class Supervisor:
                 tau_aim = aim.tau_ref
                 if self.phase is Phase.STAGE1:
                     tau_aim, aim = self._stage1_aim(t, seen, aim)
-                ux = self.ctl.tau.step(seen, tau_aim, aim.a, dt, self.ctl.saturated,
-                                       schedule=not hold)
+                ux = self.ctl.tau.step(
+                    seen, tau_aim, aim.a, dt, self.ctl.saturated, schedule=not hold
+                )
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
             ux = self._approach_accel(t, st, dt)
@@ -372,9 +395,14 @@ class Supervisor:
         if tau is None or tau < self._tau_s:
             return
         self.t_stage2 = t
-        self._enter(Phase.STAGE2, t, "predicted tau reached tau_s" if horizon > 0.0 else
-                    "measured tau reached tau_s", tau=tau, horizon_s=horizon,
-                    since_trigger=t - self.trigger.t)
+        self._enter(
+            Phase.STAGE2,
+            t,
+            "predicted tau reached tau_s" if horizon > 0.0 else "measured tau reached tau_s",
+            tau=tau,
+            horizon_s=horizon,
+            since_trigger=t - self.trigger.t,
+        )
         self._refit_stage2(t)
 
     @property
@@ -396,10 +424,15 @@ class Supervisor:
         s = self.cfg.safety
         top = s.ceiling_m - MARGIN_M  # every height reference stays below (core/envelope.py)
         if height > top:
-            self._finish(EndReason.GEOFENCE, t, (
-                f"start height {height:.3f} m is above safety.ceiling_m = {s.ceiling_m:g} m "
-                f"less the {MARGIN_M:g} m margin by {height - top:.3f} m: the hold would "
-                f"fly there"))
+            self._finish(
+                EndReason.GEOFENCE,
+                t,
+                (
+                    f"start height {height:.3f} m is above safety.ceiling_m = {s.ceiling_m:g} m "
+                    f"less the {MARGIN_M:g} m margin by {height - top:.3f} m: the hold would "
+                    f"fly there"
+                ),
+            )
         target = min(max(self.cfg.approach.takeoff_height_m, s.floor_m + MARGIN_M), top)
         climb = target - height
         self._z_ref = st.z + climb if climb > 0.1 else st.z
@@ -409,12 +442,15 @@ class Supervisor:
 
     def _begin_approach(self, t: float, st: State) -> None:
         gap = self.plan.x0 - st.x
-        need = self.plan.v0 ** 2 / (2.0 * gap) if gap > 0 else math.inf
+        need = self.plan.v0**2 / (2.0 * gap) if gap > 0 else math.inf
         if need > self.cfg.approach.accel_max_mps2:
-            self._finish(EndReason.TRIGGER_REFUSED, t,
-                         f"reaching v0 = {self.plan.v0:g} m/s by x0 = {self.plan.x0:g} m from "
-                         f"X = {st.x:.2f} m needs {need:.2f} m/s^2 > approach limit "
-                         f"{self.cfg.approach.accel_max_mps2:g} m/s^2")
+            self._finish(
+                EndReason.TRIGGER_REFUSED,
+                t,
+                f"reaching v0 = {self.plan.v0:g} m/s by x0 = {self.plan.x0:g} m from "
+                f"X = {st.x:.2f} m needs {need:.2f} m/s^2 > approach limit "
+                f"{self.cfg.approach.accel_max_mps2:g} m/s^2",
+            )
             return
         self._a_app, self._t_moving, self._v_int = need, t, 0.0
         self._enter(Phase.APPROACH, t, "", accel=need)
@@ -498,30 +534,54 @@ class Supervisor:
             return self._hover_settled(t, status.estimate_n, ratio)
         if not self._hover_waiting:
             self._hover_waiting = True
-            self.events.append(LogEvent(t, "hover-wait", "waiting for the hover thrust to "
-                                        "settle before the approach", {
-                                            "estimate_n": status.estimate_n,
-                                            "spread": status.spread}))
+            self.events.append(
+                LogEvent(
+                    t,
+                    "hover-wait",
+                    "waiting for the hover thrust to settle before the approach",
+                    {"estimate_n": status.estimate_n, "spread": status.spread},
+                )
+            )
         if t - self._t_phase > h.timeout_s:
-            self._finish(EndReason.HOVER_UNLEARNED, t, (
-                f"hover thrust unsettled after {t - self._t_phase:.1f} s in hold: estimate "
-                f"{status.estimate_n:.4f} N ({ratio:.3f} x the weight of "
-                f"{v.mass_kg:g} kg), spread {status.spread:.1%} over "
-                f"{status.steady_s:.2f} s steady (need {h.rel_tol:.1%} over {h.settle_s:g} s)"))
+            self._finish(
+                EndReason.HOVER_UNLEARNED,
+                t,
+                (
+                    f"hover thrust unsettled after {t - self._t_phase:.1f} s in hold: estimate "
+                    f"{status.estimate_n:.4f} N ({ratio:.3f} x the weight of "
+                    f"{v.mass_kg:g} kg), spread {status.spread:.1%} over "
+                    f"{status.steady_s:.2f} s steady (need {h.rel_tol:.1%} over {h.settle_s:g} s)"
+                ),
+            )
         return False
 
     def _hover_settled(self, t: float, hover_n: float, ratio: float) -> bool:
         h, v = self.cfg.hover, self.cfg.vehicle
         if not h.ratio_min <= ratio <= h.ratio_max:
-            self._finish(EndReason.HOVER_UNLEARNED, t, (
-                f"learned hover thrust {hover_n:.4f} N is {ratio:.3f} x the weight of "
-                f"vehicle.mass_kg = {v.mass_kg:g} kg, outside {h.ratio_min:g}..{h.ratio_max:g}:"
-                f" check the mass and the driver's thrust calibration"))
+            self._finish(
+                EndReason.HOVER_UNLEARNED,
+                t,
+                (
+                    f"learned hover thrust {hover_n:.4f} N is {ratio:.3f} x the weight of "
+                    f"vehicle.mass_kg = {v.mass_kg:g} kg, outside {h.ratio_min:g}..{h.ratio_max:g}:"
+                    f" check the mass and the driver's thrust calibration"
+                ),
+            )
             return False
         self.hover_learned_n = self.ctl.hover_n = hover_n
-        self.events.append(LogEvent(t, "hover-learned", f"{hover_n:.4f} N", {
-            "hover_n": hover_n, "ratio": ratio, "guess_n": self.hover.guess_n,
-            "since_hold_s": t - self._t_phase}))
+        self.events.append(
+            LogEvent(
+                t,
+                "hover-learned",
+                f"{hover_n:.4f} N",
+                {
+                    "hover_n": hover_n,
+                    "ratio": ratio,
+                    "guess_n": self.hover.guess_n,
+                    "since_hold_s": t - self._t_phase,
+                },
+            )
+        )
         return True
 
     # --- the trigger (flight/trigger.py) ---------------------------------------------------
@@ -535,8 +595,9 @@ class Supervisor:
         else:
             self._start_plan(t, d.t_meas, d.x, d.v, d.plan, d.action)
 
-    def _start_plan(self, t: float, t_meas: float, x: float, v: float, plan: Plan,
-                    action: str) -> None:
+    def _start_plan(
+        self, t: float, t_meas: float, x: float, v: float, plan: Plan, action: str
+    ) -> None:
         """Fly `plan` from tick t; the trigger state (x [m], v [m/s]) was measured at t_meas.
         The plan's clock starts when X crossed its x0, at most a tick before t_meas."""
         late = (x - plan.x0) / v if v > 0 else 0.0
@@ -625,8 +686,10 @@ class Supervisor:
         horizon = self.response.horizon_s
         s = self._plan_time(seen.x, t + horizon - self.trigger.t)
         here, a = self._plan_ahead(s, lag - horizon)
-        return ((1.0 - end) * tau_ref + end * here.tau_ref,
-                dataclasses.replace(aim, a=(1.0 - end) * aim.a + end * a))
+        return (
+            (1.0 - end) * tau_ref + end * here.tau_ref,
+            dataclasses.replace(aim, a=(1.0 - end) * aim.a + end * a),
+        )
 
     def _scale_corrected(self, seen: State, aim: Refs, weight: float) -> float:
         """The tau reference corrected for the scale error c = X / X_plan: tau = X/Xdot is
@@ -640,7 +703,7 @@ class Supervisor:
             return aim.tau_ref
         gamma = weight * min(gamma, -aim.tau_ref / (2.0 * lag))
         c = min(max(seen.x / aim.x, 0.5), 2.0)
-        return aim.tau_ref * c ** -gamma
+        return aim.tau_ref * c**-gamma
 
     def _observe_response(self, t: float, st: State) -> None:
         """Record the ticks for the lag identification (the stages' commands feed its

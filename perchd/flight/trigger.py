@@ -65,8 +65,9 @@ class TriggerDesk:
     InlinePlanner, solving in the tick (a simulated clock: a solve takes no simulated time).
     The caller owns it (starts and closes it). events: where the desk logs."""
 
-    def __init__(self, plan: Plan, cfg: FlightConfig, planner: Planner | None,
-                 events: list[LogEvent]) -> None:
+    def __init__(
+        self, plan: Plan, cfg: FlightConfig, planner: Planner | None, events: list[LogEvent]
+    ) -> None:
         self.plan, self.cfg, self.events = plan, cfg, events
         self.library = _open_library(cfg.trigger.library, plan)
         self.planner: Planner | None = planner
@@ -90,8 +91,11 @@ class TriggerDesk:
             return True
         if not self._planner_waiting:
             self._planner_waiting = True
-            self.events.append(LogEvent(t, "planner-wait", "waiting for the planner worker "
-                                        "to load before the approach"))
+            self.events.append(
+                LogEvent(
+                    t, "planner-wait", "waiting for the planner worker to load before the approach"
+                )
+            )
         return False
 
     def approach_tick(self, t: float, dt: float, st: State, v_ref: float) -> Decision | None:
@@ -111,8 +115,14 @@ class TriggerDesk:
         reply = self.planner.poll()
         if reply is not None:
             self._late_id = None
-            self.events.append(LogEvent(t, "trigger-late-solve", "the replan given up on came "
-                                        "in", {"solve_s": reply.solve_s}))
+            self.events.append(
+                LogEvent(
+                    t,
+                    "trigger-late-solve",
+                    "the replan given up on came in",
+                    {"solve_s": reply.solve_s},
+                )
+            )
 
     def _plan_ahead(self, t: float, dt: float, st: State, v_ref: float) -> None:
         """Keep a plan ready for the predicted trigger state (x0, v0 + the approach's speed
@@ -128,8 +138,9 @@ class TriggerDesk:
         asked = self._ahead_asked_v
         # Re-asked at half the tolerance the trigger accepts: the other half is for the
         # drift between the newest plan and the trigger.
-        if not self.planner.busy and (asked is None or abs(v_pred - asked) >
-                                      0.5 * self.cfg.trigger.ahead_v_tol_mps):
+        if not self.planner.busy and (
+            asked is None or abs(v_pred - asked) > 0.5 * self.cfg.trigger.ahead_v_tol_mps
+        ):
             self._ahead_asked_v = v_pred
             self.planner.request(self.plan.x0, v_pred)
 
@@ -137,8 +148,9 @@ class TriggerDesk:
         values = {"v0": reply.v0_mps, "solve_s": reply.solve_s}
         if reply.plan is not None:
             self._ahead = reply.plan
-            self.events.append(LogEvent(t, "plan-ahead", f"made for v0 = "
-                                        f"{reply.v0_mps:.3f} m/s", values))
+            self.events.append(
+                LogEvent(t, "plan-ahead", f"made for v0 = {reply.v0_mps:.3f} m/s", values)
+            )
         else:
             self.events.append(LogEvent(t, "plan-ahead", f"failed: {reply.error}", values))
 
@@ -152,13 +164,26 @@ class TriggerDesk:
             return self._take_reply(t, ReplanWait(0, t, st.x, st.xdot, t), self.planner.poll())
         ahead = self._ahead
         if ahead is not None and abs(st.xdot - ahead.v0) <= tr.ahead_v_tol_mps:
-            return Decision(ahead, t, st.x, st.xdot, (
-                f"{self._how()}: planned ahead for v0 = {ahead.v0:.3f} m/s, flown from "
-                f"x = {st.x:.3f} m, v = {st.xdot:.3f} m/s"))
+            return Decision(
+                ahead,
+                t,
+                st.x,
+                st.xdot,
+                (
+                    f"{self._how()}: planned ahead for v0 = {ahead.v0:.3f} m/s, flown from "
+                    f"x = {st.x:.3f} m, v = {st.xdot:.3f} m/s"
+                ),
+            )
         deadline = t + tr.deadline_s(float(self.plan.peaks.a))
         self.wait = ReplanWait(self.planner.request(st.x, st.xdot), t, st.x, st.xdot, deadline)
-        self.events.append(LogEvent(t, "trigger-wait", "replan asked for the measured state",
-                                    {"x": st.x, "v": st.xdot, "deadline_s": deadline - t}))
+        self.events.append(
+            LogEvent(
+                t,
+                "trigger-wait",
+                "replan asked for the measured state",
+                {"x": st.x, "v": st.xdot, "deadline_s": deadline - t},
+            )
+        )
         return None
 
     def _await_replan(self, t: float) -> Decision | None:
@@ -168,8 +193,12 @@ class TriggerDesk:
             return self._take_reply(t, w, reply)
         if t >= w.deadline:
             self._late_id = w.id
-            return self._fallback(t, w, f"replan not in after {t - w.t:.3f} s (deadline "
-                                        f"{w.deadline - w.t:.3f} s)", t - w.t)
+            return self._fallback(
+                t,
+                w,
+                f"replan not in after {t - w.t:.3f} s (deadline {w.deadline - w.t:.3f} s)",
+                t - w.t,
+            )
         return None
 
     def _take_reply(self, t: float, w: ReplanWait, reply: PlanReply) -> Decision:
@@ -177,13 +206,25 @@ class TriggerDesk:
         triggering tick (docs/architecture.md: a plan is time-invariant in X)."""
         self.wait = None
         if reply.plan is None:
-            return self._fallback(t, w, f"no plan from x = {w.x:.3f} m, v = {w.v:.3f} m/s: "
-                                        f"{reply.error}", reply.solve_s)
+            return self._fallback(
+                t,
+                w,
+                f"no plan from x = {w.x:.3f} m, v = {w.v:.3f} m/s: {reply.error}",
+                reply.solve_s,
+            )
         if w.id:
-            self.events.append(LogEvent(t, "trigger-solve", "replan in", {
-                "solve_s": reply.solve_s, "waited_s": t - w.t}))
-        return Decision(reply.plan, w.t, w.x, w.v, (
-            f"{self._how()}: retargeted to x0 = {w.x:.3f} m, v0 = {w.v:.3f} m/s"))
+            self.events.append(
+                LogEvent(
+                    t, "trigger-solve", "replan in", {"solve_s": reply.solve_s, "waited_s": t - w.t}
+                )
+            )
+        return Decision(
+            reply.plan,
+            w.t,
+            w.x,
+            w.v,
+            (f"{self._how()}: retargeted to x0 = {w.x:.3f} m, v0 = {w.v:.3f} m/s"),
+        )
 
     def _fallback(self, t: float, w: ReplanWait, why: str, solve_s: float) -> Decision:
         self.wait = None
@@ -210,8 +251,10 @@ class TriggerDesk:
             return "trigger policy 'robust' but the plan has no robust box"
         (xl, xh), (vl, vh) = box
         if not (xl <= st.x <= xh and vl <= st.xdot <= vh):
-            return (f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s outside the "
-                    f"plan's robust box x0 {xl:g}..{xh:g}, v0 {vl:g}..{vh:g}")
+            return (
+                f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s outside the "
+                f"plan's robust box x0 {xl:g}..{xh:g}, v0 {vl:g}..{vh:g}"
+            )
         return None
 
     def _refuse_rule(self, st: Any, ahead: Plan | None = None) -> tuple[Any, str, str]:
@@ -222,14 +265,21 @@ class TriggerDesk:
         if boxed is not None:
             return None, "", boxed
         tr = self.cfg.trigger
-        plan = min((p for p in (ahead, self.plan) if p is not None),
-                   key=lambda p: abs(st.xdot - p.v0))
+        plan = min(
+            (p for p in (ahead, self.plan) if p is not None), key=lambda p: abs(st.xdot - p.v0)
+        )
         dx, dv = st.x - plan.x0, st.xdot - plan.v0
         if abs(dx) <= tr.x_tol_m and abs(dv) <= tr.v_tol_mps:
             return plan, f"flown as made (dx {dx:+.3f} m, dv {dv:+.3f} m/s within tolerance)", ""
-        return None, "", (f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s differ from the "
-                          f"plan's x0 = {plan.x0:g}, v0 = {plan.v0:g} by {dx:+.3f} m, "
-                          f"{dv:+.3f} m/s (tolerance {tr.x_tol_m:g} m, {tr.v_tol_mps:g} m/s)")
+        return (
+            None,
+            "",
+            (
+                f"measured x = {st.x:.3f} m, v = {st.xdot:.3f} m/s differ from the "
+                f"plan's x0 = {plan.x0:g}, v0 = {plan.v0:g} by {dx:+.3f} m, "
+                f"{dv:+.3f} m/s (tolerance {tr.x_tol_m:g} m, {tr.v_tol_mps:g} m/s)"
+            ),
+        )
 
 
 def _open_library(path: str | None, plan: Plan) -> Any:

@@ -115,8 +115,9 @@ class FlightLogWriter:
     never raises out of the flight loop: writing stops, `lost` says why, and the flight
     reads it (flight/run.py ends a flight whose record is lost)."""
 
-    def __init__(self, path: str | os.PathLike, header: dict[str, Any],
-                 force: bool = False) -> None:
+    def __init__(
+        self, path: str | os.PathLike, header: dict[str, Any], force: bool = False
+    ) -> None:
         self.path = Path(path)
         self.rows = 0
         self.lost: str | None = None

@@ -61,8 +61,7 @@ def parse_address(text: str) -> Address:
     host, _, port = text.rpartition(":")
     host = host.strip("[]") or DEFAULT_HOST
     if not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise UriError(f"--foxglove {text}: expected [HOST:]PORT, PORT 0..65535 "
-                       "(0: any free one)")
+        raise UriError(f"--foxglove {text}: expected [HOST:]PORT, PORT 0..65535 (0: any free one)")
     return Address(host, int(port))
 
 
@@ -112,11 +111,16 @@ class Channels:
 
     def __init__(self, foxglove: Any, context: Any) -> None:
         self._by_topic = {
-            topic: foxglove.Channel(topic, message_encoding="json", context=context,
-                                    schema=foxglove.Schema(name=schema["title"],
-                                                           encoding="jsonschema",
-                                                           data=json.dumps(schema).encode()))
-            for topic, schema in schemas().items()}
+            topic: foxglove.Channel(
+                topic,
+                message_encoding="json",
+                context=context,
+                schema=foxglove.Schema(
+                    name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
+                ),
+            )
+            for topic, schema in schemas().items()
+        }
 
     def publish(self, m: Message) -> None:
         self._by_topic[m.topic].log(payload_bytes(m.payload), log_time=m.log_time)
@@ -166,8 +170,9 @@ class LiveView:
         foxglove = require("foxglove", "foxglove")
         self.context = foxglove.Context()
         try:
-            self.server = foxglove.start_server(name="perchd", host=address.host,
-                                                port=address.port, context=self.context)
+            self.server = foxglove.start_server(
+                name="perchd", host=address.host, port=address.port, context=self.context
+            )
         except (RuntimeError, OSError) as err:
             raise port_error(f"--foxglove {address.host}:{address.port}", err) from None
         self.url = f"ws://{address.host}:{self.server.port}"
@@ -178,8 +183,9 @@ class LiveView:
     def follow(self, log: str | os.PathLike) -> None:
         """Publish `log` from now on, in a thread of its own, until close()."""
         follower = LogFollower(log)
-        self._thread = threading.Thread(target=self._run, args=(follower,),
-                                        name="perchd-foxglove", daemon=True)
+        self._thread = threading.Thread(
+            target=self._run, args=(follower,), name="perchd-foxglove", daemon=True
+        )
         self._thread.start()
 
     def _run(self, follower: LogFollower) -> None:
@@ -230,10 +236,19 @@ class ViewProcess:
         require("foxglove", "foxglove")  # here: the missing extra is one line, at once
         self.proc = subprocess.Popen(
             [sys.executable, "-m", __name__, address.host, str(address.port), str(log)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         line = self.proc.stdout.readline()
-        said = json.loads(line) if line.startswith("{") else {
-            "error": f"the view process ended at start (exit {self.proc.wait()})", "exit_code": 1}
+        said = (
+            json.loads(line)
+            if line.startswith("{")
+            else {
+                "error": f"the view process ended at start (exit {self.proc.wait()})",
+                "exit_code": 1,
+            }
+        )
         if "error" in said:
             self.proc.wait()
             raise (UriError if said["exit_code"] == 2 else LinkError)(said["error"])

@@ -14,11 +14,12 @@ class LogFormatError(ValueError):
 
 
 NUMBER, TEXT = "float", "str"
-HEADER = {"plan": {"v_contact": NUMBER, "duration": NUMBER, "strategy": TEXT},
-          "config": {"rate_hz": NUMBER, "sync": TEXT}}
+HEADER = {
+    "plan": {"v_contact": NUMBER, "duration": NUMBER, "strategy": TEXT},
+    "config": {"rate_hz": NUMBER, "sync": TEXT},
+}
 """The header fields readers use; others are carried unchecked (shown, never computed on)."""
-END = {"outcome": TEXT, "detail": TEXT,
-       "summary": {"contact_speed": NUMBER, "perch_time": NUMBER}}
+END = {"outcome": TEXT, "detail": TEXT, "summary": {"contact_speed": NUMBER, "perch_time": NUMBER}}
 
 
 def is_number(value: Any) -> bool:
@@ -44,7 +45,8 @@ def _fits(value: Any, kind: str) -> bool:
         return isinstance(value, str)
     if base == "dict[str, float]":  # an event's figures: flags and unknown (null) ones too
         return isinstance(value, dict) and all(
-            v is None or isinstance(v, bool) or is_number(v) for v in value.values())
+            v is None or isinstance(v, bool) or is_number(v) for v in value.values()
+        )
     raise TypeError(f"no check for a field of kind {kind}")
 
 

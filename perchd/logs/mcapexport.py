@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Iterator
+from typing import IO, Any
 
 from perchd.core.errors import PerchdError
 from perchd.core.extras import require
@@ -43,30 +44,55 @@ TOPICS = tuple(s.topic for s in ROW_STREAMS) + (PHASE, EVENTS, FLIGHT)
 
 _NUMBER_OR_NULL = {"type": ["number", "null"]}
 # LogRow's annotations are strings (postponed evaluation): their JSON Schema types.
-_ROW_TYPES = {"float": {"type": "number"}, "float | None": _NUMBER_OR_NULL,
-              "int": {"type": "integer"}, "str": {"type": "string"},
-              "str | None": {"type": ["string", "null"]}}
+_ROW_TYPES = {
+    "float": {"type": "number"},
+    "float | None": _NUMBER_OR_NULL,
+    "int": {"type": "integer"},
+    "str": {"type": "string"},
+    "str | None": {"type": ["string", "null"]},
+}
 _ROW_FIELD_TYPES = {f.name: _ROW_TYPES[str(f.type)] for f in dataclasses.fields(LogRow)}
 
 
 def _schema(title: str, props: dict[str, Any]) -> dict[str, Any]:
-    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title,
-            "type": "object", "properties": props, "required": list(props)}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": title,
+        "type": "object",
+        "properties": props,
+        "required": list(props),
+    }
 
 
 def schemas() -> dict[str, dict[str, Any]]:
     """The JSON Schema of every topic."""
-    out = {s.topic: _schema(f"perchd{s.topic.removeprefix(PREFIX).replace('/', '.')}",
-                            {name: _ROW_FIELD_TYPES[name] for name in s.fields})
-           for s in ROW_STREAMS}
-    out[PHASE] = _schema("perchd.phase", {"phase": {"type": "string"},
-                                          "previous": {"type": ["string", "null"]}})
-    out[EVENTS] = _schema("perchd.event", {
-        "t": {"type": "number"}, "kind": {"type": "string"}, "detail": {"type": "string"},
-        "values": {"type": "object", "additionalProperties": _NUMBER_OR_NULL}})
-    out[FLIGHT] = _schema("perchd.flight", {"header": {"type": "object"},
-                                            "end": {"type": ["object", "null"]},
-                                            "complete": {"type": "boolean"}})
+    out = {
+        s.topic: _schema(
+            f"perchd{s.topic.removeprefix(PREFIX).replace('/', '.')}",
+            {name: _ROW_FIELD_TYPES[name] for name in s.fields},
+        )
+        for s in ROW_STREAMS
+    }
+    out[PHASE] = _schema(
+        "perchd.phase", {"phase": {"type": "string"}, "previous": {"type": ["string", "null"]}}
+    )
+    out[EVENTS] = _schema(
+        "perchd.event",
+        {
+            "t": {"type": "number"},
+            "kind": {"type": "string"},
+            "detail": {"type": "string"},
+            "values": {"type": "object", "additionalProperties": _NUMBER_OR_NULL},
+        },
+    )
+    out[FLIGHT] = _schema(
+        "perchd.flight",
+        {
+            "header": {"type": "object"},
+            "end": {"type": ["object", "null"]},
+            "complete": {"type": "boolean"},
+        },
+    )
     return out
 
 
@@ -115,16 +141,18 @@ def row_messages(row: LogRow, previous: str | None) -> list[Message]:
     """A row's message on every row channel, and on /perchd/phase when its phase differs
     from `previous` (the phase of the row before; None for the first)."""
     t = ns(row.t)
-    out = [Message(s.topic, t, {name: getattr(row, name) for name in s.fields})
-           for s in ROW_STREAMS]
+    out = [
+        Message(s.topic, t, {name: getattr(row, name) for name in s.fields}) for s in ROW_STREAMS
+    ]
     if row.phase != previous:  # phase changes only
         out.append(Message(PHASE, t, {"phase": row.phase, "previous": previous}))
     return out
 
 
 def event_message(ev: LogEvent) -> Message:
-    return Message(EVENTS, ns(ev.t), {"t": ev.t, "kind": ev.kind, "detail": ev.detail,
-                                      "values": ev.values})
+    return Message(
+        EVENTS, ns(ev.t), {"t": ev.t, "kind": ev.kind, "detail": ev.detail, "values": ev.values}
+    )
 
 
 def payload_bytes(payload: dict[str, Any]) -> bytes:
@@ -141,20 +169,29 @@ def write_mcap(log: FlightLog, out: IO[bytes]) -> int:
     w.start(profile="", library="perchd")
     channels = {}
     for topic, schema in schemas().items():
-        sid = w.register_schema(name=schema["title"], encoding="jsonschema",
-                                data=json.dumps(schema).encode())
-        channels[topic] = w.register_channel(topic=topic, message_encoding="json",
-                                             schema_id=sid)
+        sid = w.register_schema(
+            name=schema["title"], encoding="jsonschema", data=json.dumps(schema).encode()
+        )
+        channels[topic] = w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
     seq = dict.fromkeys(channels, 0)
     msgs = messages(log)
     for m in msgs:
-        w.add_message(channel_id=channels[m.topic], log_time=m.log_time,
-                      publish_time=m.log_time, sequence=seq[m.topic],
-                      data=payload_bytes(m.payload))
+        w.add_message(
+            channel_id=channels[m.topic],
+            log_time=m.log_time,
+            publish_time=m.log_time,
+            sequence=seq[m.topic],
+            data=payload_bytes(m.payload),
+        )
         seq[m.topic] += 1
-    w.add_metadata("perchd.flightlog", {"schema": str(log.header.get("schema", "")),
-                                        "outcome": str((log.end or {}).get("outcome", "")),
-                                        "complete": str(log.complete).lower()})
+    w.add_metadata(
+        "perchd.flightlog",
+        {
+            "schema": str(log.header.get("schema", "")),
+            "outcome": str((log.end or {}).get("outcome", "")),
+            "complete": str(log.complete).lower(),
+        },
+    )
     w.finish()
     return len(msgs)
 

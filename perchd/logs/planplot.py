@@ -15,8 +15,12 @@ def plot_plan(plan: Plan, path: str, force: bool = False) -> None:
 
     t = np.linspace(0.0, plan.duration, 1001)
     fig, axes = plt.subplots(4, 1, figsize=(6, 9), sharex=True)
-    rows = ((plan.x(t), "X [m]"), (plan.v(t), "Xdot [m/s]"),
-            (plan.a(t), "Xddot [m/s^2]"), (plan.tau_ref(t), "tau [s]"))
+    rows = (
+        (plan.x(t), "X [m]"),
+        (plan.v(t), "Xdot [m/s]"),
+        (plan.a(t), "Xddot [m/s^2]"),
+        (plan.tau_ref(t), "tau [s]"),
+    )
     for ax, (y, label) in zip(axes, rows):
         ax.plot(t, y)
         ax.axvline(plan.t_switch, color="grey", lw=0.8, ls="--")

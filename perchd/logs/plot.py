@@ -10,8 +10,8 @@ imported here, lazily, through perchd.core.extras (extra "plot").
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from perchd.core.extras import require
 from perchd.logs.figsave import save_figure
@@ -21,19 +21,27 @@ PRE_TRIGGER_S = 0.5
 """[s] of the approach shown before the trigger."""
 TAU_CLIP_S = 3.0
 """[s] |tau| beyond this is left off the plot (tau runs to infinity at low speed)."""
-ROWS = (("x", "x_plan", "distance X [m]"), ("xdot", "v_plan", "velocity Xdot [m/s]"),
-        ("tau", "tau_ref", "tau [s]"))
+ROWS = (
+    ("x", "x_plan", "distance X [m]"),
+    ("xdot", "v_plan", "velocity Xdot [m/s]"),
+    ("tau", "tau_ref", "tau [s]"),
+)
 
 
-def plot_flights(logs: Sequence[FlightLog], out: str | Path,
-                 titles: Sequence[str] | None = None, force: bool = False) -> Path:
+def plot_flights(
+    logs: Sequence[FlightLog],
+    out: str | Path,
+    titles: Sequence[str] | None = None,
+    force: bool = False,
+) -> Path:
     """The flights side by side, saved to `out` (an existing file only with `force`)."""
 
     mpl = require("matplotlib", "plot")
     mpl.use("Agg")
     plt = require("matplotlib.pyplot", "plot")
-    fig, axes = plt.subplots(3, len(logs), figsize=(5.0 * len(logs), 8.0), sharex="col",
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        3, len(logs), figsize=(5.0 * len(logs), 8.0), sharex="col", squeeze=False
+    )
     for col, log in enumerate(logs):
         title = titles[col] if titles else ""
         _column(axes[:, col], log, title)
@@ -68,14 +76,22 @@ def _column(axes, log: FlightLog, title: str) -> None:
         ax.plot(t, p, color="k", lw=1.0, ls="--", label="reference (plan)")
         for kind, style in (("stage2", ":"), ("contact", "-.")):
             if kind in events:
-                ax.axvline(events[kind] - t0, color="tab:blue", ls=style, lw=0.8,
-                           label="stage switch" if kind == "stage2" else "contact")
+                ax.axvline(
+                    events[kind] - t0,
+                    color="tab:blue",
+                    ls=style,
+                    lw=0.8,
+                    label="stage switch" if kind == "stage2" else "contact",
+                )
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     plan = log.header.get("plan") or {}
     outcome = (log.end or {}).get("outcome", "INCOMPLETE")
-    axes[0].set_title(f"{title}\n{plan.get('strategy', '?').upper()} plan "
-                      f"{plan.get('duration', float('nan')):.2f} s: {outcome}", fontsize=10)
+    axes[0].set_title(
+        f"{title}\n{plan.get('strategy', '?').upper()} plan "
+        f"{plan.get('duration', float('nan')):.2f} s: {outcome}",
+        fontsize=10,
+    )
     axes[0].legend(fontsize=8, loc="lower right")
     axes[-1].set_xlabel("time since trigger [s]")
 

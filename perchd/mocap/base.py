@@ -7,12 +7,15 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import Registry
 
-SOURCES: Registry[PoseSource] = Registry("mocap", {
-    "sim": "perchd.sim.world:open_sim_mocap",
-    "natnet": "perchd.mocap.natnet.uris:open_natnet",
-    "zmq": "perchd.mocap.zmq:open_zmq",
-    "motioncapture": "perchd.mocap.motioncapture:open_motioncapture",
-})
+SOURCES: Registry[PoseSource] = Registry(
+    "mocap",
+    {
+        "sim": "perchd.sim.world:open_sim_mocap",
+        "natnet": "perchd.mocap.natnet.uris:open_natnet",
+        "zmq": "perchd.mocap.zmq:open_zmq",
+        "motioncapture": "perchd.mocap.motioncapture:open_motioncapture",
+    },
+)
 
 
 def open_source(uri: str, runtime: Runtime) -> PoseSource:

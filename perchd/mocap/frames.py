@@ -19,7 +19,7 @@ class UpAxis(enum.Enum):
     Z = "z"
 
     @classmethod
-    def parse(cls, text: str, where: str) -> "UpAxis":
+    def parse(cls, text: str, where: str) -> UpAxis:
         try:
             return cls(text.lower())
         except ValueError:

@@ -34,8 +34,9 @@ class Backend:
 BACKENDS = (
     Backend("mock", "Mock", ("rigid_bodies", "pointcloud", "frequency")),
     Backend("optitrack", "Optitrack", ("hostname", "interface_ip", "port_command"), up="y"),
-    Backend("optitrack_closed_source", "OptitrackClosedSource", ("hostname", "port_command"),
-            up="y"),
+    Backend(
+        "optitrack_closed_source", "OptitrackClosedSource", ("hostname", "port_command"), up="y"
+    ),
     Backend("vicon", "Vicon", ("hostname", "enable_objects", "enable_pointclout")),
     Backend("qualisys", "Qualisys", ("hostname", "port", "enable_objects", "enable_pointcloud")),
     Backend("vrpn", "Vrpn", ("hostname",)),
@@ -44,8 +45,9 @@ BACKENDS = (
     Backend("fzmotion", "FZMotion", ("local_IP", "local_port", "hostname", "remote_port")),
 )
 
-INTEGER_OPTIONS = frozenset({"frequency", "port_command", "port", "updateFrequency",
-                             "local_port", "remote_port"})
+INTEGER_OPTIONS = frozenset(
+    {"frequency", "port_command", "port", "updateFrequency", "local_port", "remote_port"}
+)
 """Options the library parses with std::stoi: checked here, where a bad one is one line."""
 
 

@@ -34,8 +34,12 @@ def frame_line(bodies: dict[str, Any], body: str, seq: int, t: float) -> str:
     if rb is None:
         return json.dumps({"seq": seq, "t": t, "seen": sorted(bodies)}) + "\n"
     r = rb.rotation
-    return json.dumps({"seq": seq, "t": t, "p": [float(v) for v in rb.position],
-                       "q": [r.x, r.y, r.z, r.w]}) + "\n"
+    return (
+        json.dumps(
+            {"seq": seq, "t": t, "p": [float(v) for v in rb.position], "q": [r.x, r.y, r.z, r.w]}
+        )
+        + "\n"
+    )
 
 
 def parse_line(line: str) -> dict[str, Any]:
@@ -53,8 +57,12 @@ def sample(msg: dict[str, Any]) -> tuple[Vec3, Quat] | None:
     p, q = msg["p"], msg["q"]
     if len(p) != 3 or len(q) != 4:
         raise ValueError(f"p and q of 3 and 4 numbers expected: {p!r}, {q!r}")
-    return (float(p[0]), float(p[1]), float(p[2])), \
-        (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+    return (float(p[0]), float(p[1]), float(p[2])), (
+        float(q[0]),
+        float(q[1]),
+        float(q[2]),
+        float(q[3]),
+    )
 
 
 def serve(out: TextIO, kind: str, body: str, options: dict[str, str]) -> int:

@@ -24,6 +24,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
+from perchd.core import childproc
 from perchd.core.clock import Clock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.extras import require
@@ -31,7 +32,6 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
 from perchd.core.uri import Uri
 from perchd.core.uriparams import float_param
-from perchd.core import childproc
 from perchd.mocap import mcbackends, mcworker
 from perchd.mocap.frames import UpAxis, to_world
 from perchd.mocap.stream import Drop, PoseLimits, PoseStream, RateLimitedWarning, ThreadedSource
@@ -65,7 +65,7 @@ class MotionCaptureConfig:
         return f"motioncapture {self.kind}" + (f" {host}" if host else "")
 
 
-def open_motioncapture(uri: Uri, runtime: Runtime) -> "MotionCaptureSource":
+def open_motioncapture(uri: Uri, runtime: Runtime) -> MotionCaptureSource:
     """Registry factory for `motioncapture://` (not started yet)."""
     return MotionCaptureSource(config_from_uri(uri), runtime.clock)
 
@@ -79,18 +79,23 @@ def config_from_uri(uri: Uri) -> MotionCaptureConfig:
     if not body:
         raise UriError(f"{uri.raw}: body=NAME (the rigid body's name) is required")
     return MotionCaptureConfig(
-        backend.kind, body, tuple(sorted(options.items())),
+        backend.kind,
+        body,
+        tuple(sorted(options.items())),
         UpAxis.parse(uri.param("up", backend.up) or backend.up, uri.raw),
         float_param(uri, "timeout", 5.0, 0.05, 60.0, " s"),
-        PoseLimits(max_age_s=float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")))
+        PoseLimits(max_age_s=float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")),
+    )
 
 
 def _backend(uri: Uri) -> mcbackends.Backend:
     built = mcbackends.built_in()
     backend = mcbackends.backend(uri.host)
     if backend is None or backend.kind not in built:
-        raise UriError(f"{uri.raw}: the installed libmotioncapture has no backend "
-                       f"{uri.host!r}; it has: {', '.join(built)}")
+        raise UriError(
+            f"{uri.raw}: the installed libmotioncapture has no backend "
+            f"{uri.host!r}; it has: {', '.join(built)}"
+        )
     return backend
 
 
@@ -98,8 +103,10 @@ def _check_options(uri: Uri, backend: mcbackends.Backend, options: dict[str, str
     unknown = sorted(set(options) - set(backend.options))
     if unknown:
         known = ", ".join((*OWN_PARAMS, *backend.options))
-        raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; "
-                       f"motioncapture://{backend.kind} takes {known}")
+        raise UriError(
+            f"{uri.raw}: unknown parameter {unknown[0]!r}; "
+            f"motioncapture://{backend.kind} takes {known}"
+        )
     for key in sorted(set(options) & mcbackends.INTEGER_OPTIONS):
         if not options[key].isdigit():
             raise UriError(f"{uri.raw}: {key}={options[key]!r} is not a whole number")
@@ -113,8 +120,7 @@ class MotionCaptureSource(ThreadedSource):
         self.config = config
         self.body = config.body
         self._clock = clock
-        self._stream = PoseStream(config.body, config.limits,
-                                  RateLimitedWarning(log, config.name))
+        self._stream = PoseStream(config.body, config.limits, RateLimitedWarning(log, config.name))
         self._answered = threading.Event()
         self._failure = ""
         self._proc = None
@@ -124,18 +130,22 @@ class MotionCaptureSource(ThreadedSource):
         read, write = os.pipe()
         options = json.dumps(dict(self.config.options))
         try:
-            self._proc = childproc.start("perchd.mocap.mcworker",
-                                         [str(write), self.config.kind, self.body, options],
-                                         (write,))
+            self._proc = childproc.start(
+                "perchd.mocap.mcworker",
+                [str(write), self.config.kind, self.body, options],
+                (write,),
+            )
         finally:
             os.close(write)
         self._pipe = os.fdopen(read, "r")
         self._start_thread("motioncapture-rx")
         if not self._answered.wait(self.config.connect_timeout_s):
             self.close()
-            raise LinkError(f"{self.config.name}: no answer within "
-                            f"{self.config.connect_timeout_s:g} s (is the server up, "
-                            "streaming, and set as docs/mocap.md says?)")
+            raise LinkError(
+                f"{self.config.name}: no answer within "
+                f"{self.config.connect_timeout_s:g} s (is the server up, "
+                "streaming, and set as docs/mocap.md says?)"
+            )
         if self._failure:
             self.close()
             raise LinkError(f"{self.config.name}: {self._failure}")
@@ -160,8 +170,7 @@ class MotionCaptureSource(ThreadedSource):
             self._failure = f"the libmotioncapture process ended (exit {self._proc.wait()})"
             self._answered.set()
         elif not self._stop.is_set():
-            log.warning("%s: the libmotioncapture process ended; no more poses",
-                        self.config.name)
+            log.warning("%s: the libmotioncapture process ended; no more poses", self.config.name)
 
     def handle_line(self, line: str, arrival: float) -> None:
         """Take one worker line that arrived at agent time `arrival`; never raises."""
@@ -179,11 +188,13 @@ class MotionCaptureSource(ThreadedSource):
         self._stream.packet()
         got = mcworker.sample(msg)
         if got is None:
-            self._stream.drop(Drop.NO_BODY, f"frame {msg['seq']} has no rigid body "
-                                            f"{self.body!r} (it has: "
-                                            f"{', '.join(msg.get('seen', [])) or 'none'})")
+            self._stream.drop(
+                Drop.NO_BODY,
+                f"frame {msg['seq']} has no rigid body "
+                f"{self.body!r} (it has: "
+                f"{', '.join(msg.get('seen', [])) or 'none'})",
+            )
             return
         latency = max(0.0, time.monotonic() - float(msg["t"]))
         p, q = to_world(*got, self.config.up)
-        self._stream.offer(Pose(self.body, int(msg["seq"]), arrival - latency, p, q, True,
-                                latency))
+        self._stream.offer(Pose(self.body, int(msg["seq"]), arrival - latency, p, q, True, latency))

@@ -1,15 +1,15 @@
 """Pose outputs: where a simulator (`perchd sim --pose-out URI`) or a bridge sends poses.
 
-    natnet://HOST[:PORT][?version=4.1][&multicast=1][&group=239.255.42.99][&data_port=1511]
-        [&rate=120][&up=y]
-        a NatNet server emulator on HOST's command PORT (1510; 0 = any free port); its
-        options, with unit and default, are NATNET_OPTIONS (`perchd sim --help` prints them)
-    zmq://HOST:PORT[?public=1]
-        a ZMQ publisher bound there (docs/contracts.md §3 topic `pose`); loopback unless public=1
+natnet://HOST[:PORT][?version=4.1][&multicast=1][&group=239.255.42.99][&data_port=1511]
+    [&rate=120][&up=y]
+    a NatNet server emulator on HOST's command PORT (1510; 0 = any free port); its
+    options, with unit and default, are NATNET_OPTIONS (`perchd sim --help` prints them)
+zmq://HOST:PORT[?public=1]
+    a ZMQ publisher bound there (docs/contracts.md §3 topic `pose`); loopback unless public=1
 
-    out = open_pose_output("natnet://127.0.0.1:0", ["cf1"], clock)
-    out.publish(pose); out.uri("cf1")  # the URI `perchd fly --mocap` opens to read it back
-    out.close()
+out = open_pose_output("natnet://127.0.0.1:0", ["cf1"], clock)
+out.publish(pose); out.uri("cf1")  # the URI `perchd fly --mocap` opens to read it back
+out.close()
 """
 
 from __future__ import annotations
@@ -31,11 +31,19 @@ from perchd.mocap.zmq import ZmqPosePublisher
 # checks keys against and `perchd sim --help` and docs/contracts.md describe
 NATNET_OPTIONS = (
     ("version", "", "4.1", "NatNet version spoken, 2.0..4.1"),
-    ("multicast", "", "0", "1: frames by multicast to group:data_port; 0: unicast to each "
-                          "client's command socket"),
+    (
+        "multicast",
+        "",
+        "0",
+        "1: frames by multicast to group:data_port; 0: unicast to each client's command socket",
+    ),
     ("group", "", DEFAULT_MULTICAST, "multicast group announced and sent to"),
-    ("data_port", "", "1511; a free one when PORT is 0",
-     "data port announced (clients bind it, the emulator does not), 0..65535"),
+    (
+        "data_port",
+        "",
+        "1511; a free one when PORT is 0",
+        "data port announced (clients bind it, the emulator does not), 0..65535",
+    ),
     ("rate", "Hz", "none: a frame per pose", "frame rate, 1..1000"),
     ("up", "", "y", "up axis streamed, y (Motive's default) or z"),
 )
@@ -43,8 +51,10 @@ NATNET_OPTIONS = (
 
 def natnet_options_help() -> str:
     """The natnet:// output options, one per line: name [unit] (default) meaning."""
-    return "\n".join(f"{name}{f' [{unit}]' if unit else ''} ({default}) {meaning}"
-                     for name, unit, default, meaning in NATNET_OPTIONS)
+    return "\n".join(
+        f"{name}{f' [{unit}]' if unit else ''} ({default}) {meaning}"
+        for name, unit, default, meaning in NATNET_OPTIONS
+    )
 
 
 class PoseOutput(Protocol):
@@ -54,8 +64,7 @@ class PoseOutput(Protocol):
     def uri(self, body: str) -> str:
         """The mocap URI that reads `body` back from this output."""
 
-    def close(self) -> None:
-        ...
+    def close(self) -> None: ...
 
 
 def open_pose_output(text: str, bodies: list[str], clock: Clock) -> PoseOutput:
@@ -65,8 +74,9 @@ def open_pose_output(text: str, bodies: list[str], clock: Clock) -> PoseOutput:
         if not uri.host or uri.port is None or set(uri.query) - {"public"}:
             raise UriError(f"{text}: a zmq pose output is zmq://HOST:PORT[?public=1]")
         try:
-            return ZmqPosePublisher(f"tcp://{uri.host}:{uri.port}",
-                                    public=bool_param(uri, "public"))
+            return ZmqPosePublisher(
+                f"tcp://{uri.host}:{uri.port}", public=bool_param(uri, "public")
+            )
         except LinkError as err:
             raise port_error(uri.raw, err) from None
     if uri.scheme == "natnet":
@@ -86,11 +96,18 @@ def _natnet_output(uri, bodies: list[str], clock: Clock):
     group = uri.param("group", DEFAULT_MULTICAST) or DEFAULT_MULTICAST
     check_address(group, "group", uri.raw, multicast=True)
     try:
-        server = NatNetServer(bodies, version, host=uri.host,
-                              command_port=1510 if uri.port is None else uri.port,
-                              data_port=port_param(uri, "data_port", lowest=0),
-                              multicast=bool_param(uri, "multicast"), group=group,
-                              rate_hz=rate, up=uri.param("up", "y") or "y", clock=clock)
+        server = NatNetServer(
+            bodies,
+            version,
+            host=uri.host,
+            command_port=1510 if uri.port is None else uri.port,
+            data_port=port_param(uri, "data_port", lowest=0),
+            multicast=bool_param(uri, "multicast"),
+            group=group,
+            rate_hz=rate,
+            up=uri.param("up", "y") or "y",
+            clock=clock,
+        )
     except OSError as err:
         raise port_error(uri.raw, err) from None
     except ValueError as err:

@@ -25,8 +25,9 @@ from perchd.mocap.outputs import PoseOutput
 class RelayedSource:
     """PoseSource: upstream -> output (sockets) -> the source that output's URI names."""
 
-    def __init__(self, upstream: PoseSource, output: PoseOutput, runtime: Runtime,
-                 timeout_s: float = 1.0) -> None:
+    def __init__(
+        self, upstream: PoseSource, output: PoseOutput, runtime: Runtime, timeout_s: float = 1.0
+    ) -> None:
         self.upstream, self.output = upstream, output
         self.body = upstream.body
         self.downstream: Any = open_source(output.uri(upstream.body), runtime)
@@ -62,4 +63,4 @@ class RelayedSource:
         before = self.downstream.latest()
         self.output.publish(pose)
         self._forwarded = pose.seq
-        self.downstream.wait(before.seq if before else -(2 ** 63), self.timeout_s)
+        self.downstream.wait(before.seq if before else -(2**63), self.timeout_s)

@@ -81,8 +81,9 @@ def check_pose(pose: Pose, limits: PoseLimits) -> Pose:
     if not pose.valid:  # carries no position: the estimator ignores it, but keep it printable
         if all(math.isfinite(v) for v in (*pose.p, *pose.q)):
             return pose
-        return Pose(pose.body, pose.seq, pose.t, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), False,
-                    pose.latency)
+        return Pose(
+            pose.body, pose.seq, pose.t, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), False, pose.latency
+        )
     if not all(math.isfinite(v) for v in (*pose.p, *pose.q, pose.t)):
         raise Rejected(Drop.BAD_VALUE, f"non-finite value in p={pose.p} q={pose.q} t={pose.t}")
     if max(abs(v) for v in pose.p) > limits.max_abs_m:
@@ -109,7 +110,9 @@ class RateLimitedWarning:
         if now - self._last < self._interval:
             self._suppressed += 1
             return
-        extra = f" ({self._suppressed} more dropped since the last warning)" if self._suppressed else ""
+        extra = (
+            f" ({self._suppressed} more dropped since the last warning)" if self._suppressed else ""
+        )
         self._log.warning("%s: dropped a packet, %s: %s%s", self._what, reason.value, detail, extra)
         self._last, self._suppressed = now, 0
 

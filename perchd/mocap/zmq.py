@@ -51,14 +51,15 @@ CLOCK_SKEW_S = 0.005  # [s] a local-clock t this far in the future is rounding, 
 _PARAMS = ("body", "bind", "clock", "max_age", "public")
 
 
-def open_zmq(uri: Uri, runtime: Runtime) -> "ZmqPoseSource":
+def open_zmq(uri: Uri, runtime: Runtime) -> ZmqPoseSource:
     """Registry factory for `zmq://` (not started yet)."""
     unknown = sorted(set(uri.query) - set(_PARAMS))
     if unknown:
         raise UriError(f"{uri.raw}: unknown parameter {unknown[0]!r}; known: {', '.join(_PARAMS)}")
     if not uri.host or uri.port is None:
-        raise UriError(f"{uri.raw}: a zmq pose source needs host and port, "
-                       "e.g. zmq://127.0.0.1:5555?body=cf1")
+        raise UriError(
+            f"{uri.raw}: a zmq pose source needs host and port, e.g. zmq://127.0.0.1:5555?body=cf1"
+        )
     body = uri.param("body") or ""
     if not body:
         raise UriError(f"{uri.raw}: body=NAME is required")
@@ -68,17 +69,32 @@ def open_zmq(uri: Uri, runtime: Runtime) -> "ZmqPoseSource":
     max_age = float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")
     if bool_param(uri, "bind"):
         check_bind(uri.host, bool_param(uri, "public"), uri.raw)
-    return ZmqPoseSource(f"tcp://{uri.host}:{uri.port}", body, runtime.clock,
-                         bind=bool_param(uri, "bind"), local_clock=clock == "local",
-                         limits=PoseLimits(max_age_s=max_age), name=uri.raw)
+    return ZmqPoseSource(
+        f"tcp://{uri.host}:{uri.port}",
+        body,
+        runtime.clock,
+        bind=bool_param(uri, "bind"),
+        local_clock=clock == "local",
+        limits=PoseLimits(max_age_s=max_age),
+        name=uri.raw,
+    )
 
 
 # ---------------------------------------------------------------- message codec
 
+
 def pose_message(pose: Pose) -> bytes:
     """The docs/contracts.md §3 JSON body of a pose."""
-    return json.dumps({"body": pose.body, "seq": pose.seq, "t": pose.t, "p": list(pose.p),
-                       "q": list(pose.q), "valid": pose.valid}).encode()
+    return json.dumps(
+        {
+            "body": pose.body,
+            "seq": pose.seq,
+            "t": pose.t,
+            "p": list(pose.p),
+            "q": list(pose.q),
+            "valid": pose.valid,
+        }
+    ).encode()
 
 
 class BadMessage(ValueError):
@@ -118,12 +134,21 @@ def _vector(msg: dict, key: str, n: int) -> tuple[float, ...]:
 
 # ---------------------------------------------------------------- source
 
+
 class ZmqPoseSource(ThreadedSource):
     """PoseSource over a ZMQ SUB socket; a thread receives, validates and publishes."""
 
-    def __init__(self, endpoint: str, body: str, clock: Clock, *, bind: bool = False,
-                 local_clock: bool = True, limits: PoseLimits | None = None,
-                 name: str = "") -> None:
+    def __init__(
+        self,
+        endpoint: str,
+        body: str,
+        clock: Clock,
+        *,
+        bind: bool = False,
+        local_clock: bool = True,
+        limits: PoseLimits | None = None,
+        name: str = "",
+    ) -> None:
         super().__init__()
         self.body = body
         self.endpoint = endpoint
@@ -131,8 +156,7 @@ class ZmqPoseSource(ThreadedSource):
         self._bind = bind
         self._local_clock = local_clock
         self._name = name or endpoint
-        self._stream = PoseStream(body, limits or PoseLimits(),
-                                  RateLimitedWarning(log, self._name))
+        self._stream = PoseStream(body, limits or PoseLimits(), RateLimitedWarning(log, self._name))
         self._sock: Any = None
 
     def start(self) -> None:
@@ -203,6 +227,7 @@ class ZmqPoseSource(ThreadedSource):
 
 # ---------------------------------------------------------------- publisher
 
+
 class ZmqPosePublisher:
     """Publishes docs/contracts.md §3 poses; binds by default (the source connects).
 
@@ -211,12 +236,14 @@ class ZmqPosePublisher:
     A bind on anything but loopback needs public=True.
     """
 
-    def __init__(self, endpoint: str = "tcp://127.0.0.1:0", *, bind: bool = True,
-                 public: bool = False) -> None:
+    def __init__(
+        self, endpoint: str = "tcp://127.0.0.1:0", *, bind: bool = True, public: bool = False
+    ) -> None:
         address = endpoint.replace("zmq://", "tcp://", 1).split("?", 1)[0]
         if bind:
-            check_bind(address.split("://", 1)[-1].rsplit(":", 1)[0], public,
-                       f"pose publisher {address}")
+            check_bind(
+                address.split("://", 1)[-1].rsplit(":", 1)[0], public, f"pose publisher {address}"
+            )
         if address.endswith(":0"):
             address = address[:-2] + ":*"
         self._sock = zmq.Context.instance().socket(zmq.XPUB)
@@ -261,7 +288,7 @@ class ZmqPosePublisher:
     def close(self) -> None:
         self._sock.close()
 
-    def __enter__(self) -> "ZmqPosePublisher":
+    def __enter__(self) -> ZmqPosePublisher:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import socket
 import stat
-from typing import MutableMapping
+from collections.abc import MutableMapping
 
 from perchd.core.errors import ConfigError
 
@@ -44,8 +44,10 @@ def _pick(count: int, names: list[str]) -> int:
         return fds[0]
     named = [fd for fd, name in zip(fds, names) if name == FD_NAME]
     if len(named) != 1:
-        raise ConfigError(f"socket activation: {count} fds passed (names {':'.join(names) or '-'}) "
-                          f"and not exactly one named {FD_NAME!r}; set FileDescriptorName={FD_NAME}")
+        raise ConfigError(
+            f"socket activation: {count} fds passed (names {':'.join(names) or '-'}) "
+            f"and not exactly one named {FD_NAME!r}; set FileDescriptorName={FD_NAME}"
+        )
     return named[0]
 
 
@@ -56,15 +58,19 @@ def _checked(fd: int) -> socket.socket:
     except OSError as err:
         raise ConfigError(f"socket activation: fd {fd}: {err.strerror}") from None
     if not is_sock:
-        raise ConfigError(f"socket activation: fd {fd} is not a socket; the .socket unit must "
-                          "have ListenStream=/run/perchd/control.sock")
+        raise ConfigError(
+            f"socket activation: fd {fd} is not a socket; the .socket unit must "
+            "have ListenStream=/run/perchd/control.sock"
+        )
     sock = socket.socket(fileno=fd)
     listening = sock.getsockopt(socket.SOL_SOCKET, socket.SO_ACCEPTCONN)
     if sock.family != socket.AF_UNIX or sock.type != socket.SOCK_STREAM or not listening:
         kind = f"{sock.family.name} {sock.type.name}{'' if listening else ', not listening'}"
         sock.detach()  # systemd's fd, left as it came
-        raise ConfigError(f"socket activation: fd {fd} is {kind}, not a listening AF_UNIX "
-                          "stream socket; the .socket unit must have ListenStream=/run/perchd/"
-                          "control.sock")
+        raise ConfigError(
+            f"socket activation: fd {fd} is {kind}, not a listening AF_UNIX "
+            "stream socket; the .socket unit must have ListenStream=/run/perchd/"
+            "control.sock"
+        )
     sock.set_inheritable(False)
     return sock

@@ -69,12 +69,15 @@ class ServiceConfig:
         # the vehicle names each flight's log file: it must not lead out of log_dir
         safe_name(self.vehicle, "[service] vehicle", ConfigError)
 
-    def peer_policy(self, name: str = "perchd.toml") -> "PeerPolicy":
+    def peer_policy(self, name: str = "perchd.toml") -> PeerPolicy:
         """The control socket's PeerPolicy; ConfigError naming an unknown user or group."""
 
-
-        uids = _ids(self.allowed_users, lambda n: pwd.getpwnam(n).pw_uid, name, "allowed_users", "user")
-        gids = _ids(self.allowed_groups, lambda n: grp.getgrnam(n).gr_gid, name, "allowed_groups", "group")
+        uids = _ids(
+            self.allowed_users, lambda n: pwd.getpwnam(n).pw_uid, name, "allowed_users", "user"
+        )
+        gids = _ids(
+            self.allowed_groups, lambda n: grp.getgrnam(n).gr_gid, name, "allowed_groups", "group"
+        )
         return PeerPolicy.owner(uids, gids)
 
     def mocap_uri(self) -> str:
@@ -90,13 +93,17 @@ class Config:
     path: str = ""
 
 
-def _ids(values: tuple[int | str, ...], lookup: Any, name: str, key: str, kind: str) -> frozenset[int]:
+def _ids(
+    values: tuple[int | str, ...], lookup: Any, name: str, key: str, kind: str
+) -> frozenset[int]:
     out = set()
     for v in values:
         try:
             out.add(v if isinstance(v, int) else lookup(v))
         except KeyError:
-            raise ConfigError(f"{name}: [service] {key}: no {kind} named {v!r} on this host") from None
+            raise ConfigError(
+                f"{name}: [service] {key}: no {kind} named {v!r} on this host"
+            ) from None
     return frozenset(out)
 
 
@@ -126,20 +133,27 @@ def config_from_dict(doc: dict[str, Any], name: str = "perchd.toml", path: str =
     doc = dict(doc)
     version = doc.pop("version", None)
     if version != VERSION:
-        raise ConfigError(f"{name}: version: expected {VERSION}, got {_shown(version)}"
-                          + (" (missing)" if version is None else ""))
+        raise ConfigError(
+            f"{name}: version: expected {VERSION}, got {_shown(version)}"
+            + (" (missing)" if version is None else "")
+        )
     service = _build(ServiceConfig, doc.pop("service", {}), name, "service")
     service.peer_policy(name)  # unknown users and groups fail here, not when serving
     flight_doc = doc.pop(FLIGHT_TOP, {})
     if not isinstance(flight_doc, dict):
         raise ConfigError(f"{name}: [{FLIGHT_TOP}] must be a table, got {_shown(flight_doc)}"[:200])
     flight_doc = dict(flight_doc)
-    sections = {f.name for f in dataclasses.fields(FlightConfig)
-                if dataclasses.is_dataclass(_hints(FlightConfig)[f.name])}
+    sections = {
+        f.name
+        for f in dataclasses.fields(FlightConfig)
+        if dataclasses.is_dataclass(_hints(FlightConfig)[f.name])
+    }
     for key, value in doc.items():
         if key not in sections:
-            raise ConfigError(f"{name}: unknown table or key '{key}' (tables: service, "
-                              f"{FLIGHT_TOP}, {', '.join(sorted(sections))})")
+            raise ConfigError(
+                f"{name}: unknown table or key '{key}' (tables: service, "
+                f"{FLIGHT_TOP}, {', '.join(sorted(sections))})"
+            )
         if key in flight_doc:
             raise ConfigError(f"{name}: [{FLIGHT_TOP}] {key}: set it as a table [{key}]")
         flight_doc[key] = value
@@ -166,11 +180,14 @@ def _build(cls: type, table: Any, name: str, where: str, base: Any = None) -> An
         if key.endswith("_deg") and key[:-4] + "_rad" in fields:
             field = key[:-4] + "_rad"
             if field in table:  # neither silently wins
-                raise ConfigError(f"{name}: [{where}] {key} and {field}: give one of them, "
-                                  "not both")
+                raise ConfigError(
+                    f"{name}: [{where}] {key} and {field}: give one of them, not both"
+                )
         if field not in fields:
-            raise ConfigError(f"{name}: [{where}] {key}: unknown key (known: "
-                              f"{', '.join(sorted(_public_keys(fields)))})")
+            raise ConfigError(
+                f"{name}: [{where}] {key}: unknown key (known: "
+                f"{', '.join(sorted(_public_keys(fields)))})"
+            )
         sub = where if where != FLIGHT_TOP else ""
         dotted = f"{sub}.{key}".lstrip(".")
         if dataclasses.is_dataclass(hints[field]):
@@ -220,8 +237,7 @@ def _coerce(tp: Any, raw: Any, name: str, where: str, key: str) -> Any:
     if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
         return _coerce_ids(raw, bad)
     if origin is tuple:
-        if (not isinstance(raw, list) or len(raw) != len(args)
-                or not all(_number(v) for v in raw)):
+        if not isinstance(raw, list) or len(raw) != len(args) or not all(_number(v) for v in raw):
             raise bad(f"a list of {len(args)} numbers")
         return tuple(float(v) for v in raw)
     raise bad(f"a value of type {tp}")  # a FlightConfig field type this loader lacks
@@ -249,7 +265,7 @@ def _coerce_ids(raw: Any, bad: Any) -> tuple[int | str, ...]:
     if not isinstance(raw, list):
         raise bad(expected)
     for v in raw:
-        number = isinstance(v, int) and not isinstance(v, bool) and 0 <= v < 2 ** 32
+        number = isinstance(v, int) and not isinstance(v, bool) and 0 <= v < 2**32
         if not (number or (isinstance(v, str) and v.strip() == v and v and ":" not in v)):
             raise bad(expected)
     return tuple(raw)

@@ -43,14 +43,17 @@ def exchange(path: str | os.PathLike, req: dict[str, Any], timeout_s: float = TI
             _send(s, req)
             buf = _read_line(s)
         except OSError as err:
-            raise Unreachable(why_unreachable(path, err, timeout_s, connected=pid is not None),
-                              pid) from None
+            raise Unreachable(
+                why_unreachable(path, err, timeout_s, connected=pid is not None), pid
+            ) from None
     if not buf.endswith(b"\n"):
         raise Unreachable(f"perchd serve at {path} closed the connection without a reply", pid)
     return Answer(json.loads(buf), pid)
 
 
-def request(path: str | os.PathLike, req: dict[str, Any], timeout_s: float = TIMEOUT_S) -> dict[str, Any]:
+def request(
+    path: str | os.PathLike, req: dict[str, Any], timeout_s: float = TIMEOUT_S
+) -> dict[str, Any]:
     """The reply alone."""
     return exchange(path, req, timeout_s).reply
 
@@ -74,8 +77,9 @@ def _read_line(s: socket.socket) -> bytes:
     return buf.partition(b"\n")[0] + (b"\n" if b"\n" in buf else b"")
 
 
-def why_unreachable(path: str | os.PathLike, err: OSError, timeout_s: float,
-                    connected: bool) -> str:
+def why_unreachable(
+    path: str | os.PathLike, err: OSError, timeout_s: float, connected: bool
+) -> str:
     """One line naming the cause of a failed exchange."""
     if isinstance(err, socket.timeout):
         step = "for its reply" if connected else "to connect (its queue is full: busy or stuck)"
@@ -84,11 +88,15 @@ def why_unreachable(path: str | os.PathLike, err: OSError, timeout_s: float,
     if code == errno.ENOENT:
         return f"no control socket at {path}: is perchd serve running, and is --socket its path?"
     if code == errno.ECONNREFUSED:
-        return (f"nothing listens on {path}: a socket left by a perchd serve that stopped; "
-                "is perchd serve running?")
+        return (
+            f"nothing listens on {path}: a socket left by a perchd serve that stopped; "
+            "is perchd serve running?"
+        )
     if code in (errno.EACCES, errno.EPERM):
-        return (f"permission denied on {path} for uid {os.geteuid()}: the socket is for its "
-                "owner and group (join the group, or [service] allowed_users)")
+        return (
+            f"permission denied on {path} for uid {os.geteuid()}: the socket is for its "
+            "owner and group (join the group, or [service] allowed_users)"
+        )
     if code in (errno.EPIPE, errno.ECONNRESET):
         return f"perchd serve at {path} closed the connection before replying"
     return f"control socket {path}: {err.strerror or err}"

@@ -19,9 +19,10 @@ import pwd
 import socket
 import stat
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import ConfigError
@@ -66,7 +67,9 @@ class PeerPolicy:
     gids: frozenset[int] = frozenset()
 
     @classmethod
-    def owner(cls, uids: frozenset[int] = frozenset(), gids: frozenset[int] = frozenset()) -> "PeerPolicy":
+    def owner(
+        cls, uids: frozenset[int] = frozenset(), gids: frozenset[int] = frozenset()
+    ) -> PeerPolicy:
         """The service's own user and root, plus the configured users and groups."""
         return cls(frozenset({os.geteuid(), 0}) | uids, gids)
 
@@ -74,8 +77,10 @@ class PeerPolicy:
         """None if `peer` may connect, else the reason it may not."""
         if peer.uid in self.uids or (self.gids and not self.gids.isdisjoint(_groups_of(peer))):
             return None
-        return (f"uid {peer.uid} (gid {peer.gid}) may not use this control socket; allow it "
-                "with [service] allowed_users or allowed_groups")
+        return (
+            f"uid {peer.uid} (gid {peer.gid}) may not use this control socket; allow it "
+            "with [service] allowed_users or allowed_groups"
+        )
 
 
 def _groups_of(peer: Peer) -> set[int]:
@@ -108,11 +113,18 @@ class ControlServer:
     abort within RESERVED_WAIT_S (a full reserve drops its oldest: the newest connection is
     the one whose request is still to come)."""
 
-    def __init__(self, path: str | os.PathLike, dispatch: Dispatch, mode: int = 0o660,
-                 peers: PeerPolicy | None = None,
-                 on_refuse: Callable[[str], None] | None = None,
-                 listening: socket.socket | None = None, clock: Clock | None = None,
-                 max_clients: int = MAX_CLIENTS, idle_s: float = IDLE_TIMEOUT_S) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        dispatch: Dispatch,
+        mode: int = 0o660,
+        peers: PeerPolicy | None = None,
+        on_refuse: Callable[[str], None] | None = None,
+        listening: socket.socket | None = None,
+        clock: Clock | None = None,
+        max_clients: int = MAX_CLIENTS,
+        idle_s: float = IDLE_TIMEOUT_S,
+    ) -> None:
         self.dispatch = dispatch
         self.peers = peers or PeerPolicy.owner()
         self.on_refuse = on_refuse
@@ -213,8 +225,10 @@ class ControlServer:
             self._refuse(min(reserve, key=lambda fd: self.clients[fd].last_s), self._bound_text())
 
     def _bound_text(self) -> str:
-        return (f"{self.max_clients} clients connected already (the bound); over it only abort "
-                "is served: try again once one closes")
+        return (
+            f"{self.max_clients} clients connected already (the bound); over it only abort "
+            "is served: try again once one closes"
+        )
 
     def _refuse(self, fd: int, why: str) -> None:
         self._reply(self.clients[fd].conn, {"ok": False, "error": why})
@@ -237,8 +251,10 @@ def _check_length(path: Path) -> None:
     """bind() of a longer path fails with no errno text ("cannot listen: None"): say why."""
     size = len(os.fsencode(path))
     if size > UNIX_PATH_MAX:
-        raise ConfigError(f"--socket {path}: path too long ({size} bytes; an AF_UNIX socket "
-                          f"path has at most {UNIX_PATH_MAX}); choose a shorter one")
+        raise ConfigError(
+            f"--socket {path}: path too long ({size} bytes; an AF_UNIX socket "
+            f"path has at most {UNIX_PATH_MAX}); choose a shorter one"
+        )
 
 
 def _bind(path: Path, mode: int) -> socket.socket:

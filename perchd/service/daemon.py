@@ -82,8 +82,12 @@ class Links:
     a fresh simulated world per flight, paced in real time; real ones keep feeding the
     driver the mocap between flights (service/idle_feed.py)."""
 
-    def __init__(self, service: ServiceConfig, surface: SurfaceConfig | None = None,
-                 mass_kg: float | None = None) -> None:
+    def __init__(
+        self,
+        service: ServiceConfig,
+        surface: SurfaceConfig | None = None,
+        mass_kg: float | None = None,
+    ) -> None:
         self.surface = surface  # where a simulated world puts its wall
         self.mass_kg = mass_kg  # the flight config's, bound before the driver connects
         self.driver_uri, self.mocap_uri = service.driver, service.mocap_uri()
@@ -102,8 +106,9 @@ class Links:
             self.feed.resume()
 
     def _open(self) -> Session:
-        return open_links(self.driver_uri, self.mocap_uri, self.surface, MonotonicClock(),
-                          self.mass_kg)
+        return open_links(
+            self.driver_uri, self.mocap_uri, self.surface, MonotonicClock(), self.mass_kg
+        )
 
     @property
     def driver(self) -> Driver:
@@ -141,8 +146,16 @@ class Links:
 class FlightJob(threading.Thread):
     """One flight in its own thread; wakes the service loop through the pipe when done."""
 
-    def __init__(self, plan: Plan, plan_path: Path, links: Links, cfg: Config, log: Path,
-                 notifier: Notifier, wake_fd: int) -> None:
+    def __init__(
+        self,
+        plan: Plan,
+        plan_path: Path,
+        links: Links,
+        cfg: Config,
+        log: Path,
+        notifier: Notifier,
+        wake_fd: int,
+    ) -> None:
         super().__init__(name="perchd-flight", daemon=True)
 
         self.plan, self.plan_path, self.links, self.cfg = plan, plan_path, links, cfg
@@ -160,17 +173,33 @@ class FlightJob(threading.Thread):
         try:
             flight, visit = store.with_learned_guess(self.cfg.flight)
             self.links.pause_feed()
-            res = fly(self.plan, self.links.driver, self.links.source, self.links.runtime.clock,
-                      self.log, flight, self.abort, self.on_tick, world=self.links.session.world,
-                      header={"plan_file": str(self.plan_path), "vehicle": self.cfg.service.vehicle,
-                              "mocap": self.links.mocap_uri, "service": True,
-                              "uri_params": self.links.session.applied})
+            res = fly(
+                self.plan,
+                self.links.driver,
+                self.links.source,
+                self.links.runtime.clock,
+                self.log,
+                flight,
+                self.abort,
+                self.on_tick,
+                world=self.links.session.world,
+                header={
+                    "plan_file": str(self.plan_path),
+                    "vehicle": self.cfg.service.vehicle,
+                    "mocap": self.links.mocap_uri,
+                    "service": True,
+                    "uri_params": self.links.session.applied,
+                },
+            )
             self.result = res.to_json()
             say(store.remember_flight(flight, res, visit).describe())
         except BaseException as err:  # fly has already sent the failsafe and closed the log
             why = EndReason.LOST_LINK if isinstance(err, LinkError) else EndReason.SOFTWARE_ERROR
-            self.result = {"outcome": why.name, "log": str(self.log),
-                           "detail": f"{type(err).__name__}: {err}"}
+            self.result = {
+                "outcome": why.name,
+                "log": str(self.log),
+                "detail": f"{type(err).__name__}: {err}",
+            }
         finally:
             self.links.resume_feed()  # at once: a failsafe's LAND may be descending
             os.write(self.wake_fd, FLIGHT_DONE)
@@ -185,8 +214,9 @@ class FlightJob(threading.Thread):
 
 
 class Daemon:
-    def __init__(self, config: Config, notifier: Notifier, config_path: str | None,
-                 overrides: dict[str, str]) -> None:
+    def __init__(
+        self, config: Config, notifier: Notifier, config_path: str | None, overrides: dict[str, str]
+    ) -> None:
         self.config, self.notifier = config, notifier
         self.config_path, self.overrides = config_path, overrides
         self.job: FlightJob | None = None
@@ -204,8 +234,10 @@ class Daemon:
     def run(self) -> int:
         rfd, wfd = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
         self.wake_fd = wfd
-        previous = {s: signal.signal(s, lambda *_: None)
-                    for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGUSR1)}
+        previous = {
+            s: signal.signal(s, lambda *_: None)
+            for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGUSR1)
+        }
         old_wakeup = signal.set_wakeup_fd(wfd, warn_on_full_buffer=False)
         try:
             self._start()
@@ -226,9 +258,13 @@ class Daemon:
     def _start(self) -> None:
         svc = self.config.service
         check_dirs(svc)  # before READY=1: a service that cannot log a flight is not ready
-        self.server = ControlServer(svc.socket, self.dispatch, peers=svc.peer_policy(),
-                                    on_refuse=lambda why: say(f"control socket: refused {why}"),
-                                    listening=activated_socket())
+        self.server = ControlServer(
+            svc.socket,
+            self.dispatch,
+            peers=svc.peer_policy(),
+            on_refuse=lambda why: say(f"control socket: refused {why}"),
+            listening=activated_socket(),
+        )
         if self.server.activated and str(self.server.path) != svc.socket:
             say(f"control socket {self.server.path} from systemd (not {svc.socket})")
         self._realtime(svc.realtime)  # before the links start their threads: they inherit it
@@ -236,8 +272,10 @@ class Daemon:
         self.links = Links(svc, self.config.flight.surface, self.config.flight.vehicle.mass_kg)
         realtime.settle_heap()
         self.notifier.ready(f"{svc.vehicle}: idle")
-        say(f"ready: vehicle {svc.vehicle}, driver {svc.driver}, mocap {svc.mocap_uri()}, "
-            f"socket {self.server.path}" + (" (from systemd)" if self.server.activated else ""))
+        say(
+            f"ready: vehicle {svc.vehicle}, driver {svc.driver}, mocap {svc.mocap_uri()}, "
+            f"socket {self.server.path}" + (" (from systemd)" if self.server.activated else "")
+        )
 
     def _realtime(self, cfg: realtime.RealtimeConfig) -> None:
         try:
@@ -293,8 +331,9 @@ class Daemon:
         say(f"flight ended: {self.last.get('outcome')}; log {self.last.get('log')}")
         self.job = None
         realtime.settle_heap()  # the collections the flight went without
-        self.notifier.status(f"{self.config.service.vehicle}: idle, last flight "
-                             f"{self.last.get('outcome')}")
+        self.notifier.status(
+            f"{self.config.service.vehicle}: idle, last flight {self.last.get('outcome')}"
+        )
         if self.reload_pending:
             self.reload()
 
@@ -320,8 +359,10 @@ class Daemon:
             return  # one reload covers every SIGHUP before it
         self.reload_pending = True
         deferred = self.job is not None
-        self.notifier.reloading(f"{self.config.service.vehicle}: "
-                                + ("flying, reload after the flight" if deferred else "reloading"))
+        self.notifier.reloading(
+            f"{self.config.service.vehicle}: "
+            + ("flying, reload after the flight" if deferred else "reloading")
+        )
         if deferred:
             say("SIGHUP: reload deferred until the flight ends")
 
@@ -345,8 +386,10 @@ class Daemon:
             new = self._restart_only(new, "socket")
             new = self._restart_only(new, "realtime")
             moved = self.links.simulated and new.flight.surface != self.links.surface
-            if moved or (new.service.driver, new.service.mocap_uri()) != (self.links.driver_uri,
-                                                                          self.links.mocap_uri):
+            if moved or (new.service.driver, new.service.mocap_uri()) != (
+                self.links.driver_uri,
+                self.links.mocap_uri,
+            ):
                 self.links = self._replace_links(new)
         except PerchdError as err:
             say(f"SIGHUP: config not reloaded, keeping the old one: {err}")
@@ -380,8 +423,9 @@ class Daemon:
 
     # --- the control socket (docs/contracts.md §4) -----------------------------------------------------
     def dispatch(self, req: dict[str, Any]) -> dict[str, Any]:
-        handler = {"fly": self.cmd_fly, "abort": self.cmd_abort,
-                   "status": self.cmd_status}.get(req["cmd"])
+        handler = {"fly": self.cmd_fly, "abort": self.cmd_abort, "status": self.cmd_status}.get(
+            req["cmd"]
+        )
         if handler is None:
             return {"ok": False, "error": f"unknown cmd {req['cmd']!r} (fly, abort, status)"}
         return handler(req)
@@ -432,18 +476,30 @@ class Daemon:
 
     def cmd_status(self, req: dict[str, Any]) -> dict[str, Any]:
         svc, job = self.config.service, self.job
-        out: dict[str, Any] = {"ok": True, "vehicle": svc.vehicle, "state": "flying" if job else "idle",
-                               "driver": self.links.driver_uri, "mocap": self.links.mocap_uri,
-                               "link_ok": self.links.healthy(), "flights": self.flights,
-                               "config": self.config_path, "last": self.last,
-                               "scheduling": self.realtime_refused
-                               or svc.realtime.describe()}
+        out: dict[str, Any] = {
+            "ok": True,
+            "vehicle": svc.vehicle,
+            "state": "flying" if job else "idle",
+            "driver": self.links.driver_uri,
+            "mocap": self.links.mocap_uri,
+            "link_ok": self.links.healthy(),
+            "flights": self.flights,
+            "config": self.config_path,
+            "last": self.last,
+            "scheduling": self.realtime_refused or svc.realtime.describe(),
+        }
         if job is not None:
             st = job.tick
-            out.update(log=str(job.log), plan=str(job.plan_path),
-                       phase=st.phase.value if st else "starting",
-                       t=st and st.t, x=st and st.x, xdot=st and st.xdot,
-                       tau=st and st.tau, tau_ref=st and st.tau_ref)
+            out.update(
+                log=str(job.log),
+                plan=str(job.plan_path),
+                phase=st.phase.value if st else "starting",
+                t=st and st.t,
+                x=st and st.x,
+                xdot=st and st.xdot,
+                tau=st and st.tau,
+                tau_ref=st and st.tau_ref,
+            )
         return out
 
     def _log_path(self, plan: Plan) -> Path:
@@ -462,8 +518,9 @@ def stop_exit_code(signum: int | None) -> int:
     return 0 if signum in (None, signal.SIGTERM) else exit_code(signum)
 
 
-def apply_overrides(config: Config, overrides: dict[str, str],
-                    environ: dict[str, str] | None = None) -> Config:
+def apply_overrides(
+    config: Config, overrides: dict[str, str], environ: dict[str, str] | None = None
+) -> Config:
     """Command-line --socket/--driver/--mocap/--log-dir/--plan-dir win over the file; a
     log_dir/plan_dir left at its default follows the unit's LogsDirectory=/StateDirectory=
     (systemd's $LOGS_DIRECTORY, $STATE_DIRECTORY), so perchd@NAME logs to /var/log/perchd/NAME,
@@ -482,17 +539,23 @@ def apply_overrides(config: Config, overrides: dict[str, str],
 def check_dirs(svc: ServiceConfig) -> None:
     """plan_dir and log_dir exist (made if missing: they are configured) and are usable:
     plan_dir readable, log_dir writable; else one ConfigError naming the key."""
-    for key, need, what in (("plan_dir", os.R_OK | os.X_OK, "readable"),
-                            ("log_dir", os.W_OK | os.X_OK, "writable")):
+    for key, need, what in (
+        ("plan_dir", os.R_OK | os.X_OK, "readable"),
+        ("log_dir", os.W_OK | os.X_OK, "writable"),
+    ):
         path = Path(getattr(svc, key))
         try:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as err:
-            raise ConfigError(f"[service] {key} = {str(path)!r}: cannot create it "
-                              f"({err.strerror}); create it or set {key}") from None
+            raise ConfigError(
+                f"[service] {key} = {str(path)!r}: cannot create it "
+                f"({err.strerror}); create it or set {key}"
+            ) from None
         if not os.access(path, need):
-            raise ConfigError(f"[service] {key} = {str(path)!r}: not {what} by uid "
-                              f"{os.geteuid()}; fix its permissions or set {key}")
+            raise ConfigError(
+                f"[service] {key} = {str(path)!r}: not {what} by uid "
+                f"{os.geteuid()}; fix its permissions or set {key}"
+            )
 
 
 def serve(config_path: str | None, overrides: dict[str, str]) -> int:

@@ -18,9 +18,10 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from perchd.core.errors import LinkError
 from perchd.core.extras import require
@@ -54,8 +55,9 @@ def failsafe(uri: str, deadline: float) -> Outcome:
 
 
 def _in_process(uri: str, deadline: float) -> Outcome:
-    return Outcome(False, f"{uri}: the simulated vehicle lived in the service's process; "
-                          "nothing to do")
+    return Outcome(
+        False, f"{uri}: the simulated vehicle lived in the service's process; nothing to do"
+    )
 
 
 def _zmq(uri: str, deadline: float) -> Outcome:
@@ -72,8 +74,10 @@ def _zmq(uri: str, deadline: float) -> Outcome:
 # --- MAVLink --------------------------------------------------------------------------------
 def _mavlink(uri: str, deadline: float) -> Outcome:
     from perchd.drivers import mavlink as mav
+
     driver: Any = open_driver(uri, Runtime.real())  # the URI checked; never connected
     from pymavlink import mavutil
+
     conn = mavutil.mavlink_connection(driver.device, source_system=255, source_component=191)
     try:
         if driver.sport is not None:
@@ -115,8 +119,9 @@ class _Vehicle:
         return d.flight.custom, d.land.custom, (d.land.main, d.land.sub)
 
     def command_land(self, main_sub: tuple[int, int]) -> None:
-        self.conn.mav.command_long_send(self.system, 1, self.mav.CMD_DO_SET_MODE, 0, 1,
-                                        *main_sub, 0, 0, 0, 0)
+        self.conn.mav.command_long_send(
+            self.system, 1, self.mav.CMD_DO_SET_MODE, 0, 1, *main_sub, 0, 0, 0, 0
+        )
 
 
 def _land(uri: str, v: _Vehicle, deadline: float) -> Outcome:
@@ -130,8 +135,11 @@ def _land(uri: str, v: _Vehicle, deadline: float) -> Outcome:
     if v.mode == land:
         return Outcome(False, f"{uri}: the vehicle is landing already; nothing to do")
     if v.mode != offboard:
-        return Outcome(False, f"{uri}: armed in custom mode {v.mode}, not perchd's offboard "
-                              "mode: left to the pilot and the autopilot's own failsafe")
+        return Outcome(
+            False,
+            f"{uri}: armed in custom mode {v.mode}, not perchd's offboard "
+            "mode: left to the pilot and the autopilot's own failsafe",
+        )
     sent = 0.0
     while v.mode != land:
         now = time.monotonic()
@@ -142,8 +150,11 @@ def _land(uri: str, v: _Vehicle, deadline: float) -> Outcome:
             sent = now
             v.command_land(main_sub)
         v.poll()
-    return Outcome(True, f"{uri}: LAND commanded from perchd's offboard mode; the vehicle "
-                         f"took it (custom mode {land})")
+    return Outcome(
+        True,
+        f"{uri}: LAND commanded from perchd's offboard mode; the vehicle "
+        f"took it (custom mode {land})",
+    )
 
 
 # --- Crazyflie ------------------------------------------------------------------------------
@@ -168,9 +179,12 @@ def _crazyflie(uri: str, deadline: float) -> Outcome:
     link_uri = without_query(parse_uri(uri))
     pids = keeper_pids(link_uri)
     if pids:
-        return Outcome(False, f"{uri}: the link keeper (pid {', '.join(map(str, pids))}) "
-                              "still holds the link and flies its own descent and stop; "
-                              "nothing to do")
+        return Outcome(
+            False,
+            f"{uri}: the link keeper (pid {', '.join(map(str, pids))}) "
+            "still holds the link and flies its own descent and stop; "
+            "nothing to do",
+        )
     require("cflib", "crazyflie")
     sent = _send_stops(link_uri, deadline)
     return Outcome(True, f"{uri}: no link keeper left; stop setpoint sent {sent} times")
@@ -181,6 +195,7 @@ def _send_stops(link_uri: str, deadline: float) -> int:
     from cflib.crazyflie.commander import Commander
 
     from perchd.drivers.cflink import _LinkPort
+
     errors: list[str] = []
     cflib.crtp.init_drivers()
     try:
@@ -198,8 +213,10 @@ def _send_stops(link_uri: str, deadline: float) -> int:
     finally:
         _close_soon(link.close)
     if errors or not sent:
-        raise LinkError(f"{link_uri}: " + (errors[0].strip().splitlines()[0] if errors
-                                           else "no time left to send the stop"))
+        raise LinkError(
+            f"{link_uri}: "
+            + (errors[0].strip().splitlines()[0] if errors else "no time left to send the stop")
+        )
     return sent
 
 
@@ -211,5 +228,9 @@ def _close_soon(close: Callable[[], None], wait_s: float = 0.3) -> None:
 
 
 ACTIONS: dict[str, Callable[[str, float], Outcome]] = {
-    "sim": _in_process, "zmq": _zmq, "mavlink": _mavlink, "radio": _crazyflie, "udp": _crazyflie,
+    "sim": _in_process,
+    "zmq": _zmq,
+    "mavlink": _mavlink,
+    "radio": _crazyflie,
+    "udp": _crazyflie,
 }

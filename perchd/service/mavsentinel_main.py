@@ -25,6 +25,7 @@ class MocapStream:
 
     def next(self, after_seq: int, timeout_s: float) -> tuple[Pose | None, int]:
         from perchd.mocap.base import next_pose
+
         return next_pose(self.source, after_seq, timeout_s)
 
     def close(self) -> None:
@@ -36,6 +37,7 @@ def open_mocap(uri: str) -> MocapStream:
     is imported here, not at start-up: a sentinel without one to relay starts sooner."""
     from perchd.core.runtime import Runtime
     from perchd.mocap.base import open_source
+
     return MocapStream(open_source(uri, Runtime.real()))
 
 

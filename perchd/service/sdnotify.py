@@ -52,8 +52,9 @@ class Notifier:
         Type=notify-reload matches it against the SIGHUP it sent (sd_notify(3)). ready()
         ends the reload."""
         usec = time.clock_gettime_ns(time.CLOCK_MONOTONIC) // 1000
-        return self.send("RELOADING=1", f"MONOTONIC_USEC={usec}",
-                         *([f"STATUS={status}"] if status else []))
+        return self.send(
+            "RELOADING=1", f"MONOTONIC_USEC={usec}", *([f"STATUS={status}"] if status else [])
+        )
 
     def stopping(self) -> bool:
         return self.send("STOPPING=1")

@@ -96,13 +96,18 @@ def vehicle(index: int, seed: int, family: Family = FAMILY) -> FamilyVehicle:
     rng = np.random.default_rng([seed, index])
     d = {f.name: getattr(family, f.name).draw(rng) for f in dataclasses.fields(family)}
     plant = PlantParams(
-        mass_kg=d["mass_kg"], attitude_tau_s=d["attitude_tau_s"],
-        motor_tau_s=d["motor_tau_s"], latency_s=d["latency_s"], drag_per_s=d["drag_per_s"],
-        qdrag_per_m=d["qdrag_per_m"], draught_x_m=-d["draught_reach_m"],
-        draught_mps2=d["draught_mps2"])
+        mass_kg=d["mass_kg"],
+        attitude_tau_s=d["attitude_tau_s"],
+        motor_tau_s=d["motor_tau_s"],
+        latency_s=d["latency_s"],
+        drag_per_s=d["drag_per_s"],
+        qdrag_per_m=d["qdrag_per_m"],
+        draught_x_m=-d["draught_reach_m"],
+        draught_mps2=d["draught_mps2"],
+    )
     plant = dataclasses.replace(plant, thrust_max_n=d["thrust_to_weight"] * d["mass_kg"] * plant.g)
     mocap = MocapParams(d["mocap_rate_hz"], d["mocap_latency_s"], d["mocap_noise_m"])
-    return FamilyVehicle(index, int(rng.integers(0, 2 ** 31)), plant, mocap)
+    return FamilyVehicle(index, int(rng.integers(0, 2**31)), plant, mocap)
 
 
 def sample(n: int, seed: int, family: Family = FAMILY) -> list[FamilyVehicle]:
@@ -117,6 +122,11 @@ def lab_config(member: FamilyVehicle, base: FlightConfig) -> FlightConfig:
     the floor LAB_THRUST_MIN_SHARE of it, the hover guessed from the mass: a first flight
     remembers none); every gain, limit and timing is the base's."""
     full = member.plant.thrust_max_n
-    v = dataclasses.replace(base.vehicle, mass_kg=member.plant.mass_kg, thrust_max_n=full,
-                            thrust_min_n=LAB_THRUST_MIN_SHARE * full, hover_thrust_n=None)
+    v = dataclasses.replace(
+        base.vehicle,
+        mass_kg=member.plant.mass_kg,
+        thrust_max_n=full,
+        thrust_min_n=LAB_THRUST_MIN_SHARE * full,
+        hover_thrust_n=None,
+    )
     return dataclasses.replace(base, vehicle=v)

@@ -12,8 +12,9 @@ network delay is unknown to the sender), as it would be on a real link.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Protocol, Sequence
+from typing import Protocol
 
 from perchd.core.types import Pose
 
@@ -22,8 +23,7 @@ Arrival = tuple[float, Pose]
 
 
 class MocapFault(Protocol):
-    def apply(self, arrive: float, pose: Pose) -> list[Arrival]:
-        ...
+    def apply(self, arrive: float, pose: Pose) -> list[Arrival]: ...
 
 
 def shape(faults: Sequence[MocapFault], arrive: float, pose: Pose) -> list[Arrival]:

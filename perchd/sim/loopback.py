@@ -8,15 +8,14 @@ link fault switch, so tests can cut the link.
 
 from __future__ import annotations
 
-from perchd.drivers.base import DriverBase
-
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, LinkHealth, Setpoint
 from perchd.core.uri import Uri
+from perchd.drivers.base import DriverBase
 from perchd.sim.world import SimWorld, world_for
 
 
-def open_loopback(uri: Uri, runtime: Runtime) -> "LoopbackDriver":
+def open_loopback(uri: Uri, runtime: Runtime) -> LoopbackDriver:
     return LoopbackDriver(uri.raw, world_for(uri, runtime, "driver"))
 
 

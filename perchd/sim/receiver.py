@@ -61,9 +61,16 @@ class SetpointInbox:
     the vehicle's setpoint watchdog (checked on this thread, between messages), from one
     sender at a time (sim/onesender.py); a second is counted and named once in a line."""
 
-    def __init__(self, text: str, world: SimWorld, body: str, counts: Counts,
-                 watchdog: WatchdogParams | None = None,
-                 log: Callable[[str], None] = say, gate: SenderGate | None = None) -> None:
+    def __init__(
+        self,
+        text: str,
+        world: SimWorld,
+        body: str,
+        counts: Counts,
+        watchdog: WatchdogParams | None = None,
+        log: Callable[[str], None] = say,
+        gate: SenderGate | None = None,
+    ) -> None:
         uri = parse_uri(text)
         if uri.scheme != "zmq" or not uri.host or uri.port is None:
             raise UriError(f"--setpoint-in {text}: expected zmq://HOST:PORT")
@@ -121,13 +128,13 @@ class SetpointInbox:
         self.counts.foreign += 1
         if sender not in self._named and len(self._named) < NAMED_MAX:
             self._named.add(sender)
-            self.log(f"refusing sender {sender or '(unnamed)'}: sender "
-                     f"{self.gate.holder or '(unnamed)'} is steering the vehicle")
+            self.log(
+                f"refusing sender {sender or '(unnamed)'}: sender "
+                f"{self.gate.holder or '(unnamed)'} is steering the vehicle"
+            )
         return False
 
     def close(self) -> None:
         self._alive = False
         self._thread.join(timeout=1.0)
         self.sock.close()
-
-

@@ -14,8 +14,8 @@ latency, as the setpoint it replaces would have).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from perchd.core.errors import ConfigError
 from perchd.core.types import Setpoint
@@ -30,8 +30,9 @@ class WatchdogParams:
 
     def __post_init__(self) -> None:
         if not 0.0 < self.level_s <= self.cut_s <= 60.0:
-            raise ConfigError(f"--watchdog {self.level_s:g} {self.cut_s:g}: need "
-                              "0 < LEVEL_S <= CUT_S <= 60 s")
+            raise ConfigError(
+                f"--watchdog {self.level_s:g} {self.cut_s:g}: need 0 < LEVEL_S <= CUT_S <= 60 s"
+            )
 
 
 class SetpointWatchdog:

@@ -21,8 +21,8 @@ import heapq
 import math
 import random
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 from perchd.core.clock import Clock
 from perchd.core.envelope import FAILSAFE_DESCENT_MPS, FAILSAFE_DROP_MAX_M
@@ -35,7 +35,6 @@ from perchd.core.uriparams import SIM, check_known, check_params, float_param, n
 from perchd.sim.faults import MocapFault, shape
 from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
 from perchd.sim.stall import Stall, stall_from_uri
-
 
 DESCENT_GAIN_PER_S = 3.0
 """[1/s] the failsafe descent's sink-rate gain: m (g + k (v_ref - vz)) of thrust."""
@@ -86,7 +85,7 @@ class Faults:
 
     mocap_outages: list[tuple[float, float]] = field(default_factory=list)
     link_ok: bool = True
-    at: list[tuple[float, Callable[["SimWorld"], None]]] = field(default_factory=list)
+    at: list[tuple[float, Callable[[SimWorld], None]]] = field(default_factory=list)
     mocap: list[MocapFault] = field(default_factory=list)
 
 
@@ -96,8 +95,11 @@ class SimWorld:
         self.clock = clock
         sp, n = params.surface_point, params.surface_normal
         norm = math.sqrt(sum(c * c for c in n))
-        self.start = params.start or (sp[0] - 4.5 * n[0] / norm, sp[1] - 4.5 * n[1] / norm,
-                                      sp[2] + 1.0)
+        self.start = params.start or (
+            sp[0] - 4.5 * n[0] / norm,
+            sp[1] - 4.5 * n[1] / norm,
+            sp[2] + 1.0,
+        )
         self.t0 = clock.now()
         self.plant = Plant(params.plant, self.start, self.t0)
         self.faults = Faults()
@@ -200,8 +202,9 @@ class SimWorld:
             return
         pp = self.plant.params
         lift = pp.mass_kg * (pp.g + DESCENT_GAIN_PER_S * (-FAILSAFE_DESCENT_MPS - self.plant.v[2]))
-        self._queue_command(Setpoint(t, 0.0, 0.0, 0.0, min(max(lift, 0.0), pp.thrust_max_n),
-                                     -1, Phase.ABORT), t)
+        self._queue_command(
+            Setpoint(t, 0.0, 0.0, 0.0, min(max(lift, 0.0), pp.thrust_max_n), -1, Phase.ABORT), t
+        )
 
     def command(self, sp: Setpoint) -> None:
         with self._lock:
@@ -248,8 +251,9 @@ class SimWorld:
             return self.t0 + self._next_frame * self._period + self.params.mocap.latency_s
 
 
-def world_params_from_uri(uri: Uri, base: WorldParams | None = None,
-                          kind: str | None = None) -> WorldParams:
+def world_params_from_uri(
+    uri: Uri, base: WorldParams | None = None, kind: str | None = None
+) -> WorldParams:
     """Apply a sim:// URI's options to `base` (defaults); bad values and unknown keys are one
     UriError. kind "driver" or "mocap": that side's keys only (the other side's are refused
     naming where they belong); None: a whole world's (perchd.core.uriparams.SIM,
@@ -267,20 +271,28 @@ def world_params_from_uri(uri: Uri, base: WorldParams | None = None,
         motor_tau_s=float_param(uri, "motor_tau", wp.plant.motor_tau_s, 0.001, 1.0, " s"),
         mass_kg=float_param(uri, "mass", wp.plant.mass_kg, 0.005, 50.0, " kg"),
         drag_per_s=float_param(uri, "drag", wp.plant.drag_per_s, 0.0, 5.0, " 1/s"),
-        qdrag_per_m=float_param(uri, "qdrag", wp.plant.qdrag_per_m, 0.0, 5.0, " 1/m"))
+        qdrag_per_m=float_param(uri, "qdrag", wp.plant.qdrag_per_m, 0.0, 5.0, " 1/m"),
+    )
     mocap = replace(
         wp.mocap,
         rate_hz=float_param(uri, "mocap_rate", wp.mocap.rate_hz, 1.0, 1000.0, " Hz"),
         latency_s=float_param(uri, "mocap_latency", wp.mocap.latency_s, 0.0, 0.5, " s"),
-        noise_m=float_param(uri, "noise", wp.mocap.noise_m, 0.0, 0.1, " m"))
+        noise_m=float_param(uri, "noise", wp.mocap.noise_m, 0.0, 0.1, " m"),
+    )
     start = _floats(uri, "start", 3, "X,Y,Z in metres") or wp.start
     draught = _floats(uri, "draught", 2, "X,A: from world x = X [m] on, A [m/s^2] along X")
     if draught is not None:
         plant = replace(plant, draught_x_m=draught[0], draught_mps2=draught[1])
-    seed = int(float_param(uri, "seed", float(wp.seed), 0, 2 ** 31, ""))
-    return replace(wp, plant=plant, mocap=mocap, start=start, seed=seed,
-                   body=uri.param("body", wp.body) or wp.body,
-                   stall=stall_from_uri(uri) or wp.stall)
+    seed = int(float_param(uri, "seed", float(wp.seed), 0, 2**31, ""))
+    return replace(
+        wp,
+        plant=plant,
+        mocap=mocap,
+        start=start,
+        seed=seed,
+        body=uri.param("body", wp.body) or wp.body,
+        stall=stall_from_uri(uri) or wp.stall,
+    )
 
 
 def _floats(uri: Uri, key: str, n: int, form: str) -> tuple[float, ...] | None:
@@ -303,16 +315,20 @@ def world_for(uri: Uri, runtime: Runtime, kind: str) -> SimWorld:
     none yet; a world made already (by the other link, or perchd.session from both URIs)
     must be what this URI's options make of it, or they are refused: never ignored."""
     if uri.host:
-        raise UriError(f"{uri.raw}: sim:// takes no host; its options go in the query "
-                       "(--driver sim://?latency=0.02 --mocap sim://?noise=0.001)")
+        raise UriError(
+            f"{uri.raw}: sim:// takes no host; its options go in the query "
+            "(--driver sim://?latency=0.02 --mocap sim://?noise=0.001)"
+        )
     if runtime.sim is None:
         runtime.sim = SimWorld(world_params_from_uri(uri, kind=kind), runtime.clock)
         return runtime.sim
     wanted = world_params_from_uri(uri, runtime.sim.params, kind)
     if wanted != runtime.sim.params:
         if not runtime.sim.pristine:
-            raise UriError(f"{uri.raw}: the simulated world has run already without this "
-                           f"--{kind} link's options; open both links before it runs")
+            raise UriError(
+                f"{uri.raw}: the simulated world has run already without this "
+                f"--{kind} link's options; open both links before it runs"
+            )
         runtime.sim.__init__(wanted, runtime.clock)  # in place: the other link holds it
     return runtime.sim
 

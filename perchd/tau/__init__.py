@@ -10,7 +10,23 @@ from perchd.tau.planfile import load_plan, plan_from_json, plan_to_json, save_pl
 from perchd.tau.retarget import retarget
 from perchd.tau.verify import check_limits, report, verify_plan, violations
 
-__all__ = ["Limits", "Peaks", "Plan", "check_limits", "load_plan", "make_plan",
-           "min_time_bound", "plan_bound", "plan_ctds", "plan_ctdts", "plan_from_json",
-           "plan_ipts", "plan_to_json", "report", "retarget", "save_plan", "verify_plan",
-           "violations"]
+__all__ = [
+    "Limits",
+    "Peaks",
+    "Plan",
+    "check_limits",
+    "load_plan",
+    "make_plan",
+    "min_time_bound",
+    "plan_bound",
+    "plan_ctds",
+    "plan_ctdts",
+    "plan_from_json",
+    "plan_ipts",
+    "plan_to_json",
+    "report",
+    "retarget",
+    "save_plan",
+    "verify_plan",
+    "violations",
+]

@@ -24,12 +24,18 @@ def stage1_min_time(gap: float, v0: float, v_c: float, a_max: float, v_max: floa
     if v_peak <= v_max:
         return (2 * v_peak - v0 - v_c) / a_max
     ramps = (2 * v_max - v0 - v_c) / a_max
-    ramp_gap = (2 * v_max ** 2 - v0 * v0 - v_c * v_c) / (2 * a_max)
+    ramp_gap = (2 * v_max**2 - v0 * v0 - v_c * v_c) / (2 * a_max)
     return ramps + (gap - ramp_gap) / v_max
 
 
-def min_time_bound(x0: float, v0: float, tau_s: float | None, v_contact: tuple[float, float],
-                   a_max: float, v_max: float | None) -> tuple[float, float]:
+def min_time_bound(
+    x0: float,
+    v0: float,
+    tau_s: float | None,
+    v_contact: tuple[float, float],
+    a_max: float,
+    v_max: float | None,
+) -> tuple[float, float]:
     """(bound [s], its best V_c [m/s]) over V_c in v_contact, by a dense scan then refinement."""
     v_max = math.inf if v_max is None else v_max
     hold = 0.0 if tau_s is None else -tau_s

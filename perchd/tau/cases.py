@@ -32,8 +32,10 @@ class Case:
     ctdts_v_c: float
 
 
-CASES = (Case("case1", -3.0, 1.5, -0.5, (0.7, 1.0), 2.5, 1.4, 1.0),
-         Case("case2", -3.0, 1.5, -0.5, (0.7, 1.0), 2.0, 1.0, 0.94))
+CASES = (
+    Case("case1", -3.0, 1.5, -0.5, (0.7, 1.0), 2.5, 1.4, 1.0),
+    Case("case2", -3.0, 1.5, -0.5, (0.7, 1.0), 2.0, 1.0, 0.94),
+)
 FILES = ("ctds", "ctdts", "ipts-n3", "ipts-n5", "ipts-n8")
 
 
@@ -42,8 +44,9 @@ def make(case: Case, kind: str) -> Plan:
     if kind == "ctds":
         return plan_ctds(case.x0, case.v0, 0.5, Limits((0.0, 0.0), case.v_max, case.a_max))
     if kind == "ctdts":
-        return plan_ctdts(case.x0, case.v0, case.tau_s, case.ctdts_v_c, case.a_max, case.v_max,
-                          case.v_contact)
+        return plan_ctdts(
+            case.x0, case.v0, case.tau_s, case.ctdts_v_c, case.a_max, case.v_max, case.v_contact
+        )
     order = int(kind.split("-n")[1])
     return plan_ipts(case.x0, case.v0, case.tau_s, case.v_contact, case.v_max, case.a_max, order)
 

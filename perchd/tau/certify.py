@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 from perchd.core.errors import PlanError
 from perchd.tau.profiles import Coefficients, FloatArray, Times
 
-SLACK = 1e-9          # relative slack on every proven bound (floating point)
+SLACK = 1e-9  # relative slack on every proven bound (floating point)
 MAX_CELLS = 4_000_000  # total 2-D cells examined before giving up (not certified)
 
 Interval = tuple[Times, Times]
@@ -84,14 +84,17 @@ class Box:
         r = np.abs(k0)
         return (np.maximum(-self.x0[1], self.v0[0] / r), np.minimum(-self.x0[0], self.v0[1] / r))
 
-    def scaled(self, factor: float, about: tuple[float, float] | None = None) -> "Box":
+    def scaled(self, factor: float, about: tuple[float, float] | None = None) -> Box:
         """The box shrunk (factor < 1) or grown about `about` (x0, v0), default its centre."""
         xc, vc = about if about is not None else (sum(self.x0) / 2, sum(self.v0) / 2)
 
         def edge(e: float, centre: float) -> float:
             return float(centre + (e - centre) * factor)
-        return Box((edge(self.x0[0], xc), edge(self.x0[1], xc)),
-                   (edge(self.v0[0], vc), edge(self.v0[1], vc)))
+
+        return Box(
+            (edge(self.x0[0], xc), edge(self.x0[1], xc)),
+            (edge(self.v0[0], vc), edge(self.v0[1], vc)),
+        )
 
     def contains(self, x0: float, v0: float) -> bool:
         return self.x0[0] <= x0 <= self.x0[1] and self.v0[0] <= v0 <= self.v0[1]
@@ -101,24 +104,33 @@ class Box:
 class Violation:
     """A state of the box where a limit fails; `limit` names it."""
 
-    limit: str          # "tau_s" | "tau" | "v_contact_low" | "v_contact_high" | "v_max" | "a_max"
-    x0: float           # [m]
-    v0: float           # [m/s]
-    t: float            # [s] since trigger
-    value: float        # the quantity at that state and time
-    bound: float        # the limit it breaks
+    limit: str  # "tau_s" | "tau" | "v_contact_low" | "v_contact_high" | "v_max" | "a_max"
+    x0: float  # [m]
+    v0: float  # [m/s]
+    t: float  # [s] since trigger
+    value: float  # the quantity at that state and time
+    bound: float  # the limit it breaks
 
     def __str__(self) -> str:
         if self.limit in ("tau_s", "tau"):
-            return (f"{self.message()} at x0={self.x0:.4f} m, v0={self.v0:.4f} m/s "
-                    f"(tau0={self.x0 / self.v0:.4f} s, tau_s={self.bound:g} s)")
-        return (f"{self.message()}: {self.value:.6g} vs {self.bound:.6g} at x0={self.x0:.4f} m, "
-                f"v0={self.v0:.4f} m/s, t={self.t:.4f} s")
+            return (
+                f"{self.message()} at x0={self.x0:.4f} m, v0={self.v0:.4f} m/s "
+                f"(tau0={self.x0 / self.v0:.4f} s, tau_s={self.bound:g} s)"
+            )
+        return (
+            f"{self.message()}: {self.value:.6g} vs {self.bound:.6g} at x0={self.x0:.4f} m, "
+            f"v0={self.v0:.4f} m/s, t={self.t:.4f} s"
+        )
 
     def message(self) -> str:
-        return {"tau_s": "tau never reaches tau_s", "tau": "tau turns positive/infinite before tau_s",
-                "v_contact_low": "contact speed below V_l", "v_contact_high": "contact speed above V_u",
-                "v_max": "speed above v_max", "a_max": "|acceleration| above a_max"}[self.limit]
+        return {
+            "tau_s": "tau never reaches tau_s",
+            "tau": "tau turns positive/infinite before tau_s",
+            "v_contact_low": "contact speed below V_l",
+            "v_contact_high": "contact speed above V_u",
+            "v_max": "speed above v_max",
+            "a_max": "|acceleration| above a_max",
+        }[self.limit]
 
 
 class Bounds(TypedDict, total=False):
@@ -136,7 +148,7 @@ class Certificate:
     certified: bool
     violation: Violation | None
     reason: str
-    bounds: Bounds = field(default_factory=Bounds)   # v_peak, a_peak, v_contact (lo, hi) [SI]
+    bounds: Bounds = field(default_factory=Bounds)  # v_peak, a_peak, v_contact (lo, hi) [SI]
     duration: tuple[float, float] = (float("nan"), float("nan"))  # [s] min, max over box
     cells: int = 0
 
@@ -158,8 +170,11 @@ def first_switch(k: FloatArray, k0: float, tau_s: float) -> tuple[float | None, 
     if not real:
         return None, "tau_s"
     ts = min(real)
-    crit = [r.real for r in (npoly.polyroots(npoly.polyder(q)) if len(k) > 1 else [])
-            if abs(r.imag) <= 1e-9 and 0 < r.real < ts]
+    crit = [
+        r.real
+        for r in (npoly.polyroots(npoly.polyder(q)) if len(k) > 1 else [])
+        if abs(r.imag) <= 1e-9 and 0 < r.real < ts
+    ]
     pmax = max(npoly.polyval(np.array([0.0, ts] + crit), q)) + k0
     return (ts, "") if pmax < 0 else (None, "tau")
 
@@ -176,11 +191,13 @@ def _polish(poly: FloatArray, t: float) -> float:
 
 # --- point evaluation -------------------------------------------------------------
 
+
 @overload
 def scale_functions(k: FloatArray, k0: float, t: float) -> tuple[float, float, float]: ...
 @overload
-def scale_functions(k: FloatArray, k0: FloatArray,
-                    t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]: ...
+def scale_functions(
+    k: FloatArray, k0: FloatArray, t: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]: ...
 def scale_functions(k: FloatArray, k0: Times, t: Times) -> tuple[Times, Times, Times]:
     """(p, f1, f2) at k0, t (broadcast): V = |x0| f1, A = |x0| f2 (see module docstring).
     Vectorised over k0 too (one per cell centre), which InversePolynomial (one k) is not."""
@@ -189,11 +206,13 @@ def scale_functions(k: FloatArray, k0: Times, t: Times) -> tuple[Times, Times, T
     p = k0 + npoly.polyval(t, q)
     e = np.exp(k0 * t + npoly.polyval(t, big_q))
     # numpy types polyval's result as floating[Any] whatever the input; here it is float64
-    return cast(tuple[Times, Times, Times],
-                (p, -e * p, e * (npoly.polyval(t, npoly.polyder(q)) + p * p)))
+    return cast(
+        tuple[Times, Times, Times], (p, -e * p, e * (npoly.polyval(t, npoly.polyder(q)) + p * p))
+    )
 
 
 # --- interval arithmetic on arrays (lo, hi) ----------------------------------------
+
 
 def _ipoly(c: FloatArray, t1: FloatArray, t2: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Enclosure of sum c_i t^i over [t1, t2] with t1 >= 0 (t^i monotone)."""
@@ -231,14 +250,15 @@ class _Poly:
     def __init__(self, k: FloatArray) -> None:
         self.q: FloatArray = np.concatenate(([0.0], k))
         self.dq: FloatArray = np.asarray(npoly.polyder(self.q), np.float64)
-        self.ddq: FloatArray = np.asarray(npoly.polyder(self.q, 2) if len(k) > 1 else np.zeros(1),
-                                          np.float64)
+        self.ddq: FloatArray = np.asarray(
+            npoly.polyder(self.q, 2) if len(k) > 1 else np.zeros(1), np.float64
+        )
         self.big_q: FloatArray = np.concatenate(([0.0, 0.0], k / np.arange(2, len(k) + 2)))
 
 
-def _cell_bounds(poly: _Poly, ka: FloatArray, kb: FloatArray, t1: FloatArray,
-                 t2: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray,
-                                          FloatArray, Centre]:
+def _cell_bounds(
+    poly: _Poly, ka: FloatArray, kb: FloatArray, t1: FloatArray, t2: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, Centre]:
     """Upper bounds of f1 and |f2| on cells [ka,kb] x [t1,t2], the upper bound of p, and the
     two excess terms (k-direction, t-direction) of the f2 bound, used to pick a split."""
     kc, tc, hk, ht = (ka + kb) / 2, (t1 + t2) / 2, (kb - ka) / 2, (t2 - t1) / 2
@@ -248,9 +268,9 @@ def _cell_bounds(poly: _Poly, ka: FloatArray, kb: FloatArray, t1: FloatArray,
     e = (np.exp(big_p[0]), np.exp(big_p[1]))
     t = (t1, t2)
     psq = _isq(p)
-    acc = _iadd(dq, psq)                              # p' + p^2
+    acc = _iadd(dq, psq)  # p' + p^2
     dk_f1 = _imul(e, _iadd(_imul(t, p), (1.0, 1.0)))  # -(df1/dk0), same |.|
-    f2 = _imul(e, acc)                                 # = -(df1/dt)
+    f2 = _imul(e, acc)  # = -(df1/dt)
     dk_f2 = _imul(e, _iadd(_imul(t, acc), _iscale(2.0, p)))
     dt_f2 = _imul(e, _iadd(ddq, _iscale(3.0, _imul(p, dq)), (p[0] ** 3, p[1] ** 3)))
     _, f1c, f2c = scale_functions(poly.q[1:], kc, tc)
@@ -266,45 +286,87 @@ CERTIFIED_KEPT = 256
 """Certificates remembered (the inputs are a few floats; a certificate a few more)."""
 
 
-def certify_box(k: Coefficients, box: Box, v_contact: tuple[float, float], v_max: float | None,
-                a_max: float | None, tau_s: float, *, min_width: float = 1e-9) -> Certificate:
+def certify_box(
+    k: Coefficients,
+    box: Box,
+    v_contact: tuple[float, float],
+    v_max: float | None,
+    a_max: float | None,
+    tau_s: float,
+    *,
+    min_width: float = 1e-9,
+) -> Certificate:
     """Prove that k = (k_1..k_n) meets every limit for every trigger state in `box`
     (method in the module docstring), or return the violation found. Remembered per
     process: every flight of a robust campaign re-certifies the same box (check_plan)."""
     key = Box((float(box.x0[0]), float(box.x0[1])), (float(box.v0[0]), float(box.v0[1])))
-    return _certify_box(tuple(float(x) for x in np.ravel(k)), key,
-                        (float(v_contact[0]), float(v_contact[1])), v_max, a_max, tau_s,
-                        min_width)
+    return _certify_box(
+        tuple(float(x) for x in np.ravel(k)),
+        key,
+        (float(v_contact[0]), float(v_contact[1])),
+        v_max,
+        a_max,
+        tau_s,
+        min_width,
+    )
 
 
 @functools.lru_cache(maxsize=CERTIFIED_KEPT)
-def _certify_box(k_: tuple[float, ...], box: Box, v_contact: tuple[float, float],
-                 v_max: float | None, a_max: float | None, tau_s: float,
-                 min_width: float) -> Certificate:
+def _certify_box(
+    k_: tuple[float, ...],
+    box: Box,
+    v_contact: tuple[float, float],
+    v_max: float | None,
+    a_max: float | None,
+    tau_s: float,
+    min_width: float,
+) -> Certificate:
     k = np.asarray(k_, dtype=float)
     kmin, kmax = box.k0_range
     if kmin <= 1.0 / tau_s:
-        return _fail(Violation("tau_s", box.x0[1], box.v0[1], 0.0, box.x0[1] / box.v0[1], tau_s),
-                     "not certified")
+        return _fail(
+            Violation("tau_s", box.x0[1], box.v0[1], 0.0, box.x0[1] / box.v0[1], tau_s),
+            "not certified",
+        )
     ts_max, why = first_switch(k, kmax, tau_s)
     if ts_max is None:
         s = box.segment(kmax)[0]
-        return _fail(Violation(why, -s, s * abs(kmax), float("nan"), float("nan"), tau_s),
-                     "not certified")
+        return _fail(
+            Violation(why, -s, s * abs(kmax), float("nan"), float("nan"), tau_s), "not certified"
+        )
     ts_min = _switch_in_box(k, kmin, tau_s)
     contact = _contact_cells(k, box, v_contact, tau_s, kmin, kmax, min_width)
     if not isinstance(contact, tuple):
-        return _fail(contact, "not certified") if contact else Certificate(
-            False, None, "not certified: contact speed within 1e-9 of a limit somewhere (undecided)")
+        return (
+            _fail(contact, "not certified")
+            if contact
+            else Certificate(
+                False,
+                None,
+                "not certified: contact speed within 1e-9 of a limit somewhere (undecided)",
+            )
+        )
     cells_k, vc = contact
     peaks = _peak_cells(k, box, cells_k, v_max, a_max, tau_s, min_width)
     if not isinstance(peaks, tuple):
-        return _fail(peaks, "not certified") if peaks else Certificate(
-            False, None, "not certified: speed/acceleration undecided (within 1e-9 of a limit or cell budget spent)")
+        return (
+            _fail(peaks, "not certified")
+            if peaks
+            else Certificate(
+                False,
+                None,
+                "not certified: speed/acceleration undecided (within 1e-9 of a limit or cell budget spent)",
+            )
+        )
     v_peak, a_peak, n = peaks
-    return Certificate(True, None, "certified",
-                       {"v_peak": v_peak, "a_peak": a_peak, "v_contact": vc},
-                       (ts_min + abs(tau_s), ts_max + abs(tau_s)), n)
+    return Certificate(
+        True,
+        None,
+        "certified",
+        {"v_peak": v_peak, "a_peak": a_peak, "v_contact": vc},
+        (ts_min + abs(tau_s), ts_max + abs(tau_s)),
+        n,
+    )
 
 
 def _fail(v: Violation, reason: str) -> Certificate:
@@ -315,14 +377,23 @@ def _switch_in_box(k: FloatArray, k0: float, tau_s: float) -> float:
     """t_s at a k0 of the box, which has one once k_max has (step 1 of the method)."""
     ts, why = first_switch(k, k0, tau_s)
     if ts is None:  # only by round-off at a root of p's own level
-        raise PlanError(f"certify: no switch time at k0 = {k0:g} 1/s ({why}) although "
-                        f"there is one at the box's largest k0")
+        raise PlanError(
+            f"certify: no switch time at k0 = {k0:g} 1/s ({why}) although "
+            f"there is one at the box's largest k0"
+        )
     return ts
 
 
-def _contact_cells(k: FloatArray, box: Box, v_contact: tuple[float, float], tau_s: float,
-                   kmin: float, kmax: float, min_width: float, n0: int = 32
-                   ) -> tuple[list[KCell], tuple[float, float]] | Violation | None:
+def _contact_cells(
+    k: FloatArray,
+    box: Box,
+    v_contact: tuple[float, float],
+    tau_s: float,
+    kmin: float,
+    kmax: float,
+    min_width: float,
+    n0: int = 32,
+) -> tuple[list[KCell], tuple[float, float]] | Violation | None:
     """Step 2: returns (list of (a, b, ts_a, ts_b) covering [kmin, kmax], (V_c lo, V_c hi)
     proven), or a Violation, or None (undecided)."""
     poly = _Poly(k)
@@ -345,11 +416,11 @@ def _contact_cells(k: FloatArray, box: Box, v_contact: tuple[float, float], tau_
         tc = t_s(c)
         gc = c * tc + npoly.polyval(tc, poly.big_q)
         dlo, dhi = _ipoly(poly.dq, np.array([ta]), np.array([tb]))
-        if dhi[0] < 0:   # g' = t_s - 1/(tau_s p'(t_s)), p' < 0 on the cell
+        if dhi[0] < 0:  # g' = t_s - 1/(tau_s p'(t_s)), p' < 0 on the cell
             inv = sorted((-1.0 / (tau_s * dlo[0]), -1.0 / (tau_s * dhi[0])))
             slope = max(abs(ta + inv[0]), abs(tb + inv[1]))
             g = (gc - slope * h, gc + slope * h)
-        else:            # fall back to the plain enclosure of P over K x [ta, tb]
+        else:  # fall back to the plain enclosure of P over K x [ta, tb]
             bq = _ipoly(poly.big_q, np.array([ta]), np.array([tb]))
             g = (a * tb + bq[0][0], b * ta + bq[1][0])
         s_lo_min = min(box.segment(np.array([a, b]))[0])
@@ -367,14 +438,15 @@ def _contact_cells(k: FloatArray, box: Box, v_contact: tuple[float, float], tau_
             witness = _contact_witness(k, box, (a, b), v_contact, tau_s)
             if witness:
                 return witness
-            undecided = True   # within SLACK of a limit: keep looking for a real violation
+            undecided = True  # within SLACK of a limit: keep looking for a real violation
             continue
         todo += [(a, c), (c, b)]
     return None if undecided else (done, (lo_all, hi_all))
 
 
-def _contact_witness(k: FloatArray, box: Box, k0s: tuple[float, ...],
-                     v_contact: tuple[float, float], tau_s: float) -> Violation | None:
+def _contact_witness(
+    k: FloatArray, box: Box, k0s: tuple[float, ...], v_contact: tuple[float, float], tau_s: float
+) -> Violation | None:
     for k0 in k0s:
         ts = _switch_in_box(k, k0, tau_s)
         for s, lim, bound in zip(box.segment(k0), ("v_contact_low", "v_contact_high"), v_contact):
@@ -384,9 +456,16 @@ def _contact_witness(k: FloatArray, box: Box, k0s: tuple[float, ...],
     return None
 
 
-def _peak_cells(k: FloatArray, box: Box, cells_k: list[KCell], v_max: float | None,
-                a_max: float | None, tau_s: float, min_width: float, m0: int = 16
-                ) -> tuple[float, float, int] | Violation | None:
+def _peak_cells(
+    k: FloatArray,
+    box: Box,
+    cells_k: list[KCell],
+    v_max: float | None,
+    a_max: float | None,
+    tau_s: float,
+    min_width: float,
+    m0: int = 16,
+) -> tuple[float, float, int] | Violation | None:
     """Step 3: (v_peak, a_peak, cells examined) proven, or a Violation, or None (undecided)."""
     poly = _Poly(k)
     v_lim = np.inf if v_max is None else v_max
@@ -398,7 +477,11 @@ def _peak_cells(k: FloatArray, box: Box, cells_k: list[KCell], v_max: float | No
     ctsb: list[float] = []
     for a, b, _, tb in cells_k:
         edges = np.linspace(0.0, tb, m0 + 1)
-        cka += [a] * m0; ckb += [b] * m0; ct1 += list(edges[:-1]); ct2 += list(edges[1:]); ctsb += [tb] * m0
+        cka += [a] * m0
+        ckb += [b] * m0
+        ct1 += list(edges[:-1])
+        ct2 += list(edges[1:])
+        ctsb += [tb] * m0
     ka, kb, t1, t2, tsb = map(np.array, (cka, ckb, ct1, ct2, ctsb))
     v_peak = a_peak = 0.0
     examined, undecided = 0, False
@@ -410,7 +493,7 @@ def _peak_cells(k: FloatArray, box: Box, cells_k: list[KCell], v_max: float | No
         s_hi = box.segment(kb)[1]  # largest s on the cell: v_hi/|k0| grows with k0
         s_hi = np.maximum(s_hi, box.segment(ka)[1])
         ub1, ub2, p_hi, ek, et, centre = _cell_bounds(poly, ka, kb, t1, t2)
-        live = p_hi >= 1.0 / tau_s       # else the whole cell lies after t_s
+        live = p_hi >= 1.0 / tau_s  # else the whole cell lies after t_s
         v_ub, a_ub = s_hi * ub1 * (1 + SLACK), s_hi * ub2 * (1 + SLACK)
         ok = (~live) | ((v_ub <= v_lim) & (a_ub <= a_lim))
         v_peak = max(v_peak, float(np.max(v_ub[ok & live], initial=0.0)))
@@ -424,18 +507,27 @@ def _peak_cells(k: FloatArray, box: Box, cells_k: list[KCell], v_max: float | No
         ka, kb, t1, t2, tsb, ek, et = (x[bad] for x in (ka, kb, t1, t2, tsb, ek, et))
         tiny = ((kb - ka) < min_width * kspan) & ((t2 - t1) < min_width * 10)
         if tiny.any():
-            witness = _peak_witness(k, box, ka[tiny], kb[tiny], t1[tiny], t2[tiny], v_lim, a_lim, tau_s)
+            witness = _peak_witness(
+                k, box, ka[tiny], kb[tiny], t1[tiny], t2[tiny], v_lim, a_lim, tau_s
+            )
             if witness:
                 return witness
-            undecided = True   # within SLACK of a limit: keep looking for a real violation
+            undecided = True  # within SLACK of a limit: keep looking for a real violation
             ka, kb, t1, t2, tsb, ek, et = (x[~tiny] for x in (ka, kb, t1, t2, tsb, ek, et))
         ka, kb, t1, t2, tsb = _split(k, tau_s, ka, kb, t1, t2, tsb, ek >= et)
     return None if undecided else (v_peak, a_peak, examined)
 
 
-def _split(k: FloatArray, tau_s: float, ka: FloatArray, kb: FloatArray, t1: FloatArray,
-           t2: FloatArray, tsb: FloatArray, along_k: NDArray[np.bool_]
-           ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+def _split(
+    k: FloatArray,
+    tau_s: float,
+    ka: FloatArray,
+    kb: FloatArray,
+    t1: FloatArray,
+    t2: FloatArray,
+    tsb: FloatArray,
+    along_k: NDArray[np.bool_],
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Halve each cell along k0 (where along_k) or t; drop children after t_s(b)."""
     kc, tc = (ka + kb) / 2, (t1 + t2) / 2
     ts_c = np.array([_switch_in_box(k, c, tau_s) if ak else 0.0 for c, ak in zip(kc, along_k)])
@@ -449,8 +541,15 @@ def _split(k: FloatArray, tau_s: float, ka: FloatArray, kb: FloatArray, t1: Floa
     return ka_n[keep], kb_n[keep], t1_n[keep], t2_n[keep], ts_n[keep]
 
 
-def _centre_witness(k: FloatArray, box: Box, centre: Centre, bad: NDArray[np.bool_],
-                    v_lim: float, a_lim: float, tau_s: float) -> Violation | None:
+def _centre_witness(
+    k: FloatArray,
+    box: Box,
+    centre: Centre,
+    bad: NDArray[np.bool_],
+    v_lim: float,
+    a_lim: float,
+    tau_s: float,
+) -> Violation | None:
     """The worst real violation at the centre of a failing cell (largest s of its ray), if any."""
     kc, tc, f1c, f2c = (x[bad] for x in centre)
     s = box.segment(kc)[1]
@@ -466,8 +565,17 @@ def _centre_witness(k: FloatArray, box: Box, centre: Centre, bad: NDArray[np.boo
     return None
 
 
-def _peak_witness(k: FloatArray, box: Box, ka: FloatArray, kb: FloatArray, t1: FloatArray,
-                  t2: FloatArray, v_lim: float, a_lim: float, tau_s: float) -> Violation | None:
+def _peak_witness(
+    k: FloatArray,
+    box: Box,
+    ka: FloatArray,
+    kb: FloatArray,
+    t1: FloatArray,
+    t2: FloatArray,
+    v_lim: float,
+    a_lim: float,
+    tau_s: float,
+) -> Violation | None:
     for a, b, ta, tb in zip(ka, kb, t1, t2):
         for k0 in (a, b, (a + b) / 2):
             ts = _switch_in_box(k, k0, tau_s)

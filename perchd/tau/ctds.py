@@ -14,9 +14,13 @@ def plan_ctds(x0: float, v0: float, c: float, limits: Limits | None = None) -> P
     """Constant tau-dot c in (0, 0.5]: contact in finite time at zero speed (section 2.1)."""
     check_trigger(x0, v0)
     if not math.isfinite(c) or c <= 0:
-        raise PlanError(f"c = {c:g}: with c <= 0 the vehicle never arrives (X -> 0 only as t -> inf)")
+        raise PlanError(
+            f"c = {c:g}: with c <= 0 the vehicle never arrives (X -> 0 only as t -> inf)"
+        )
     if c > 0.5:
-        raise PlanError(f"c = {c:g}: above 0.5 the acceleration is infinite at contact "
-                        f"(c must be in (0, 0.5]; at c = 1 speed stays v0, above 1 it diverges)")
+        raise PlanError(
+            f"c = {c:g}: above 0.5 the acceleration is infinite at contact "
+            f"(c must be in (0, 0.5]; at c = 1 speed stays v0, above 1 it diverges)"
+        )
     plan = make_plan("ctds", x0, v0, None, limits or Limits((0.0, 0.0)), c=c)
     return check_limits(plan)

@@ -17,15 +17,22 @@ def ctdts_c(x0: float, v0: float, tau_s: float, v_c: float) -> float:
     if not tau0 < tau_s < 0:
         raise PlanError(f"tau_s = {tau_s:g} s must lie in (tau_0, 0) = ({tau0:g}, 0)")
     if not 0 < v_c < v0:
-        raise PlanError(f"v_contact = {v_c:g} m/s must lie in (0, v0) = (0, {v0:g}): "
-                        f"CTDTS can only decelerate")
+        raise PlanError(
+            f"v_contact = {v_c:g} m/s must lie in (0, v0) = (0, {v0:g}): CTDTS can only decelerate"
+        )
     ratio = math.log(tau_s / tau0)
     return ratio / (math.log(v_c / v0) + ratio)
 
 
-def plan_ctdts(x0: float, v0: float, tau_s: float, v_c: float, a_max: float | None,
-               v_max: float | None = None,
-               window: tuple[float, float] | None = None) -> Plan:
+def plan_ctdts(
+    x0: float,
+    v0: float,
+    tau_s: float,
+    v_c: float,
+    a_max: float | None,
+    v_max: float | None = None,
+    window: tuple[float, float] | None = None,
+) -> Plan:
     """Two stages: constant tau-dot down to V_c at tau_s, then constant speed to contact.
 
     window [m/s]: the contact speeds the vehicle tolerates, recorded in the plan's limits so

@@ -38,7 +38,7 @@ class Node:
 
     def z(self) -> list[float]:
         """Scaled variables (m_1..m_n, t_s): m_i = k_i t_s^i, smooth across the grid."""
-        return [ki * self.t_switch ** i for i, ki in enumerate(self.k)][1:] + [self.t_switch]
+        return [ki * self.t_switch**i for i, ki in enumerate(self.k)][1:] + [self.t_switch]
 
 
 @dataclass(frozen=True)
@@ -61,19 +61,22 @@ class PlanLibrary:
         lim = self.limits
         for z in self._starts(i, j, fx, fv):
             ts = z[-1]
-            k = [v0 / x0] + [mi / ts ** n for n, mi in enumerate(z[:-1], start=1)]
-            plan = plan_ipts_from(x0, v0, self.tau_s, lim.v_contact, lim.v_max, lim.a_max,
-                                  k, ts)
+            k = [v0 / x0] + [mi / ts**n for n, mi in enumerate(z[:-1], start=1)]
+            plan = plan_ipts_from(x0, v0, self.tau_s, lim.v_contact, lim.v_max, lim.a_max, k, ts)
             if plan is not None:
                 return plan
-        raise PlanError(f"no warm replan from x0 = {x0:g} m, v0 = {v0:g} m/s converged to a "
-                        f"plan meeting the limits (library cell without plans?)")
+        raise PlanError(
+            f"no warm replan from x0 = {x0:g} m, v0 = {v0:g} m/s converged to a "
+            f"plan meeting the limits (library cell without plans?)"
+        )
 
     def matches(self, plan: Plan) -> str:
         """Why this library cannot replan `plan` (its strategy, order or limits), or ''."""
         if plan.strategy != "ipts" or plan.order != self.order:
-            return f"the library holds IPTS order {self.order} plans, the plan is " \
-                   f"{plan.strategy}{'' if plan.order is None else f' order {plan.order}'}"
+            return (
+                f"the library holds IPTS order {self.order} plans, the plan is "
+                f"{plan.strategy}{'' if plan.order is None else f' order {plan.order}'}"
+            )
         if plan.tau_s != self.tau_s or plan.limits != self.limits:
             return "the library was made for other limits or tau_s than the plan's"
         return ""
@@ -81,8 +84,11 @@ class PlanLibrary:
     def _starts(self, i: int, j: int, fx: float, fv: float) -> list[list[float]]:
         """Warm starts, best first: the bilinear blend of the cell's corners (when all four
         have plans), then each corner's own optimum, nearest first."""
-        corners = [(self.nodes[i + a][j + b], (fx if a else 1 - fx) * (fv if b else 1 - fv))
-                   for a in (0, 1) for b in (0, 1)]
+        corners = [
+            (self.nodes[i + a][j + b], (fx if a else 1 - fx) * (fv if b else 1 - fv))
+            for a in (0, 1)
+            for b in (0, 1)
+        ]
         known = sorted(((n, w) for n, w in corners if n is not None), key=lambda nw: -nw[1])
         starts = [n.z() for n, _ in known]
         if len(known) == 4:
@@ -96,16 +102,25 @@ def _cell(grid: tuple[float, ...], value: float, name: str, unit: str) -> tuple[
     lo, hi = grid[0], grid[-1]
     if not lo <= value <= hi:
         by = lo - value if value < lo else value - hi
-        raise PlanError(f"{name} = {value:g} {unit} is outside the library's grid "
-                        f"{lo:g}..{hi:g} {unit} by {by:.4g} {unit}")
+        raise PlanError(
+            f"{name} = {value:g} {unit} is outside the library's grid "
+            f"{lo:g}..{hi:g} {unit} by {by:.4g} {unit}"
+        )
     i = min(max(0, next(n for n, g in enumerate(grid) if g >= value) - 1), len(grid) - 2)
     return i, (value - grid[i]) / (grid[i + 1] - grid[i])
 
 
-def build_library(x0: tuple[float, float], v0: tuple[float, float], counts: tuple[int, int],
-                  tau_s: float, v_contact: tuple[float, float], v_max: float | None,
-                  a_max: float | None, order: int,
-                  progress: Callable[[int, int], None] | None = None) -> PlanLibrary:
+def build_library(
+    x0: tuple[float, float],
+    v0: tuple[float, float],
+    counts: tuple[int, int],
+    tau_s: float,
+    v_contact: tuple[float, float],
+    v_max: float | None,
+    a_max: float | None,
+    order: int,
+    progress: Callable[[int, int], None] | None = None,
+) -> PlanLibrary:
     """Cold-solve the global minimum-time plan at every node of the grid (x0 [m], v0 [m/s]
     ranges with counts[0] x counts[1] nodes). progress(done, total) is called per node."""
 
@@ -120,8 +135,9 @@ def build_library(x0: tuple[float, float], v0: tuple[float, float], counts: tupl
         row: list[Node | None] = []
         for j, v in enumerate(v0s):
             try:
-                plan = plan_ipts(x, v, tau_s, v_contact, v_max, a_max, order,
-                                 probe_orders=False)  # a hole needs no order advice
+                plan = plan_ipts(
+                    x, v, tau_s, v_contact, v_max, a_max, order, probe_orders=False
+                )  # a hole needs no order advice
                 row.append(Node(tuple(given(plan.k, "stage1.k")), plan.t_switch))
             except PlanError as err:  # infeasible here; the file records the hole
                 row.append(None)
@@ -137,17 +153,28 @@ def build_library(x0: tuple[float, float], v0: tuple[float, float], counts: tupl
 def _axis(span: tuple[float, float], count: int, name: str) -> tuple[float, ...]:
     lo, hi = span
     if not (count >= 2 and math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-        raise PlanError(f"library {name} grid needs LO < HI and at least 2 nodes, "
-                        f"got {lo:g}..{hi:g} with {count}")
+        raise PlanError(
+            f"library {name} grid needs LO < HI and at least 2 nodes, "
+            f"got {lo:g}..{hi:g} with {count}"
+        )
     return tuple(lo + (hi - lo) * n / (count - 1) for n in range(count))
 
 
 # -- files ------------------------------------------------------------------------------------
 def library_to_json(lib: PlanLibrary) -> dict[str, object]:
-    return {"schema": SCHEMA, "strategy": "ipts", "order": lib.order, "tau_s": lib.tau_s,
-            "limits": lib.limits.to_json(), "x0": list(lib.x0s), "v0": list(lib.v0s),
-            "nodes": [[None if n is None else {"k": list(n.k), "t_switch": n.t_switch}
-                       for n in row] for row in lib.nodes]}
+    return {
+        "schema": SCHEMA,
+        "strategy": "ipts",
+        "order": lib.order,
+        "tau_s": lib.tau_s,
+        "limits": lib.limits.to_json(),
+        "x0": list(lib.x0s),
+        "v0": list(lib.v0s),
+        "nodes": [
+            [None if n is None else {"k": list(n.k), "t_switch": n.t_switch} for n in row]
+            for row in lib.nodes
+        ],
+    }
 
 
 def library_text(lib: PlanLibrary) -> str:
@@ -183,15 +210,23 @@ def library_from_json(doc: object) -> PlanLibrary:
     lim = doc.get("limits")
     if not isinstance(lim, dict):
         raise PlanError("limits must be an object")
-    lo, hi = (_finite(v, "limits.v_contact")
-              for v in _list(lim.get("v_contact"), 2, "limits.v_contact"))
-    limits = Limits((lo, hi), _optional(lim.get("v_max"), "limits.v_max"),
-                    _optional(lim.get("a_max"), "limits.a_max"))
+    lo, hi = (
+        _finite(v, "limits.v_contact") for v in _list(lim.get("v_contact"), 2, "limits.v_contact")
+    )
+    limits = Limits(
+        (lo, hi),
+        _optional(lim.get("v_max"), "limits.v_max"),
+        _optional(lim.get("a_max"), "limits.a_max"),
+    )
     x0s, v0s = _grid_axis(doc.get("x0"), "x0"), _grid_axis(doc.get("v0"), "v0")
     rows = _list(doc.get("nodes"), len(x0s), "nodes")
-    nodes = tuple(tuple(_node(cell, order, tau_s, x0s[i], v0s[j], f"nodes[{i}][{j}]")
-                        for j, cell in enumerate(_list(row, len(v0s), f"nodes[{i}]")))
-                  for i, row in enumerate(rows))
+    nodes = tuple(
+        tuple(
+            _node(cell, order, tau_s, x0s[i], v0s[j], f"nodes[{i}][{j}]")
+            for j, cell in enumerate(_list(row, len(v0s), f"nodes[{i}]"))
+        )
+        for i, row in enumerate(rows)
+    )
     return PlanLibrary(order, tau_s, limits, x0s, v0s, nodes)
 
 
@@ -204,7 +239,7 @@ def _node(cell: object, order: int, tau_s: float, x0: float, v0: float, name: st
     ts = _finite(cell.get("t_switch"), f"{name}.t_switch")
     if not (ts > 0 and math.isclose(k[0], v0 / x0, rel_tol=1e-9)):
         raise PlanError(f"{name}: k_0 must be v0/x0 = {v0 / x0:g} and t_switch > 0")
-    reached = sum(ki * ts ** n for n, ki in enumerate(k))
+    reached = sum(ki * ts**n for n, ki in enumerate(k))
     if abs(reached * tau_s - 1.0) > SWITCH_TOL:
         raise PlanError(f"{name}: tau(t_switch) = {1 / reached:g} s, not tau_s = {tau_s:g} s")
     return Node(k, ts)

@@ -70,8 +70,12 @@ class Plan:
     def stage(self, t: float) -> int:
         return 1 if float(t) < self.t_switch else 2
 
-    def _split(self, t: Times, first: Callable[[FloatArray], FloatArray],
-               second: Callable[[FloatArray], FloatArray]) -> Times:
+    def _split(
+        self,
+        t: Times,
+        first: Callable[[FloatArray], FloatArray],
+        second: Callable[[FloatArray], FloatArray],
+    ) -> Times:
         ts = np.asarray(t, float)
         one = ts < self.t_switch
         out = np.where(one, first(np.where(one, ts, 0.0)), second(ts))
@@ -108,12 +112,15 @@ class Plan:
         return self._split(t, self.stage1.a, np.zeros_like)
 
 
-def stage1_profile(strategy: str, x0: float, v0: float, c: float | None,
-                   k: Coefficients | None) -> ConstantTauDot | InversePolynomial:
+def stage1_profile(
+    strategy: str, x0: float, v0: float, c: float | None, k: Coefficients | None
+) -> ConstantTauDot | InversePolynomial:
     if strategy in ("ctds", "ctdts"):
         if c is None or not (math.isfinite(c) and c > 0):  # also keeps 1/c defined
-            raise PlanError(f"stage1.c must be a positive tau-dot (with c <= 0 the vehicle "
-                            f"never arrives), got {c!r}")
+            raise PlanError(
+                f"stage1.c must be a positive tau-dot (with c <= 0 the vehicle "
+                f"never arrives), got {c!r}"
+            )
         return ConstantTauDot(x0, v0, c)
     if k is None:
         raise PlanError("stage1.k: ipts needs its coefficients k_0..k_n")
@@ -145,9 +152,17 @@ def check_trigger(x0: float, v0: float) -> None:
         raise PlanError(f"v0 must be a positive closing speed [m/s], got {v0:g}")
 
 
-def make_plan(strategy: str, x0: float, v0: float, tau_s: float | None, limits: Limits, *,
-              c: float | None = None, k: Coefficients | None = None,
-              robust: RobustBox | None = None) -> Plan:
+def make_plan(
+    strategy: str,
+    x0: float,
+    v0: float,
+    tau_s: float | None,
+    limits: Limits,
+    *,
+    c: float | None = None,
+    k: Coefficients | None = None,
+    robust: RobustBox | None = None,
+) -> Plan:
     """Derive every figure of a plan from its parameters (used by planners and the loader)."""
     if strategy not in STRATEGIES:
         raise PlanError(f"strategy must be one of {', '.join(STRATEGIES)}, got {strategy!r}")
@@ -162,11 +177,25 @@ def make_plan(strategy: str, x0: float, v0: float, tau_s: float | None, limits: 
         v_contact = float(profile.v(t_switch))
         duration = t_switch - hold
     if not (math.isfinite(duration) and 0 < t_switch <= duration):
-        raise PlanError(f"stage1: switch at {t_switch:g} s and contact at {duration:g} s "
-                        "after the trigger; both must be positive and in that order")
+        raise PlanError(
+            f"stage1: switch at {t_switch:g} s and contact at {duration:g} s "
+            "after the trigger; both must be positive and in that order"
+        )
     peaks = Peaks(peak_abs(profile.v, t_switch), peak_abs(profile.a, t_switch))
-    return Plan(strategy, x0, v0, tau_s, c, None if k is None else tuple(map(float, k)),
-                float(t_switch), float(duration), v_contact, limits, peaks, robust)
+    return Plan(
+        strategy,
+        x0,
+        v0,
+        tau_s,
+        c,
+        None if k is None else tuple(map(float, k)),
+        float(t_switch),
+        float(duration),
+        v_contact,
+        limits,
+        peaks,
+        robust,
+    )
 
 
 def checked_tau_s(tau_s: float | None) -> float:

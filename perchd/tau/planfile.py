@@ -24,12 +24,24 @@ T = TypeVar("T")
 
 
 def plan_to_json(plan: Plan) -> dict[str, Any]:
-    stage1: dict[str, Any] = ({"c": plan.c} if plan.strategy in ("ctds", "ctdts")
-                              else {"k": list(given(plan.k, "stage1.k"))})
-    doc: dict[str, Any] = {"schema": SCHEMA, "strategy": plan.strategy, "x0": plan.x0, "v0": plan.v0,
-           "tau_s": plan.tau_s, "stage1": stage1, "t_switch": plan.t_switch,
-           "duration": plan.duration, "v_contact": plan.v_contact,
-           "limits": plan.limits.to_json(), "peaks": {"v": plan.peaks.v, "a": plan.peaks.a}}
+    stage1: dict[str, Any] = (
+        {"c": plan.c}
+        if plan.strategy in ("ctds", "ctdts")
+        else {"k": list(given(plan.k, "stage1.k"))}
+    )
+    doc: dict[str, Any] = {
+        "schema": SCHEMA,
+        "strategy": plan.strategy,
+        "x0": plan.x0,
+        "v0": plan.v0,
+        "tau_s": plan.tau_s,
+        "stage1": stage1,
+        "t_switch": plan.t_switch,
+        "duration": plan.duration,
+        "v_contact": plan.v_contact,
+        "limits": plan.limits.to_json(),
+        "peaks": {"v": plan.peaks.v, "a": plan.peaks.a},
+    }
     if plan.robust is not None:
         doc["robust"] = {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])}
     doc.update(plan.extra)
@@ -52,8 +64,9 @@ def load_plan(path: str | Path, text: str | None = None) -> Plan:
     return load_json(path, plan_from_json, "plan file", text)
 
 
-def load_json(path: str | Path, parse: Callable[[object], T], what: str,
-              text: str | None = None) -> T:
+def load_json(
+    path: str | Path, parse: Callable[[object], T], what: str, text: str | None = None
+) -> T:
     """parse(JSON document of file `path`), every error one PlanError naming the file."""
     if text is None:  # one bounded regular-file rule for the CLI and the service
         text = read_regular(path, "", PlanError)  # "PATH: why", as below
@@ -84,15 +97,35 @@ def plan_from_json(doc: object) -> Plan:
     c = _number(stage1, "c", "stage1.c") if strategy != "ipts" else None
     k = _numbers(stage1, "k", "stage1.k") if strategy == "ipts" else None
     tau_s = None if strategy == "ctds" else _number(doc, "tau_s")
-    plan = make_plan(strategy, _number(doc, "x0"), _number(doc, "v0"), tau_s, _limits(doc),
-                     c=c, k=k, robust=_robust(doc))
+    plan = make_plan(
+        strategy,
+        _number(doc, "x0"),
+        _number(doc, "v0"),
+        tau_s,
+        _limits(doc),
+        c=c,
+        k=k,
+        robust=_robust(doc),
+    )
     _agree(doc, plan)
     extra = {key: doc[key] for key in doc.keys() & OPTIONAL_EXTRA}
     return Plan(**{**plan.__dict__, "extra": extra}) if extra else plan
 
 
-KNOWN = {"schema", "strategy", "x0", "v0", "tau_s", "stage1", "t_switch", "duration",
-         "v_contact", "limits", "peaks", "robust"}
+KNOWN = {
+    "schema",
+    "strategy",
+    "x0",
+    "v0",
+    "tau_s",
+    "stage1",
+    "t_switch",
+    "duration",
+    "v_contact",
+    "limits",
+    "peaks",
+    "robust",
+}
 OPTIONAL_EXTRA = {"certificate"}
 """Documented keys carried through unchecked (docs/contracts.md §1)."""
 
@@ -114,8 +147,9 @@ def _agree(doc: dict[str, Any], plan: Plan) -> None:
         raise PlanError(why)
 
 
-def _field(doc: dict[str, Any], key: str, kind: type | tuple[type, ...],
-           name: str | None = None) -> Any:
+def _field(
+    doc: dict[str, Any], key: str, kind: type | tuple[type, ...], name: str | None = None
+) -> Any:
     if key not in doc:
         raise PlanError(f"{name or key}: missing")
     value = doc[key]
@@ -128,8 +162,9 @@ def _field(doc: dict[str, Any], key: str, kind: type | tuple[type, ...],
 def _number(doc: dict[str, Any], key: str, name: str | None = None) -> float:
     value = _field(doc, key, (int, float), name or key)
     if isinstance(value, int) and abs(value) >= 1e308:  # beyond a float
-        raise PlanError(f"{name or key}: must be finite, got an integer of "
-                        f"{len(str(abs(value)))} digits")
+        raise PlanError(
+            f"{name or key}: must be finite, got an integer of {len(str(abs(value)))} digits"
+        )
     if not math.isfinite(value):
         raise PlanError(f"{name or key}: must be finite, got {value!r}")
     return float(value)
@@ -139,16 +174,19 @@ def _numbers(doc: dict[str, Any], key: str, name: str) -> list[float]:
 
     values = _field(doc, key, list, name)
     if not 2 <= len(values) <= MAX_ORDER + 1:
-        raise PlanError(f"{name}: expected 2..{MAX_ORDER + 1} coefficients k_0..k_n, "
-                        f"got {len(values)}")
+        raise PlanError(
+            f"{name}: expected 2..{MAX_ORDER + 1} coefficients k_0..k_n, got {len(values)}"
+        )
     return [_number({"v": v}, "v", f"{name}[{i}]") for i, v in enumerate(values)]
 
 
 def _limits(doc: dict[str, Any]) -> Limits:
     lim = _field(doc, "limits", dict)
     pair = _numbers_pair(lim, "v_contact", "limits.v_contact")
-    optional = {k: None if lim.get(k) is None else _number(lim, k, f"limits.{k}")
-                for k in ("v_max", "a_max")}
+    optional = {
+        k: None if lim.get(k) is None else _number(lim, k, f"limits.{k}")
+        for k in ("v_max", "a_max")
+    }
     return Limits(pair, **optional)
 
 

@@ -62,7 +62,7 @@ class ConstantTauDot:
     @overload
     def a(self, t: FloatArray) -> FloatArray: ...
     def a(self, t: Times) -> Times:
-        return self.v0 ** 2 / self.x0 * (1.0 - self.c) * self._base(t) ** (1.0 / self.c - 2.0)
+        return self.v0**2 / self.x0 * (1.0 - self.c) * self._base(t) ** (1.0 / self.c - 2.0)
 
 
 @dataclass(frozen=True)
@@ -80,13 +80,15 @@ class InversePolynomial:
         return p
 
     def _dp(self, t: Times) -> Times:
-        dp: Times = np.polynomial.polynomial.polyval(np.asarray(t, float),
-                                                     np.polynomial.polynomial.polyder(self.k))
+        dp: Times = np.polynomial.polynomial.polyval(
+            np.asarray(t, float), np.polynomial.polynomial.polyder(self.k)
+        )
         return dp
 
     def _P(self, t: Times) -> Times:
-        big_p: Times = np.polynomial.polynomial.polyval(np.asarray(t, float),
-                                                        np.polynomial.polynomial.polyint(self.k))
+        big_p: Times = np.polynomial.polynomial.polyval(
+            np.asarray(t, float), np.polynomial.polynomial.polyint(self.k)
+        )
         return big_p
 
     @overload
@@ -123,10 +125,16 @@ class InversePolynomial:
         None if tau never gets there (or passes through infinity first)."""
         poly = np.array(self.k, float)
         poly[0] -= 1.0 / tau_s
-        candidates = [r.real for r in np.polynomial.polynomial.polyroots(poly)
-                      if abs(r.imag) < 1e-9 and r.real > 0]
-        zeros = [r.real for r in np.polynomial.polynomial.polyroots(self.k)
-                 if abs(r.imag) < 1e-9 and r.real > 0]
+        candidates = [
+            r.real
+            for r in np.polynomial.polynomial.polyroots(poly)
+            if abs(r.imag) < 1e-9 and r.real > 0
+        ]
+        zeros = [
+            r.real
+            for r in np.polynomial.polynomial.polyroots(self.k)
+            if abs(r.imag) < 1e-9 and r.real > 0
+        ]
         if not candidates:
             return None
         t_s = min(candidates)

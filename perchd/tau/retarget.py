@@ -29,7 +29,6 @@ def retarget(plan: Plan, x0: float, v0: float, library: PlanLibrary | None = Non
 
     lim = plan.limits
     if plan.robust is not None:
-
         k = retarget_k(given(plan.k, "stage1.k")[1:], Box(*plan.robust), x0, v0)
         return make_plan("ipts", x0, v0, plan.tau_s, lim, k=k, robust=plan.robust)
     if library is not None:
@@ -40,7 +39,15 @@ def retarget(plan: Plan, x0: float, v0: float, library: PlanLibrary | None = Non
     if plan.strategy == "ctds":
         return plan_ctds(x0, v0, given(plan.c, "stage1.c"), lim)
     if plan.strategy == "ctdts":
-        return plan_ctdts(x0, v0, given(plan.tau_s, "tau_s"), plan.v_contact, lim.a_max,
-                          lim.v_max, lim.v_contact)
-    return plan_ipts(x0, v0, given(plan.tau_s, "tau_s"), lim.v_contact, lim.v_max, lim.a_max,
-                     given(plan.order, "stage1.k"))
+        return plan_ctdts(
+            x0, v0, given(plan.tau_s, "tau_s"), plan.v_contact, lim.a_max, lim.v_max, lim.v_contact
+        )
+    return plan_ipts(
+        x0,
+        v0,
+        given(plan.tau_s, "tau_s"),
+        lim.v_contact,
+        lim.v_max,
+        lim.a_max,
+        given(plan.order, "stage1.k"),
+    )

@@ -30,8 +30,8 @@ from perchd.tau.profiles import Coefficients, FloatArray, InversePolynomial
 Progress = Callable[[int, int], None]
 """progress(done, total): steps of a long search done so far."""
 
-T_SAMPLES = 97          # time samples per trajectory in the search (certifier bounds between)
-SEARCH_MARGIN = 2e-3    # relative slack the search keeps from every limit
+T_SAMPLES = 97  # time samples per trajectory in the search (certifier bounds between)
+SEARCH_MARGIN = 2e-3  # relative slack the search keeps from every limit
 
 
 @dataclass(frozen=True)
@@ -56,21 +56,24 @@ class RobustResult:
     certificate: Certificate
 
 
-def admissible(k: Coefficients, k0s: FloatArray, lim: RobustLimits,
-               margin: float = SEARCH_MARGIN) -> tuple[FloatArray, FloatArray]:
+def admissible(
+    k: Coefficients, k0s: FloatArray, lim: RobustLimits, margin: float = SEARCH_MARGIN
+) -> tuple[FloatArray, FloatArray]:
     """Sampled (L, U) [m] of admissible |x0| for each k_0 (nan where tau misses tau_s)."""
 
     lo, hi = np.full(len(k0s), np.nan), np.full(len(k0s), np.nan)
     u = np.linspace(0.0, 1.0, T_SAMPLES)
     for j, k0 in enumerate(k0s):
-        unit = InversePolynomial(-1.0, (float(k0), *map(float, k)))   # |x0| = 1 m
+        unit = InversePolynomial(-1.0, (float(k0), *map(float, k)))  # |x0| = 1 m
         ts = unit.first_switch(lim.tau_s)
         if ts is None:
             continue
         f1, f2 = unit.v(u * ts), unit.a(u * ts)
         vc = f1[-1]
         lo[j] = lim.v_contact[0] / vc * (1 + margin)
-        hi[j] = min(lim.v_contact[1] / vc, lim.v_max / f1.max(), lim.a_max / np.abs(f2).max()) * (1 - margin)
+        hi[j] = min(lim.v_contact[1] / vc, lim.v_max / f1.max(), lim.a_max / np.abs(f2).max()) * (
+            1 - margin
+        )
     return lo, hi
 
 
@@ -78,8 +81,10 @@ def box_margin(k: Coefficients, box: Box, lim: RobustLimits, n_edge: int = 16) -
     """Worst relative margin over sampled box-boundary states (< 0: some limit broken)."""
     xs = np.linspace(box.x0[0], box.x0[1], n_edge)
     vs = np.linspace(box.v0[0], box.v0[1], n_edge)
-    pts = np.concatenate([np.stack([xs, np.full_like(xs, v)], 1) for v in box.v0]
-                         + [np.stack([np.full_like(vs, x), vs], 1) for x in box.x0])
+    pts = np.concatenate(
+        [np.stack([xs, np.full_like(xs, v)], 1) for v in box.v0]
+        + [np.stack([np.full_like(vs, x), vs], 1) for x in box.x0]
+    )
     s, k0s = -pts[:, 0], pts[:, 1] / pts[:, 0]
     lo, hi = admissible(k, k0s, lim, margin=0.0)
     if np.isnan(lo).any() or k0s.min() <= 1 / lim.tau_s:
@@ -139,12 +144,13 @@ def grid_box(k: Coefficients, lim: RobustLimits, dom: SearchDomain) -> Box | Non
     return Box((-s[i1 - 1], -s[i0]), (v[j0], v[j1 - 1]))
 
 
-def _box_containing(mask: NDArray[np.bool_], s: FloatArray, v: FloatArray,
-                    state: tuple[float, float]) -> Box | None:
+def _box_containing(
+    mask: NDArray[np.bool_], s: FloatArray, v: FloatArray, state: tuple[float, float]
+) -> Box | None:
     """Grow a box cell by cell around the grid point nearest `state` while it stays feasible."""
     i = int(np.clip(np.searchsorted(s, -state[0]) - 1, 0, len(s) - 2))
     j = int(np.clip(np.searchsorted(v, state[1]) - 1, 0, len(v) - 2))
-    i0, i1, j0, j1 = i, i + 2, j, j + 2       # the grid cell holding the state
+    i0, i1, j0, j1 = i, i + 2, j, j + 2  # the grid cell holding the state
     if not mask[i0:i1, j0:j1].all():
         return None
     grown = True
@@ -173,8 +179,9 @@ def _score(k: FloatArray, lim: RobustLimits, dom: SearchDomain) -> float:
     return float(max(lo[0] + x0, -x0 - hi[0], 0.0)) + 1e-3
 
 
-def polish(k: Coefficients, box: Box, lim: RobustLimits, dom: SearchDomain,
-           evals: int | None = None) -> tuple[FloatArray, Box]:
+def polish(
+    k: Coefficients, box: Box, lim: RobustLimits, dom: SearchDomain, evals: int | None = None
+) -> tuple[FloatArray, Box]:
     """Grow the box and adjust k together (Nelder-Mead; sampled boundary must keep a margin)."""
 
     n = len(k)
@@ -186,21 +193,32 @@ def polish(k: Coefficients, box: Box, lim: RobustLimits, dom: SearchDomain,
     def cost(z: FloatArray) -> float:
         kk, b = unpack(z)
         if not (b.x0[0] < b.x0[1] < 0 < b.v0[0] < b.v0[1]) or (
-                dom.contains and not (b.x0[0] <= dom.contains[0] <= b.x0[1]
-                                      and b.v0[0] <= dom.contains[1] <= b.v0[1])):
+            dom.contains
+            and not (
+                b.x0[0] <= dom.contains[0] <= b.x0[1] and b.v0[0] <= dom.contains[1] <= b.v0[1]
+            )
+        ):
             return 1.0
         return -b.area if box_margin(kk, b, lim) >= SEARCH_MARGIN else 1.0
 
-    res = minimize(cost, z0, method="Nelder-Mead",
-                   options={"maxfev": evals or 600 * (n + 4), "xatol": 1e-6, "fatol": 1e-7, "adaptive": True})
+    res = minimize(
+        cost,
+        z0,
+        method="Nelder-Mead",
+        options={"maxfev": evals or 600 * (n + 4), "xatol": 1e-6, "fatol": 1e-7, "adaptive": True},
+    )
     z = res.x if res.fun < cost(z0) else z0
     kk, b = unpack(z)
     return np.asarray(kk), b
 
 
-def shrink_until_certified(k: Coefficients, box: Box, lim: RobustLimits,
-                           about: tuple[float, float] | None = None,
-                           steps: int = 40) -> RobustResult:
+def shrink_until_certified(
+    k: Coefficients,
+    box: Box,
+    lim: RobustLimits,
+    about: tuple[float, float] | None = None,
+    steps: int = 40,
+) -> RobustResult:
     """Largest (within 0.1 %) shrink of `box` about `about` (default its centre) that
     `certify_box` proves."""
     cert = lim.certify(k, box)
@@ -221,10 +239,19 @@ def shrink_until_certified(k: Coefficients, box: Box, lim: RobustLimits,
     return RobustResult(tuple(map(float, k)), best[0], best[1])
 
 
-def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(), *,
-                seed: int = 0, maxiter: int = 60, popsize: int = 12, k_bound: float = 2.0,
-                start: RobustResult | None = None, polish_evals: int | None = None,
-                progress: Progress | None = None) -> RobustResult:
+def largest_box(
+    order: int,
+    lim: RobustLimits,
+    dom: SearchDomain = SearchDomain(),
+    *,
+    seed: int = 0,
+    maxiter: int = 60,
+    popsize: int = 12,
+    k_bound: float = 2.0,
+    start: RobustResult | None = None,
+    polish_evals: int | None = None,
+    progress: Progress | None = None,
+) -> RobustResult:
     """k_1..k_n (n = order) and the largest certified box for them (see module docstring).
     `start` (e.g. the order n-1 result, padded with zeros) seeds the search, so a higher
     order never does worse than the lower one it contains. progress(generation, maxiter)
@@ -234,9 +261,18 @@ def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(
         raise PlanError(f"order must be >= 1, got {order}")
     bounds = [(-3.0, 1.0)] + [(-k_bound, k_bound)] * (order - 1)
     guess = None if start is None else np.pad(start.k, (0, order - len(start.k)))[:order]
-    de = differential_evolution(_score, bounds, args=(lim, dom), seed=seed, maxiter=maxiter,
-                                popsize=popsize, tol=1e-8, polish=False, x0=guess,
-                                callback=_generations(progress, maxiter))
+    de = differential_evolution(
+        _score,
+        bounds,
+        args=(lim, dom),
+        seed=seed,
+        maxiter=maxiter,
+        popsize=popsize,
+        tol=1e-8,
+        polish=False,
+        x0=guess,
+        callback=_generations(progress, maxiter),
+    )
     candidates = [(de.x, grid_box(de.x, lim, dom))]
     if start is not None:
         candidates.append((guess, start.box))
@@ -253,8 +289,15 @@ def largest_box(order: int, lim: RobustLimits, dom: SearchDomain = SearchDomain(
     return max(found, key=lambda r: r.box.area)
 
 
-def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
-              maxiter: int = 60, progress: Progress | None = None) -> RobustResult:
+def fastest_k(
+    order: int,
+    box: Box,
+    lim: RobustLimits,
+    *,
+    seed: int = 0,
+    maxiter: int = 60,
+    progress: Progress | None = None,
+) -> RobustResult:
     """k_1..k_n certified over `box` with the least worst-case duration: first the k with the
     widest sampled margin over the box (differential evolution), then the worst duration
     t_s(k_max) + |tau_s| minimised under a sampled margin (COBYLA), then certified.
@@ -264,20 +307,31 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
         raise PlanError(f"order must be >= 1, got {order}")
     ratio, k0 = contact_ratio(box)
     if ratio > lim.v_contact[1] / lim.v_contact[0]:
-        raise PlanError(f"no k of any order holds x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 "
-                        f"{box.v0[0]:g}..{box.v0[1]:g} m/s: along v0/x0 = {k0:.4g}/s the box spans "
-                        f"|x0| by a factor {ratio:.4f} > V_u/V_l = "
-                        f"{lim.v_contact[1] / lim.v_contact[0]:.4f}, and contact speed scales with |x0|")
+        raise PlanError(
+            f"no k of any order holds x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 "
+            f"{box.v0[0]:g}..{box.v0[1]:g} m/s: along v0/x0 = {k0:.4g}/s the box spans "
+            f"|x0| by a factor {ratio:.4f} > V_u/V_l = "
+            f"{lim.v_contact[1] / lim.v_contact[0]:.4f}, and contact speed scales with |x0|"
+        )
     k_max = box.k0_range[1]
     bounds = [(-3.0, 1.0)] + [(-2.0, 2.0)] * (order - 1)
-    de = differential_evolution(lambda k: -box_margin(k, box, lim), bounds, seed=seed,
-                                maxiter=maxiter, popsize=12, tol=1e-8, polish=False,
-                                callback=_generations(progress, maxiter))
+    de = differential_evolution(
+        lambda k: -box_margin(k, box, lim),
+        bounds,
+        seed=seed,
+        maxiter=maxiter,
+        popsize=12,
+        tol=1e-8,
+        polish=False,
+        callback=_generations(progress, maxiter),
+    )
     if -de.fun < SEARCH_MARGIN:
         cert = lim.certify(de.x, box)
-        raise PlanError(f"no order-{order} k holds over x0 {box.x0[0]:g}..{box.x0[1]:g} m, "
-                        f"v0 {box.v0[0]:g}..{box.v0[1]:g} m/s: the best one breaks a limit by "
-                        f"{-100 * de.fun:.3g} % ({cert.reason})")
+        raise PlanError(
+            f"no order-{order} k holds over x0 {box.x0[0]:g}..{box.x0[1]:g} m, "
+            f"v0 {box.v0[0]:g}..{box.v0[1]:g} m/s: the best one breaks a limit by "
+            f"{-100 * de.fun:.3g} % ({cert.reason})"
+        )
 
     def worst(k: FloatArray) -> float:
         ts, _ = first_switch(np.asarray(k), k_max, lim.tau_s)
@@ -286,8 +340,13 @@ def fastest_k(order: int, box: Box, lim: RobustLimits, *, seed: int = 0,
     best = de.x
     for margin in (SEARCH_MARGIN, 4 * SEARCH_MARGIN, 16 * SEARCH_MARGIN):
         cons = {"type": "ineq", "fun": lambda k, m=margin: box_margin(k, box, lim) - m}
-        res = minimize(worst, de.x, method="COBYLA", constraints=[cons],
-                       options={"maxiter": 500 * order, "rhobeg": 0.05})
+        res = minimize(
+            worst,
+            de.x,
+            method="COBYLA",
+            constraints=[cons],
+            options={"maxiter": 500 * order, "rhobeg": 0.05},
+        )
         k = res.x if box_margin(res.x, box, lim) >= 0 else de.x
         cert = lim.certify(k, box)
         if cert.certified:
@@ -307,6 +366,7 @@ def _generations(progress: Progress | None, maxiter: int) -> Callable[[Any], Non
     def callback(intermediate_result: Any) -> None:  # scipy passes the result by this name
         done[0] += 1
         progress(done[0], maxiter)
+
     return callback
 
 
@@ -327,6 +387,8 @@ def retarget_k(k: Coefficients, box: Box, x0: float, v0: float) -> FloatArray:
     """(k_0, k_1..k_n) for a measured trigger state: k_1..k_n kept, k_0 = v0/x0.
     PlanError if (x0, v0) lies outside the certified box."""
     if not box.contains(x0, v0):
-        raise PlanError(f"trigger state x0 = {x0:.3f} m, v0 = {v0:.3f} m/s is outside the "
-                        f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} m/s")
+        raise PlanError(
+            f"trigger state x0 = {x0:.3f} m, v0 = {v0:.3f} m/s is outside the "
+            f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} m/s"
+        )
     return np.concatenate(([v0 / x0], np.asarray(k, float)))

@@ -14,13 +14,15 @@ from perchd.tau.plan import Plan, given, make_plan
 from perchd.tau.profiles import Coefficients
 from perchd.tau.robust import RobustLimits, RobustResult, retarget_k
 
-METHOD = ("certify_box: monotone t_s in k0, mean-value enclosures on adaptive k0 x t cells "
-          "(perchd/tau/certify.py)")
+METHOD = (
+    "certify_box: monotone t_s in k0, mean-value enclosures on adaptive k0 x t cells "
+    "(perchd/tau/certify.py)"
+)
 
 
 def _inward(box: Box, digits: int = 4) -> Box:
     """The box with edges rounded inward (a sub-box of a certified box is certified)."""
-    f: int = 10 ** digits
+    f: int = 10**digits
 
     def up(e: float) -> float:
         return math.ceil(round(e * f, 6)) / f
@@ -31,16 +33,30 @@ def _inward(box: Box, digits: int = 4) -> Box:
     return Box((up(box.x0[0]), down(box.x0[1])), (up(box.v0[0]), down(box.v0[1])))
 
 
-def robust_plan(k: Coefficients, box: Box, lim: RobustLimits, x0: float, v0: float,
-                extra: dict[str, Any] | None = None) -> Plan:
+def robust_plan(
+    k: Coefficients,
+    box: Box,
+    lim: RobustLimits,
+    x0: float,
+    v0: float,
+    extra: dict[str, Any] | None = None,
+) -> Plan:
     """The Plan (perchd.tau.make_plan) of k flown from (x0, v0), carrying its certified box."""
-    plan = make_plan("ipts", x0, v0, lim.tau_s, Limits(lim.v_contact, lim.v_max, lim.a_max),
-                     k=retarget_k(k, box, x0, v0), robust=(box.x0, box.v0))
+    plan = make_plan(
+        "ipts",
+        x0,
+        v0,
+        lim.tau_s,
+        Limits(lim.v_contact, lim.v_max, lim.a_max),
+        k=retarget_k(k, box, x0, v0),
+        robust=(box.x0, box.v0),
+    )
     return replace(plan, extra=extra) if extra else plan
 
 
-def certified_plan(result: RobustResult, lim: RobustLimits,
-                   nominal: tuple[float, float] | None = None) -> Plan:
+def certified_plan(
+    result: RobustResult, lim: RobustLimits, nominal: tuple[float, float] | None = None
+) -> Plan:
     """The plan file's Plan for a robust result, flown from `nominal` (default: box centre),
     its box rounded inward to 0.1 mm, re-certified, and the certificate in plan.extra."""
     box = _inward(result.box)
@@ -48,10 +64,14 @@ def certified_plan(result: RobustResult, lim: RobustLimits,
     if not cert.certified:
         raise PlanError(f"rounded box lost its certificate: {cert.reason}")
     x0, v0 = nominal or (round(sum(box.x0) / 2, 4), round(sum(box.v0) / 2, 4))
-    record = {"method": METHOD, "area": box.area, "v_peak": cert.bounds["v_peak"],
-              "a_peak": cert.bounds["a_peak"],
-              "v_contact": [float(v) for v in cert.bounds["v_contact"]],
-              "duration": [float(d) for d in cert.duration]}
+    record = {
+        "method": METHOD,
+        "area": box.area,
+        "v_peak": cert.bounds["v_peak"],
+        "a_peak": cert.bounds["a_peak"],
+        "v_contact": [float(v) for v in cert.bounds["v_contact"]],
+        "duration": [float(d) for d in cert.duration],
+    }
     return robust_plan(result.k, box, lim, x0, v0, {"certificate": record})
 
 
@@ -73,6 +93,8 @@ def check_plan(plan: Plan) -> Certificate:
     lo, hi = lim.v_contact
     cert = RobustLimits(plan.tau_s, (lo, hi), lim.v_max, lim.a_max).certify(k[1:], box)
     if not cert.certified:
-        raise PlanError(f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} "
-                        f"m/s {cert.reason}")
+        raise PlanError(
+            f"robust box x0 {box.x0[0]:g}..{box.x0[1]:g} m, v0 {box.v0[0]:g}..{box.v0[1]:g} "
+            f"m/s {cert.reason}"
+        )
     return cert

@@ -17,16 +17,22 @@ TOL = 1e-6  # relative slack for a limit met with equality by an optimiser
 def violations(plan: Plan) -> list[str]:
     """Each broken limit in words, naming the limit and by how much (empty: all met)."""
     found = []
-    for name, peak, limit, unit in (("a_max", plan.peaks.a, plan.limits.a_max, "m/s^2"),
-                                    ("v_max", plan.peaks.v, plan.limits.v_max, "m/s")):
+    for name, peak, limit, unit in (
+        ("a_max", plan.peaks.a, plan.limits.a_max, "m/s^2"),
+        ("v_max", plan.peaks.v, plan.limits.v_max, "m/s"),
+    ):
         if limit is not None and peak > limit * (1 + TOL):
-            found.append(f"{plan.strategy}: peak {name[0]} = {peak:.4f} {unit} exceeds "
-                         f"{name} = {limit:g} {unit} by {peak - limit:.4f} {unit} "
-                         f"({100 * (peak / limit - 1):.1f} %)")
+            found.append(
+                f"{plan.strategy}: peak {name[0]} = {peak:.4f} {unit} exceeds "
+                f"{name} = {limit:g} {unit} by {peak - limit:.4f} {unit} "
+                f"({100 * (peak / limit - 1):.1f} %)"
+            )
     lo, hi = plan.limits.v_contact
     if not lo - TOL <= plan.v_contact <= hi + TOL:
-        found.append(f"{plan.strategy}: contact speed {plan.v_contact:.4f} m/s is outside "
-                     f"v_contact [{lo:g}, {hi:g}] m/s")
+        found.append(
+            f"{plan.strategy}: contact speed {plan.v_contact:.4f} m/s is outside "
+            f"v_contact [{lo:g}, {hi:g}] m/s"
+        )
     return found + _robust_violations(plan)
 
 
@@ -45,8 +51,16 @@ def verify_plan(plan: Plan) -> Plan:
     """The plan itself, or PlanError naming its first fault: a figure its parameters do not
     give (re-derived as the loader does), or a limit it breaks (what `perchd plan check`
     reports infeasible)."""
-    derived = make_plan(plan.strategy, plan.x0, plan.v0, plan.tau_s, plan.limits,
-                        c=plan.c, k=plan.k, robust=plan.robust)
+    derived = make_plan(
+        plan.strategy,
+        plan.x0,
+        plan.v0,
+        plan.tau_s,
+        plan.limits,
+        c=plan.c,
+        k=plan.k,
+        robust=plan.robust,
+    )
     why = disagreement(figures(plan), derived)
     if why is not None:
         raise PlanError(why)
@@ -88,8 +102,23 @@ class Report:
 def report(plan: Plan) -> Report:
     bound = plan_bound(plan)
     broken = violations(plan)
-    robust = None if plan.robust is None else {"x0": list(plan.robust[0]),
-                                               "v0": list(plan.robust[1])}
-    return Report(plan.strategy, plan.order, plan.x0, plan.v0, plan.tau_s, plan.duration,
-                  plan.t_switch, plan.v_contact, plan.peaks.v, plan.peaks.a, bound,
-                  plan.duration / bound, not broken, tuple(broken), robust)
+    robust = (
+        None if plan.robust is None else {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])}
+    )
+    return Report(
+        plan.strategy,
+        plan.order,
+        plan.x0,
+        plan.v0,
+        plan.tau_s,
+        plan.duration,
+        plan.t_switch,
+        plan.v_contact,
+        plan.peaks.v,
+        plan.peaks.a,
+        bound,
+        plan.duration / bound,
+        not broken,
+        tuple(broken),
+        robust,
+    )

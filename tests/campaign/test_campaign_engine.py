@@ -28,13 +28,30 @@ WAIT_S = 240.0
 
 
 def campaign(table: Path, *extra: str) -> list[str]:
-    return [sys.executable, "-m", "perchd", "sim", "--campaign", BOX, "--flights", FLIGHTS,
-            "--seed", "5", "--gust", "0.2", "--table", str(table), "--json", *extra]
+    return [
+        sys.executable,
+        "-m",
+        "perchd",
+        "sim",
+        "--campaign",
+        BOX,
+        "--flights",
+        FLIGHTS,
+        "--seed",
+        "5",
+        "--gust",
+        "0.2",
+        "--table",
+        str(table),
+        "--json",
+        *extra,
+    ]
 
 
 def run(table: Path, *extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run(campaign(table, *extra), capture_output=True, text=True,
-                          timeout=WAIT_S, cwd=ROOT)
+    return subprocess.run(
+        campaign(table, *extra), capture_output=True, text=True, timeout=WAIT_S, cwd=ROOT
+    )
 
 
 def flights(table: Path) -> list[dict]:
@@ -51,8 +68,9 @@ def start(table: Path, *extra: str) -> subprocess.Popen:
     """The campaign in the background; its stderr in a file beside the table (a pipe
     nobody reads while waiting could fill and stall it)."""
     with open(table.with_name("stderr.txt"), "w") as err:
-        return subprocess.Popen(campaign(table, *extra), stdout=subprocess.PIPE,
-                                stderr=err, text=True, cwd=ROOT)
+        return subprocess.Popen(
+            campaign(table, *extra), stdout=subprocess.PIPE, stderr=err, text=True, cwd=ROOT
+        )
 
 
 def finish(proc: subprocess.Popen, table: Path) -> tuple[str, str]:
@@ -91,8 +109,7 @@ def reference(tmp_path_factory) -> list[dict]:
 
 
 @pytest.mark.parametrize("workers", ["1", "2"])
-def test_the_same_seed_gives_the_same_table_on_any_number_of_workers(tmp_path, reference,
-                                                                     workers):
+def test_the_same_seed_gives_the_same_table_on_any_number_of_workers(tmp_path, reference, workers):
     table = tmp_path / "t.parquet"
     done = run(table, "--cluster", f"local:{workers}")
     assert done.returncode in (0, 1), done.stderr
@@ -165,8 +182,8 @@ def test_an_unreachable_scheduler_is_one_line_and_leaves_nothing(tmp_path):
 
 
 def test_without_dask_a_scheduler_address_names_the_extra(monkeypatch):
-    from perchd.core.errors import ConfigError
     from perchd.campaign import engine
+    from perchd.core.errors import ConfigError
 
     monkeypatch.setattr(engine, "have_dask", lambda: False)
     with pytest.raises(ConfigError, match=r"pip install 'perchd\[cluster\]'"):

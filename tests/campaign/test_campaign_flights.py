@@ -10,9 +10,6 @@ import numpy as np
 import pytest
 from simflight import Sim  # the closed-loop tests' own simulated flight
 
-from perchd.core.errors import ConfigError
-from perchd.flight.config import FlightConfig, SurfaceConfig, TriggerPolicy
-from perchd.logs.flightlog import read_log
 from perchd.campaign.flights import (
     COLUMNS,
     FlightSpec,
@@ -28,6 +25,9 @@ from perchd.campaign.flights import (
     summarize,
     write_table,
 )
+from perchd.core.errors import ConfigError
+from perchd.flight.config import FlightConfig, SurfaceConfig, TriggerPolicy
+from perchd.logs.flightlog import read_log
 from perchd.tau import load_plan, retarget
 
 PLANS = Path(__file__).parents[2] / "plans"
@@ -73,21 +73,27 @@ def test_random_trigger_states_stay_in_their_ranges_and_a_seed_repeats_them():
 
 
 def test_without_gusts_no_flight_is_kicked():
-    assert all(s.gust_dv == (0.0, 0.0, 0.0) and s.gust_s == 0.0
-               for s in random_specs(Spread((-3.4, -2.8), (1.0, 2.0)), 20, 2.0))
+    assert all(
+        s.gust_dv == (0.0, 0.0, 0.0) and s.gust_s == 0.0
+        for s in random_specs(Spread((-3.4, -2.8), (1.0, 2.0)), 20, 2.0)
+    )
 
 
-@pytest.mark.parametrize("kwargs, words", [
-    ({"x0": (-2.8, -3.4)}, "--x0 -2.8 -3.4: LO must not exceed HI (by 0.6)"),
-    ({"x0": (-1.0, 0.5)}, "a trigger gap must be < 0 m"),
-    ({"v0": (0.0, 1.0)}, "a closing speed must be > 0 m/s"),
-    ({"gust_mps": 2.5}, "--gust 2.5 m/s is outside 0..2 m/s"),
-    ({"seed": -1}, "--seed -1: must be >= 0"),
-])
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        ({"x0": (-2.8, -3.4)}, "--x0 -2.8 -3.4: LO must not exceed HI (by 0.6)"),
+        ({"x0": (-1.0, 0.5)}, "a trigger gap must be < 0 m"),
+        ({"v0": (0.0, 1.0)}, "a closing speed must be > 0 m/s"),
+        ({"gust_mps": 2.5}, "--gust 2.5 m/s is outside 0..2 m/s"),
+        ({"seed": -1}, "--seed -1: must be >= 0"),
+    ],
+)
 def test_a_bad_spread_is_one_error_naming_the_option(kwargs, words):
     base = {"x0": (-3.4, -2.8), "v0": (1.0, 2.0)}
-    with pytest.raises(ConfigError, match=words.replace(".", r"\.").replace("(", r"\(")
-                       .replace(")", r"\)")):
+    with pytest.raises(
+        ConfigError, match=words.replace(".", r"\.").replace("(", r"\(").replace(")", r"\)")
+    ):
         Spread(**{**base, **kwargs})
 
 
@@ -103,7 +109,7 @@ def test_the_start_leaves_the_approach_within_its_acceleration_limit():
     cfg = FlightConfig()
     for x0, v0 in [(-3.0, 1.5), (-3.4, 2.45), (-2.7, 0.7)]:
         x, y, z = start_for(x0, v0, cfg)
-        need = v0 ** 2 / (2 * (x0 - x))
+        need = v0**2 / (2 * (x0 - x))
         assert need <= 0.75 * cfg.approach.accel_max_mps2 + 1e-9 and (y, z) == (0.0, 1.0)
     wall = dataclasses.replace(cfg, surface=SurfaceConfig((2.0, 1.0, 0.5), (0.0, 1.0, 0.0)))
     x, y, z = start_for(-3.0, 1.5, wall)
@@ -116,7 +122,8 @@ def test_a_flight_is_the_same_flight_the_closed_loop_tests_fly(tmp_path):
     row = fly_one(ROBUST, CFG, spread, spec(-3.1, 1.5), tmp_path / "a.jsonl")
     x, y, z = start_for(-3.1, 1.5, CFG)
     ref = Sim(f"sim://?start={x},{y},{z}&latency=0.02&noise=0.001&seed=3").fly(
-        retarget(ROBUST, -3.1, 1.5), tmp_path / "b.jsonl", CFG)
+        retarget(ROBUST, -3.1, 1.5), tmp_path / "b.jsonl", CFG
+    )
     assert row.outcome == ref.outcome.name == "CONTACT"
     assert row.contact_speed == ref.true_contact_speed
     assert row.perch_time == ref.true_perch_time
@@ -126,8 +133,9 @@ def test_a_flight_is_the_same_flight_the_closed_loop_tests_fly(tmp_path):
 
 
 def test_a_row_holds_the_figures_that_follow_from_each_other(tmp_path):
-    row = fly_one(ROBUST, CFG, Spread((-3.2, -3.0), (1.4, 1.6)), spec(-3.1, 1.5),
-                  tmp_path / "f.jsonl")
+    row = fly_one(
+        ROBUST, CFG, Spread((-3.2, -3.0), (1.4, 1.6)), spec(-3.1, 1.5), tmp_path / "f.jsonl"
+    )
     assert row.perch_error_s == pytest.approx(row.perch_time - row.plan_duration)
     assert (row.v_lo, row.v_hi) == (0.7, 1.0) and row.in_window
     assert abs(row.trigger_x + 3.1) < 0.03 and abs(row.trigger_v - 1.5) < 0.03
@@ -139,8 +147,9 @@ def test_a_row_holds_the_figures_that_follow_from_each_other(tmp_path):
 
 def test_an_aim_outside_the_robust_box_is_refused(tmp_path):
     (xl, _), (vl, _) = ROBUST.robust
-    row = fly_one(ROBUST, CFG, Spread((-4.0, -3.0), (1.4, 1.6)), spec(xl - 0.2, 1.5),
-                  tmp_path / "f.jsonl")
+    row = fly_one(
+        ROBUST, CFG, Spread((-4.0, -3.0), (1.4, 1.6)), spec(xl - 0.2, 1.5), tmp_path / "f.jsonl"
+    )
     assert row.outcome == "TRIGGER_REFUSED" and "outside the robust box" in row.detail
     assert row.contact_speed is None and row.perch_error_s is None and not row.in_window
 
@@ -148,15 +157,18 @@ def test_an_aim_outside_the_robust_box_is_refused(tmp_path):
 def test_a_gust_kicks_the_vehicle_at_its_moment_and_not_before(tmp_path):
     spread = Spread((-3.2, -3.0), (1.4, 1.6), gust_mps=0.5)
     calm = fly_one(ROBUST, CFG, spread, spec(-3.1, 1.5), tmp_path / "calm.jsonl")
-    gust = fly_one(ROBUST, CFG, spread, spec(-3.1, 1.5, 0.8, (0.5, 0.0, 0.0)),
-                   tmp_path / "gust.jsonl")
+    gust = fly_one(
+        ROBUST, CFG, spread, spec(-3.1, 1.5, 0.8, (0.5, 0.0, 0.0)), tmp_path / "gust.jsonl"
+    )
     assert calm.outcome == gust.outcome == "CONTACT"
     a, b = read_log(tmp_path / "calm.jsonl"), read_log(tmp_path / "gust.jsonl")
     t_trig = next(e.t for e in b.events if e.kind == "stage1")
     before = [(r.xdot, s.xdot) for r, s in zip(a.rows, b.rows) if r.t < t_trig + 0.79]
-    after = [s.xdot - r.xdot for r, s in zip(a.rows, b.rows) if t_trig + 0.85 <= r.t <= t_trig + 0.9]
-    assert all(x == y for x, y in before)          # the same flight up to the gust
-    assert min(after) > 0.3                        # then 0.5 m/s faster, the controller braking
+    after = [
+        s.xdot - r.xdot for r, s in zip(a.rows, b.rows) if t_trig + 0.85 <= r.t <= t_trig + 0.9
+    ]
+    assert all(x == y for x, y in before)  # the same flight up to the gust
+    assert min(after) > 0.3  # then 0.5 m/s faster, the controller braking
     assert gust.gust_dvx == 0.5 and gust.gust_s == 0.8
 
 
@@ -175,7 +187,8 @@ def test_the_table_and_the_summary_agree_with_the_rows(tmp_path):
     spread = Spread((-3.3, -2.9), (0.8, 2.4), seed=4)
     (xl, _), _ = ROBUST.robust
     specs = grid_specs(spread, 2, 2, ROBUST.duration) + [
-        FlightSpec(4, xl - 0.2, 1.5, 0.0, (0.0, 0.0, 0.0), 9)]   # refused: outside the box
+        FlightSpec(4, xl - 0.2, 1.5, 0.0, (0.0, 0.0, 0.0), 9)
+    ]  # refused: outside the box
     rows = run_campaign(ROBUST, CFG, spread, specs)
     write_table(rows, tmp_path / "t.csv")
     with open(tmp_path / "t.csv", newline="") as f:
@@ -188,12 +201,20 @@ def test_the_table_and_the_summary_agree_with_the_rows(tmp_path):
     assert s.flights == 5 and s.outcomes == {"CONTACT": 4, "TRIGGER_REFUSED": 1}
     assert outcomes.count("CONTACT") == 4 and table[4]["contact_speed"] == ""
     assert s.in_window == sum(t["in_window"] == "True" for t in table) == 4
-    assert (s.contact_speed.min, s.contact_speed.max) == pytest.approx((speeds[0], speeds[-1]), abs=1e-6)
+    assert (s.contact_speed.min, s.contact_speed.max) == pytest.approx(
+        (speeds[0], speeds[-1]), abs=1e-6
+    )
     assert s.contact_speed.median == pytest.approx((speeds[1] + speeds[2]) / 2, abs=1e-6)
     assert s.perch_error_s.median == pytest.approx((errors[1] + errors[2]) / 2, abs=1e-6)
-    dv = sorted(float(t["contact_speed"]) - float(t["plan_v_contact"]) for t in table
-                if t["contact_speed"])
-    assert (s.speed_error_mps.min, s.speed_error_mps.max) == pytest.approx((dv[0], dv[-1]), abs=1e-6)
-    pct = sorted(100 * float(t["perch_error_s"]) / float(t["plan_duration"])
-                 for t in table if t["perch_error_s"])
+    dv = sorted(
+        float(t["contact_speed"]) - float(t["plan_v_contact"]) for t in table if t["contact_speed"]
+    )
+    assert (s.speed_error_mps.min, s.speed_error_mps.max) == pytest.approx(
+        (dv[0], dv[-1]), abs=1e-6
+    )
+    pct = sorted(
+        100 * float(t["perch_error_s"]) / float(t["plan_duration"])
+        for t in table
+        if t["perch_error_s"]
+    )
     assert s.perch_error_pct.max == pytest.approx(pct[-1], abs=1e-4)

@@ -9,13 +9,13 @@ from pathlib import Path
 import pytest
 from simflight import Sim  # the closed-loop tests' simulated flight
 
+from perchd.campaign.flights import Spread, default_ranges, random_specs, run_campaign
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
-from perchd.campaign.flights import Spread, default_ranges, random_specs, run_campaign
 from perchd.tau import load_plan, retarget
 
 PLANS = Path(__file__).parents[2] / "plans"
-START = "sim://?start=-7.8,0,1"       # far enough back to reach v0 = 2.5 m/s by |x0| = 3.5 m
+START = "sim://?start=-7.8,0,1"  # far enough back to reach v0 = 2.5 m/s by |x0| = 3.5 m
 ROBUST = FlightConfig(trigger=TriggerConfig(policy=TriggerPolicy.ROBUST))
 
 
@@ -42,7 +42,7 @@ def test_a_hundred_flights_across_the_box_all_perch_inside_the_speed_window(name
 def test_a_trigger_outside_the_box_is_refused_before_stage_one(tmp_path):
     plan = robust_plan("robust-n3-largest.json", -3.0, 1.5)
     (xl, xh), (vl, vh) = plan.robust
-    plan = dataclasses.replace(plan, robust=((xl, xh), (vl, 1.4)))   # 1.5 m/s is now outside
+    plan = dataclasses.replace(plan, robust=((xl, xh), (vl, 1.4)))  # 1.5 m/s is now outside
     res = Sim(START).fly(plan, tmp_path / "f.jsonl", ROBUST)
     assert res.outcome is EndReason.TRIGGER_REFUSED
     assert "outside the plan's robust box" in res.detail

@@ -10,8 +10,10 @@ def test_percentiles_are_min_median_and_nearest_rank_p99_in_ms():
 
 
 def test_bench_planner_json_reports_the_order_3_paper_optima_and_warm_replans(capsys):
-    assert main(["bench", "planner", "--orders", "3", "--repeat", "1", "--replans", "3",
-                 "--json"]) == 0
+    assert (
+        main(["bench", "planner", "--orders", "3", "--repeat", "1", "--replans", "3", "--json"])
+        == 0
+    )
     rows = json.loads(capsys.readouterr().out)
     cold = [r for r in rows if r["solve"] == "cold"]
     assert sorted(round(r["duration_s"], 5) for r in cold) == [2.01475, 2.20937]

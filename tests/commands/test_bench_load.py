@@ -61,17 +61,22 @@ def perchd_bench(*args: str) -> subprocess.Popen:
     handled one is reset to the default at exec."""
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        return subprocess.Popen([sys.executable, "-m", "perchd", "bench", *args],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                env={**os.environ, "PYTHONPATH": str(ROOT)})
+        return subprocess.Popen(
+            [sys.executable, "-m", "perchd", "bench", *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(ROOT)},
+        )
     finally:
         signal.signal(signal.SIGINT, previous)
 
 
 @pytest.mark.slow
 def test_ctrl_c_during_the_loaded_run_stops_every_hog():
-    bench = perchd_bench("planner", "--orders", "3", "--repeat", "20", "--replans", "5",
-                         "--load", "2")
+    bench = perchd_bench(
+        "planner", "--orders", "3", "--repeat", "20", "--replans", "5", "--load", "2"
+    )
     try:
         deadline, hogs = time.monotonic() + 120, set()
         while len(hogs) < 2 and time.monotonic() < deadline and bench.poll() is None:
@@ -90,15 +95,17 @@ def test_ctrl_c_during_the_loaded_run_stops_every_hog():
 
 @pytest.mark.slow
 def test_planner_load_json_has_idle_and_loaded_medians_of_the_same_rows():
-    bench = perchd_bench("planner", "--orders", "3", "--repeat", "2", "--replans", "5",
-                         "--load", "1", "--json")
+    bench = perchd_bench(
+        "planner", "--orders", "3", "--repeat", "2", "--replans", "5", "--load", "1", "--json"
+    )
     out, err = bench.communicate(timeout=120)
     assert bench.returncode == 0, err
     fig = json.loads(out)
     assert fig["hogs"] == 1 and len(fig["rows"]) == 4
     for r in fig["rows"]:
         assert r["loaded_median_ms"] > 0 and r["ratio_loaded"] == pytest.approx(
-            r["loaded_median_ms"] / r["median_ms"])
+            r["loaded_median_ms"] / r["median_ms"]
+        )
 
 
 @pytest.mark.parametrize("args", [("loop", "--load", "-1"), ("planner", "--load", "65")])
@@ -118,6 +125,8 @@ def test_loop_load_json_flies_both_halves_and_counts_overruns_at_100_and_500_hz(
     for half in ("idle", "loaded"):
         f = fig[half]
         assert (f["fixed_100hz"]["rate_hz"], f["fixed_500hz"]["rate_hz"]) == (100.0, 500.0)
-        assert f["zmq_mocap"]["outcomes"] and set(f["zmq_mocap"]["outcomes"]) <= {"SIGNAL",
-                                                                                   "CONTACT"}
+        assert f["zmq_mocap"]["outcomes"] and set(f["zmq_mocap"]["outcomes"]) <= {
+            "SIGNAL",
+            "CONTACT",
+        }
         assert f["zmq_mocap"]["setpoints_matched"] >= 25

@@ -13,8 +13,12 @@ SPREAD = {"min_us", "median_us", "p99_us", "max_us"}
 
 
 def bench(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "perchd", "bench", "loop", *args],
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "perchd", "bench", "loop", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def assert_spread(s: dict) -> None:
@@ -27,9 +31,18 @@ def test_a_short_json_run_has_every_figure_and_they_come_from_real_runs():
     out = bench("--json", "--seconds", "0.4")
     assert out.returncode == 0, out.stderr
     fig = json.loads(out.stdout)
-    assert set(fig) == {"seconds", "load_before", "agent_compute_hot", "fixed_500hz",
-                        "fixed_100hz", "zmq_mocap", "zmq_fixed", "zmq_echo", "idle_500hz",
-                        "load_after"}
+    assert set(fig) == {
+        "seconds",
+        "load_before",
+        "agent_compute_hot",
+        "fixed_500hz",
+        "fixed_100hz",
+        "zmq_mocap",
+        "zmq_fixed",
+        "zmq_echo",
+        "idle_500hz",
+        "load_after",
+    }
     assert fig["seconds"] == 0.4
 
     for key, hz in (("fixed_500hz", 500), ("fixed_100hz", 100)):
@@ -52,8 +65,7 @@ def test_a_short_json_run_has_every_figure_and_they_come_from_real_runs():
         assert z["flights"] == len(z["outcomes"]) >= 1
         assert set(z["outcomes"]) <= {"SIGNAL", "CONTACT"}  # cut short, or perched
         assert z["setpoints_matched"] >= 50  # >= 1 s of flight at 100 Hz, poses matched
-        for key in ("latency_sockets", "latency_agent", "tick_compute", "agent_compute",
-                    "jitter"):
+        for key in ("latency_sockets", "latency_agent", "tick_compute", "agent_compute", "jitter"):
             assert_spread(z[key])
         # a setpoint cannot reach the rig before its pose reached the agent
         assert z["latency_sockets"]["min_us"] > z["latency_agent"]["min_us"] > 0.0
@@ -71,24 +83,67 @@ def test_a_short_json_run_has_every_figure_and_they_come_from_real_runs():
 
 def test_the_text_report_names_each_figure_and_its_target():
     from perchd.bench.loop import rows, text
+
     s = {"min_us": 1.0, "median_us": 2.0, "p99_us": 3.0, "max_us": 4.0}
-    z = {"sync": "mocap", "rate_hz": 100.0, "mocap_hz": 100.0, "flights": 1,
-         "outcomes": ["CONTACT"], "setpoints_matched": 400, "overruns": 0, "cpu_fraction": 0.05,
-         "latency_sockets": s, "latency_agent": s, "tick_compute": s, "agent_compute": s,
-         "jitter": s}
-    fig = {"load_before": 0.1, "load_after": 0.2, "agent_compute_hot": {"ticks": 5, **s},
-           "fixed_500hz": {"lateness": s, "period_deviation": s, "agent_compute": s,
-                           "ticks": 2500, "seconds": 5.0, "overruns": 0, "missed": 0,
-                           "cpu_fraction": 0.04, "rate_hz": 500.0, "overruns_per_min": 0.0,
-                           "steal_ms": 0.0, "gc_collections": 0},
-           "fixed_100hz": {"lateness": s, "period_deviation": s, "agent_compute": s,
-                           "ticks": 500, "seconds": 5.0, "overruns": 1, "missed": 1,
-                           "cpu_fraction": 0.01, "rate_hz": 100.0, "overruns_per_min": 12.0,
-                           "steal_ms": 30.0, "gc_collections": 0},
-           "zmq_mocap": z, "zmq_fixed": {**z, "sync": "fixed", "mocap_hz": 120.0},
-           "zmq_echo": {**z, "sync": "echo"},
-           "idle_500hz": {"lateness": s, "ticks": 2500, "seconds": 5.0, "overruns": 0,
-                          "overruns_per_min": 0.0, "steal_ms": 10.0}}
+    z = {
+        "sync": "mocap",
+        "rate_hz": 100.0,
+        "mocap_hz": 100.0,
+        "flights": 1,
+        "outcomes": ["CONTACT"],
+        "setpoints_matched": 400,
+        "overruns": 0,
+        "cpu_fraction": 0.05,
+        "latency_sockets": s,
+        "latency_agent": s,
+        "tick_compute": s,
+        "agent_compute": s,
+        "jitter": s,
+    }
+    fig = {
+        "load_before": 0.1,
+        "load_after": 0.2,
+        "agent_compute_hot": {"ticks": 5, **s},
+        "fixed_500hz": {
+            "lateness": s,
+            "period_deviation": s,
+            "agent_compute": s,
+            "ticks": 2500,
+            "seconds": 5.0,
+            "overruns": 0,
+            "missed": 0,
+            "cpu_fraction": 0.04,
+            "rate_hz": 500.0,
+            "overruns_per_min": 0.0,
+            "steal_ms": 0.0,
+            "gc_collections": 0,
+        },
+        "fixed_100hz": {
+            "lateness": s,
+            "period_deviation": s,
+            "agent_compute": s,
+            "ticks": 500,
+            "seconds": 5.0,
+            "overruns": 1,
+            "missed": 1,
+            "cpu_fraction": 0.01,
+            "rate_hz": 100.0,
+            "overruns_per_min": 12.0,
+            "steal_ms": 30.0,
+            "gc_collections": 0,
+        },
+        "zmq_mocap": z,
+        "zmq_fixed": {**z, "sync": "fixed", "mocap_hz": 120.0},
+        "zmq_echo": {**z, "sync": "echo"},
+        "idle_500hz": {
+            "lateness": s,
+            "ticks": 2500,
+            "seconds": 5.0,
+            "overruns": 0,
+            "overruns_per_min": 0.0,
+            "steal_ms": 10.0,
+        },
+    }
     report = text(fig)
     for name, _, target in rows(fig):
         assert f"{name}" in report and target in report

@@ -18,13 +18,23 @@ PLANS = ROOT / "plans"
 
 
 def perchd(*args, timeout=20):
-    return subprocess.run([sys.executable, "-m", "perchd", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "perchd", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
 
 
-@pytest.mark.parametrize("argv", [["plan", "check", "/dev/zero"],
-                                  ["fly", "/dev/zero", "--driver", "sim://", "--mocap", "sim://"],
-                                  ["sim", "--campaign", "/dev/zero"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["plan", "check", "/dev/zero"],
+        ["fly", "/dev/zero", "--driver", "sim://", "--mocap", "sim://"],
+        ["sim", "--campaign", "/dev/zero"],
+    ],
+)
 def test_a_device_is_refused_at_once(argv):
     out = perchd(*argv)
     assert out.returncode == 2, out.stderr
@@ -77,13 +87,22 @@ def test_shipped_libraries_still_load(path):
     load_library(path)
 
 
-@pytest.mark.parametrize("x0, says", [("1e999", "must be finite"), ("NaN", "must be finite"),
-                                      ("-" + "9" * 400, "400 digits"), ("true", "expected a number"),
-                                      ("-" + "9" * 5000, "not JSON")])
+@pytest.mark.parametrize(
+    "x0, says",
+    [
+        ("1e999", "must be finite"),
+        ("NaN", "must be finite"),
+        ("-" + "9" * 400, "400 digits"),
+        ("true", "expected a number"),
+        ("-" + "9" * 5000, "not JSON"),
+    ],
+)
 def test_a_plan_number_of_any_size_is_one_line(tmp_path, x0, says):
     text = (PLANS / "case1-ipts-n3.json").read_text()
     doc = json.loads(text)
-    (tmp_path / "p.json").write_text(text.replace(f'"x0": {json.dumps(doc["x0"])}', f'"x0": {x0}', 1))
+    (tmp_path / "p.json").write_text(
+        text.replace(f'"x0": {json.dumps(doc["x0"])}', f'"x0": {x0}', 1)
+    )
     out = perchd("plan", "check", str(tmp_path / "p.json"))
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1 and says in out.stderr, out.stderr

@@ -21,8 +21,13 @@ BOX = str(PLANS / "robust-n3-table2-box.json")
 
 
 def perchd(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "perchd", "sim", *args], capture_output=True,
-                          text=True, timeout=60, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "perchd", "sim", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=cwd,
+    )
 
 
 def read_table(path: Path) -> list[dict]:
@@ -35,8 +40,24 @@ def read_table(path: Path) -> list[dict]:
 
 def test_a_grid_campaign_writes_its_table_and_prints_one_json_summary(tmp_path):
     table = tmp_path / "out.csv"
-    done = perchd("--campaign", BOX, "--grid", "2", "2", "--latency", "0.02", "--noise", "0.001",
-                  "--gust", "0.2", "--seed", "1", "--table", str(table), "--json")
+    done = perchd(
+        "--campaign",
+        BOX,
+        "--grid",
+        "2",
+        "2",
+        "--latency",
+        "0.02",
+        "--noise",
+        "0.001",
+        "--gust",
+        "0.2",
+        "--seed",
+        "1",
+        "--table",
+        str(table),
+        "--json",
+    )
     assert done.returncode == 0, done.stderr
     out = json.loads(done.stdout)
     rows = read_table(table)
@@ -55,14 +76,15 @@ def test_a_grid_campaign_writes_its_table_and_prints_one_json_summary(tmp_path):
 
 def test_the_text_summary_counts_outcomes_and_gives_speed_and_perch_time_figures(tmp_path):
     (tmp_path / "campaigns").mkdir()
-    done = perchd("--campaign", BOX, "--flights", "3", "--x0", "-3.95", "-3.8", "--seed", "2",
-                  cwd=tmp_path)
+    done = perchd(
+        "--campaign", BOX, "--flights", "3", "--x0", "-3.95", "-3.8", "--seed", "2", cwd=tmp_path
+    )
     made = (tmp_path / "campaigns").glob("*-robust-n3-table2-box.*")
     rows = read_table(next(p for p in made if p.suffix in (".parquet", ".csv")))
     refused = sum(r["outcome"] == "TRIGGER_REFUSED" for r in rows)
     contacts = [float(r["contact_speed"]) for r in rows if r["contact_speed"]]
-    assert refused >= 1 and refused + len(contacts) == 3   # aims below -3.88 m leave the box
-    assert done.returncode == 1   # not every flight perched inside its window
+    assert refused >= 1 and refused + len(contacts) == 3  # aims below -3.88 m leave the box
+    assert done.returncode == 1  # not every flight perched inside its window
     lines = done.stdout.splitlines()
     assert lines[0].startswith("flights: 3 in ") and f"TRIGGER_REFUSED {refused}" in lines[0]
     assert lines[1] == f"contact inside the plan's window: {len(contacts)} of 3"
@@ -72,20 +94,34 @@ def test_the_text_summary_counts_outcomes_and_gives_speed_and_perch_time_figures
     assert lines[-1].startswith("table: campaigns/")
 
 
-@pytest.mark.parametrize("args, message", [
-    ((), "--pose-out and --setpoint-in are required (or --campaign P.json"),
-    (("--pose-out", "zmq://127.0.0.1:0"), "--pose-out and --setpoint-in are required"),
-    (("--campaign", BOX, "--pose-out", "zmq://127.0.0.1:0", "--exit-on-stop"),
-     "--pose-out, --exit-on-stop: for a live simulator, not a --campaign"),
-    (("--pose-out", "zmq://127.0.0.1:0", "--setpoint-in", "zmq://127.0.0.1:0", "--flights", "3"),
-     "--flights: only with --campaign P.json"),
-    (("--campaign", BOX, "--x0", "-3", "-3.5"), "--x0 -3 -3.5: LO must not exceed HI (by 0.5)"),
-    (("--campaign", BOX, "--latency", "2"), "--latency 2 s is outside 0..1 s"),
-    (("--campaign", BOX, "--flights", "0"), "--flights 0: at least 1"),
-    (("--campaign", BOX, "--jobs", "0"), "--jobs 0: at least 1"),
-    (("--campaign", "/nonexistent/plan.json"), "/nonexistent/plan.json"),
-    (("--campaign", BOX, "--flights", "2", "--grid", "2", "2"), "not allowed with argument"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        ((), "--pose-out and --setpoint-in are required (or --campaign P.json"),
+        (("--pose-out", "zmq://127.0.0.1:0"), "--pose-out and --setpoint-in are required"),
+        (
+            ("--campaign", BOX, "--pose-out", "zmq://127.0.0.1:0", "--exit-on-stop"),
+            "--pose-out, --exit-on-stop: for a live simulator, not a --campaign",
+        ),
+        (
+            (
+                "--pose-out",
+                "zmq://127.0.0.1:0",
+                "--setpoint-in",
+                "zmq://127.0.0.1:0",
+                "--flights",
+                "3",
+            ),
+            "--flights: only with --campaign P.json",
+        ),
+        (("--campaign", BOX, "--x0", "-3", "-3.5"), "--x0 -3 -3.5: LO must not exceed HI (by 0.5)"),
+        (("--campaign", BOX, "--latency", "2"), "--latency 2 s is outside 0..1 s"),
+        (("--campaign", BOX, "--flights", "0"), "--flights 0: at least 1"),
+        (("--campaign", BOX, "--jobs", "0"), "--jobs 0: at least 1"),
+        (("--campaign", "/nonexistent/plan.json"), "/nonexistent/plan.json"),
+        (("--campaign", BOX, "--flights", "2", "--grid", "2", "2"), "not allowed with argument"),
+    ],
+)
 def test_bad_options_are_one_line_and_exit_2(args, message, tmp_path):
     done = perchd(*args, cwd=tmp_path)
     assert done.returncode == 2 and done.stdout == ""
@@ -112,7 +148,7 @@ def test_on_a_terminal_the_bar_is_rewritten_in_place_and_ends_the_line():
     bar.close()
     text = term.getvalue()
     assert text.count("\r") == 4 and text.endswith("\n") and text.count("\n") == 1
-    assert text.count("\x1b[K") == 4   # each bar clears what a longer one left
+    assert text.count("\x1b[K") == 4  # each bar clears what a longer one left
     last = text.split("\r")[-1]
     assert last.startswith("[" + "#" * 30 + "] 4/4 flights (CONTACT 3, GEOFENCE 1)")
     assert text.split("\r")[2].startswith("[" + "#" * 15 + "." * 15 + "] 2/4")
@@ -125,15 +161,17 @@ def test_elsewhere_a_line_comes_at_every_tenth_of_the_campaign():
         bar(row.outcome)
     bar.close()
     lines = out.getvalue().splitlines()
-    assert [line.split()[2] for line in lines] == [f"{n}/25" for n in (2, 4, 6, 8, 10, 12, 14,
-                                                                       16, 18, 20, 22, 24, 25)]
+    assert [line.split()[2] for line in lines] == [
+        f"{n}/25" for n in (2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 25)
+    ]
     assert "\r" not in out.getvalue()
 
 
 def test_the_command_draws_the_bar_when_stderr_is_a_real_terminal(tmp_path):
-    code, out, seen = run_on_terminal("sim", "--campaign", BOX, "--flights", "3",
-                                      "--table", str(tmp_path / "t.csv"))
+    code, out, seen = run_on_terminal(
+        "sim", "--campaign", BOX, "--flights", "3", "--table", str(tmp_path / "t.csv")
+    )
     bars = seen.split("\r")
     assert code == 0 and out.startswith("flights: 3 in ")
     assert [b.split("] ")[1].split()[0] for b in bars[1:4]] == ["1/3", "2/3", "3/3"]
-    assert "perchd sim:" not in seen   # no line-per-tenth form on a terminal
+    assert "perchd sim:" not in seen  # no line-per-tenth form on a terminal

@@ -26,10 +26,28 @@ def rows(table: Path) -> list[dict]:
 def test_an_interrupted_campaign_keeps_what_finished(tmp_path, sig, code, jobs):
     table = tmp_path / "t.csv"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-m", "perchd", "sim", "--campaign", str(PLAN),
-                             "--flights", "400", "--jobs", jobs, "--table", str(table), "--json"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
-                            env=env)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "sim",
+            "--campaign",
+            str(PLAN),
+            "--flights",
+            "400",
+            "--jobs",
+            jobs,
+            "--table",
+            str(table),
+            "--json",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        env=env,
+    )
     deadline = time.monotonic() + 90
     while time.monotonic() < deadline and (not table.exists() or len(rows(table)) < 2):
         time.sleep(0.1)

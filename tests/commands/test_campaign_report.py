@@ -14,8 +14,12 @@ PLAN = str(Path(__file__).parents[2] / "plans" / "robust-n3-table2-box.json")
 
 
 def perchd(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "perchd", "sim", *map(str, args)],
-                          capture_output=True, text=True, timeout=180)
+    return subprocess.run(
+        [sys.executable, "-m", "perchd", "sim", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
 
 
 def test_a_csv_campaign_is_resumed_and_reported_with_its_figures(tmp_path):
@@ -33,7 +37,11 @@ def test_a_csv_campaign_is_resumed_and_reported_with_its_figures(tmp_path):
     out = json.loads(done.stdout)
     assert out["flights"] == 3 and out["complete"] is True and len(out["worst"]) == 2
     assert sorted(p.name for p in plots.iterdir()) == [
-        "contact-speed.png", "outcomes.png", "perch-error.png", "worst.png"]
+        "contact-speed.png",
+        "outcomes.png",
+        "perch-error.png",
+        "worst.png",
+    ]
     median = json.loads(first.stdout)["contact_speed"]["median"]
     assert out["contact_speed"]["median"] == pytest.approx(median, rel=1e-6)  # CSV: 7 digits
 

@@ -21,6 +21,7 @@ from perchd.session import open_links
 
 def plan_file(tmp_path, strategy="ipts"):
     import perchd.tau as tau
+
     if not hasattr(tau, "load_plan"):
         pytest.skip("perchd.tau has no load_plan yet")
     shipped = PLANS / ("case1-ipts-n3.json" if strategy == "ipts" else "case1-ctdts.json")
@@ -33,8 +34,19 @@ def plan_file(tmp_path, strategy="ipts"):
 
 def test_perchd_fly_sim_performs_a_whole_perch_and_prints_the_contract_json(tmp_path, capsys):
     log = tmp_path / "f.jsonl"
-    code = main(["fly", str(plan_file(tmp_path)), "--driver", "sim://", "--mocap", "sim://",
-                 "--log", str(log), "--json"])
+    code = main(
+        [
+            "fly",
+            str(plan_file(tmp_path)),
+            "--driver",
+            "sim://",
+            "--mocap",
+            "sim://",
+            "--log",
+            str(log),
+            "--json",
+        ]
+    )
     out, err = capsys.readouterr()
     res = json.loads(out)
     assert code == 0 and res["outcome"] == "CONTACT"
@@ -46,8 +58,9 @@ def test_perchd_fly_sim_performs_a_whole_perch_and_prints_the_contract_json(tmp_
     assert "stage1" in err and "tau" in err  # the live status line
 
 
-def test_perchd_fly_without_log_writes_into_flightlogs_and_prints_a_summary(tmp_path, capsys,
-                                                                            monkeypatch):
+def test_perchd_fly_without_log_writes_into_flightlogs_and_prints_a_summary(
+    tmp_path, capsys, monkeypatch
+):
     plan = plan_file(tmp_path).resolve()
     monkeypatch.chdir(tmp_path)
     assert main(["fly", str(plan), "--driver", "sim://", "--mocap", "sim://"]) == 0
@@ -59,8 +72,9 @@ def test_perchd_fly_without_log_writes_into_flightlogs_and_prints_a_summary(tmp_
 
 def test_a_surface_given_on_the_command_line_moves_the_simulated_wall_too():
     cfg = FlightConfig()
-    cfg = dataclasses.replace(cfg, surface=dataclasses.replace(cfg.surface, point=(2.0, 1.0, 0.0),
-                                                               normal=(0.0, 1.0, 0.0)))
+    cfg = dataclasses.replace(
+        cfg, surface=dataclasses.replace(cfg.surface, point=(2.0, 1.0, 0.0), normal=(0.0, 1.0, 0.0))
+    )
     links = open_links("sim://", "sim://", cfg.surface)
     links.close()
     assert links.world.params.surface_point == (2.0, 1.0, 0.0)
@@ -97,9 +111,26 @@ def test_a_push_met_in_earlier_flights_never_reaches_the_next(tmp_path, capsys):
     plan, state = plan_file(tmp_path), tmp_path / "lab-1.json"
 
     def fly(driver: str, state_file, name: str, i: int) -> dict:
-        assert main(["fly", str(plan), "--driver", driver, "--mocap", "sim://?noise=0.001",
-                     "--log", str(tmp_path / f"f{i}.jsonl"), "--state", str(state_file),
-                     "--vehicle", name, "--json"]) == 0
+        assert (
+            main(
+                [
+                    "fly",
+                    str(plan),
+                    "--driver",
+                    driver,
+                    "--mocap",
+                    "sim://?noise=0.001",
+                    "--log",
+                    str(tmp_path / f"f{i}.jsonl"),
+                    "--state",
+                    str(state_file),
+                    "--vehicle",
+                    name,
+                    "--json",
+                ]
+            )
+            == 0
+        )
         return json.loads(capsys.readouterr().out)
 
     for i in range(2):
@@ -118,7 +149,22 @@ def test_a_push_met_in_earlier_flights_never_reaches_the_next(tmp_path, capsys):
 def test_the_summary_names_the_vehicle_profile_each_time(tmp_path, capsys):
     plan, state = plan_file(tmp_path), tmp_path / "v.json"
     for i, read in enumerate(("none yet", "read: hover ")):
-        assert main(["fly", str(plan), "--driver", "sim://", "--mocap", "sim://",
-                     "--log", str(tmp_path / f"f{i}.jsonl"), "--state", str(state)]) == 0
+        assert (
+            main(
+                [
+                    "fly",
+                    str(plan),
+                    "--driver",
+                    "sim://",
+                    "--mocap",
+                    "sim://",
+                    "--log",
+                    str(tmp_path / f"f{i}.jsonl"),
+                    "--state",
+                    str(state),
+                ]
+            )
+            == 0
+        )
         line = capsys.readouterr().out.splitlines()[-1]
         assert line.startswith(f"vehicle profile: {state} ({read}") and line.endswith("; written)")

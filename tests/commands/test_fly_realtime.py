@@ -30,13 +30,28 @@ def without_rt(argv: list[str]) -> list[str]:
 
 def perchd(*args: str, prefix=lambda a: a) -> subprocess.CompletedProcess:
     argv = prefix([sys.executable, "-m", "perchd", *args])
-    return subprocess.run(argv, capture_output=True, text=True, timeout=120,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    return subprocess.run(
+        argv,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
 
 
 def fly_args(log: Path, *extra: str) -> tuple[str, ...]:
-    return ("fly", str(PLAN), "--driver", "sim://", "--mocap", "sim://", "--log", str(log),
-            "--json", *extra)
+    return (
+        "fly",
+        str(PLAN),
+        "--driver",
+        "sim://",
+        "--mocap",
+        "sim://",
+        "--log",
+        str(log),
+        "--json",
+        *extra,
+    )
 
 
 def test_refused_without_cap_sys_nice_and_rtprio_0_in_one_line_and_nothing_flown(tmp_path):
@@ -61,11 +76,14 @@ def test_granted_when_permitted_the_flight_flies_under_fifo_pinned(tmp_path):
     assert header["scheduling"] == "SCHED_FIFO priority 1, memory locked, pinned to CPU 0"
 
 
-@pytest.mark.parametrize("args, message", [
-    (("--realtime=100",), "realtime priority 100 is outside 0..99"),
-    (("--cpu", "1"), "--cpu 1: only with --realtime"),
-    (("--realtime=5", "--cpu", "4096"), "CPU 4096 is not one this process may run on"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (("--realtime=100",), "realtime priority 100 is outside 0..99"),
+        (("--cpu", "1"), "--cpu 1: only with --realtime"),
+        (("--realtime=5", "--cpu", "4096"), "CPU 4096 is not one this process may run on"),
+    ],
+)
 def test_bad_values_are_one_line_and_nothing_flown(tmp_path, args, message):
     log = tmp_path / "f.jsonl"
     out = perchd(*fly_args(log, *args))

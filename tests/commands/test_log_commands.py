@@ -33,8 +33,11 @@ def test_the_summary_agrees_with_the_flight_and_rederives_tau_rms_and_jitter(flo
     assert s["perch_time"] == pytest.approx(fly["perch_time"])
     assert s["plan_duration"] == pytest.approx(fly["plan_duration"])
     rows = [json.loads(line)["row"] for line in log.read_text().splitlines() if '"row"' in line]
-    tracked = [r["tau"] - r["tau_ref"] for r in rows if r["phase"] in ("stage1", "stage2")
-               and r["tau"] is not None and r["tau_ref"] is not None]
+    tracked = [
+        r["tau"] - r["tau_ref"]
+        for r in rows
+        if r["phase"] in ("stage1", "stage2") and r["tau"] is not None and r["tau_ref"] is not None
+    ]
     assert s["tau_rows"] == len(tracked) > 100
     assert s["tau_rms"] == pytest.approx(math.sqrt(statistics.fmean(e * e for e in tracked)))
     assert 0 < s["tau_rms"] < 0.1
@@ -46,8 +49,14 @@ def test_the_summary_agrees_with_the_flight_and_rederives_tau_rms_and_jitter(flo
 
 def test_the_text_summary_names_every_figure(flown):
     text = perchd("log", "summary", str(flown[0])).stdout
-    for label in ("outcome: CONTACT", "contact speed:", "perch time:", "(plan 2.015 s, error",
-                  "tau tracking RMS:", "loop jitter: median"):
+    for label in (
+        "outcome: CONTACT",
+        "contact speed:",
+        "perch time:",
+        "(plan 2.015 s, error",
+        "tau tracking RMS:",
+        "loop jitter: median",
+    ):
         assert label in text
 
 
@@ -55,9 +64,11 @@ def test_a_log_cut_short_is_summarised_as_incomplete(flown, tmp_path):
     lines = flown[0].read_text().splitlines(keepends=True)
     contact = next(i for i, line in enumerate(lines) if '"kind":"contact"' in line)
     cut = tmp_path / "cut.jsonl"
-    cut.write_text("".join(lines[:contact + 3]) + lines[contact + 3][:20])  # torn last line
+    cut.write_text("".join(lines[: contact + 3]) + lines[contact + 3][:20])  # torn last line
     s = summary(cut)
-    assert s["outcome"] == "INCOMPLETE" and s["contact_speed"] == pytest.approx(flown[1]["contact_speed"])
+    assert s["outcome"] == "INCOMPLETE" and s["contact_speed"] == pytest.approx(
+        flown[1]["contact_speed"]
+    )
     # from event tick times: trigger and contact are each interpolated within about a tick
     assert abs(s["perch_time"] - flown[1]["perch_time"]) < 0.03
 
@@ -73,15 +84,25 @@ def test_the_plot_is_a_png_of_three_rows(flown, tmp_path):
 
 
 def test_plotting_without_matplotlib_names_the_extra_and_summary_never_imports_it(flown, tmp_path):
-    code = ("import sys; sys.modules['matplotlib'] = None; from perchd.cli import main; "
-            f"sys.exit(main(['log', 'plot', {str(flown[0])!r}, '--out', {str(tmp_path / 'x.png')!r}]))")
+    code = (
+        "import sys; sys.modules['matplotlib'] = None; from perchd.cli import main; "
+        f"sys.exit(main(['log', 'plot', {str(flown[0])!r}, '--out', {str(tmp_path / 'x.png')!r}]))"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert done.returncode == 2 and "plot" in done.stderr and len(done.stderr.strip().splitlines()) == 1
-    code = ("import sys; from perchd.cli import main; main(['log', 'summary', "
-            f"{str(flown[0])!r}]); assert 'matplotlib' not in sys.modules")
+    assert (
+        done.returncode == 2
+        and "plot" in done.stderr
+        and len(done.stderr.strip().splitlines()) == 1
+    )
+    code = (
+        "import sys; from perchd.cli import main; main(['log', 'summary', "
+        f"{str(flown[0])!r}]); assert 'matplotlib' not in sys.modules"
+    )
     assert subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
 
 
 def test_a_missing_log_is_one_line_and_exit_2(tmp_path):
     done = perchd("log", "summary", str(tmp_path / "none.jsonl"))
-    assert done.returncode == 2 and done.stderr.strip().endswith("cannot read (No such file or directory)")
+    assert done.returncode == 2 and done.stderr.strip().endswith(
+        "cannot read (No such file or directory)"
+    )

@@ -23,7 +23,7 @@ class Feeder:
         self._publish, self._stop = publish, threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
-    def __enter__(self) -> "Feeder":
+    def __enter__(self) -> Feeder:
         self._thread.start()
         return self
 
@@ -45,9 +45,9 @@ def test_json_lines_from_a_natnet_server(capsys):
     lines = [json.loads(line) for line in out.splitlines()]
     assert len(lines) == 3
     assert set(lines[0]) == {"body", "seq", "t", "p", "q", "valid", "latency"}
-    assert all(l["body"] == "cf1" and l["p"] == pytest.approx([0.25, -0.5, 1.0]) for l in lines)
-    assert [l["seq"] for l in lines] == sorted({l["seq"] for l in lines})
-    assert all(0.002 <= l["latency"] < 0.4 for l in lines)
+    assert all(p["body"] == "cf1" and p["p"] == pytest.approx([0.25, -0.5, 1.0]) for p in lines)
+    assert [p["seq"] for p in lines] == sorted({p["seq"] for p in lines})
+    assert all(0.002 <= p["latency"] < 0.4 for p in lines)
     assert "3 poses" in err
 
 

@@ -13,14 +13,34 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
-IPTS = ["plan", "ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "0.7",
-        "1.0", "--v-max", "2.5", "--a-max", "1.4"]
+IPTS = [
+    "plan",
+    "ipts",
+    "--x0",
+    "-3",
+    "--v0",
+    "1.5",
+    "--tau-s",
+    "-0.5",
+    "--v-contact",
+    "0.7",
+    "1.0",
+    "--v-max",
+    "2.5",
+    "--a-max",
+    "1.4",
+]
 SIM = ["--driver", "sim://", "--mocap", "sim://"]
 
 
 def perchd(*args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "perchd", *map(str, args)], capture_output=True,
-                          text=True, timeout=120, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "perchd", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=cwd,
+    )
 
 
 def one_line(out, code=2):
@@ -68,8 +88,9 @@ def test_plan_out_is_never_overwritten_without_force(tmp_path):
     assert perchd("plan", "check", out).returncode == 0
 
 
-@pytest.mark.parametrize("where, says", [("missing/o.json", "does not exist"),
-                                         (".", "is a directory")])
+@pytest.mark.parametrize(
+    "where, says", [("missing/o.json", "does not exist"), (".", "is a directory")]
+)
 def test_plan_out_bad_places_are_one_line(tmp_path, where, says):
     assert says in one_line(perchd(*IPTS, "--out", tmp_path / where))
     assert not (tmp_path / "missing").exists()
@@ -87,7 +108,9 @@ def test_plan_check_plot_of_an_unknown_format_is_one_line(tmp_path):
 def test_log_plot_out_is_checked(tmp_path):
     log = tmp_path / "f.jsonl"
     assert perchd("fly", PLAN, *SIM, "--log", log, "--json").returncode == 0
-    assert "does not exist" in one_line(perchd("log", "plot", log, "--out", tmp_path / "m" / "x.png"))
+    assert "does not exist" in one_line(
+        perchd("log", "plot", log, "--out", tmp_path / "m" / "x.png")
+    )
     png = tmp_path / "f.png"
     png.write_text("keep")
     assert "--force" in one_line(perchd("log", "plot", log))
@@ -102,12 +125,28 @@ def test_campaign_table_is_checked(tmp_path):
     assert "--table" in line and "--force" in line
     assert table.read_text() == "keep"
     assert "not an existing directory" in one_line(
-        perchd("sim", "--campaign", PLAN, "--flights", 1, "--logs", tmp_path / "nope"))
+        perchd("sim", "--campaign", PLAN, "--flights", 1, "--logs", tmp_path / "nope")
+    )
 
 
 def test_negative_exponent_values_parse(tmp_path):
-    done = perchd("plan", "ipts", "--x0", "-3e0", "--v0", "1.5", "--tau-s", "-5e-1",
-                  "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4")
+    done = perchd(
+        "plan",
+        "ipts",
+        "--x0",
+        "-3e0",
+        "--v0",
+        "1.5",
+        "--tau-s",
+        "-5e-1",
+        "--v-contact",
+        "0.7",
+        "1.0",
+        "--v-max",
+        "2.5",
+        "--a-max",
+        "1.4",
+    )
     assert done.returncode == 0, done.stderr
 
 
@@ -130,8 +169,14 @@ def limited(fsize_bytes):
 
 
 def perchd_limited(fsize_bytes, *args, cwd=ROOT):
-    return subprocess.run([sys.executable, "-m", "perchd", *map(str, args)], capture_output=True,
-                          text=True, timeout=120, cwd=cwd, preexec_fn=limited(fsize_bytes))
+    return subprocess.run(
+        [sys.executable, "-m", "perchd", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=cwd,
+        preexec_fn=limited(fsize_bytes),
+    )
 
 
 def read_only(tmp_path):
@@ -181,19 +226,34 @@ def test_log_onto_a_fifo_or_a_device_is_one_line_even_with_force(tmp_path):
 
 def test_log_onto_the_config_or_the_state_is_refused(tmp_path):
     state = tmp_path / "s.json"
-    assert perchd("fly", PLAN, *SIM, "--log", tmp_path / "a.jsonl", "--state", state,
-                  "--json").returncode == 0
+    assert (
+        perchd(
+            "fly", PLAN, *SIM, "--log", tmp_path / "a.jsonl", "--state", state, "--json"
+        ).returncode
+        == 0
+    )
     before = state.read_bytes()
-    assert "is the input" in one_line(perchd("fly", PLAN, *SIM, "--log", state, "--state", state,
-                                             "--force"))
+    assert "is the input" in one_line(
+        perchd("fly", PLAN, *SIM, "--log", state, "--state", state, "--force")
+    )
     assert state.read_bytes() == before
 
 
 def test_log_force_keeps_the_old_log_until_the_new_one_is_whole(tmp_path):
     log = tmp_path / "f.jsonl"
     log.write_text("old")
-    out = perchd_limited(100_000, "fly", PLAN, *SIM, "--log", log, "--force", "--json",
-                         "--state", tmp_path / "s.json")
+    out = perchd_limited(
+        100_000,
+        "fly",
+        PLAN,
+        *SIM,
+        "--log",
+        log,
+        "--force",
+        "--json",
+        "--state",
+        tmp_path / "s.json",
+    )
     assert out.returncode == 1 and json.loads(out.stdout)["log_lost"]
     assert log.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".part")] == []
@@ -201,8 +261,9 @@ def test_log_force_keeps_the_old_log_until_the_new_one_is_whole(tmp_path):
 
 def test_a_full_disk_mid_flight_ends_in_the_failsafe_with_its_summary_and_json(tmp_path):
     log = tmp_path / "f.jsonl"
-    out = perchd_limited(100_000, "fly", PLAN, *SIM, "--log", log, "--json",
-                         "--state", tmp_path / "s.json")
+    out = perchd_limited(
+        100_000, "fly", PLAN, *SIM, "--log", log, "--json", "--state", tmp_path / "s.json"
+    )
     assert out.returncode == 1, out.stderr
     assert "Traceback" not in out.stderr
     res = json.loads(out.stdout)
@@ -210,8 +271,9 @@ def test_a_full_disk_mid_flight_ends_in_the_failsafe_with_its_summary_and_json(t
     assert "File too large" in res["log_lost"] and "log was lost" in res["detail"]
     summary = perchd("log", "summary", log)  # what was written before the loss still reads
     assert summary.returncode == 0 and "INCOMPLETE" in summary.stdout
-    text = perchd_limited(100_000, "fly", PLAN, *SIM, "--log", tmp_path / "g.jsonl",
-                          "--state", tmp_path / "s.json")
+    text = perchd_limited(
+        100_000, "fly", PLAN, *SIM, "--log", tmp_path / "g.jsonl", "--state", tmp_path / "s.json"
+    )
     assert "outcome: SOFTWARE_ERROR" in text.stdout and "LOST" in text.stdout
 
 
@@ -226,26 +288,51 @@ def test_a_full_disk_for_a_plan_leaves_no_file_and_the_old_one_whole(tmp_path):
 
 def test_dev_full_as_an_output_is_one_line():
     assert "not a regular file (a character device)" in one_line(
-        perchd(*IPTS, "--out", "/dev/full", "--force"))
+        perchd(*IPTS, "--out", "/dev/full", "--force")
+    )
 
 
 def test_a_read_only_directory_is_one_line(tmp_path):
     ro, drop = read_only(tmp_path)
-    out = subprocess.run([*drop, sys.executable, "-m", "perchd", *IPTS, "--out", str(ro / "p.json")],
-                         capture_output=True, text=True, timeout=60, cwd=ROOT)
+    out = subprocess.run(
+        [*drop, sys.executable, "-m", "perchd", *IPTS, "--out", str(ro / "p.json")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+    )
     assert "Permission denied" in one_line(out) and list(ro.iterdir()) == []
-    fly = subprocess.run([*drop, sys.executable, "-m", "perchd", "fly", str(PLAN), *SIM,
-                          "--log", str(ro / "f.jsonl"), "--state", str(tmp_path / "s.json")],
-                         capture_output=True, text=True, timeout=60, cwd=ROOT)
+    fly = subprocess.run(
+        [
+            *drop,
+            sys.executable,
+            "-m",
+            "perchd",
+            "fly",
+            str(PLAN),
+            *SIM,
+            "--log",
+            str(ro / "f.jsonl"),
+            "--state",
+            str(tmp_path / "s.json"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+    )
     assert "--log" in one_line(fly) and list(ro.iterdir()) == []
 
 
-@pytest.mark.parametrize("argv", [
-    ["plan", "check", f"/tmp/{LONG}.json"],
-    [*IPTS, "--out", f"/tmp/{LONG}.json"],
-    ["fly", str(PLAN), *SIM, "--log", f"/tmp/{LONG}.jsonl"],
-    ["fly", str(PLAN), *SIM, "--log", "/tmp/nope.jsonl", "--state", f"/tmp/{LONG}"],
-    ["log", "summary", f"/tmp/{LONG}.jsonl"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["plan", "check", f"/tmp/{LONG}.json"],
+        [*IPTS, "--out", f"/tmp/{LONG}.json"],
+        ["fly", str(PLAN), *SIM, "--log", f"/tmp/{LONG}.jsonl"],
+        ["fly", str(PLAN), *SIM, "--log", "/tmp/nope.jsonl", "--state", f"/tmp/{LONG}"],
+        ["log", "summary", f"/tmp/{LONG}.jsonl"],
+    ],
+)
 def test_a_path_too_long_is_one_line(argv):
     assert "File name too long" in one_line(perchd(*argv))

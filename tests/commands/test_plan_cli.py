@@ -18,8 +18,17 @@ def test_plan_check_json_holds_the_contract_fields():
     out = perchd("plan", "check", str(PLANS / "case1-ipts-n3.json"), "--json")
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
-    for key in ("strategy", "duration", "t_switch", "v_contact", "v_peak", "a_peak",
-                "bound", "ratio", "feasible"):
+    for key in (
+        "strategy",
+        "duration",
+        "t_switch",
+        "v_contact",
+        "v_peak",
+        "a_peak",
+        "bound",
+        "ratio",
+        "feasible",
+    ):
         assert key in doc
     assert doc["ratio"] == pytest.approx(doc["duration"] / doc["bound"])
     assert doc["feasible"] is True
@@ -43,16 +52,36 @@ def test_plan_check_verifies_a_plan_library_node_by_node(tmp_path):
 
 
 def test_plan_ipts_writes_a_file_that_checks(tmp_path):
-    out = perchd("plan", "ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5",
-                 "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4",
-                 "--order", "3", "--out", str(tmp_path / "p.json"))
+    out = perchd(
+        "plan",
+        "ipts",
+        "--x0",
+        "-3",
+        "--v0",
+        "1.5",
+        "--tau-s",
+        "-0.5",
+        "--v-contact",
+        "0.7",
+        "1.0",
+        "--v-max",
+        "2.5",
+        "--a-max",
+        "1.4",
+        "--order",
+        "3",
+        "--out",
+        str(tmp_path / "p.json"),
+    )
     assert out.returncode == 0, out.stderr
     assert "2.014" in out.stdout
     assert perchd("plan", "check", str(tmp_path / "p.json")).returncode == 0
 
 
 def test_plan_check_draws_the_four_panels(tmp_path):
-    out = perchd("plan", "check", str(PLANS / "case1-ctdts.json"), "--plot", str(tmp_path / "f.png"))
+    out = perchd(
+        "plan", "check", str(PLANS / "case1-ctdts.json"), "--plot", str(tmp_path / "f.png")
+    )
     assert out.returncode == 0 and (tmp_path / "f.png").stat().st_size > 10_000
 
 
@@ -60,15 +89,63 @@ BAD = [
     (["ctds", "--x0", "-3", "--v0", "1.5", "--c", "0.7"], "infinite"),
     (["ctds", "--x0", "-3", "--v0", "1.5", "--c", "-0.1"], "never arrives"),
     (["ctds", "--x0", "3", "--v0", "1.5"], "x0 must be a negative"),
-    (["ctdts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "1.0",
-      "--a-max", "0.4"], r"a_max = 0.4 m/s\^2 by 0.05"),
-    (["ctdts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "2.0"],
-     "only decelerate"),
+    (
+        [
+            "ctdts",
+            "--x0",
+            "-3",
+            "--v0",
+            "1.5",
+            "--tau-s",
+            "-0.5",
+            "--v-contact",
+            "1.0",
+            "--a-max",
+            "0.4",
+        ],
+        r"a_max = 0.4 m/s\^2 by 0.05",
+    ),
+    (
+        ["ctdts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "2.0"],
+        "only decelerate",
+    ),
     (["ctdts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-3", "--v-contact", "1.0"], "tau_s"),
-    (["ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0",
-      "--v-max", "2.5", "--a-max", "0.2"], "a_max = 0.2"),
-    (["ipts", "--x0", "-3", "--v0", "1.5", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0",
-      "--order", "10"], "order must be 1..9"),
+    (
+        [
+            "ipts",
+            "--x0",
+            "-3",
+            "--v0",
+            "1.5",
+            "--tau-s",
+            "-0.5",
+            "--v-contact",
+            "0.7",
+            "1.0",
+            "--v-max",
+            "2.5",
+            "--a-max",
+            "0.2",
+        ],
+        "a_max = 0.2",
+    ),
+    (
+        [
+            "ipts",
+            "--x0",
+            "-3",
+            "--v0",
+            "1.5",
+            "--tau-s",
+            "-0.5",
+            "--v-contact",
+            "0.7",
+            "1.0",
+            "--order",
+            "10",
+        ],
+        "order must be 1..9",
+    ),
     (["check", "/nonexistent/plan.json"], "cannot read"),
     (["ipts", "--x0", "-3"], "required"),
 ]
@@ -83,7 +160,7 @@ def test_bad_input_is_one_line_and_exit_2(args, message):
     assert "Traceback" not in out.stderr
     line = out.stderr.strip().splitlines()[-1]
     assert re.search(message, line), out.stderr
-    assert len([l for l in out.stderr.strip().splitlines() if not l.startswith("usage")]) == 1
+    assert len([ln for ln in out.stderr.strip().splitlines() if not ln.startswith("usage")]) == 1
 
 
 def _edited(edit):

@@ -27,8 +27,9 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.mark.parametrize("scheme,free_port", [("natnet", free_udp_port),
-                                              ("zmq", free_tcp_port)], ids=["natnet", "zmq"])
+@pytest.mark.parametrize(
+    "scheme,free_port", [("natnet", free_udp_port), ("zmq", free_tcp_port)], ids=["natnet", "zmq"]
+)
 def test_a_second_pose_output_on_a_taken_port_is_refused_as_bad_input(scheme, free_port):
     uri = f"{scheme}://127.0.0.1:{free_port()}"
     first = open_pose_output(uri, ["cf1"], MonotonicClock())
@@ -43,17 +44,36 @@ def test_perchd_sim_on_a_taken_natnet_port_exits_2():
     port = free_udp_port()
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as holder:
         holder.bind(("127.0.0.1", port))
-        done = subprocess.run([sys.executable, "-m", "perchd", "sim", "--pose-out",
-                               f"natnet://127.0.0.1:{port}", "--setpoint-in",
-                               "zmq://127.0.0.1:0", "--duration", "1"],
-                              capture_output=True, text=True, timeout=60, cwd=ROOT)
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "sim",
+                "--pose-out",
+                f"natnet://127.0.0.1:{port}",
+                "--setpoint-in",
+                "zmq://127.0.0.1:0",
+                "--duration",
+                "1",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            cwd=ROOT,
+        )
     assert done.returncode == 2, done.stderr
     assert "port is taken" in done.stderr and "ready" not in done.stderr
 
 
 def perchd(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "perchd", *args], capture_output=True,
-                          text=True, timeout=60, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "perchd", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+    )
 
 
 @pytest.mark.parametrize("side", ["mocap", "driver"])
@@ -65,8 +85,18 @@ def test_perchd_fly_binding_a_taken_zmq_port_exits_2_naming_the_uri(side, tmp_pa
         taken = holder.getsockname()[1]
         mocap = f"zmq://127.0.0.1:{taken if side == 'mocap' else free_tcp_port()}?body=cf1&bind=1"
         driver = f"zmq://127.0.0.1:{taken if side == 'driver' else free_tcp_port()}?bind=1&wait=0.1"
-        done = perchd("fly", "plans/case1-ipts-n3.json", "--driver", driver, "--mocap", mocap,
-                      "--log", str(tmp_path / "f.jsonl"), "--state", str(tmp_path / "v.json"))
+        done = perchd(
+            "fly",
+            "plans/case1-ipts-n3.json",
+            "--driver",
+            driver,
+            "--mocap",
+            mocap,
+            "--log",
+            str(tmp_path / "f.jsonl"),
+            "--state",
+            str(tmp_path / "v.json"),
+        )
     uri = mocap if side == "mocap" else driver
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and "port is taken" in done.stderr
@@ -75,10 +105,17 @@ def test_perchd_fly_binding_a_taken_zmq_port_exits_2_naming_the_uri(side, tmp_pa
 
 def serve_once(tmp: Path, sock: Path) -> subprocess.Popen:
     config = tmp / "perchd.toml"
-    config.write_text(f'version = 1\n[service]\nsocket = "{sock}"\nplan_dir = "{tmp}"\n'
-                      f'log_dir = "{tmp / "logs"}"\n')
-    return subprocess.Popen([sys.executable, "-m", "perchd", "serve", "--config", str(config)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    config.write_text(
+        f'version = 1\n[service]\nsocket = "{sock}"\nplan_dir = "{tmp}"\n'
+        f'log_dir = "{tmp / "logs"}"\n'
+    )
+    return subprocess.Popen(
+        [sys.executable, "-m", "perchd", "serve", "--config", str(config)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
 
 
 def test_a_second_perchd_serve_on_a_live_control_socket_exits_2_naming_it(tmp_path):

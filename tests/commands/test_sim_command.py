@@ -33,7 +33,8 @@ class SimProcess:
 
     def __init__(self, *extra: str, pose_out: str = "natnet://127.0.0.1:0") -> None:
         self.proc, self.mocap, self.driver = start_announced(
-            "sim", "--pose-out", pose_out, "--setpoint-in", "zmq://127.0.0.1:0", "--json", *extra)
+            "sim", "--pose-out", pose_out, "--setpoint-in", "zmq://127.0.0.1:0", "--json", *extra
+        )
 
     def finish(self, timeout: float = 10.0) -> dict:
         """Its one JSON summary after --exit-on-stop (exit 0), or after a SIGTERM we send
@@ -57,9 +58,24 @@ class SimProcess:
 def fly_agent(sim: SimProcess, log: Path):
     """`perchd fly` against the sim process, as a user runs it."""
     done = subprocess.run(
-        [sys.executable, "-m", "perchd", "fly", str(PLANS / "case1-ipts-n3.json"), "--driver",
-         sim.driver, "--mocap", sim.mocap, "--log", str(log), "--json"],
-        capture_output=True, text=True, timeout=60)
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "fly",
+            str(PLANS / "case1-ipts-n3.json"),
+            "--driver",
+            sim.driver,
+            "--mocap",
+            sim.mocap,
+            "--log",
+            str(log),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.stdout, done.stderr
     out = json.loads(done.stdout)
     return EndReason[out["outcome"]], out["contact_speed"], out["perch_time"]
@@ -78,8 +94,9 @@ def fly_in_process(plan, log: Path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("pose_out", ["natnet://127.0.0.1:0", "zmq://127.0.0.1:0"],
-                         ids=["natnet", "zmq"])
+@pytest.mark.parametrize(
+    "pose_out", ["natnet://127.0.0.1:0", "zmq://127.0.0.1:0"], ids=["natnet", "zmq"]
+)
 def test_the_agent_perches_on_perchd_sim_in_another_process_as_in_process(pose_out, tmp_path):
     plan = case1_ipts()
     reference = fly_in_process(plan, tmp_path / "in_process.jsonl")
@@ -110,9 +127,23 @@ def test_the_sim_counts_bad_setpoints_obeys_stop_and_reports_on_sigterm():
         pub.connect("tcp://" + sim.driver.split("//")[1].split("?")[0])
         time.sleep(0.3)  # let the subscription reach the publisher
         send(pub, b"setpoint", b"{not json")
-        send(pub, b"setpoint", json.dumps({"vehicle": "cf1", "seq": 0, "t": 0.0, "pose_seq": 0,
-                                           "roll": 0.0, "pitch": 0.0, "yaw": 0.0,
-                                           "thrust": 0.2943, "phase": "hold"}).encode())
+        send(
+            pub,
+            b"setpoint",
+            json.dumps(
+                {
+                    "vehicle": "cf1",
+                    "seq": 0,
+                    "t": 0.0,
+                    "pose_seq": 0,
+                    "roll": 0.0,
+                    "pitch": 0.0,
+                    "yaw": 0.0,
+                    "thrust": 0.2943,
+                    "phase": "hold",
+                }
+            ).encode(),
+        )
         send(pub, b"stop", json.dumps({"vehicle": "cf1", "reason": "operator abort"}).encode())
         time.sleep(0.3)
         report = sim.finish(timeout=0.1)  # SIGTERMs it, which must exit 143
@@ -123,14 +154,31 @@ def test_the_sim_counts_bad_setpoints_obeys_stop_and_reports_on_sigterm():
     assert report["poses"] > 30 and report["contact"] is False
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--pose-out", "udp://x", "--setpoint-in", "zmq://127.0.0.1:0"], "a pose output is"),
-    (["--pose-out", "zmq://127.0.0.1:0", "--setpoint-in", "tcp://127.0.0.1:0"], "expected zmq://HOST:PORT"),
-    (["--pose-out", "zmq://127.0.0.1:0", "--setpoint-in", "zmq://127.0.0.1:0", "--noise", "1"], "--noise 1 m"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--pose-out", "udp://x", "--setpoint-in", "zmq://127.0.0.1:0"], "a pose output is"),
+        (
+            ["--pose-out", "zmq://127.0.0.1:0", "--setpoint-in", "tcp://127.0.0.1:0"],
+            "expected zmq://HOST:PORT",
+        ),
+        (
+            [
+                "--pose-out",
+                "zmq://127.0.0.1:0",
+                "--setpoint-in",
+                "zmq://127.0.0.1:0",
+                "--noise",
+                "1",
+            ],
+            "--noise 1 m",
+        ),
+    ],
+)
 def test_bad_arguments_are_one_line_and_exit_2(args, message):
-    done = subprocess.run([sys.executable, "-m", "perchd", "sim", *args],
-                          capture_output=True, text=True, timeout=30)
+    done = subprocess.run(
+        [sys.executable, "-m", "perchd", "sim", *args], capture_output=True, text=True, timeout=30
+    )
     assert done.returncode == 2
     assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1
 

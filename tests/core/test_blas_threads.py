@@ -14,16 +14,24 @@ import pytest
 from perchd import BLAS_THREAD_VARS
 
 ROOT = Path(__file__).resolve().parents[2]
-REPORT = ("import json, threadpoolctl; "
-          "print(json.dumps([p['num_threads'] for p in threadpoolctl.threadpool_info()]))")
+REPORT = (
+    "import json, threadpoolctl; "
+    "print(json.dumps([p['num_threads'] for p in threadpoolctl.threadpool_info()]))"
+)
 
 
 def pools(code: str, **env: str) -> list[int]:
     """Thread counts of every pool threadpoolctl finds in a fresh interpreter running `code`."""
     environ = {k: v for k, v in os.environ.items() if k not in BLAS_THREAD_VARS}
     environ.update(env, PYTHONPATH=str(ROOT))
-    out = subprocess.run([sys.executable, "-c", f"{code}; {REPORT}"], env=environ,
-                         capture_output=True, text=True, timeout=60, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", f"{code}; {REPORT}"],
+        env=environ,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
     return json.loads(out.stdout.splitlines()[-1])
 
 

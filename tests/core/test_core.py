@@ -49,8 +49,9 @@ def test_a_missing_optional_library_names_the_extra_to_install():
 
 
 def test_the_cli_prints_its_version():
-    out = subprocess.run([sys.executable, "-m", "perchd", "--version"],
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-m", "perchd", "--version"], capture_output=True, text=True, check=True
+    )
     assert out.stdout.startswith("perchd ")
 
 
@@ -60,9 +61,14 @@ def test_an_unclosed_ipv6_bracket_is_a_uri_error_not_a_traceback():
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.text(max_size=40) | st.builds(lambda s, t: f"{s}://{t}",
-                                         st.sampled_from(["sim", "zmq", "natnet", "radio"]),
-                                         st.text(max_size=30)))
+@given(
+    st.text(max_size=40)
+    | st.builds(
+        lambda s, t: f"{s}://{t}",
+        st.sampled_from(["sim", "zmq", "natnet", "radio"]),
+        st.text(max_size=30),
+    )
+)
 def test_any_text_parses_or_is_one_uri_error(text):
     try:
         parse_uri(text)

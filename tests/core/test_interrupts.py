@@ -22,7 +22,8 @@ SCRIPT = textwrap.dedent("""
 
 
 def test_a_signal_caught_while_the_main_thread_holds_the_events_lock_still_stops():
-    done = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True,
-                          timeout=20, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=20, check=False
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "SIGTERM"

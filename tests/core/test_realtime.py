@@ -37,9 +37,14 @@ stop.set()
 
 
 def probe(prio: int, cpu: int = -1, prefix: tuple[str, ...] = ()) -> dict:
-    out = subprocess.run([*prefix, sys.executable, "-c", PROBE.format(prio=prio, cpu=cpu)],
-                         capture_output=True, text=True, timeout=60, check=True,
-                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    out = subprocess.run(
+        [*prefix, sys.executable, "-c", PROBE.format(prio=prio, cpu=cpu)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     return json.loads(out.stdout)
 
 
@@ -55,8 +60,9 @@ def test_granted_every_thread_before_and_after_is_fifo_pinned_and_memory_locked(
 def test_refused_leaves_the_pin_and_the_lock_undone():
     if shutil.which("prlimit") is None or shutil.which("setpriv") is None:
         pytest.skip("needs util-linux prlimit and setpriv")
-    drop = ("setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice") \
-        if os.geteuid() == 0 else ()
+    drop = (
+        ("setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice") if os.geteuid() == 0 else ()
+    )
     got = probe(10, cpu=0, prefix=("prlimit", "--rtprio=0", *drop))
     assert got["error"].startswith("SCHED_FIFO priority 10 refused")
     assert set(got["policies"]) == {os.SCHED_OTHER}
@@ -66,7 +72,9 @@ def test_refused_leaves_the_pin_and_the_lock_undone():
 
 def test_off_by_default_and_priorities_outside_1_to_99_refused():
     assert not RealtimeConfig().enabled
-    assert RealtimeConfig(50, 1).describe() == "SCHED_FIFO priority 50, memory locked, pinned to CPU 1"
+    assert (
+        RealtimeConfig(50, 1).describe() == "SCHED_FIFO priority 50, memory locked, pinned to CPU 1"
+    )
     for bad in ({"priority": -1}, {"priority": 100}, {"cpu": -2}):
         with pytest.raises(ConfigError):
             RealtimeConfig(**bad)
@@ -85,8 +93,14 @@ below_loop(child.pid)
 print(json.dumps([os.sched_getscheduler(child.pid), os.sched_getparam(child.pid).sched_priority]))
 child.kill()
 """
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=60, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     assert json.loads(out.stdout) == [getattr(os, f"SCHED_{policy}"), child_prio]
 
 
@@ -100,6 +114,12 @@ apply(RealtimeConfig(20, lock_memory=False))
 probe = "import os; from perchd.core.realtime import leave_realtime; a = os.sched_getscheduler(0); leave_realtime(); print(a, os.sched_getscheduler(0))"
 print(json.dumps(subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()))
 """
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=60, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     assert json.loads(out.stdout) == [str(os.SCHED_FIFO), str(os.SCHED_OTHER)]

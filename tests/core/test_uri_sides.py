@@ -102,8 +102,19 @@ def test_a_whole_world_uri_still_opens_one_session_with_each_side_its_keys():
 
 def test_perchd_fly_applies_mocap_noise_and_the_log_header_says_so(tmp_path, capsys):
     log = tmp_path / "f.jsonl"
-    code = main(["fly", str(PLANS / "case1-ipts-n3.json"), "--driver", "sim://",
-                 "--mocap", "sim://?noise=0.002", "--log", str(log), "--json"])
+    code = main(
+        [
+            "fly",
+            str(PLANS / "case1-ipts-n3.json"),
+            "--driver",
+            "sim://",
+            "--mocap",
+            "sim://?noise=0.002",
+            "--log",
+            str(log),
+            "--json",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     header = read_log(log).header
     assert header["uri_params"]["mocap"] == {"noise": "0.002"}
@@ -112,8 +123,18 @@ def test_perchd_fly_applies_mocap_noise_and_the_log_header_says_so(tmp_path, cap
 
 
 def test_perchd_fly_refuses_a_misplaced_sim_key_in_one_line(tmp_path, capsys):
-    code = main(["fly", str(PLANS / "case1-ipts-n3.json"), "--driver", "sim://?noise=0.05",
-                 "--mocap", "sim://", "--log", str(tmp_path / "f.jsonl")])
+    code = main(
+        [
+            "fly",
+            str(PLANS / "case1-ipts-n3.json"),
+            "--driver",
+            "sim://?noise=0.05",
+            "--mocap",
+            "sim://",
+            "--log",
+            str(tmp_path / "f.jsonl"),
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "--mocap" in err and "noise" in err
     assert not (tmp_path / "f.jsonl").exists()

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import pytest
-from perchd.drivers.base import DRIVERS, open_driver
-from perchd.drivers.thrust import G
 from rigs import MASS, NOT_HERE, RIGS
 from ticks import level, ticks_until_lost
 from ticks import wait_for as _wait
 
 from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint
+from perchd.drivers.base import DRIVERS, open_driver
+from perchd.drivers.thrust import G
 
 WEIGHT = MASS * G
 

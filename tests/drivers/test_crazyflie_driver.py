@@ -9,15 +9,15 @@ import time
 
 import pytest
 from crtp_responder import STOP, CrtpResponder
-from perchd.drivers import crazyflie
-from perchd.drivers.base import open_driver
-from perchd.drivers.crazyflie import PING_S
-from perchd.drivers.thrust import CrazyflieThrust
 from ticks import level, ticks_until_lost
 
 from perchd.core.errors import LinkError, MissingExtraError, UriError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Pose, Setpoint
+from perchd.drivers import crazyflie
+from perchd.drivers.base import open_driver
+from perchd.drivers.crazyflie import PING_S
+from perchd.drivers.thrust import CrazyflieThrust
 
 pytest.importorskip("cflib")
 
@@ -41,7 +41,7 @@ def cf(responder):
 
 def foerster_motor_newtons(u: float) -> float:
     """Per-motor static thrust of a CF2.0 (Foerster 2015), written out again for the test."""
-    return 2.130295e-11 * u ** 2 + 1.032633e-6 * u + 5.484560e-4
+    return 2.130295e-11 * u**2 + 1.032633e-6 * u + 5.484560e-4
 
 
 def test_connecting_sends_the_zero_thrust_setpoint_that_unlocks_the_motors(responder, cf):
@@ -71,7 +71,11 @@ def test_hover_thrust_is_36000_units_and_twice_the_weight_follows_the_motor_curv
     lo, hi = 36000.0, 65535.0
     for _ in range(60):
         mid = (lo + hi) / 2
-        lo, hi = (mid, hi) if foerster_motor_newtons(mid) < 2 * foerster_motor_newtons(36000) else (lo, mid)
+        lo, hi = (
+            (mid, hi)
+            if foerster_motor_newtons(mid) < 2 * foerster_motor_newtons(36000)
+            else (lo, mid)
+        )
     assert thrusts[1] == pytest.approx(lo, abs=1)
     assert 50000 < thrusts[1] < 60000  # below the firmware's 60000 clamp
 
@@ -188,16 +192,23 @@ def test_a_vehicle_that_never_answers_fails_the_connect_with_a_named_cause(respo
         driver.connect()
 
 
-@pytest.mark.parametrize("query, field", [("?mass=1", "mass=1 kg is outside"),
-                                          ("?hover=70000", "hover=70000 units"),
-                                          ("?timeout=x", "timeout='x' is not a number")])
+@pytest.mark.parametrize(
+    "query, field",
+    [
+        ("?mass=1", "mass=1 kg is outside"),
+        ("?hover=70000", "hover=70000 units"),
+        ("?timeout=x", "timeout='x' is not a number"),
+    ],
+)
 def test_bad_options_are_refused_by_name(query, field):
     with pytest.raises(UriError, match=field):
         open_driver("udp://127.0.0.1:19850" + query, Runtime.real())
 
 
-@pytest.mark.parametrize("uri", ["radio://0/80/2M/ZZZ", "radio://0/200/2M", "radio://0/80/3M",
-                                 "radio://x/80/2M", "radio://0"])
+@pytest.mark.parametrize(
+    "uri",
+    ["radio://0/80/2M/ZZZ", "radio://0/200/2M", "radio://0/80/3M", "radio://x/80/2M", "radio://0"],
+)
 def test_a_radio_uri_typo_is_refused_before_connecting(uri):
     with pytest.raises(UriError, match=r"expected radio://DONGLE/CHANNEL/RATE\[/ADDRESS\]"):
         open_driver(uri, Runtime.real())

@@ -64,8 +64,12 @@ def responder():
 def start_agent(uri: str, *speed: str) -> tuple[subprocess.Popen, int]:
     """A process that owns a driver and streams a tilted stage-1 setpoint (with a `speed`
     [m/s], mocap moving along world X beside it); its keeper's pid."""
-    agent = subprocess.Popen([sys.executable, "-c", AGENT, uri, *speed], stdout=subprocess.PIPE,
-                             text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    agent = subprocess.Popen(
+        [sys.executable, "-c", AGENT, uri, *speed],
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     keeper_pid = int(agent.stdout.readline())
     assert agent.stdout.readline().strip() == "streaming"
     return agent, keeper_pid
@@ -79,14 +83,18 @@ def gone(pid: int) -> bool:
         return True
 
 
-def check_descent_then_stop(responder: CrtpResponder, t_dead: float, keeper_pid: int,
-                            height_m: float | None = None) -> None:
+def check_descent_then_stop(
+    responder: CrtpResponder, t_dead: float, keeper_pid: int, height_m: float | None = None
+) -> None:
     """Without the mocap (none bound): the open-loop sink, level, its kick below the hold,
     then hover less the margin (below the hold, above the kick), stopped by its bound."""
     hold = CrazyflieThrust().units(THRUST_N * math.cos(PITCH))
     last = CrazyflieThrust().units(THRUST_N)
-    bound = cfsink.KICK_S + (cfsink.OPEN_UNKNOWN_S if height_m is None else
-                             height_m / cfsink.OPEN_SINK_MPS + cfsink.OPEN_SPARE_S)
+    bound = cfsink.KICK_S + (
+        cfsink.OPEN_UNKNOWN_S
+        if height_m is None
+        else height_m / cfsink.OPEN_SINK_MPS + cfsink.OPEN_SPARE_S
+    )
     assert responder.wait_for(lambda: responder.stops(), timeout=bound + 1.5)
     stop_t = responder.stops()[0].t
     after = [s for s in responder.setpoints() if t_dead < s.t < stop_t]
@@ -142,9 +150,13 @@ def test_an_agent_killed_at_speed_has_the_keeper_brake_before_the_descent(respon
     agent.wait()
     check_descent_then_stop(responder, t_dead, keeper_pid, height_m=1.0)
     (roll, pitch), model = expected_lean(yaw_deg), CrazyflieThrust()
-    lean = [s for s in responder.setpoints()  # the agent's own last ones pitch the other way
-            if s.t > t_dead and abs(s.wire_pitch_deg - math.degrees(pitch)) < 0.01
-            and abs(s.roll_deg - math.degrees(roll)) < 0.01]
+    lean = [
+        s
+        for s in responder.setpoints()  # the agent's own last ones pitch the other way
+        if s.t > t_dead
+        and abs(s.wire_pitch_deg - math.degrees(pitch)) < 0.01
+        and abs(s.roll_deg - math.degrees(roll)) < 0.01
+    ]
     assert len(lean) >= 8 and lean[-1].t - t_dead == pytest.approx(0.3, abs=0.08)
     hold_n = THRUST_N * math.cos(PITCH)
     hold = model.units(hold_n)
@@ -197,8 +209,11 @@ def test_a_flight_after_a_failsafe_on_the_same_link_is_flown_again(responder):
         assert not [s for s in responder.setpoints() if s.t > responder.stops()[0].t]
         cf.engage()
         cf.send(level(HOVER_N))
-        assert responder.wait_for(lambda: [s for s in responder.setpoints()
-                                           if s.t > responder.stops()[-1].t and s.thrust > 0])
+        assert responder.wait_for(
+            lambda: [
+                s for s in responder.setpoints() if s.t > responder.stops()[-1].t and s.thrust > 0
+            ]
+        )
         after = [s.thrust for s in responder.setpoints() if s.t > responder.stops()[-1].t]
     assert after[0] == 0 and max(after) > 0  # the zero-thrust unlock first
 
@@ -210,6 +225,7 @@ class Vertical:
 
     def __init__(self, z_m: float, vz_mps: float, hover_error: float, seed: int = 1) -> None:
         import random
+
         self.model = CrazyflieThrust()
         self.z, self.vz, self.thrust_n = z_m, vz_mps, self.model.newtons(self.model.hover_units)
         self.weight_n = self.thrust_n * (1.0 + hover_error)
@@ -231,19 +247,29 @@ class Vertical:
 
     def pose(self):
         from perchd.core.types import Pose
+
         self.seq += 1
-        return Pose("cf", self.seq, self.t, (0.0, 0.0, self.z + self.rng.gauss(0, 0.001)),
-                    (0.0, 0.0, 0.0, 1.0))
+        return Pose(
+            "cf",
+            self.seq,
+            self.t,
+            (0.0, 0.0, self.z + self.rng.gauss(0, 0.001)),
+            (0.0, 0.0, 0.0, 1.0),
+        )
 
 
-def fly_down(plant: Vertical, mocap_until_s: float = 99.0, mocap: bool = True,
-             hold_units: int | None = None) -> tuple[list[float], float | None]:
+def fly_down(
+    plant: Vertical, mocap_until_s: float = 99.0, mocap: bool = True, hold_units: int | None = None
+) -> tuple[list[float], float | None]:
     """The keeper's descent against `plant` at its 20 ms ticks, mocap poses every 10 ms until
     mocap_until_s [s]: the true sink at each tick, and when the motors were cut."""
     hover = cfsink.Hover(plant.model, plant.model.newtons(plant.model.hover_units))
     hold = hold_units or plant.model.hover_units
-    descent = cflink.Descent(0.0, cfsink.OpenSink(0.0, hold, hover, plant.z),
-                             cfsink.ClosedSink(0.0, hover) if mocap else None)
+    descent = cflink.Descent(
+        0.0,
+        cfsink.OpenSink(0.0, hold, hover, plant.z),
+        cfsink.ClosedSink(0.0, hover) if mocap else None,
+    )
     sinks, units = [], hold
     for tick in range(int(cflink.DESCENT_MAX_S / cflink.PING_S) + 1):
         now = tick * cflink.PING_S
@@ -281,7 +307,7 @@ def test_the_closed_loop_holds_the_sink_and_cuts_at_touchdown(hover_error, vz0):
 def test_the_closed_loop_sink_is_held_mid_descent():
     plant = Vertical(2.0, 0.0, 0.05)
     sinks, _ = fly_down(plant)
-    held = sinks[int(1.0 / cflink.PING_S):int(2.5 / cflink.PING_S)]
+    held = sinks[int(1.0 / cflink.PING_S) : int(2.5 / cflink.PING_S)]
     assert statistics.mean(held) == pytest.approx(cfsink.SINK_MPS, abs=0.08)
     assert max(held) - min(held) < 0.15
 

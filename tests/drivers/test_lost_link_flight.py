@@ -12,18 +12,19 @@ import threading
 
 import pytest
 from caseplans import case1_ipts
-from perchd.drivers.base import open_driver
 from rigs import CrazyflieRig, MavlinkRig, ZmqRig, bridge, kill_after
 
 import perchd.flight.run as flight
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
+from perchd.drivers.base import open_driver
 from perchd.logs.flightlog import read_log
 from perchd.mocap.base import open_source
 
 
-@pytest.mark.parametrize("rig_cls", [CrazyflieRig, MavlinkRig, ZmqRig],
-                         ids=["crazyflie-udp", "mavlink", "zmq"])
+@pytest.mark.parametrize(
+    "rig_cls", [CrazyflieRig, MavlinkRig, ZmqRig], ids=["crazyflie-udp", "mavlink", "zmq"]
+)
 def test_a_link_that_dies_mid_flight_ends_it_as_lost_link_within_3_ticks(rig_cls, tmp_path):
     rig = rig_cls()
     runtime = Runtime.real()
@@ -31,15 +32,18 @@ def test_a_link_that_dies_mid_flight_ends_it_as_lost_link_within_3_ticks(rig_cls
     world = runtime.sim
     driver = open_driver(rig.uri, runtime)
     stop, killed = threading.Event(), []
-    helpers = [threading.Thread(target=bridge, args=(rig, world, stop), daemon=True),
-               threading.Thread(target=kill_after, args=(rig, world, 50, killed), daemon=True)]
+    helpers = [
+        threading.Thread(target=bridge, args=(rig, world, stop), daemon=True),
+        threading.Thread(target=kill_after, args=(rig, world, 50, killed), daemon=True),
+    ]
     try:
         driver.connect()
         source.start()
         for h in helpers:
             h.start()
-        result = flight.fly(case1_ipts(), driver, source, runtime.clock, tmp_path / "f.jsonl",
-                            world=world)
+        result = flight.fly(
+            case1_ipts(), driver, source, runtime.clock, tmp_path / "f.jsonl", world=world
+        )
     finally:
         stop.set()
         source.close()

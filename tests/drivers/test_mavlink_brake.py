@@ -9,6 +9,8 @@ import dataclasses
 import math
 
 import pytest
+
+from perchd.core.ned import euler_zyx, rotate
 from perchd.drivers.mavlink.brake import (
     BRAKE_ACCEL_MPS2,
     BRAKE_MIN_MPS,
@@ -17,8 +19,6 @@ from perchd.drivers.mavlink.brake import (
     VelocityTracker,
     brake_for,
 )
-
-from perchd.core.ned import euler_zyx, rotate
 
 G = 9.81
 HOVER = 0.42
@@ -75,8 +75,7 @@ def test_a_brake_survives_its_wire_form():
 
 def test_braking_again_keeps_the_heading_and_hover_thrust():
     brake = brake_for((1.0, 0.0, 0.0), 0.4, HOVER, 3.0).again((0.0, -0.5, 0.0))
-    assert (brake.v_ne, brake.heading_ned, brake.hover, brake.t_s) == ((0.0, -0.5), 0.4,
-                                                                       HOVER, 3.0)
+    assert (brake.v_ne, brake.heading_ned, brake.hover, brake.t_s) == ((0.0, -0.5), 0.4, HOVER, 3.0)
     assert brake.duration_s == pytest.approx(0.5 / BRAKE_ACCEL_MPS2)
 
 

@@ -155,6 +155,7 @@ def test_a_dead_autopilot_is_lost_within_3_ticks_and_the_land_command_still_goes
 
 # -- PX4: airborne take-over, level at the heading, udpout to PX4, failsafe parameters --
 
+
 def heading_of(q) -> float:
     """[deg] NED yaw of a (w, x, y, z) target."""
     return math.degrees(Quaternion(list(q)).euler[2])
@@ -268,5 +269,3 @@ def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-

@@ -100,8 +100,11 @@ def test_an_ekf_given_no_poses_is_a_named_refusal_within_the_wait():
     try:
         drv = connected(v, "&arm=1&wait=1", engage=False)
         start = time.monotonic()
-        with pytest.raises(LinkError, match=r"refused to arm \(MAV_RESULT 4\) for 1 s while "
-                                            r"0 poses went to its EKF"):
+        with pytest.raises(
+            LinkError,
+            match=r"refused to arm \(MAV_RESULT 4\) for 1 s while "
+            r"0 poses went to its EKF",
+        ):
             drv.engage()
         assert time.monotonic() - start < 2.0 and not v.armed
         drv.close()
@@ -129,9 +132,24 @@ def test_perchd_fly_arms_an_ekf_on_mocap_alone_from_the_ground(tmp_path):
     poses = StillPoses((-4.5, 0.0, 0.0))
     try:
         fly = subprocess.Popen(
-            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", f"{v.uri}?arm=1",
-             "--mocap", poses.uri, "--log", str(tmp_path / "f.jsonl"), "--json"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "fly",
+                str(PLAN),
+                "--driver",
+                f"{v.uri}?arm=1",
+                "--mocap",
+                poses.uri,
+                "--log",
+                str(tmp_path / "f.jsonl"),
+                "--json",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
             armed = v.wait_for(lambda: v.armed or fly.poll() is not None, timeout=20.0)
             time.sleep(0.5)  # a few ticks of the flight
@@ -151,7 +169,7 @@ def test_perchd_fly_arms_an_ekf_on_mocap_alone_from_the_ground(tmp_path):
 def test_a_failsafe_from_another_thread_while_engaging_wins():
     """A stopping service sends the failsafe from its own thread when the flight's does not
     end in time: the engage under way must not take the vehicle back out of LAND."""
-    v = VehicleDouble(ARDUPILOT, vision_to_arm=10 ** 6)  # it never arms
+    v = VehicleDouble(ARDUPILOT, vision_to_arm=10**6)  # it never arms
     try:
         drv = connected(v, "&arm=1&wait=3", engage=False)
         timer = threading.Timer(0.5, drv.failsafe, args=(EndReason.SIGNAL,))

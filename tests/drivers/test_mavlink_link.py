@@ -50,8 +50,11 @@ class Autopilot:
                     self.requests += 1
                     name = msg.param_id
                     if name in self.params:
-                        self._send(self.mav.param_value_encode(name.encode(), self.params[name],
-                                                               9, len(self.params), 0))
+                        self._send(
+                            self.mav.param_value_encode(
+                                name.encode(), self.params[name], 9, len(self.params), 0
+                            )
+                        )
 
     def close(self) -> None:
         self._stop.set()
@@ -102,8 +105,14 @@ def request(link: Connection, name: str):
 
 def test_the_answer_asked_for_is_the_one_returned_its_handler_already_run(wired):
     link, receiver, autopilot = wired
-    msg = wait_for(link, ("PARAM_VALUE",), lambda m: m.param_id == "GUID_OPTIONS", 2.0, CLOCK,
-                   ask=request(link, "GUID_OPTIONS"))
+    msg = wait_for(
+        link,
+        ("PARAM_VALUE",),
+        lambda m: m.param_id == "GUID_OPTIONS",
+        2.0,
+        CLOCK,
+        ask=request(link, "GUID_OPTIONS"),
+    )
     assert msg is not None and msg.param_value == 8.0
     assert receiver.values["GUID_OPTIONS"] == 8.0  # the owner's state before the waiter's
     assert autopilot.requests == 1  # asked once, not again
@@ -113,8 +122,16 @@ def test_no_answer_is_none_after_the_timeout_asked_again_meanwhile(wired):
     link, _, autopilot = wired
     idles = []
     start = time.monotonic()
-    msg = wait_for(link, ("PARAM_VALUE",), lambda m: True, 0.35, CLOCK,
-                   ask=request(link, "NO_SUCH"), ask_every_s=0.1, idle=lambda: idles.append(1))
+    msg = wait_for(
+        link,
+        ("PARAM_VALUE",),
+        lambda m: True,
+        0.35,
+        CLOCK,
+        ask=request(link, "NO_SUCH"),
+        ask_every_s=0.1,
+        idle=lambda: idles.append(1),
+    )
     assert msg is None and 0.35 <= time.monotonic() - start < 1.0
     time.sleep(0.05)
     assert 3 <= autopilot.requests <= 5 and len(idles) >= 10
@@ -125,6 +142,7 @@ def test_an_idle_that_raises_ends_the_wait(wired):
 
     def stop() -> None:
         raise RuntimeError("a failsafe meanwhile")
+
     with pytest.raises(RuntimeError, match="failsafe meanwhile"):
         wait_for(link, ("PARAM_VALUE",), lambda m: True, 2.0, CLOCK, idle=stop)
 

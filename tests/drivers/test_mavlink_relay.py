@@ -12,12 +12,12 @@ import time
 
 import pytest
 from mavlink_double import PX4, VehicleDouble, agent_process
-from perchd.drivers.mavlink.relay import DISARMED_GRACE_S
-from perchd.drivers.mavlink.sentinel import FOLLOW_PERIOD_S, LAND_REPEATS, VEHICLE_SILENT_S
-from perchd.drivers.mavlink.vision import POS_STD_M, vision_estimate, vision_message
 from still_poses import StillPoses
 
 from perchd.core.types import Pose
+from perchd.drivers.mavlink.relay import DISARMED_GRACE_S
+from perchd.drivers.mavlink.sentinel import FOLLOW_PERIOD_S, LAND_REPEATS, VEHICLE_SILENT_S
+from perchd.drivers.mavlink.vision import POS_STD_M, vision_estimate, vision_message
 from perchd.session import open_links
 
 YAW0_DEG = 60.0
@@ -28,8 +28,14 @@ OFFBOARD = 6 << 16  # PX4 OFFBOARD: a new agent takes it
 LAND_PX4 = (4 << 16) | (6 << 24)  # PX4 AUTO.LAND
 
 
-def agent(vehicle_uri: str, mocap_uri: str, query: str = "", fly_s: float = 1e9,
-          serving: bool = False, relayed: str | None = None) -> subprocess.Popen:
+def agent(
+    vehicle_uri: str,
+    mocap_uri: str,
+    query: str = "",
+    fly_s: float = 1e9,
+    serving: bool = False,
+    relayed: str | None = None,
+) -> subprocess.Popen:
     """`perchd fly`'s driver wiring in a process of its own: mocap bound, connected,
     engaged on the poses, then each new pose observed and a pitched setpoint sent at 100 Hz
     until it is killed, or for fly_s [s] and then closed (the driver's own LAND) and
@@ -98,8 +104,13 @@ def flown(request):
     unicast) moving at SPEED_MPS along world X, and an agent flying it on that mocap, killed
     after 0.6 s; yields (vehicle, mocap, time.monotonic() of the kill)."""
     vehicle = VehicleDouble(PX4, airborne=True, timesync=True, mavlink2=True)
-    mocap = StillPoses(p=(-3.0, 0.2, 1.0), body="v", rate_hz=RATE_HZ,
-                       velocity=(SPEED_MPS, 0.0, 0.0), natnet=request.param == "natnet")
+    mocap = StillPoses(
+        p=(-3.0, 0.2, 1.0),
+        body="v",
+        rate_hz=RATE_HZ,
+        velocity=(SPEED_MPS, 0.0, 0.0),
+        natnet=request.param == "natnet",
+    )
     try:
         yield vehicle, mocap, killed_agent(vehicle, mocap)
     finally:
@@ -125,10 +136,9 @@ def test_after_the_kill_the_mocap_goes_on_to_the_ekf_in_the_agents_frame(flown):
     for msg in relayed:
         usec = min(stamps, key=lambda s: abs(s - msg.usec))
         assert abs(usec - msg.usec) <= stamp_tol_us
-        assert (msg.x, msg.y, msg.z) == pytest.approx(ned(published[usec], YAW0_DEG),
-                                                      abs=1e-5)
+        assert (msg.x, msg.y, msg.z) == pytest.approx(ned(published[usec], YAW0_DEG), abs=1e-5)
         assert msg.yaw == pytest.approx(math.radians(YAW0_DEG), abs=1e-6)
-        assert msg.covariance[0] == pytest.approx(POS_STD_M ** 2)
+        assert msg.covariance[0] == pytest.approx(POS_STD_M**2)
     assert [m.usec for m in relayed] == sorted({m.usec for m in relayed})
     replies = [(t, tc1) for t, tc1, _ in list(vehicle.timesync_replies) if t > killed + 0.2]
     assert len(replies) >= 5
@@ -219,7 +229,6 @@ def test_an_agent_that_ends_normally_hands_its_landing_vehicle_to_the_relay():
     finally:
         mocap.close()
         vehicle.die()
-
 
 
 def test_an_agent_killed_between_flights_leaves_the_relay_and_no_command():

@@ -30,9 +30,10 @@ class RivalGcs:
 
     def _stream(self) -> None:
         while not self.done.wait(0.05):
-            for msg in (self.mav.heartbeat_encode(18, 8, 0, 0, 4),  # ONBOARD_CONTROLLER
-                        self.mav.set_attitude_target_encode(0, 1, 1, 0b111, [1, 0, 0, 0],
-                                                            0, 0, 0, 0.5)):
+            for msg in (
+                self.mav.heartbeat_encode(18, 8, 0, 0, 4),  # ONBOARD_CONTROLLER
+                self.mav.set_attitude_target_encode(0, 1, 1, 0b111, [1, 0, 0, 0], 0, 0, 0, 0.5),
+            ):
                 self.relay.inject(msg.pack(self.mav))
 
     def close(self) -> None:
@@ -55,15 +56,20 @@ def test_a_companion_streaming_attitude_targets_is_named_and_nothing_is_flown(ar
     finally:
         rival.close()
         relay.close()
-    assert str(err.value) == (f"{uri}: another companion (system 7, component 191) is steering "
-                              "the vehicle (SET_ATTITUDE_TARGET); stop it first")
+    assert str(err.value) == (
+        f"{uri}: another companion (system 7, component 191) is steering "
+        "the vehicle (SET_ATTITUDE_TARGET); stop it first"
+    )
     assert vehicle.targets == [] and vehicle.modes == []
 
 
 def test_a_vehicle_armed_in_its_offboard_mode_already_is_refused(ardupilot):
     vehicle = ardupilot
     vehicle.armed, vehicle.custom_mode = True, GUIDED_NOGPS
-    with pytest.raises(TargetBusy, match="armed in its offboard mode already .custom mode 20.: "
-                                         "another GCS or companion flies it"):
+    with pytest.raises(
+        TargetBusy,
+        match="armed in its offboard mode already .custom mode 20.: "
+        "another GCS or companion flies it",
+    ):
         connected(vehicle, engage=False)
     assert vehicle.targets == []

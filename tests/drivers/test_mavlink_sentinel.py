@@ -21,13 +21,16 @@ from mavlink_double import (
     agent_process,
     connected,
 )
+from pymavlink import mavutil
+
+from perchd.core.ned import euler_zyx
+from perchd.drivers.mavlink import Connection, dialect_for
 from perchd.drivers.mavlink.brake import (
     BRAKE_ACCEL_MPS2,
     BRAKE_DONE_MPS,
     BRAKE_ROUNDS,
     LEVEL_MAX_S,
 )
-from perchd.drivers.mavlink import Connection, dialect_for
 from perchd.drivers.mavlink.relay import RELAY_MAX_S
 from perchd.drivers.mavlink.sentinel import (
     LAND_REPEATS,
@@ -35,9 +38,6 @@ from perchd.drivers.mavlink.sentinel import (
     agent_death,
     follow_landing,
 )
-from pymavlink import mavutil
-
-from perchd.core.ned import euler_zyx
 
 LAND = {ARDUPILOT: 9, PX4: (4 << 16) | (6 << 24)}  # the double's custom_mode for LAND
 
@@ -56,8 +56,9 @@ def airborne():
         vehicle.die()
 
 
-def agent(uri: str, engage: bool, speed: float | None = None, poses_for_s: float = 1e9
-          ) -> subprocess.Popen:
+def agent(
+    uri: str, engage: bool, speed: float | None = None, poses_for_s: float = 1e9
+) -> subprocess.Popen:
     """A process that connects perchd's driver to `uri` (engaging it when asked), says
     "ready" and then streams a pitched setpoint at 100 Hz until it is killed; with a
     `speed` [m/s], mocap poses moving along world X (north: yaw0 = 0) go to the driver
@@ -83,16 +84,18 @@ def agent(uri: str, engage: bool, speed: float | None = None, poses_for_s: float
     return agent_process(code)
 
 
-def modes_after_kill(vehicle: VehicleDouble, engage: bool = True, flown_s: float = 0.3,
-                     **poses: float) -> list[tuple[float, int]]:
+def modes_after_kill(
+    vehicle: VehicleDouble, engage: bool = True, flown_s: float = 0.3, **poses: float
+) -> list[tuple[float, int]]:
     """(seconds after the SIGKILL, custom mode) of every mode the vehicle was switched to;
     the agent is killed flown_s [s] after it says ready."""
     killed = kill_agent(vehicle, engage, flown_s, **poses)
     return [(t - killed, mode) for t, mode in vehicle.modes if t > killed]
 
 
-def kill_agent(vehicle: VehicleDouble, engage: bool, flown_s: float, then=None,
-               **poses: float) -> float:
+def kill_agent(
+    vehicle: VehicleDouble, engage: bool, flown_s: float, then=None, **poses: float
+) -> float:
     """time.monotonic() of the SIGKILL; returns once the sentinel has had time to act;
     then(): called right after the kill."""
     proc = agent(vehicle.uri, engage, **poses)
@@ -107,8 +110,7 @@ def kill_agent(vehicle: VehicleDouble, engage: bool, flown_s: float, then=None,
 
 
 @pytest.mark.parametrize("autopilot", [ARDUPILOT, PX4], ids=["ardupilot", "px4"])
-def test_a_killed_agent_has_the_vehicle_landing_within_a_tenth_of_a_second(airborne,
-                                                                          autopilot):
+def test_a_killed_agent_has_the_vehicle_landing_within_a_tenth_of_a_second(airborne, autopilot):
     """Before, the vehicle flew the last pitched setpoint for GUID_TIMEOUT / COM_OF_LOSS_T
     and only then took its own failsafe."""
     after = modes_after_kill(airborne(autopilot))
@@ -129,7 +131,7 @@ def test_a_vehicle_killed_at_speed_is_braked_levelled_then_landed(airborne, auto
     land = next(t for t, _ in vehicle.modes if t > killed)
     sent = [t for t in vehicle.targets if killed + 0.005 < t.t < land]
     lean = [t for t in sent if t.q != (1.0, 0.0, 0.0, 0.0)]
-    level = sent[len(lean):]
+    level = sent[len(lean) :]
     assert len(lean) >= 10 and all(t.q == lean[0].q for t in lean)
     assert lean[-1].t - killed == pytest.approx(0.3, abs=0.05)
     w, x, y, z = lean[0].q
@@ -155,8 +157,10 @@ def land_after_braking(vehicle: VehicleDouble, slowed_after_s: float) -> float:
 
     def slow() -> None:
         vehicle.velocity_ned = (BRAKE_DONE_MPS / 2, 0.0, 0.0)
-    killed = kill_agent(vehicle, True, 0.5, lambda: threading.Timer(slowed_after_s, slow).start(),
-                        speed=0.9)
+
+    killed = kill_agent(
+        vehicle, True, 0.5, lambda: threading.Timer(slowed_after_s, slow).start(), speed=0.9
+    )
     deadline = time.monotonic() + 3.0
     while not any(t > killed for t, _ in vehicle.modes) and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -257,8 +261,13 @@ def test_over_a_stream_link_the_land_command_is_one_whole_frame():
     parser = mavutil.mavlink.MAVLink(None)
     msgs = [m for m in (parser.parse_buffer(b"".join(got)) or [])]
     assert len(msgs) == LAND_REPEATS
-    assert all(m.get_type() == "COMMAND_LONG" and m.command == 176 and m.param2 == 9
-               and (m.target_system, m.target_component) == (1, 1) for m in msgs)
+    assert all(
+        m.get_type() == "COMMAND_LONG"
+        and m.command == 176
+        and m.param2 == 9
+        and (m.target_system, m.target_component) == (1, 1)
+        for m in msgs
+    )
 
 
 def test_over_a_udpin_link_the_land_goes_to_the_vehicle_heard():
@@ -268,8 +277,9 @@ def test_over_a_udpin_link_the_land_goes_to_the_vehicle_heard():
     vehicle.bind(("127.0.0.1", 0))
     vehicle.settimeout(2.0)
     px4 = mavutil.mavlink.MAVLink(None, 1, 1)
-    vehicle.sendto(px4.heartbeat_encode(2, 12, 0, 0, 4).pack(px4),
-                   ("127.0.0.1", conn.port.getsockname()[1]))
+    vehicle.sendto(
+        px4.heartbeat_encode(2, 12, 0, 0, 4).pack(px4), ("127.0.0.1", conn.port.getsockname()[1])
+    )
     assert conn.recv_match(type="HEARTBEAT", blocking=True, timeout=2.0) is not None
     sentinel = Sentinel(Connection(conn), (1, 1), (4, 6))
     sentinel.flying(True)
@@ -290,6 +300,7 @@ def test_a_brake_that_fails_still_ends_in_land(monkeypatch):
 
     def broken(*_: object) -> None:
         raise RuntimeError("a brake that cannot be flown")
+
     monkeypatch.setattr(sentinel, "fly_brake", broken)
     vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     vehicle.bind(("127.0.0.1", 0))
@@ -302,7 +313,18 @@ def test_a_brake_that_fails_still_ends_in_land(monkeypatch):
     dest = f"127.0.0.1:{vehicle.getsockname()[1]}"
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT)}
     try:
-        argv = [str(theirs.detach()), str(link.fileno()), dest, "255", "190", "1", "1", "4", "6", "-"]
+        argv = [
+            str(theirs.detach()),
+            str(link.fileno()),
+            dest,
+            "255",
+            "190",
+            "1",
+            "1",
+            "4",
+            "6",
+            "-",
+        ]
         assert sentinel.main(argv) == 0
     finally:
         for sig, handler in saved.items():
@@ -312,7 +334,6 @@ def test_a_brake_that_fails_still_ends_in_land(monkeypatch):
     link.close()
     vehicle.close()
     assert all(m.command == 176 and (m.param2, m.param3) == (4, 6) for m in msgs)
-
 
 
 class HeardLink:
@@ -337,8 +358,10 @@ def test_the_relay_ends_relay_max_s_after_the_death_whatever_the_vehicle_does():
     link = HeardLink()
     try:
         start = time.monotonic()
-        assert follow_landing(link, LiveRelay(), 6 << 16, start - RELAY_MAX_S + 0.3) == \
-            f"{RELAY_MAX_S:g} s after the death"
+        assert (
+            follow_landing(link, LiveRelay(), 6 << 16, start - RELAY_MAX_S + 0.3)
+            == f"{RELAY_MAX_S:g} s after the death"
+        )
         assert 0.25 <= time.monotonic() - start <= 1.0
     finally:
         link.sock.close()

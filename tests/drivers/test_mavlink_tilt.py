@@ -13,10 +13,10 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from mavlink_double import PX4, VehicleDouble, connected
-from perchd.drivers.mavlink.tilt import MAX_RAD, STALE_S, BootClock, TiltCorrection
 from pymavlink.quaternion import Quaternion
 
 from perchd.core.types import Phase, Pose, Setpoint
+from perchd.drivers.mavlink.tilt import MAX_RAD, STALE_S, BootClock, TiltCorrection
 
 DEG = math.radians(1.0)
 ATT_PERIOD_S, POSE_PERIOD_S = 0.02, 0.01  # ATTITUDE at 50 Hz, mocap at 100 Hz

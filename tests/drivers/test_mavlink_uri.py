@@ -15,18 +15,26 @@ from perchd.core.runtime import Runtime
 from perchd.drivers.base import open_driver
 
 
-@pytest.mark.parametrize("uri, message", [
-    ("mavlink:udpout:127.0.0.1:14550?mass=90", "mass=90 kg is outside"),
-    ("mavlink:nonsense", "expected mavlink:udpin:HOST:PORT .PX4: udpin:127.0.0.1:14540"),
-])
+@pytest.mark.parametrize(
+    "uri, message",
+    [
+        ("mavlink:udpout:127.0.0.1:14550?mass=90", "mass=90 kg is outside"),
+        ("mavlink:nonsense", "expected mavlink:udpin:HOST:PORT .PX4: udpin:127.0.0.1:14540"),
+    ],
+)
 def test_bad_uris_are_refused_by_name(uri, message):
     with pytest.raises(UriError, match=message):
         open_driver(uri, Runtime.real())
 
 
-@pytest.mark.parametrize("uri, port", [("mavlink:tcp:host:xx?mass=1", "'xx'"),
-                                       ("mavlink:udpout:127.0.0.1?mass=1", "''"),
-                                       ("mavlink:udpin:0.0.0.0:70000?mass=1", "'70000'")])
+@pytest.mark.parametrize(
+    "uri, port",
+    [
+        ("mavlink:tcp:host:xx?mass=1", "'xx'"),
+        ("mavlink:udpout:127.0.0.1?mass=1", "''"),
+        ("mavlink:udpin:0.0.0.0:70000?mass=1", "'70000'"),
+    ],
+)
 def test_a_network_device_without_a_port_is_refused_before_pymavlink_sees_it(uri, port):
     with pytest.raises(UriError, match=f"needs HOST:PORT with a port 1..65535, got {port}"):
         open_driver(uri, Runtime.real())
@@ -38,8 +46,13 @@ def test_without_pymavlink_the_factory_names_the_extra_to_install(monkeypatch):
         open_driver("mavlink:udpout:127.0.0.1:14550?mass=1", Runtime.real())
 
 
-@pytest.mark.parametrize("uri", ["mavlink:udpin:127.0.0.1:14540?mass=1&sport=5000",
-                                 "mavlink:udpout:127.0.0.1:14580?mass=1&sport=1.5"])
+@pytest.mark.parametrize(
+    "uri",
+    [
+        "mavlink:udpin:127.0.0.1:14540?mass=1&sport=5000",
+        "mavlink:udpout:127.0.0.1:14580?mass=1&sport=1.5",
+    ],
+)
 def test_sport_is_for_udpout_only(uri):
     with pytest.raises(UriError, match="sport= is a whole port number, for udpout: links only"):
         open_driver(uri, Runtime.real())

@@ -26,13 +26,17 @@ def pose(t, p, roll=0.0, pitch=0.0, yaw=0.0, seq=1, valid=True):
 
 
 @pytest.mark.parametrize("autopilot", [ARDUPILOT, PX4])
-@pytest.mark.parametrize("yaw0_deg, world, ned", [
-    (0, (1.0, 2.0, 3.0), (1.0, -2.0, -3.0)),  # NWU: X north, Y west, Z up
-    (90, (1.0, 2.0, 3.0), (2.0, 1.0, -3.0)),  # ENU: X east, Y north
-    (60, (1.0, 0.0, 0.5), (0.5, math.sqrt(3) / 2, -0.5)),  # X at heading 60 deg
-])
+@pytest.mark.parametrize(
+    "yaw0_deg, world, ned",
+    [
+        (0, (1.0, 2.0, 3.0), (1.0, -2.0, -3.0)),  # NWU: X north, Y west, Z up
+        (90, (1.0, 2.0, 3.0), (2.0, 1.0, -3.0)),  # ENU: X east, Y north
+        (60, (1.0, 0.0, 0.5), (0.5, math.sqrt(3) / 2, -0.5)),  # X at heading 60 deg
+    ],
+)
 def test_each_pose_goes_to_the_autopilot_in_ned_at_its_measurement_time(
-        autopilot, yaw0_deg, world, ned):
+    autopilot, yaw0_deg, world, ned
+):
     v = VehicleDouble(autopilot, mavlink2=True)
     try:
         drv = connected(v, f"&yaw0={yaw0_deg}")
@@ -44,8 +48,9 @@ def test_each_pose_goes_to_the_autopilot_in_ned_at_its_measurement_time(
         assert (m.x, m.y, m.z) == pytest.approx(ned, abs=1e-6)
         # FRD in NED: roll stays, pitch flips, yaw is measured clockwise from yaw0
         assert (m.roll, m.pitch) == pytest.approx((0.1, -0.2), abs=1e-6)
-        assert math.remainder(m.yaw - (math.radians(yaw0_deg) - 0.3), math.tau) == \
-            pytest.approx(0.0, abs=1e-6)
+        assert math.remainder(m.yaw - (math.radians(yaw0_deg) - 0.3), math.tau) == pytest.approx(
+            0.0, abs=1e-6
+        )
         assert m.usec == round((runtime_now + 0.04) * 1e6)
         cov = list(m.covariance)
         assert cov[0] == cov[6] == cov[11] > 0 and cov[15] == cov[18] == cov[20] > 0
@@ -80,8 +85,9 @@ def test_yaw0_auto_forwards_from_the_first_pose_at_the_measured_offset():
         m = v.visions[0][1]
         assert math.degrees(m.yaw) == pytest.approx(100.0, abs=1e-3)  # its own heading
         # world X is at heading 130 deg: a point 1 m along it
-        assert (m.x, m.y) == pytest.approx((math.cos(math.radians(130)),
-                                            math.sin(math.radians(130))), abs=1e-6)
+        assert (m.x, m.y) == pytest.approx(
+            (math.cos(math.radians(130)), math.sin(math.radians(130))), abs=1e-6
+        )
         drv.close()
     finally:
         v.close()

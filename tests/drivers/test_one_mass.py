@@ -42,8 +42,9 @@ def test_the_mismatch_is_refused_before_the_driver_connects():
     pytest.importorskip("cflib")
     # Nothing listens on the port: a connect would fail with LinkError after its wait.
     with pytest.raises(ConfigError, match="disagrees"):
-        open_links("udp://127.0.0.1:9?mass=0.0282&wait=5", "zmq://127.0.0.1:9?body=cf1",
-                   mass_kg=0.030)
+        open_links(
+            "udp://127.0.0.1:9?mass=0.0282&wait=5", "zmq://127.0.0.1:9?body=cf1", mass_kg=0.030
+        )
 
 
 def test_a_mavlink_uri_mass_that_disagrees_is_refused():

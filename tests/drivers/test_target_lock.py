@@ -24,8 +24,10 @@ from perchd.drivers.targetlock import (
 )
 
 URI = "zmq://127.0.0.1:5999?vehicle=cf1"
-HOLD = ("import sys, time; from perchd.drivers.targetlock import hold_target; "
-        "hold_target(sys.argv[1]); print('held', flush=True); time.sleep(60)")
+HOLD = (
+    "import sys, time; from perchd.drivers.targetlock import hold_target; "
+    "hold_target(sys.argv[1]); print('held', flush=True); time.sleep(60)"
+)
 
 
 @pytest.fixture(autouse=True)
@@ -47,8 +49,9 @@ def holder():
 def takes(uri: str) -> subprocess.CompletedProcess:
     """Whether another process can take the lock now."""
     code = "import sys; from perchd.drivers.targetlock import hold_target; hold_target(sys.argv[1])"
-    return subprocess.run([sys.executable, "-c", code, uri], capture_output=True, text=True,
-                          timeout=30, check=False)
+    return subprocess.run(
+        [sys.executable, "-c", code, uri], capture_output=True, text=True, timeout=30, check=False
+    )
 
 
 def test_the_target_is_the_uri_without_its_options():
@@ -63,8 +66,10 @@ def test_a_held_vehicle_is_refused_naming_the_holder_and_taken_once_it_dies(hold
     with pytest.raises(TargetBusy) as err:
         hold_target(URI)
     command = f"{sys.executable} -c {HOLD} {URI}"[:COMMAND_CHARS]
-    assert str(err.value) == (f"{URI}: the vehicle is in use by another perchd, pid {holder.pid} "
-                              f"({command}); stop that one first (lock {lock_path(URI)})")
+    assert str(err.value) == (
+        f"{URI}: the vehicle is in use by another perchd, pid {holder.pid} "
+        f"({command}); stop that one first (lock {lock_path(URI)})"
+    )
     assert err.value.exit_code == 2
     holder.send_signal(signal.SIGKILL)  # no chance to clean up: the kernel drops the flock
     holder.wait()

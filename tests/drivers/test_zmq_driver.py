@@ -6,14 +6,14 @@ import json
 import os
 
 import pytest
-from perchd.drivers.base import open_driver
-from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, setpoint_message
 from ticks import level, ticks_until_lost
 from zmq_subscriber import SetpointSubscriber
 
 from perchd.core.errors import LinkError, UriError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.drivers.base import open_driver
+from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, setpoint_message
 
 
 @pytest.fixture
@@ -29,9 +29,18 @@ def test_setpoints_follow_contract_3_with_the_pose_they_came_from(sub):
         drv.send(Setpoint(12.36, 0.0, 0.0, 0.0, 0.26, 18, Phase.STAGE2))
         assert sub.wait_for(lambda: len(sub.of("setpoint")) == 2)
     first, second = sub.of("setpoint")
-    assert first == {"vehicle": "cf7", "seq": 0, "t": 12.35, "pose_seq": 17, "roll": 0.1,
-                     "pitch": -0.2, "yaw": 0.3, "thrust": 0.27, "phase": "stage1",
-                     "sender": drv.sender}
+    assert first == {
+        "vehicle": "cf7",
+        "seq": 0,
+        "t": 12.35,
+        "pose_seq": 17,
+        "roll": 0.1,
+        "pitch": -0.2,
+        "yaw": 0.3,
+        "thrust": 0.27,
+        "phase": "stage1",
+        "sender": drv.sender,
+    }
     assert (second["seq"], second["pose_seq"], second["phase"]) == (1, 18, "stage2")
     assert drv.sender.startswith(f"{os.getpid()}-") and second["sender"] == drv.sender
     assert sub.wait_for(lambda: sub.of("stop")) and sub.of("stop")[-1]["sender"] == drv.sender
@@ -85,13 +94,19 @@ def test_the_receiving_end_reads_back_exactly_what_the_driver_sent():
     assert parse_setpoint_message(body) == ("cf1", 9, sp)
 
 
-@pytest.mark.parametrize("body, field", [
-    (b"{", "not JSON"),
-    (b"[1]", "not a JSON object"),
-    (b'{"t": 0, "roll": "x", "pitch": 0, "yaw": 0, "thrust": 0}', "'roll' must be a finite number"),
-    (b'{"t": 0, "roll": 0, "pitch": 0, "yaw": 0, "thrust": NaN}', "'thrust' must be a finite"),
-    (b'{"t": 0, "roll": 0, "pitch": 0, "yaw": 0, "thrust": 0, "phase": "up"}', "'phase'"),
-])
+@pytest.mark.parametrize(
+    "body, field",
+    [
+        (b"{", "not JSON"),
+        (b"[1]", "not a JSON object"),
+        (
+            b'{"t": 0, "roll": "x", "pitch": 0, "yaw": 0, "thrust": 0}',
+            "'roll' must be a finite number",
+        ),
+        (b'{"t": 0, "roll": 0, "pitch": 0, "yaw": 0, "thrust": NaN}', "'thrust' must be a finite"),
+        (b'{"t": 0, "roll": 0, "pitch": 0, "yaw": 0, "thrust": 0, "phase": "up"}', "'phase'"),
+    ],
+)
 def test_a_malformed_setpoint_is_refused_naming_the_field(body, field):
     with pytest.raises(BadSetpoint, match=field):
         parse_setpoint_message(body)

@@ -16,12 +16,12 @@ import zmq
 from aborts import TRIGGER_T, assert_failsafe_and_closed_log
 from caseplans import case1_ipts
 from faultsim import TICK, fly, injected, report
-from perchd.drivers.base import open_driver
 from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig, bridge
 from udp_relay import UdpRelay
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
+from perchd.drivers.base import open_driver
 from perchd.flight.run import FlightAbort
 from perchd.flight.run import fly as fly_real
 from perchd.logs.flightlog import read_log
@@ -48,7 +48,9 @@ class CutAfterTick:
                 self.cut_at = now
                 sim.world.faults.link_ok = False
                 sim.world.faults.at.append(
-                    (now + self.back_s, lambda w: setattr(w.faults, "link_ok", True)))
+                    (now + self.back_s, lambda w: setattr(w.faults, "link_ok", True))
+                )
+
         return on_tick
 
 
@@ -61,8 +63,13 @@ def test_a_cut_link_ends_the_flight_on_the_next_tick_in_every_phase(tmp_path):
         assert_failsafe_and_closed_log(f.sim, f.res, EndReason.LOST_LINK)
         assert f.end_t - cut.cut_at == pytest.approx(TICK)  # the very next tick
         delays.append(f.end_t - cut.cut_at)
-    report("link: loopback link cut (fault switch)", "driver health not ok, read at the "
-           "start of every tick", "LOST_LINK, failsafe", "motors off (stop setpoint)", delays)
+    report(
+        "link: loopback link cut (fault switch)",
+        "driver health not ok, read at the start of every tick",
+        "LOST_LINK, failsafe",
+        "motors off (stop setpoint)",
+        delays,
+    )
 
 
 def test_a_link_that_comes_back_after_the_abort_gets_no_thrust(tmp_path):
@@ -74,8 +81,12 @@ def test_a_link_that_comes_back_after_the_abort_gets_no_thrust(tmp_path):
     fail = f.sim.world.sent.index(next(s for s in f.sim.world.sent if s.phase.value == "abort"))
     assert all(s.thrust == 0.0 for s in f.sim.world.sent[fail:])
     assert f.sim.world.plant.thrust < 0.01  # the motors spun down and stayed down
-    report("link: loopback link back after the abort", "-", "failsafe is latched: the "
-           "driver sends nothing more", "motors stay off")
+    report(
+        "link: loopback link back after the abort",
+        "-",
+        "failsafe is latched: the driver sends nothing more",
+        "motors stay off",
+    )
 
 
 @pytest.mark.parametrize("latency", [0.05, 0.1])
@@ -84,15 +95,22 @@ def test_a_slow_link_up_to_100_ms_still_perches_inside_the_contact_window(latenc
     injected("slow link")
     assert f.res.outcome is EndReason.CONTACT
     assert 0.7 - 0.02 <= f.res.true_contact_speed <= 1.0 + 0.02
-    report(f"link: commands {1000 * latency:.0f} ms late (loopback)", "none needed",
-           "flown (the setpoints lead by ff_lead_s)", "perches "
-           f"({f.res.true_contact_speed:.3f} m/s)")
+    report(
+        f"link: commands {1000 * latency:.0f} ms late (loopback)",
+        "none needed",
+        "flown (the setpoints lead by ff_lead_s)",
+        f"perches ({f.res.true_contact_speed:.3f} m/s)",
+    )
 
 
 def test_a_link_200_ms_slow_is_a_lost_link_before_it_flies(tmp_path):
     f = fly(tmp_path, uri="sim://?latency=0.2")
-    report("link: commands 200 ms late (loopback)", "echo round trip > link_rtt_max_s (0.25 s)",
-           f"{f.res.outcome.name}, failsafe", "motors off before the approach")
+    report(
+        "link: commands 200 ms late (loopback)",
+        "echo round trip > link_rtt_max_s (0.25 s)",
+        f"{f.res.outcome.name}, failsafe",
+        "motors off before the approach",
+    )
     assert f.res.outcome is EndReason.LOST_LINK and f.res.failsafe_sent
     assert "link too slow: round trip 400 ms > 250 ms" in f.res.detail
     assert f.res.trigger is None  # never reached the trigger: the slow link was seen at once
@@ -115,23 +133,33 @@ class RealFlight:
 
     def at_setpoint(self, n: int, name: str, fn) -> None:
         """Run fn once n setpoints have reached the world; remember when (monotonic)."""
+
         def wait():
             while len(self.world.sent) < n and not self._stop.is_set():
                 time.sleep(0.001)
             fn()
             self.marks[name] = time.monotonic()
+
         threading.Thread(target=wait, daemon=True).start()
 
     def fly(self, tmp_path, abort_after_s: float | None = None, close: bool = True):
         if abort_after_s is not None:
             self.at_setpoint(int(abort_after_s * 100), "abort", self.abort.request)
-        threading.Thread(target=bridge, args=(self.rig, self.world, self._stop),
-                         daemon=True).start()
+        threading.Thread(
+            target=bridge, args=(self.rig, self.world, self._stop), daemon=True
+        ).start()
         try:
             self.driver.connect()
             self.source.start()
-            return fly_real(case1_ipts(), self.driver, self.source, self.runtime.clock,
-                            tmp_path / "f.jsonl", abort=self.abort, world=self.world)
+            return fly_real(
+                case1_ipts(),
+                self.driver,
+                self.source,
+                self.runtime.clock,
+                tmp_path / "f.jsonl",
+                abort=self.abort,
+                world=self.world,
+            )
         finally:
             self._stop.set()
             if close:
@@ -180,9 +208,13 @@ def test_a_peer_that_stops_answering_is_lost_link_within_3_ticks_of_the_timeout(
     assert rows[-1].t > mute + timeout - PING_S - 2 * TICK  # not before the silence rule
     assert len([r for r in rows if r.t > mute + timeout]) <= 3  # and then within 3 ticks
     assert rig.stopped()
-    report(f"link: {make.__name__} peer stops answering", f"silent > timeout "
-           f"(URI timeout=, here {timeout:g} s)", "LOST_LINK, failsafe",
-           "stop sent (Crazyflie: stop setpoint; MAVLink: LAND)", [rows[-1].t - mute])
+    report(
+        f"link: {make.__name__} peer stops answering",
+        f"silent > timeout (URI timeout=, here {timeout:g} s)",
+        "LOST_LINK, failsafe",
+        "stop sent (Crazyflie: stop setpoint; MAVLink: LAND)",
+        [rows[-1].t - mute],
+    )
 
 
 def fly_slowed(make, delay_s: float, tmp_path, what: str):
@@ -204,16 +236,24 @@ def test_a_slow_peer_within_the_round_trip_limit_is_not_a_lost_link(make, tmp_pa
     assert res.outcome is EndReason.OPERATOR_ABORT  # flown until the operator stopped it
     assert relay.forwarded["down"] > 20 and relay.forwarded["up"] > 50
     assert rig.commanded() is not None  # the vehicle got the (late) setpoints
-    report(f"link: {make.__name__} peer answers 100 ms late each way", "none: a 200 ms round "
-           "trip is inside link_rtt_max_s (0.25 s)", "flown", "flies on")
+    report(
+        f"link: {make.__name__} peer answers 100 ms late each way",
+        "none: a 200 ms round trip is inside link_rtt_max_s (0.25 s)",
+        "flown",
+        "flies on",
+    )
 
 
 def test_a_crazyflie_link_slower_than_the_round_trip_limit_is_lost_link(tmp_path):
     _, _, res = fly_slowed(crazyflie, 0.15, tmp_path, "slow crazyflie link")
     assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
     assert "link too slow: round trip" in res.detail and "> 250 ms" in res.detail
-    report("link: crazyflie echo 150 ms late each way", "echo round trip (median of 10) > "
-           "link_rtt_max_s 0.25 s", "LOST_LINK, failsafe", "stop sent (and repeated)")
+    report(
+        "link: crazyflie echo 150 ms late each way",
+        "echo round trip (median of 10) > link_rtt_max_s 0.25 s",
+        "LOST_LINK, failsafe",
+        "stop sent (and repeated)",
+    )
 
 
 def thrust_after(rig, since: float) -> list[float]:
@@ -259,9 +299,13 @@ def test_a_short_outage_is_ridden_out_and_a_long_one_is_lost_link_for_good(make,
     assert rows[-1].t > marks["pause2"]  # the first, short outage was flown through
     assert all(t == 0 for t in thrust_after(rig, ended))  # back, and no thrust
     report(f"link: {make.__name__} outage of 30 ms (< timeout)", "-", "flown", "flies on")
-    report(f"link: {make.__name__} outage longer than the timeout, then back", "silent > "
-           f"timeout ({TIMEOUT_S:g} s)", "LOST_LINK, failsafe latched", "no thrust after the "
-           "link returns", [rows[-1].t - marks["pause2"]])
+    report(
+        f"link: {make.__name__} outage longer than the timeout, then back",
+        f"silent > timeout ({TIMEOUT_S:g} s)",
+        "LOST_LINK, failsafe latched",
+        "no thrust after the link returns",
+        [rows[-1].t - marks["pause2"]],
+    )
 
 
 def stops_heard(rig) -> list[float]:
@@ -280,11 +324,16 @@ def test_a_failsafe_sent_into_a_dead_link_reaches_the_vehicle_when_it_returns(ma
     first = min(heard) - marks["resume"]
     assert rig.stopped()
     assert all(t == 0 for t in thrust_after(rig, ended))  # and thrust never came back
-    repeat = {"crazyflie": "stop every 20 ms for 3 s", "mavlink": "LAND every 0.25 s until "
-              "the heartbeat shows it taken, 10 s at most"}[make.__name__]
-    report(f"link: {make.__name__} failsafe sent while the link is down, link back", "-",
-           f"LOST_LINK, failsafe repeated by the driver ({repeat})",
-           f"stop/LAND heard {1e3 * first:.0f} ms after the link is back")
+    repeat = {
+        "crazyflie": "stop every 20 ms for 3 s",
+        "mavlink": "LAND every 0.25 s until the heartbeat shows it taken, 10 s at most",
+    }[make.__name__]
+    report(
+        f"link: {make.__name__} failsafe sent while the link is down, link back",
+        "-",
+        f"LOST_LINK, failsafe repeated by the driver ({repeat})",
+        f"stop/LAND heard {1e3 * first:.0f} ms after the link is back",
+    )
 
 
 def test_a_zmq_subscriber_that_returns_on_the_same_port_gets_no_setpoint(tmp_path):
@@ -306,5 +355,9 @@ def test_a_zmq_subscriber_that_returns_on_the_same_port_gets_no_setpoint(tmp_pat
     assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
     assert len([r for r in read_log(res.log).rows if r.t > flight.marks["die"]]) <= 3
     assert not got  # the driver, still open, sends nothing after its failsafe
-    report("link: zmq subscriber gone, then back on the same port", "XPUB sees the "
-           "unsubscription", "LOST_LINK, failsafe", "stop published; nothing after")
+    report(
+        "link: zmq subscriber gone, then back on the same port",
+        "XPUB sees the unsubscription",
+        "LOST_LINK, failsafe",
+        "stop published; nothing after",
+    )

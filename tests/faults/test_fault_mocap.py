@@ -52,14 +52,17 @@ loop's period; the mocap-synchronous loop ticks on every frame, or 1.5 periods w
 
 @pytest.fixture(scope="module")
 def nominal(tmp_path_factory):
-    return {loop: fly(tmp_path_factory.mktemp("nominal"), cfg=cfg).res
-            for loop, (cfg, _) in LOOPS.items()}
+    return {
+        loop: fly(tmp_path_factory.mktemp("nominal"), cfg=cfg).res
+        for loop, (cfg, _) in LOOPS.items()
+    }
 
 
 @pytest.mark.parametrize("loop", LOOPS)
 @pytest.mark.parametrize("name", STALE)
 def test_a_fault_that_starves_the_estimator_is_stale_mocap_on_the_first_tick_after_3_periods(
-        name, loop, tmp_path):
+    name, loop, tmp_path
+):
     cfg, tick = LOOPS[loop]
     delays = []
     for phase, onset in ONSETS.items():
@@ -69,41 +72,52 @@ def test_a_fault_that_starves_the_estimator_is_stale_mocap_on_the_first_tick_aft
         # more than 3 periods since the newest usable frame, and at most one tick more
         assert 3 * PERIOD - 1e-9 < f.since_last_fused <= 3 * PERIOD + tick + 1e-9, phase
         delays.append(f.since_last_fused)
-    report(f"mocap: {name} ({loop} loop)", "> 3 frame periods (25 ms) without a usable frame, "
-           "checked every tick", "STALE_MOCAP, failsafe", "motors off (stop setpoint)", delays)
+    report(
+        f"mocap: {name} ({loop} loop)",
+        "> 3 frame periods (25 ms) without a usable frame, checked every tick",
+        "STALE_MOCAP, failsafe",
+        "motors off (stop setpoint)",
+        delays,
+    )
 
 
 def test_a_gap_of_two_frames_is_flown_through(tmp_path, nominal):
     f = fly(tmp_path, Stop(3.0, 3.0 + 2 * PERIOD))
     assert f.res.outcome is EndReason.CONTACT
     assert f.res.contact_speed == pytest.approx(nominal["fixed 100 Hz"].contact_speed, abs=1e-3)
-    report("mocap: 2 frames missing", "none needed", "estimator predicts across the gap",
-           "perches")
+    report("mocap: 2 frames missing", "none needed", "estimator predicts across the gap", "perches")
 
 
-@pytest.mark.parametrize("name, faults", [
-    ("frames 15 ms late", (Late(3.0, 3.3, 0.015),)),
-    ("pairs out of order all flight", (Reorder(),)),
-    ("every frame 3 times", (Repeat(times=3),)),
-    ("outlier (0.5 m) every 10th frame", (Outliers(every=10),)),
-    ("outlier (0.5 m) every 3rd frame", (Outliers(every=3),)),
-    ("invalid for 2 frames", (Invalid(3.0, 3.0 + 2 * PERIOD),)),
-    ("rate drops to 50 %", (RateDrop(keep_every=2),)),
-    ("NaN in every 10th frame", (Corrupt(every=10),)),
-    ("inf in every 10th frame", (Corrupt(value=math.inf, every=10),)),
-    ("1e12 m in every 10th frame", (Corrupt(value=1e12, every=10),)),
-], ids=lambda v: v if isinstance(v, str) else "")
+@pytest.mark.parametrize(
+    "name, faults",
+    [
+        ("frames 15 ms late", (Late(3.0, 3.3, 0.015),)),
+        ("pairs out of order all flight", (Reorder(),)),
+        ("every frame 3 times", (Repeat(times=3),)),
+        ("outlier (0.5 m) every 10th frame", (Outliers(every=10),)),
+        ("outlier (0.5 m) every 3rd frame", (Outliers(every=3),)),
+        ("invalid for 2 frames", (Invalid(3.0, 3.0 + 2 * PERIOD),)),
+        ("rate drops to 50 %", (RateDrop(keep_every=2),)),
+        ("NaN in every 10th frame", (Corrupt(every=10),)),
+        ("inf in every 10th frame", (Corrupt(value=math.inf, every=10),)),
+        ("1e12 m in every 10th frame", (Corrupt(value=1e12, every=10),)),
+    ],
+    ids=lambda v: v if isinstance(v, str) else "",
+)
 @pytest.mark.parametrize("loop", LOOPS)
-def test_faults_within_the_estimator_s_tolerance_still_perch(loop, name, faults, tmp_path,
-                                                             nominal):
+def test_faults_within_the_estimator_s_tolerance_still_perch(loop, name, faults, tmp_path, nominal):
     f = fly(tmp_path, *faults, cfg=LOOPS[loop][0])
     assert f.res.outcome is EndReason.CONTACT and not f.res.failsafe_sent
     assert f.res.true_contact_speed == pytest.approx(nominal[loop].true_contact_speed, abs=0.01)
     assert f.res.contact_speed == pytest.approx(nominal[loop].contact_speed, abs=0.01)
     seqs = [r.pose_seq for r in f.log.rows if r.pose_seq >= 0]
     assert seqs == sorted(seqs)  # an older frame never replaced a newer one
-    report(f"mocap: {name} ({loop} loop)", "per frame (dropped: older, same seq, non-finite, "
-           "or a jump > 10 m/s)", "frame ignored; the filter predicts", "perches")
+    report(
+        f"mocap: {name} ({loop} loop)",
+        "per frame (dropped: older, same seq, non-finite, or a jump > 10 m/s)",
+        "frame ignored; the filter predicts",
+        "perches",
+    )
 
 
 def test_repeated_frames_change_nothing_at_all(tmp_path, nominal):
@@ -123,24 +137,33 @@ def test_a_frozen_tracker_with_fresh_stamps_is_stale_while_the_vehicle_moves(tmp
         assert f.sim.world.contact is None
         assert 3 * PERIOD < f.since_last_fused <= 3 * PERIOD + TICK + 1e-9
         delays.append(f.since_last_fused)
-    report("mocap: frozen position, fresh stamps, vehicle moving", "bit-identical position "
-           "while the estimate moves: frame dropped, then > 3 periods", "STALE_MOCAP",
-           "motors off, short of the wall", delays)
+    report(
+        "mocap: frozen position, fresh stamps, vehicle moving",
+        "bit-identical position while the estimate moves: frame dropped, then > 3 periods",
+        "STALE_MOCAP",
+        "motors off, short of the wall",
+        delays,
+    )
 
 
 def test_a_tracker_frozen_while_hovering_is_stale_once_the_approach_should_move_it(tmp_path):
     """Frozen during the hold the frames are believable (a hovering body), until the
     approach has commanded motion for FROZEN_MAX_S without the position changing a bit."""
     from perchd.flight.supervisor import FROZEN_MAX_S
+
     f = fly(tmp_path, Freeze(ONSETS["hold"], restamp=True))
     assert_failsafe_and_closed_log(f.sim, f.res, EndReason.STALE_MOCAP)
     assert "mocap frozen" in f.res.detail and f.sim.world.contact is None
     approach = next(e.t for e in f.log.events if e.kind == "approach")
     assert FROZEN_MAX_S <= f.end_t - approach <= FROZEN_MAX_S + TICK + 1e-9
     assert f.sim.world.gap(f.sim.world.plant.p) < -4.0  # it had barely started to move
-    report("mocap: frozen position, fresh stamps, from the hold", f"position bit-identical "
-           f"for > {FROZEN_MAX_S:g} s of approach", "STALE_MOCAP ('mocap frozen')",
-           "motors off near the start point", [f.end_t - approach])
+    report(
+        "mocap: frozen position, fresh stamps, from the hold",
+        f"position bit-identical for > {FROZEN_MAX_S:g} s of approach",
+        "STALE_MOCAP ('mocap frozen')",
+        "motors off near the start point",
+        [f.end_t - approach],
+    )
 
 
 def test_the_stale_limit_counts_mocap_frames_not_the_loop_s_polls():
@@ -150,6 +173,7 @@ def test_the_stale_limit_counts_mocap_frames_not_the_loop_s_polls():
     from perchd.flight.config import EstimatorConfig
     from perchd.flight.estimator import Estimator
     from perchd.flight.frame import PerchFrame
+
     est = Estimator(EstimatorConfig(), PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)))
     seen = [k for k in range(120) if k % 6 != 5]
     for k in seen:

@@ -44,9 +44,25 @@ class Fly:
     def __init__(self, sim: SimProcess, log: Path, preexec=None) -> None:
         self.log = log
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", sim.driver,
-             "--mocap", sim.mocap, "--log", str(log), "--json"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=preexec)
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "fly",
+                str(PLAN),
+                "--driver",
+                sim.driver,
+                "--mocap",
+                sim.mocap,
+                "--log",
+                str(log),
+                "--json",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            preexec_fn=preexec,
+        )
 
     def wait_phase(self, phase: str) -> None:
         """Read the status lines on stderr (one per 0.5 s) until one names `phase`."""
@@ -83,12 +99,18 @@ def test_a_signal_mid_flight_ends_it_on_the_next_tick_with_the_failsafe(sig, sim
     after = [r for r in log.rows if r.t >= sent]
     assert 1 <= len(after) <= 2 and after[-1].end == "SIGNAL"  # the next tick (or the one after)
     assert sim.summary()["stops"] >= 1  # the vehicle heard the stop
-    report(f"process: {sig.name} to perchd fly", "signal handler -> abort flag, read every "
-           "tick", f"SIGNAL, failsafe, log closed, exit {128 + sig}", "stop published (motors off)",
-           [log.rows[-1].t - sent])
+    report(
+        f"process: {sig.name} to perchd fly",
+        "signal handler -> abort flag, read every tick",
+        f"SIGNAL, failsafe, log closed, exit {128 + sig}",
+        "stop published (motors off)",
+        [log.rows[-1].t - sent],
+    )
 
 
-def test_sigkill_mid_flight_leaves_a_readable_log_and_the_vehicle_s_watchdog_lands_it(sim, tmp_path):
+def test_sigkill_mid_flight_leaves_a_readable_log_and_the_vehicle_s_watchdog_lands_it(
+    sim, tmp_path
+):
     flight = Fly(sim, tmp_path / "f.jsonl")
     try:
         flight.wait_phase("approach")
@@ -112,11 +134,15 @@ def test_sigkill_mid_flight_leaves_a_readable_log_and_the_vehicle_s_watchdog_lan
     assert len(wd["cut_after_s"]) == 1 and CUT_S <= wd["cut_after_s"][0] < CUT_S + 0.1
     assert wd["locked"] and summary["vehicle"]["thrust_n"] < 1e-3  # motors off
     assert summary["contact"] or summary["vehicle"]["z_m"] == 0.0  # down: floor (or perched)
-    report("process: SIGKILL to perchd fly", "none possible in-process", "none; log "
-           "readable up to the kill (flushed per row)", "no stop; the vehicle's setpoint "
-           f"watchdog (perchd sim as Crazyflie firmware) levels it "
-           f"{1e3 * wd['levelled_after_s'][0]:.0f} ms and cuts the motors "
-           f"{1e3 * wd['cut_after_s'][0]:.0f} ms after the last setpoint")
+    report(
+        "process: SIGKILL to perchd fly",
+        "none possible in-process",
+        "none; log readable up to the kill (flushed per row)",
+        "no stop; the vehicle's setpoint "
+        f"watchdog (perchd sim as Crazyflie firmware) levels it "
+        f"{1e3 * wd['levelled_after_s'][0]:.0f} ms and cuts the motors "
+        f"{1e3 * wd['cut_after_s'][0]:.0f} ms after the last setpoint",
+    )
 
 
 def ended(log: Path) -> bool:
@@ -136,11 +162,12 @@ def test_a_loop_starved_of_cpu_ends_in_a_named_abort_with_the_failsafe(sim, tmp_
     def starved():
         os.sched_setaffinity(0, {cpus[0]})
         os.nice(19)
+
     flight = Fly(sim, tmp_path / "f.jsonl", preexec=starved)
     hogs = []
     try:
         flight.wait_phase("approach")
-        busy = "import os; os.sched_setaffinity(0, {%d})\nwhile True: pass" % cpus[0]
+        busy = f"import os; os.sched_setaffinity(0, {{{cpus[0]}}})\nwhile True: pass"
         hogs = [subprocess.Popen([sys.executable, "-c", busy]) for _ in range(2)]
         hogged = time.monotonic()
         while not ended(flight.log) and time.monotonic() < hogged + 20:
@@ -161,10 +188,13 @@ def test_a_loop_starved_of_cpu_ends_in_a_named_abort_with_the_failsafe(sim, tmp_
     log = read_log(out["log"])
     assert log.complete and log.end["outcome"] == reason.name
     assert sim.summary()["stops"] >= 1
-    report("process: loop starved of CPU (nice 19 beside 2 busy processes on one CPU)",
-           "10 missed deadlines in a row, or stale mocap, whichever first",
-           f"{reason.name} here, failsafe, log closed", "stop published (motors off)",
-           [log.rows[-1].t - hogged])
+    report(
+        "process: loop starved of CPU (nice 19 beside 2 busy processes on one CPU)",
+        "10 missed deadlines in a row, or stale mocap, whichever first",
+        f"{reason.name} here, failsafe, log closed",
+        "stop published (motors off)",
+        [log.rows[-1].t - hogged],
+    )
 
 
 @pytest.mark.slow
@@ -179,21 +209,33 @@ def test_a_busy_process_beside_the_loop_does_not_stop_a_perch(sim, tmp_path):
     injected("CPU contention", real_time=True)
     assert code == 0 and out["outcome"] == "CONTACT", out and out["detail"]
     loop = out["loop"]
-    report("process: one busy process beside the loop", "-", "flown "
-           f"({loop['overruns']} overruns, max streak {loop['max_streak']})", "perches "
-           f"({out['contact_speed']:.3f} m/s estimated)")
+    report(
+        "process: one busy process beside the loop",
+        "-",
+        f"flown ({loop['overruns']} overruns, max streak {loop['max_streak']})",
+        f"perches ({out['contact_speed']:.3f} m/s estimated)",
+    )
 
 
 # --- clocks --------------------------------------------------------------------------------
 def wall_clock_calls(root: Path) -> list[str]:
     """Every time.time / datetime.now / time.gmtime... call in perchd/ and drivers/."""
-    wall = {("time", "time"), ("time", "time_ns"), ("datetime", "now"), ("datetime", "utcnow"),
-            ("time", "localtime"), ("time", "gmtime")}
+    wall = {
+        ("time", "time"),
+        ("time", "time_ns"),
+        ("datetime", "now"),
+        ("datetime", "utcnow"),
+        ("time", "localtime"),
+        ("time", "gmtime"),
+    }
     found = []
     for path in [*(root / "perchd").rglob("*.py"), *(root / "drivers").rglob("*.py")]:
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
-                    and (node.value.id, node.attr) in wall:
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and (node.value.id, node.attr) in wall
+            ):
                 found.append(f"{path.relative_to(root)}:{node.lineno} {node.value.id}.{node.attr}")
     return found
 
@@ -204,15 +246,20 @@ def test_no_flight_code_reads_the_wall_clock():
 
 def test_wall_clock_steps_change_nothing_in_a_flight(tmp_path, monkeypatch):
     nominal = fly(tmp_path, name="nominal")
-    steps = iter(range(10 ** 9))
+    steps = iter(range(10**9))
     monkeypatch.setattr(time, "time", lambda: 1.7e9 + 86400.0 * (-1) ** next(steps) * 365)
     monkeypatch.setattr(time, "time_ns", lambda: int(time.time() * 1e9))
     stepped = fly(tmp_path, name="stepped")
     injected("wall clock steps")
-    assert [(r.t, r.x, r.thrust) for r in stepped.log.rows] == \
-        [(r.t, r.x, r.thrust) for r in nominal.log.rows]
-    report("clock: wall clock steps +-1 year on every read", "not read by any flight code "
-           "(AST scan + identical flight)", "none", "perches exactly as without")
+    assert [(r.t, r.x, r.thrust) for r in stepped.log.rows] == [
+        (r.t, r.x, r.thrust) for r in nominal.log.rows
+    ]
+    report(
+        "clock: wall clock steps +-1 year on every read",
+        "not read by any flight code (AST scan + identical flight)",
+        "none",
+        "perches exactly as without",
+    )
 
 
 @pytest.mark.parametrize("jump, phase", [(0.05, "stage1"), (0.2, "stage1"), (1.0, "approach")])
@@ -226,7 +273,9 @@ def test_a_monotonic_clock_jump_skips_the_missed_ticks_and_flies_on(jump, phase,
             if st.phase.value == phase and not at:
                 at.append(sim.runtime.clock.now())
                 sim.runtime.clock.advance(jump)
+
         return stall
+
     f = fly(tmp_path, on_tick=on_tick)
     injected("monotonic clock jump")
     assert f.res.outcome is EndReason.CONTACT
@@ -235,6 +284,9 @@ def test_a_monotonic_clock_jump_skips_the_missed_ticks_and_flies_on(jump, phase,
     ts = [r.t for r in f.log.rows]
     gap = max(b - a for a, b in zip(ts, ts[1:]))
     assert gap == pytest.approx(jump, abs=1e-6)  # the next tick is the first deadline after it
-    report(f"clock: monotonic clock leaps {1000 * jump:.0f} ms ({phase})", "one overrun",
-           f"{f.res.loop.missed} missed ticks skipped, loop back on its grid", "perches "
-           f"({f.res.true_contact_speed:.3f} m/s)")
+    report(
+        f"clock: monotonic clock leaps {1000 * jump:.0f} ms ({phase})",
+        "one overrun",
+        f"{f.res.loop.missed} missed ticks skipped, loop back on its grid",
+        f"perches ({f.res.true_contact_speed:.3f} m/s)",
+    )

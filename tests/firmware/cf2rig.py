@@ -9,9 +9,9 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
@@ -22,8 +22,10 @@ from perchd.sim.firmware.harness import ProcessGroup
 from perchd.sim.firmware.quadrotor import euler_zyx
 
 CF2 = os.environ.get("PERCHD_CF2", "")
-needs_cf2 = pytest.mark.skipif(not (CF2 and os.access(CF2, os.X_OK)),
-                               reason="set PERCHD_CF2 to the built cf2 binary (docs/firmware.md)")
+needs_cf2 = pytest.mark.skipif(
+    not (CF2 and os.access(CF2, os.X_OK)),
+    reason="set PERCHD_CF2 to the built cf2 binary (docs/firmware.md)",
+)
 MASS = 0.0282
 """[kg] the SITL vehicle (perchd.sim.firmware.quadrotor.QuadModel)."""
 CALIBRATION = f"?mass={MASS}&hover=38780"
@@ -36,8 +38,16 @@ def cf2_vehicle(tmp: Path, **kw) -> Iterator[Cf2Vehicle]:
     previous = sys.getswitchinterval()
     sys.setswitchinterval(GIL_SWITCH_S)  # as `perchd sim firmware` does: the 1 kHz thread first
     with ProcessGroup() as procs:
-        v = Cf2Vehicle(Cf2Params(CF2, link="udp://127.0.0.1:0", start=(0.0, 0.0, 0.0),
-                                 surface=None, log=tmp / "cf2.log", **kw))
+        v = Cf2Vehicle(
+            Cf2Params(
+                CF2,
+                link="udp://127.0.0.1:0",
+                start=(0.0, 0.0, 0.0),
+                surface=None,
+                log=tmp / "cf2.log",
+                **kw,
+            )
+        )
         try:
             v.start(procs, threading.Event())
             yield v
@@ -58,8 +68,15 @@ class Pilot:
         self.v, self.cf, self.k = vehicle, driver, 0
         self.z_ref = 0.5
 
-    def fly(self, seconds: float, roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0,
-            thrust: float | None = None, every=None) -> None:
+    def fly(
+        self,
+        seconds: float,
+        roll: float = 0.0,
+        pitch: float = 0.0,
+        yaw: float = 0.0,
+        thrust: float | None = None,
+        every=None,
+    ) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             tr = self.v.truth()

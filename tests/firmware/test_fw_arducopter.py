@@ -24,9 +24,13 @@ from fwharness import log_rows as rows
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
 INSTANCE = os.environ.get("PERCHD_FW_INSTANCE", "0")
 """SITL's -I N: one per instance number on a machine shared with other runs."""
-pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
-    not (ARDUCOPTER and os.access(ARDUCOPTER, os.X_OK)),
-    reason="set PERCHD_ARDUCOPTER to the built arducopter SITL binary (docs/firmware.md)")]
+pytestmark = [
+    pytest.mark.firmware,
+    pytest.mark.skipif(
+        not (ARDUCOPTER and os.access(ARDUCOPTER, os.X_OK)),
+        reason="set PERCHD_ARDUCOPTER to the built arducopter SITL binary (docs/firmware.md)",
+    ),
+]
 pytest.importorskip("pymavlink")
 
 CONFIG = Path(__file__).with_name("arducopter-3kg.toml")
@@ -42,14 +46,35 @@ def with_param(uri: str, param: str) -> str:
 
 
 def start(tmp: Path, *extra: str) -> tuple[subprocess.Popen, str, str]:
-    return start_harness("--arducopter", ARDUCOPTER, "--instance", INSTANCE, "--fw-log",
-                         str(tmp / "sitl.log"), *extra, env=ENV)
+    return start_harness(
+        "--arducopter",
+        ARDUCOPTER,
+        "--instance",
+        INSTANCE,
+        "--fw-log",
+        str(tmp / "sitl.log"),
+        *extra,
+        env=ENV,
+    )
 
 
 def fly_argv(tmp: Path, mocap: str, driver: str) -> list[str]:
-    return [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver",
-            with_param(driver, MASS), "--mocap", mocap, "--config", str(CONFIG),
-            "--log", str(tmp / "flight.jsonl"), "--json"]
+    return [
+        sys.executable,
+        "-m",
+        "perchd",
+        "fly",
+        str(PLAN),
+        "--driver",
+        with_param(driver, MASS),
+        "--mocap",
+        mocap,
+        "--config",
+        str(CONFIG),
+        "--log",
+        str(tmp / "flight.jsonl"),
+        "--json",
+    ]
 
 
 def report(figures: dict) -> None:
@@ -66,6 +91,7 @@ class Recorder:
     def __init__(self, uri: str) -> None:
         from perchd.core.runtime import Runtime
         from perchd.mocap.base import open_source
+
         self.src = open_source(uri, Runtime.real())
         self.src.start()
         self.samples: list[tuple[float, float, float, float, float]] = []
@@ -75,6 +101,7 @@ class Recorder:
 
     def _run(self) -> None:
         from perchd.sim.firmware.quadrotor import euler_zyx
+
         while not self._stop.wait(0.01):
             p = self.src.latest()
             if p is not None:
@@ -88,26 +115,31 @@ class Recorder:
 
 def pitch_lag(log: Path, truth: list[tuple[float, float, float, float, float]]) -> float | None:
     """[s] delay that best aligns the true pitch with the commanded one (approach..stage 2)."""
-    cmd = [(x["t"], x["pitch"]) for x in rows(log)
-           if x["phase"] in ("approach", "stage1", "stage2")]
+    cmd = [
+        (x["t"], x["pitch"]) for x in rows(log) if x["phase"] in ("approach", "stage1", "stage2")
+    ]
     if len(cmd) < 50 or len(truth) < 50:
         return None
 
     def true_pitch(t: float) -> float:
         return min(truth, key=lambda s: abs(s[0] - t))[2]
+
     meas = [true_pitch(t) for t, _ in cmd]
     dt = (cmd[-1][0] - cmd[0][0]) / (len(cmd) - 1)
-    err = {k: sum((meas[i] - cmd[i - k][1]) ** 2 for i in range(k, len(cmd))) / (len(cmd) - k)
-           for k in range(0, min(60, len(cmd) // 2))}
+    err = {
+        k: sum((meas[i] - cmd[i - k][1]) ** 2 for i in range(k, len(cmd))) / (len(cmd) - k)
+        for k in range(0, min(60, len(cmd) // 2))
+    }
     return min(err, key=err.get) * dt
 
 
 def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_path):
-    from perchd.drivers.base import open_driver
     from pymavlink import mavutil  # noqa: F401 (the driver's dependency)
 
     from perchd.core.runtime import Runtime
     from perchd.core.types import Phase, Setpoint
+    from perchd.drivers.base import open_driver
+
     proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
@@ -118,15 +150,23 @@ def test_harness_is_ready_and_its_truth_moves_when_the_vehicle_takes_off(tmp_pat
             end, k = time.monotonic() + 3.0, 0
             while time.monotonic() < end:  # 1.3 g straight up
                 k += 1
-                ap.send(Setpoint(runtime.clock.now(), 0.0, 0.0, 0.0, 1.3 * 3.0 * 9.81, k,
-                                 Phase.HOLD))
+                ap.send(
+                    Setpoint(runtime.clock.now(), 0.0, 0.0, 0.0, 1.3 * 3.0 * 9.81, k, Phase.HOLD)
+                )
                 time.sleep(0.02)
             z1 = rec.samples[-1][4]
     finally:
         rec.close()
         sim = stop_harness(proc)
-    report({"test": "smoke", "z0": z0, "z1": z1, "truth_hz": sim["truth"]["rate_hz"],
-            "modes": sim["modes"]})
+    report(
+        {
+            "test": "smoke",
+            "z0": z0,
+            "z1": z1,
+            "truth_hz": sim["truth"]["rate_hz"],
+            "modes": sim["modes"],
+        }
+    )
     assert sim["truth"]["rate_hz"] > 50
     assert z1 - z0 > 0.5
 
@@ -138,8 +178,9 @@ def perch_from_the_ground(tmp: Path, test: str, *harness: str) -> tuple[dict, di
     proc, mocap, driver = start(tmp, *harness)
     rec = Recorder(mocap)
     try:
-        done = subprocess.run(fly_argv(tmp, mocap, driver), capture_output=True,
-                              text=True, timeout=180, env=ENV)
+        done = subprocess.run(
+            fly_argv(tmp, mocap, driver), capture_output=True, text=True, timeout=180, env=ENV
+        )
         time.sleep(1.0)
     finally:
         rec.close()
@@ -147,13 +188,23 @@ def perch_from_the_ground(tmp: Path, test: str, *harness: str) -> tuple[dict, di
     assert done.stdout, done.stderr
     fly = json.loads(done.stdout)
     over = takeoff_overshoot(tmp / "flight.jsonl", rec.samples)
-    report({"test": test, "outcome": fly["outcome"], "detail": fly.get("detail"),
+    report(
+        {
+            "test": test,
+            "outcome": fly["outcome"],
+            "detail": fly.get("detail"),
             "contact_speed": fly["contact_speed"],
             "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
-            "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
-            "trigger": fly["trigger"], "pitch_lag_s": pitch_lag(tmp / "flight.jsonl", rec.samples),
-            "takeoff_overshoot_m": over, "lag": lag_event(tmp / "flight.jsonl"),
-            "modes": sim["modes"], "load": os.getloadavg()})
+            "perch_time": fly["perch_time"],
+            "plan_duration": plan["duration"],
+            "trigger": fly["trigger"],
+            "pitch_lag_s": pitch_lag(tmp / "flight.jsonl", rec.samples),
+            "takeoff_overshoot_m": over,
+            "lag": lag_event(tmp / "flight.jsonl"),
+            "modes": sim["modes"],
+            "load": os.getloadavg(),
+        }
+    )
     return fly, sim, over
 
 
@@ -207,8 +258,13 @@ def test_sigkill_of_perchd_fly_mid_approach_brakes_and_lands_within_3_s(tmp_path
     proc, mocap, driver = start(tmp_path)
     rec = Recorder(mocap)
     try:
-        fly = subprocess.Popen(fly_argv(tmp_path, mocap, driver), stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, env=ENV)
+        fly = subprocess.Popen(
+            fly_argv(tmp_path, mocap, driver),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=ENV,
+        )
         log = tmp_path / "flight.jsonl"
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline and fly.poll() is None:
@@ -224,17 +280,38 @@ def test_sigkill_of_perchd_fly_mid_approach_brakes_and_lands_within_3_s(tmp_path
         rec.close()
         sim = stop_harness(proc)
     truths = [(t - killed, math.hypot(r, p), z) for t, r, p, _, z in rec.samples if t >= killed]
-    land_t = next((m["t"] + sim["t0"] - killed for m in sim["modes"]
-                   if m["mode"] == "LAND" and m["t"] + sim["t0"] >= killed), math.inf)
+    land_t = next(
+        (
+            m["t"] + sim["t0"] - killed
+            for m in sim["modes"]
+            if m["mode"] == "LAND" and m["t"] + sim["t0"] >= killed
+        ),
+        math.inf,
+    )
     # level: below 2 deg and staying there until LAND, whose own position hold tilts it again
-    level = next((t for t, tilt, _ in truths if t > 0.1 and all(
-        x < 2 * DEG for u, x, _ in truths if t <= u < land_t)), None)
+    level = next(
+        (
+            t
+            for t, tilt, _ in truths
+            if t > 0.1 and all(x < 2 * DEG for u, x, _ in truths if t <= u < land_t)
+        ),
+        None,
+    )
     trace = [(round(t, 2), round(math.degrees(x), 1)) for t, x, _ in truths if t < 4.0][::10]
     land = None if land_t == math.inf else land_t
-    report({"test": "sigkill", "level_after_s": level, "land_after_s": land,
-            "final_mode": sim["mode"], "armed": sim["armed"],
-            "final_z": truths[-1][2] if truths else None, "modes": sim["modes"],
-            "tilt_deg_after_kill": trace, "load": os.getloadavg()})
+    report(
+        {
+            "test": "sigkill",
+            "level_after_s": level,
+            "land_after_s": land,
+            "final_mode": sim["mode"],
+            "armed": sim["armed"],
+            "final_z": truths[-1][2] if truths else None,
+            "modes": sim["modes"],
+            "tilt_deg_after_kill": trace,
+            "load": os.getloadavg(),
+        }
+    )
     assert land is not None and land < 3.0
     assert max(math.degrees(x) for t, x, _ in truths if t < land_t) < 20.0  # the brake's 17
 
@@ -246,14 +323,18 @@ def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
     import threading
 
     from fwvision import PoseFeed, climb_and_compare
-    from perchd.drivers.base import open_driver
 
     from perchd.core.runtime import Runtime
+    from perchd.drivers.base import open_driver
     from perchd.sim.firmware.ardupilot import ArduPilotParams, ArduPilotVehicle
     from perchd.sim.firmware.harness import ProcessGroup
+
     with ProcessGroup() as procs:
-        v = ArduPilotVehicle(ArduPilotParams(ARDUCOPTER, instance=int(INSTANCE), vision=True,
-                                             log=tmp_path / "sitl.log"))
+        v = ArduPilotVehicle(
+            ArduPilotParams(
+                ARDUCOPTER, instance=int(INSTANCE), vision=True, log=tmp_path / "sitl.log"
+            )
+        )
         try:
             v.start(procs, threading.Event())
             runtime = Runtime.real()
@@ -269,8 +350,7 @@ def test_ardupilots_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
             texts = [t for _, t in v.state.texts if "EKF3 IMU0" in t]
         finally:
             v.close()
-    report({"test": "arducopter-vision", **figures, "ekf_texts": texts,
-            "load": os.getloadavg()})
+    report({"test": "arducopter-vision", **figures, "ekf_texts": texts, "load": os.getloadavg()})
     assert any("using external nav data" in t for t in texts)
     assert figures["climbed_m"] > 0.5
     assert figures["max_error_m"] < 0.15
@@ -283,14 +363,34 @@ def test_the_readme_form_is_refused_before_arming(tmp_path):
     proc, mocap, driver = start(tmp_path, "--stock-params")
     try:
         readme = driver.split("?")[0]
-        done = subprocess.run([sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver",
-                               readme, "--mocap", mocap], capture_output=True, text=True,
-                              timeout=60, env=ENV)
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "fly",
+                str(PLAN),
+                "--driver",
+                readme,
+                "--mocap",
+                mocap,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=ENV,
+        )
         time.sleep(1.0)
     finally:
         sim = stop_harness(proc)
-    report({"test": "readme-form", "exit": done.returncode,
-            "stderr": done.stderr.strip().splitlines()[-1:], "modes": sim["modes"]})
+    report(
+        {
+            "test": "readme-form",
+            "exit": done.returncode,
+            "stderr": done.stderr.strip().splitlines()[-1:],
+            "modes": sim["modes"],
+        }
+    )
     assert done.returncode != 0
     for name in ("GUID_TIMEOUT=3", "FS_GCS_ENABLE=0", "ATC_ANGLE_BOOST=1", "EK3_SRC1_POSXY=3"):
         assert name in done.stderr

@@ -60,8 +60,10 @@ def touchdown(after: list[tuple[float, float, bool]], t_kill: float) -> dict:
     if i is None or i < 2:
         return {"touchdown_s": None, "touchdown_mps": None}
     (t1, z1, _), (t2, z2, _) = after[i - 2], after[i - 1]
-    return {"touchdown_s": round(after[i][0] - t_kill, 3),
-            "touchdown_mps": round((z1 - z2) / (t2 - t1), 3)}
+    return {
+        "touchdown_s": round(after[i][0] - t_kill, 3),
+        "touchdown_mps": round((z1 - z2) / (t2 - t1), 3),
+    }
 
 
 def after_kill(track: list[list], t_kill: float) -> dict:
@@ -69,23 +71,42 @@ def after_kill(track: list[list], t_kill: float) -> dict:
     before = [z for t, z, _ in track if t <= t_kill]
     after = [(t, z, on) for t, z, on in track if t > t_kill]
     on_after = [t for t, _, on in after if on]
-    return {"z_at_kill": before[-1], "rise_m": round(max(z for _, z, _ in after) - before[-1], 4),
-            **touchdown(after, t_kill),
-            "motors_stop_s": round(on_after[-1] - t_kill + 0.01, 3) if on_after else 0.0,
-            "track_after_s": round(after[-1][0] - t_kill, 3)}
+    return {
+        "z_at_kill": before[-1],
+        "rise_m": round(max(z for _, z, _ in after) - before[-1], 4),
+        **touchdown(after, t_kill),
+        "motors_stop_s": round(on_after[-1] - t_kill + 0.01, 3) if on_after else 0.0,
+        "track_after_s": round(after[-1][0] - t_kill, 3),
+    }
 
 
 def fly_and_kill(tmp_path: Path, phase: str) -> dict | None:
     """A perch, its agent SIGKILLed where KILLS says; the figures, None if never reached."""
-    proc, mocap, driver = start_harness("--cf2", CF2, "--link", "udp://127.0.0.1:0",
-                                        "--fw-log", str(tmp_path / "cf2.log"), env=ENV)
+    proc, mocap, driver = start_harness(
+        "--cf2", CF2, "--link", "udp://127.0.0.1:0", "--fw-log", str(tmp_path / "cf2.log"), env=ENV
+    )
     log, (due, delay) = tmp_path / "flight.jsonl", KILLS[phase]
     t_kill = None
     try:
         fly = subprocess.Popen(
-            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
-             mocap, "--log", str(log), "--json"],
-            stdout=subprocess.DEVNULL, stderr=(tmp_path / "fly.err").open("w"), env=ENV)
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "fly",
+                str(PLAN),
+                "--driver",
+                driver,
+                "--mocap",
+                mocap,
+                "--log",
+                str(log),
+                "--json",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=(tmp_path / "fly.err").open("w"),
+            env=ENV,
+        )
         deadline = time.monotonic() + 60
         while fly.poll() is None and time.monotonic() < deadline:
             if any(due(r) for r in rows(log)):
@@ -100,8 +121,11 @@ def fly_and_kill(tmp_path: Path, phase: str) -> dict | None:
         sim = stop_harness(proc, 15.0)
     if t_kill is None:
         return None
-    return {"phase": phase, **after_kill(sim["track"], t_kill),
-            "launches": [r["outcome"] for r in sim["launches"]]}
+    return {
+        "phase": phase,
+        **after_kill(sim["track"], t_kill),
+        "launches": [r["outcome"] for r in sim["launches"]],
+    }
 
 
 @pytest.mark.parametrize("phase", list(KILLS))

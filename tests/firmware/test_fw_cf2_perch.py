@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 from cf2rig import CF2, needs_cf2
 from fwharness import ENV, PLAN, lag_event, start_harness, stop_harness
+
 from perchd.drivers.thrust import CrazyflieThrust
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
@@ -28,8 +29,17 @@ default thrust model, which the flight flies in when no hover= calibrates it."""
 
 
 def harness(tmp: Path) -> tuple[subprocess.Popen, str, str]:
-    return start_harness("--cf2", CF2, "--link", "udp://127.0.0.1:0", "--noise", "0.001",
-                         "--fw-log", str(tmp / "cf2.log"), env=ENV)
+    return start_harness(
+        "--cf2",
+        CF2,
+        "--link",
+        "udp://127.0.0.1:0",
+        "--noise",
+        "0.001",
+        "--fw-log",
+        str(tmp / "cf2.log"),
+        env=ENV,
+    )
 
 
 @pytest.mark.parametrize("flight", [1, 2, 3])
@@ -39,10 +49,27 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
     driver = driver.split("?")[0]  # no mass, no hover: the hold learns it
     try:
         done = subprocess.run(
-            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
-             mocap, "--log", str(tmp_path / "flight.jsonl"), "--state",
-             str(tmp_path / "vehicles.json"), "--json"],
-            capture_output=True, text=True, timeout=90, env=ENV)
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "fly",
+                str(PLAN),
+                "--driver",
+                driver,
+                "--mocap",
+                mocap,
+                "--log",
+                str(tmp_path / "flight.jsonl"),
+                "--state",
+                str(tmp_path / "vehicles.json"),
+                "--json",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=90,
+            env=ENV,
+        )
     finally:
         sim = stop_harness(proc, 15.0)
     assert done.stdout, done.stderr
@@ -50,15 +77,22 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
     lo, hi = plan["limits"]["v_contact"]
     yaws = sim["yaw_range_rad"]  # the true heading over the whole run
     figures = {
-        "flight": flight, "outcome": fly["outcome"], "contact_speed": fly["contact_speed"],
+        "flight": flight,
+        "outcome": fly["outcome"],
+        "contact_speed": fly["contact_speed"],
         "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
-        "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
+        "perch_time": fly["perch_time"],
+        "plan_duration": plan["duration"],
         "trigger_speed": fly["trigger"] and fly["trigger"]["v"],
-        "hover_n": fly["hover_n"], "hover_true_n": HOVER_TRUE_N,
-        "yaw_range_rad": yaws, "lag": lag_event(tmp_path / "flight.jsonl"),
+        "hover_n": fly["hover_n"],
+        "hover_true_n": HOVER_TRUE_N,
+        "yaw_range_rad": yaws,
+        "lag": lag_event(tmp_path / "flight.jsonl"),
         "imu_rate_hz": sim["imu"]["rate_hz"],
-        "imu_late_max_ms": sim["imu"]["late_max_ms"], "imu_skipped": sim["imu"]["skipped_late"],
-        "launches": [r["outcome"] for r in sim["launches"]]}
+        "imu_late_max_ms": sim["imu"]["late_max_ms"],
+        "imu_skipped": sim["imu"]["skipped_late"],
+        "launches": [r["outcome"] for r in sim["launches"]],
+    }
     print("\n" + json.dumps(figures))
     if os.environ.get("PERCHD_FW_REPORT"):
         with open(os.environ["PERCHD_FW_REPORT"], "a") as f:

@@ -21,6 +21,7 @@ DEG = math.pi / 180.0
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
     from perchd.drivers.base import open_driver
+
     with cf2_vehicle(tmp_path_factory.mktemp("cf2")) as v:
         with open_driver(v.relay.uri + CALIBRATION, Runtime.real()) as cf:
             pilot = Pilot(v, cf)
@@ -35,9 +36,11 @@ def test_it_arms_takes_off_and_hovers_at_the_models_hover_pwm(rig):
     assert all(abs(z - 0.5) < 0.05 for z in heights), (min(heights), max(heights))
     assert abs(sum(pwm) / len(pwm) - v.params.model.hover_pwm) < 800
     assert v.summary()["imu"]["rate_hz"] > 900  # real time on 2 shared cores
-    print(f"\nhover: z {min(heights):.3f}..{max(heights):.3f} m, mean PWM "
-          f"{sum(pwm) / len(pwm):.0f} (model {v.params.model.hover_pwm:.0f}), IMU "
-          f"{v.summary()['imu']['rate_hz']:.1f} Hz")
+    print(
+        f"\nhover: z {min(heights):.3f}..{max(heights):.3f} m, mean PWM "
+        f"{sum(pwm) / len(pwm):.0f} (model {v.params.model.hover_pwm:.0f}), IMU "
+        f"{v.summary()['imu']['rate_hz']:.1f} Hz"
+    )
 
 
 @pytest.mark.parametrize("sign", [1, -1], ids=["right", "left"])
@@ -76,8 +79,10 @@ def test_yaw_turns_to_the_setpoint_and_holds_it(rig, target):
     pilot.fly(2.5, yaw=target, every=lambda tr: yaws.append(rpy(v)[2]))
     pilot.fly(2.0, yaw=0.0)
     final = yaws[-1]
-    print(f"\nyaw to {target:+.2f} rad: final {final:+.3f} rad, range "
-          f"{min(yaws):+.3f}..{max(yaws):+.3f} rad")
+    print(
+        f"\nyaw to {target:+.2f} rad: final {final:+.3f} rad, range "
+        f"{min(yaws):+.3f}..{max(yaws):+.3f} rad"
+    )
     assert final == pytest.approx(target, abs=0.1)
     assert max(abs(y) for y in yaws) < abs(target) + 0.2  # no run-away
 

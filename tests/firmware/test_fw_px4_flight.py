@@ -36,20 +36,24 @@ from fwharness import (
     start_placed,
     surface_normal,
 )
-from perchd.drivers.base import open_driver
 from svc import NotifyListener, Serve, ctl
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import Phase, Pose, Setpoint
+from perchd.drivers.base import open_driver
 from perchd.sim.firmware.harness import ProcessGroup, yaw_of
 from perchd.sim.firmware.px4 import SIH_MASS_KG, Px4Params, Px4Vehicle
 
 PX4 = os.environ.get("PERCHD_PX4", "")
 PX4_EXTRA = os.environ.get("PERCHD_PX4_EXTRA", "").split()
 INSTANCE = int(os.environ.get("PERCHD_FW_INSTANCE", os.environ.get("PERCHD_PX4_INSTANCE", "0")))
-pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
-    not (PX4 and os.access(Path(PX4) / "bin" / "px4", os.X_OK)),
-    reason="set PERCHD_PX4 to a PX4 SITL build folder (docs/firmware.md)")]
+pytestmark = [
+    pytest.mark.firmware,
+    pytest.mark.skipif(
+        not (PX4 and os.access(Path(PX4) / "bin" / "px4", os.X_OK)),
+        reason="set PERCHD_PX4 to a PX4 SITL build folder (docs/firmware.md)",
+    ),
+]
 pytest.importorskip("pymavlink")
 
 G = 9.81
@@ -85,6 +89,7 @@ def report(figures: dict) -> None:
 
 # -- take-over in the air, in this process ----------------------------------------------------
 
+
 def test_taking_over_px4_in_the_air_loses_no_more_than_10_cm(tmp_path):
     """Measured from the acknowledged switch: before it PX4's own Hold flies, and that
     wanders +-0.2 m on its GPS-height estimate (docs/firmware.md)."""
@@ -109,12 +114,18 @@ def test_taking_over_px4_in_the_air_loses_no_more_than_10_cm(tmp_path):
                 sampler.join()
                 drv.close()
             lowest = min(z for t, z, _ in heights if t_switch <= t <= t_switch + 3.0)
-            figures = {"test": "px4-takeover", "z_connect": z0, "z_switch": z_switch,
-                       "loss_m": z_switch - lowest,
-                       "connect_s": t_switch - t0, "yaw_change_deg": math.degrees(
-                           math.remainder(yaw_of(v.truth().q) - yaw0, math.tau)),
-                       "yaw_deg": [round(math.degrees(y), 1) for t, z, y in heights][::20],
-                       "modes": v.summary()["modes"]}
+            figures = {
+                "test": "px4-takeover",
+                "z_connect": z0,
+                "z_switch": z_switch,
+                "loss_m": z_switch - lowest,
+                "connect_s": t_switch - t0,
+                "yaw_change_deg": math.degrees(
+                    math.remainder(yaw_of(v.truth().q) - yaw0, math.tau)
+                ),
+                "yaw_deg": [round(math.degrees(y), 1) for t, z, y in heights][::20],
+                "modes": v.summary()["modes"],
+            }
             report(figures)
             assert z_switch - lowest <= 0.1, figures
         finally:
@@ -143,17 +154,45 @@ def hold_height(v: Px4Vehicle, drv, z_ref: float, yaw: float, seconds: float) ->
 
 # -- whole perches through the CLI ------------------------------------------------------------
 
+
 def harness(tmp: Path, *extra: str) -> tuple[subprocess.Popen, str, str, list[str]]:
-    return start_placed("--px4", PX4, *PX4_EXTRA, "--instance", str(INSTANCE), "--ahead",
-                        str(AHEAD_M), "--px4-param", f"SIH_KDV={DRAG}", "--fw-log",
-                        str(tmp / "px4.log"), *extra, env=ENV)
+    return start_placed(
+        "--px4",
+        PX4,
+        *PX4_EXTRA,
+        "--instance",
+        str(INSTANCE),
+        "--ahead",
+        str(AHEAD_M),
+        "--px4-param",
+        f"SIH_KDV={DRAG}",
+        "--fw-log",
+        str(tmp / "px4.log"),
+        *extra,
+        env=ENV,
+    )
 
 
 def fly_argv(tmp: Path, mocap: str, driver: str, surface: list[str]) -> list[str]:
     config = tmp / "px4.toml"
     config.write_text(CONFIG)
-    return [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", driver, "--mocap",
-            mocap, "--config", str(config), *surface, "--log", str(tmp / "flight.jsonl"), "--json"]
+    return [
+        sys.executable,
+        "-m",
+        "perchd",
+        "fly",
+        str(PLAN),
+        "--driver",
+        driver,
+        "--mocap",
+        mocap,
+        "--config",
+        str(config),
+        *surface,
+        "--log",
+        str(tmp / "flight.jsonl"),
+        "--json",
+    ]
 
 
 def stop(proc: subprocess.Popen) -> dict:
@@ -182,8 +221,13 @@ def test_the_agent_perches_on_px4_sih(tmp_path, flight):
     proc, mocap, driver, surface = harness(tmp_path, *start)
     watch = YawWatch(mocap)
     try:
-        done = subprocess.run(fly_argv(tmp_path, mocap, driver, surface), capture_output=True,
-                              text=True, timeout=120, env=ENV)
+        done = subprocess.run(
+            fly_argv(tmp_path, mocap, driver, surface),
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=ENV,
+        )
         time.sleep(1.0)
         sim = stop(proc)
     finally:
@@ -193,16 +237,22 @@ def test_the_agent_perches_on_px4_sih(tmp_path, flight):
     fly = json.loads(done.stdout)
     heading = sim["start_heading_rad"]
     figures = {
-        "test": "px4-perch", "flight": flight, "outcome": fly["outcome"],
+        "test": "px4-perch",
+        "flight": flight,
+        "outcome": fly["outcome"],
         "contact_speed": fly["contact_speed"],
         "true_contact_speed": sim["contact"] and sim["contact"]["speed"],
-        "perch_time": fly["perch_time"], "plan_duration": plan["duration"],
+        "perch_time": fly["perch_time"],
+        "plan_duration": plan["duration"],
         "trigger_speed": fly["trigger"] and fly["trigger"]["v"],
-        "yaw_error_deg": math.degrees(heading_error(
-            watch.between(*flight_window(tmp_path / "flight.jsonl")), heading)),
+        "yaw_error_deg": math.degrees(
+            heading_error(watch.between(*flight_window(tmp_path / "flight.jsonl")), heading)
+        ),
         "yaw_error_whole_run_deg": math.degrees(heading_error(sim["yaw_range_rad"], heading)),
-        "lag": lag_event(tmp_path / "flight.jsonl"), "modes": sim["modes"],
-        "heading_estimate_error_deg": sim["heading_estimate_error_deg"]}
+        "lag": lag_event(tmp_path / "flight.jsonl"),
+        "modes": sim["modes"],
+        "heading_estimate_error_deg": sim["heading_estimate_error_deg"],
+    }
     report(figures)
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
@@ -213,8 +263,7 @@ def test_the_agent_perches_on_px4_sih(tmp_path, flight):
     assert "AUTO.RTL" not in sim["modes"]
 
 
-@pytest.mark.parametrize("boot", ["safe-params", "stock-params+configure", "vision",
-                                  "vision+drag"])
+@pytest.mark.parametrize("boot", ["safe-params", "stock-params+configure", "vision", "vision+drag"])
 def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, boot):
     """PX4's defaults (COM_OBL_RC_ACT = 0: Position, without RC escalating to Return) are
     either set at boot by the harness or by the driver's ?configure=1. With GPS (SIH's) its
@@ -224,16 +273,24 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
     benchmark does: before the relay the vehicle crept ~0.2 m/s toward the wall in Land,
     1.3 m in all."""
     stock = boot == "stock-params+configure"
-    extra = (["--stock-params"] if stock else
-             ["--vision", "--ahead", "7.5"] if boot.startswith("vision")  # X >= -8 m
-             else [])
+    extra = (
+        ["--stock-params"]
+        if stock
+        else ["--vision", "--ahead", "7.5"]
+        if boot.startswith("vision")  # X >= -8 m
+        else []
+    )
     extra += ["--px4-param", "SIH_KDV=1.0"] if boot == "vision+drag" else []
     proc, mocap, driver, surface = harness(tmp_path, *extra)
     driver += "&configure=1" if stock else ""
     watch = YawWatch(mocap)
     try:
-        fly = subprocess.Popen(fly_argv(tmp_path, mocap, driver, surface), env=ENV,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        fly = subprocess.Popen(
+            fly_argv(tmp_path, mocap, driver, surface),
+            env=ENV,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         killed = kill_at_speed(fly, tmp_path / "flight.jsonl", KILL_SPEED_MPS, 90.0)
         assert killed is not None, "the approach never got up to speed"
         time.sleep(8.0)  # COM_OF_LOSS_T, then PX4's own action
@@ -243,15 +300,16 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
         shut(proc)
     modes = sim["modes"]
     figures = after_kill(watch.positions, killed, surface_normal(surface))
-    report({"test": "px4-sigkill", "boot": boot, "modes": modes, **figures,
-            "load": os.getloadavg()})
+    report(
+        {"test": "px4-sigkill", "boot": boot, "modes": modes, **figures, "load": os.getloadavg()}
+    )
     # the sentinel's brake, then Land: 0.22-0.46 m over twelve kills at 0.46-0.51 m/s
     # (docs/safety.md, "The brake"); Land alone had gone 0.36-0.63 m
     assert figures["further_toward_wall_m"] <= 0.5
     assert "OFFBOARD" in modes
     # What PX4 did when the agent died follows its take-over. Landed and disarmed, PX4 may
     # report the mode last chosen, OFFBOARD, again (seen once in the vision boot's blind land).
-    after = modes[modes.index("OFFBOARD") + 1:]
+    after = modes[modes.index("OFFBOARD") + 1 :]
     assert after and after[0] in ("AUTO.LAND", "AUTO.LOITER"), modes
     assert "AUTO.RTL" not in modes
 
@@ -281,8 +339,11 @@ def test_ten_perchd_processes_in_a_row_connect_to_one_px4_boot(tmp_path):
             argv = fly_argv(tmp_path, "zmq://127.0.0.1:9?body=cf1", driver, [])
             argv[argv.index("--log") + 1] = str(log)
             done = subprocess.run(argv, capture_output=True, text=True, timeout=60, env=ENV)
-            outcomes.append(json.loads(done.stdout)["outcome"] if done.stdout else
-                            done.stderr.strip().splitlines()[-1])
+            outcomes.append(
+                json.loads(done.stdout)["outcome"]
+                if done.stdout
+                else done.stderr.strip().splitlines()[-1]
+            )
         sim = stop(proc)
     finally:
         shut(proc)
@@ -295,15 +356,31 @@ def test_the_readme_form_is_refused_before_any_mode_change(tmp_path):
     EKF2 does not take external vision, so the driver refuses by name before OFFBOARD."""
     proc, mocap, _driver, surface = harness(tmp_path)
     try:
-        argv = [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver",
-                f"mavlink:udpin:127.0.0.1:{14540 + INSTANCE}", "--mocap", mocap, *surface]
+        argv = [
+            sys.executable,
+            "-m",
+            "perchd",
+            "fly",
+            str(PLAN),
+            "--driver",
+            f"mavlink:udpin:127.0.0.1:{14540 + INSTANCE}",
+            "--mocap",
+            mocap,
+            *surface,
+        ]
         done = subprocess.run(argv, capture_output=True, text=True, timeout=60, env=ENV)
         time.sleep(1.5)  # a heartbeat after any switch
         sim = stop(proc)
     finally:
         shut(proc)
-    report({"test": "px4-readme-form", "exit": done.returncode,
-            "stderr": done.stderr.strip().splitlines()[-1:], "modes": sim["modes"]})
+    report(
+        {
+            "test": "px4-readme-form",
+            "exit": done.returncode,
+            "stderr": done.stderr.strip().splitlines()[-1:],
+            "modes": sim["modes"],
+        }
+    )
     assert done.returncode != 0 and "EKF2_EV_CTRL=0 (wanted" in done.stderr
     assert "OFFBOARD" not in sim["modes"]
 
@@ -314,11 +391,14 @@ def test_a_service_abort_on_mocap_alone_lands_where_it_stopped(tmp_path):
     feeds EKF2 the mocap through the landing (docs/safety.md, "Between flights"). Before,
     nothing fed it once the flight had ended: Land dead-reckoned, as after a death without
     the relay (1.3 m on)."""
-    proc, mocap, driver, surface = harness(tmp_path, "--vision", "--ahead", "7.5",
-                                           "--px4-param", "SIH_KDV=1.0")
-    point, normal = surface[surface.index("--surface") + 1:][:3], surface_normal(surface)
-    tables = (CONFIG.split("\n", 1)[1] + "[surface]\n"
-              f"point = [{', '.join(point)}]\nnormal = [{', '.join(map(str, normal))}]\n")
+    proc, mocap, driver, surface = harness(
+        tmp_path, "--vision", "--ahead", "7.5", "--px4-param", "SIH_KDV=1.0"
+    )
+    point, normal = surface[surface.index("--surface") + 1 :][:3], surface_normal(surface)
+    tables = (
+        CONFIG.split("\n", 1)[1] + "[surface]\n"
+        f"point = [{', '.join(point)}]\nnormal = [{', '.join(map(str, normal))}]\n"
+    )
     watch = YawWatch(mocap)
     notify = NotifyListener(tmp_path / "notify")
     svc = Serve(tmp_path, notify, tables=tables, driver=driver, mocap=mocap)
@@ -340,9 +420,16 @@ def test_a_service_abort_on_mocap_alone_lands_where_it_stopped(tmp_path):
     figures = after_kill(watch.positions, aborted, normal)
     stopped = [p for t, p in watch.positions if t >= aborted + 2.0]  # Land has braked
     creep = max(sum((p[i] - stopped[0][i]) * normal[i] for i in range(3)) for p in stopped)
-    report({"test": "px4-serve-abort", "modes": sim["modes"], **figures,
-            "creep_toward_wall_after_2_s_m": creep, "last": idle["last"]["outcome"],
-            "load": os.getloadavg()})
+    report(
+        {
+            "test": "px4-serve-abort",
+            "modes": sim["modes"],
+            **figures,
+            "creep_toward_wall_after_2_s_m": creep,
+            "last": idle["last"]["outcome"],
+            "load": os.getloadavg(),
+        }
+    )
     assert idle["state"] == "idle" and idle["last"]["outcome"] == "OPERATOR_ABORT"
     assert "AUTO.LAND" in sim["modes"] and "AUTO.RTL" not in sim["modes"]
     # measured 0.00 m in four runs (Land settles back from its overshoot); with nothing fed

@@ -15,10 +15,10 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
-from perchd.drivers.mavlink import ned_attitude
 
 from perchd.core.errors import UriError
 from perchd.core.types import Phase, Setpoint
+from perchd.drivers.mavlink import ned_attitude
 from perchd.sim.firmware.px4 import (
     EARTH_RADIUS_M,
     Px4Params,
@@ -38,9 +38,11 @@ ROOT = Path(__file__).parents[2]
 def rotate(q, v):
     """v rotated by the (x, y, z, w) quaternion q."""
     x, y, z, w = q
-    r = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    r = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
     return tuple(sum(r[i][j] * v[j] for j in range(3)) for i in range(3))
 
 
@@ -49,8 +51,12 @@ def ned_q(roll, pitch, yaw):
     cr, sr = math.cos(roll / 2), math.sin(roll / 2)
     cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
     cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
 
 
 def test_lat_lon_alt_become_east_north_up_metres_from_the_origin():
@@ -69,8 +75,9 @@ def test_level_facing_north_is_enu_yaw_90_and_minus_q_is_the_same_attitude(sign)
     assert euler_zyx(q) == pytest.approx((0.0, 0.0, math.pi / 2), abs=1e-9)
 
 
-@pytest.mark.parametrize("ned_yaw_deg, enu_yaw_deg", [(0, 90), (90, 0), (180, -90), (-90, 180),
-                                                     (30, 60)])
+@pytest.mark.parametrize(
+    "ned_yaw_deg, enu_yaw_deg", [(0, 90), (90, 0), (180, -90), (-90, 180), (30, 60)]
+)
 def test_headings_map_from_north_clockwise_to_east_anticlockwise(ned_yaw_deg, enu_yaw_deg):
     yaw = euler_zyx(enu_quat(ned_q(0.0, 0.0, math.radians(ned_yaw_deg))))[2]
     assert math.degrees(yaw) % 360 == pytest.approx(enu_yaw_deg % 360, abs=1e-6)
@@ -88,10 +95,18 @@ def test_the_body_axes_land_where_they_should():
 
 def test_a_hil_message_becomes_truth_in_the_enu_world():
     lat0, lon0, h0 = ORIGIN
-    msg = SimpleNamespace(lat=round((lat0 + 1e-5) * 1e7), lon=round(lon0 * 1e7),
-                          alt=round((h0 + 2.0) * 1e3), vx=100, vy=-50, vz=-30,
-                          rollspeed=0.1, pitchspeed=0.2, yawspeed=0.3,
-                          attitude_quaternion=[-1.0, 0.0, 0.0, 0.0])
+    msg = SimpleNamespace(
+        lat=round((lat0 + 1e-5) * 1e7),
+        lon=round(lon0 * 1e7),
+        alt=round((h0 + 2.0) * 1e3),
+        vx=100,
+        vy=-50,
+        vz=-30,
+        rollspeed=0.1,
+        pitchspeed=0.2,
+        yawspeed=0.3,
+        attitude_quaternion=[-1.0, 0.0, 0.0, 0.0],
+    )
     origin = (round(lat0 * 1e7) * 1e-7, round(lon0 * 1e7) * 1e-7, round(h0 * 1e3) * 1e-3)
     t = truth_from_hil(msg, 12.5, origin)
     assert t.t == 12.5
@@ -111,7 +126,9 @@ def test_what_the_driver_sends_with_yaw0_90_comes_back_as_the_same_enu_attitude(
 
 def test_the_surface_is_put_ahead_along_the_heading_and_contact_is_its_crossing():
     s = surface_ahead((1.0, 2.0, 2.5), math.pi / 2, 4.5)
-    assert s.point == pytest.approx((1.0, 6.5, 2.5)) and s.normal == pytest.approx((0, 1, 0), abs=1e-12)
+    assert s.point == pytest.approx((1.0, 6.5, 2.5)) and s.normal == pytest.approx(
+        (0, 1, 0), abs=1e-12
+    )
     assert s.gap((1.0, 2.0, 2.5)) == pytest.approx(-4.5)
     assert s.speed((0.3, 0.8, 0.0)) == pytest.approx(0.8)
 
@@ -131,21 +148,37 @@ def test_a_velocity_count_stands_for_the_centre_of_its_truncated_step(count, spe
 
 
 def test_the_cli_takes_px4_or_cf2_not_both(tmp_path):
-    run = subprocess.run([sys.executable, "-m", "perchd", "sim", "firmware", "--px4", str(tmp_path),
-                          "--cf2", "x"], capture_output=True, text=True, cwd=ROOT)
+    run = subprocess.run(
+        [sys.executable, "-m", "perchd", "sim", "firmware", "--px4", str(tmp_path), "--cf2", "x"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert run.returncode != 0 and "not allowed with argument" in run.stderr
-    run = subprocess.run([sys.executable, "-m", "perchd", "sim", "firmware", "--px4", str(tmp_path)],
-                         capture_output=True, text=True, cwd=ROOT)
+    run = subprocess.run(
+        [sys.executable, "-m", "perchd", "sim", "firmware", "--px4", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert run.returncode != 0 and "not a PX4 SITL build folder" in run.stderr
 
 
-@pytest.mark.parametrize(("extra", "said"), [
-    (["--heading", "400"], "--heading 400 deg is outside -360..360 deg"),
-    (["--heading", "60", "--vision"], "with --vision it waits on the ground"),
-    (["--sim-speed", "3"], "--sim-speed 3 is outside 0.5..2")])
+@pytest.mark.parametrize(
+    ("extra", "said"),
+    [
+        (["--heading", "400"], "--heading 400 deg is outside -360..360 deg"),
+        (["--heading", "60", "--vision"], "with --vision it waits on the ground"),
+        (["--sim-speed", "3"], "--sim-speed 3 is outside 0.5..2"),
+    ],
+)
 def test_a_heading_px4_cannot_turn_to_is_one_line_and_exit_2(tmp_path, extra, said):
-    run = subprocess.run([sys.executable, "-m", "perchd", "sim", "firmware", "--px4",
-                          fake_build(tmp_path), *extra], capture_output=True, text=True, cwd=ROOT)
+    run = subprocess.run(
+        [sys.executable, "-m", "perchd", "sim", "firmware", "--px4", fake_build(tmp_path), *extra],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert run.returncode == 2 and said in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and "Traceback" not in run.stderr
 
@@ -173,9 +206,18 @@ def hil_east(x_m: float, speed_mps: float) -> SimpleNamespace:
     facing east: lat/lon in 1e-7 deg (1.1 cm, 0.75 cm steps here), velocity in cm/s."""
     lat0, lon0, h0 = ORIGIN
     lon = lon0 + math.degrees(x_m / (EARTH_RADIUS_M * math.cos(math.radians(lat0))))
-    return SimpleNamespace(lat=round(lat0 * 1e7), lon=round(lon * 1e7), alt=round((h0 + 2.5) * 1e3),
-                           vx=0, vy=int(speed_mps * 100), vz=0, rollspeed=0.0, pitchspeed=0.0,
-                           yawspeed=0.0, attitude_quaternion=[math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)])
+    return SimpleNamespace(
+        lat=round(lat0 * 1e7),
+        lon=round(lon * 1e7),
+        alt=round((h0 + 2.5) * 1e3),
+        vx=0,
+        vy=int(speed_mps * 100),
+        vz=0,
+        rollspeed=0.0,
+        pitchspeed=0.0,
+        yawspeed=0.0,
+        attitude_quaternion=[math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)],
+    )
 
 
 def test_the_speed_perchd_measures_from_sih_truth_is_steady(tmp_path):
@@ -250,6 +292,7 @@ class HeadingPx4:
 
     def __init__(self, port: int) -> None:
         from pymavlink import mavutil
+
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.02)
@@ -263,15 +306,17 @@ class HeadingPx4:
     def _run(self) -> None:
         while not self._stop.is_set():
             yaw = math.radians(self.heading_deg)
-            msg = self.mav.attitude_encode(int(time.monotonic() * 1e3) & 0xFFFFFFFF, 0.0, 0.0,
-                                           yaw, 0.0, 0.0, 0.0)
+            msg = self.mav.attitude_encode(
+                int(time.monotonic() * 1e3) & 0xFFFFFFFF, 0.0, 0.0, yaw, 0.0, 0.0, 0.0
+            )
             self.sock.sendto(msg.pack(self.mav), ("127.0.0.1", self.port))
             try:
                 data = self.sock.recv(512)
             except TimeoutError:
                 continue
-            self.commands += [m for m in self._parser.parse_buffer(data) or []
-                              if m.get_type() == "COMMAND_LONG"]
+            self.commands += [
+                m for m in self._parser.parse_buffer(data) or [] if m.get_type() == "COMMAND_LONG"
+            ]
 
     def close(self) -> None:
         self._stop.set()
@@ -283,7 +328,6 @@ def test_px4_is_turned_in_hold_until_its_heading_estimate_has_held_there(tmp_pat
     """DO_REPOSITION (192) with only a yaw, in radians as PX4 reads it, position and height
     left NaN (kept); done once ATTITUDE's heading has stayed within 2 deg for 1 s."""
     from pymavlink import mavutil
-
     from ticks import wait_for
 
     from perchd.drivers.mavlink import Connection
@@ -297,8 +341,9 @@ def test_px4_is_turned_in_hold_until_its_heading_estimate_has_held_there(tmp_pat
     try:
         assert wait_for(lambda: vehicle._ekf_heading is not None)  # PX4 heard: answered
         done = threading.Event()
-        turner = threading.Thread(target=lambda: (
-            vehicle._turn(math.radians(60.0), threading.Event()), done.set()))
+        turner = threading.Thread(
+            target=lambda: (vehicle._turn(math.radians(60.0), threading.Event()), done.set())
+        )
         turner.start()
         time.sleep(0.3)
         assert not done.is_set()
@@ -313,8 +358,7 @@ def test_px4_is_turned_in_hold_until_its_heading_estimate_has_held_there(tmp_pat
     assert all(math.isnan(p) for p in (command.param5, command.param6, command.param7))
 
 
-def test_the_push_px4s_attitude_estimate_puts_on_the_vehicle_is_averaged_before_contact(
-        tmp_path):
+def test_the_push_px4s_attitude_estimate_puts_on_the_vehicle_is_averaged_before_contact(tmp_path):
     """Truly level, facing the surface (east), while PX4's estimate says 0.02 rad nose down
     (thrust leaning toward the wall): PX4 believes it pushes g sin 0.02 more than it does,
     -0.196 m/s^2 along the normal. Only the 0.5 s before contact count."""
@@ -327,9 +371,11 @@ def test_the_push_px4s_attitude_estimate_puts_on_the_vehicle_is_averaged_before_
     for t, pitch in ((99.0, 0.05), (100.0, -0.02), (100.1, -0.02)):
         clock.sleep_until(t)
         vehicle._on_truth(hil_east(0.0, 0.0))
-        vehicle._on_attitude(SimpleNamespace(roll=0.0, pitch=pitch, yaw=math.pi / 2,
-                                             time_boot_ms=0))
+        vehicle._on_attitude(
+            SimpleNamespace(roll=0.0, pitch=pitch, yaw=math.pi / 2, time_boot_ms=0)
+        )
     assert vehicle.attitude_push() is None  # no contact yet
     vehicle._contact = Contact(100.2, 1.0, (5.0, 0.0, 2.5))
-    assert vehicle.summary()["attitude_push_mps2"] == pytest.approx(-9.81 * math.sin(0.02),
-                                                                    rel=1e-3)
+    assert vehicle.summary()["attitude_push_mps2"] == pytest.approx(
+        -9.81 * math.sin(0.02), rel=1e-3
+    )

@@ -15,23 +15,35 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from fwvision import PoseFeed, climb_and_compare
-from perchd.drivers.base import open_driver
 
 from perchd.core.runtime import Runtime
+from perchd.drivers.base import open_driver
 from perchd.sim.firmware.harness import ProcessGroup
 from perchd.sim.firmware.px4 import SIH_MASS_KG, Px4Params, Px4Vehicle
 
 PX4 = os.environ.get("PERCHD_PX4", "")
 INSTANCE = int(os.environ.get("PERCHD_FW_INSTANCE", os.environ.get("PERCHD_PX4_INSTANCE", "0")))
-pytestmark = [pytest.mark.firmware, pytest.mark.skipif(
-    not (PX4 and os.access(Path(PX4) / "bin" / "px4", os.X_OK)),
-    reason="set PERCHD_PX4 to a PX4 SITL build folder (docs/firmware.md)")]
+pytestmark = [
+    pytest.mark.firmware,
+    pytest.mark.skipif(
+        not (PX4 and os.access(Path(PX4) / "bin" / "px4", os.X_OK)),
+        reason="set PERCHD_PX4 to a PX4 SITL build folder (docs/firmware.md)",
+    ),
+]
 
 
 def test_px4s_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
     with ProcessGroup() as procs:
-        v = Px4Vehicle(Px4Params(PX4, INSTANCE, takeoff=False, surface_ahead_m=None,
-                                 vision=True, log=tmp_path / "px4.log"))
+        v = Px4Vehicle(
+            Px4Params(
+                PX4,
+                INSTANCE,
+                takeoff=False,
+                surface_ahead_m=None,
+                vision=True,
+                log=tmp_path / "px4.log",
+            )
+        )
         try:
             v.start(procs, threading.Event())
             runtime = Runtime.real()

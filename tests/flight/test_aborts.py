@@ -39,8 +39,12 @@ def test_no_pose_at_all_ends_as_stale_mocap(tmp_path):
 def test_crossing_the_geofence_ceiling_ends_the_flight(tmp_path):
     def lift(world):
         world.plant.v[2] += 2.0
-    sim, res = fly(tmp_path, safety(ceiling_m=1.4, speed_max_mps=10.0),
-                   setup=lambda s: s.world.faults.at.append((TRIGGER_T + 0.5, lift)))
+
+    sim, res = fly(
+        tmp_path,
+        safety(ceiling_m=1.4, speed_max_mps=10.0),
+        setup=lambda s: s.world.faults.at.append((TRIGGER_T + 0.5, lift)),
+    )
     assert_failsafe_and_closed_log(sim, res, EndReason.GEOFENCE)
     assert "above the ceiling 1.4 m" in res.detail
     rows = read_log(res.log).rows
@@ -50,8 +54,12 @@ def test_crossing_the_geofence_ceiling_ends_the_flight(tmp_path):
 def test_a_gust_that_pushes_the_vehicle_off_its_line_is_a_geofence_end(tmp_path):
     def gust(world):
         world.plant.v[1] += 3.0
-    sim, res = fly(tmp_path, safety(speed_max_mps=10.0),
-                   setup=lambda s: s.world.faults.at.append((TRIGGER_T + 0.5, gust)))
+
+    sim, res = fly(
+        tmp_path,
+        safety(speed_max_mps=10.0),
+        setup=lambda s: s.world.faults.at.append((TRIGGER_T + 0.5, gust)),
+    )
     assert_failsafe_and_closed_log(sim, res, EndReason.GEOFENCE)
     assert "off the approach line" in res.detail
 
@@ -59,6 +67,7 @@ def test_a_gust_that_pushes_the_vehicle_off_its_line_is_a_geofence_end(tmp_path)
 def test_a_knock_that_tilts_the_vehicle_past_the_limit_ends_the_flight(tmp_path):
     def knock(world):
         world.plant.att[0] = math.radians(70.0)
+
     sim, res = fly(tmp_path, setup=lambda s: s.world.faults.at.append((TRIGGER_T + 0.3, knock)))
     assert_failsafe_and_closed_log(sim, res, EndReason.TILT_LIMIT)
     assert "tilt" in res.detail
@@ -69,6 +78,7 @@ def test_an_operator_abort_from_another_thread_ends_the_flight_on_the_next_tick(
 
     def on_tick(sim):
         return lambda st: abort.request() if st.phase is Phase.STAGE1 else None
+
     sim, res = fly(tmp_path, abort=abort, on_tick=on_tick)
     assert_failsafe_and_closed_log(sim, res, EndReason.OPERATOR_ABORT)
     rows = read_log(res.log).rows
@@ -86,6 +96,7 @@ def test_a_signal_is_its_own_reason(tmp_path):
 def test_a_cut_link_is_a_lost_link_end(tmp_path):
     def cut(world):
         world.faults.link_ok = False
+
     sim, res = fly(tmp_path, setup=lambda s: s.world.faults.at.append((TRIGGER_T + 0.2, cut)))
     assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
     assert read_log(res.log).end["outcome"] == "LOST_LINK"
@@ -94,8 +105,10 @@ def test_a_cut_link_is_a_lost_link_end(tmp_path):
 def test_going_too_fast_is_a_speed_limit_end(tmp_path):
     def shove(world):  # above the plan's own peak speed, which the limit must allow
         world.plant.v[0] += 2.6
-    sim, res = fly(tmp_path, safety(speed_max_mps=2.5),
-                   setup=lambda s: s.world.faults.at.append((0.3, shove)))
+
+    sim, res = fly(
+        tmp_path, safety(speed_max_mps=2.5), setup=lambda s: s.world.faults.at.append((0.3, shove))
+    )
     assert_failsafe_and_closed_log(sim, res, EndReason.SPEED_LIMIT)
     assert res.trigger is None  # shoved in the hold, before the approach
 
@@ -103,6 +116,7 @@ def test_going_too_fast_is_a_speed_limit_end(tmp_path):
 def test_a_vehicle_stopped_by_a_headwind_diverges_from_its_tau_reference(tmp_path):
     def headwind(world):
         world.plant.v[0] = -0.5
+
     sim, res = fly(tmp_path, setup=lambda s: s.world.faults.at.append((TRIGGER_T + 0.5, headwind)))
     assert_failsafe_and_closed_log(sim, res, EndReason.TAU_DIVERGENCE)
 
@@ -110,6 +124,7 @@ def test_a_vehicle_stopped_by_a_headwind_diverges_from_its_tau_reference(tmp_pat
 def test_a_loop_that_keeps_missing_its_deadlines_ends_the_flight(tmp_path):
     def on_tick(sim):  # every stage-1 tick takes 15 ms of a 10 ms period
         return lambda st: sim.runtime.clock.advance(0.015) if st.phase is Phase.STAGE1 else None
+
     sim, res = fly(tmp_path, on_tick=on_tick)
     assert_failsafe_and_closed_log(sim, res, EndReason.DEADLINE_OVERRUN)
     assert res.loop.max_streak >= FlightConfig().safety.overrun_streak
@@ -153,7 +168,9 @@ def test_an_exception_in_the_loop_still_sends_the_failsafe_and_closes_the_log(tm
         def boom(st):
             if st.phase is Phase.STAGE1:
                 raise RuntimeError("display crashed")
+
         return boom
+
     sim = Sim()
     with pytest.raises(RuntimeError, match="display crashed"):
         sim.fly(case1("ipts"), tmp_path / "f.jsonl", on_tick=on_tick(sim))
@@ -164,11 +181,17 @@ def test_an_exception_in_the_loop_still_sends_the_failsafe_and_closes_the_log(tm
 
 def test_a_wall_nearer_than_configured_stops_the_vehicle_short_and_the_plan_completes(tmp_path):
     from perchd.flight.config import SurfaceConfig
-    cfg = dataclasses.replace(safety(tau_error_s=100.0), surface=SurfaceConfig(point=(0.5, 0.0, 0.0)))
+
+    cfg = dataclasses.replace(
+        safety(tau_error_s=100.0), surface=SurfaceConfig(point=(0.5, 0.0, 0.0))
+    )
 
     def noisy(sim):  # real mocap sees a perched body jitter; bit-still reads as a frozen tracker
         wp = sim.world.params
-        sim.world.params = dataclasses.replace(wp, mocap=dataclasses.replace(wp.mocap, noise_m=1e-4))
+        sim.world.params = dataclasses.replace(
+            wp, mocap=dataclasses.replace(wp.mocap, noise_m=1e-4)
+        )
+
     sim, res = fly(tmp_path, cfg, setup=noisy)
     assert sim.world.contact is not None  # it hit the real wall, 0.5 m before the configured one
     assert_failsafe_and_closed_log(sim, res, EndReason.PLAN_COMPLETE)

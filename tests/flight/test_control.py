@@ -93,9 +93,10 @@ def test_positive_pitch_accelerates_along_plus_x_and_positive_roll_along_minus_y
     assert att((0.0, 1.0, 0.0)).roll < 0.0
 
 
-@pytest.mark.parametrize("held, step, left", [(0.3, 0.2, 0.1), (0.3, 0.5, 0.0),
-                                              (0.3, -0.2, 0.3), (-0.3, -0.2, -0.1),
-                                              (-0.3, 0.2, -0.3)])
+@pytest.mark.parametrize(
+    "held, step, left",
+    [(0.3, 0.2, 0.1), (0.3, 0.5, 0.0), (0.3, -0.2, 0.3), (-0.3, -0.2, -0.1), (-0.3, 0.2, -0.3)],
+)
 def test_a_growing_feed_forward_takes_back_only_what_the_integral_holds(held, step, left):
     """[m/s^2] the integral's contribution before (held) and after a feed-forward step."""
     ctl = TauController(TauGains())

@@ -30,15 +30,30 @@ PLAN = PLANS / "case1-ipts-n3.json"
 def fly_with_config(tmp_path, capsys, toml: str) -> tuple[int, str]:
     cfg = tmp_path / "flight.toml"
     cfg.write_text(f"version = 1\n{toml}\n")
-    code = main(["fly", str(PLAN), "--driver", "sim://", "--mocap", "sim://", "--config",
-                 str(cfg), "--log", str(tmp_path / "f.jsonl")])
+    code = main(
+        [
+            "fly",
+            str(PLAN),
+            "--driver",
+            "sim://",
+            "--mocap",
+            "sim://",
+            "--config",
+            str(cfg),
+            "--log",
+            str(tmp_path / "f.jsonl"),
+        ]
+    )
     return code, capsys.readouterr().err.strip()
 
 
 def test_a_take_off_height_of_100_m_is_refused_naming_key_value_and_bound(tmp_path, capsys):
     code, err = fly_with_config(tmp_path, capsys, "[approach]\ntakeoff_height_m = 100")
     assert code == 2 and len(err.splitlines()) == 1
-    assert f"[approach] takeoff_height_m = 100 m: outside its range 0..{TAKEOFF_HEIGHT_MAX_M:g} m" in err
+    assert (
+        f"[approach] takeoff_height_m = 100 m: outside its range 0..{TAKEOFF_HEIGHT_MAX_M:g} m"
+        in err
+    )
     assert not (tmp_path / "f.jsonl").exists()
     code, err = fly_with_config(tmp_path, capsys, "[approach]\ntakeoff_height_m = 3.5")
     top = SafetyConfig().ceiling_m - MARGIN_M
@@ -50,15 +65,18 @@ def test_no_ceiling_lifts_the_take_off_height_past_its_constant():
     floor = SafetyConfig().floor_m
     high = SafetyConfig(ceiling_m=floor + CEILING_ABOVE_FLOOR_M)
     with pytest.raises(ConfigError, match=f"outside its range 0..{TAKEOFF_HEIGHT_MAX_M:g} m"):
-        FlightConfig(safety=high, approach=ApproachConfig(takeoff_height_m=TAKEOFF_HEIGHT_MAX_M + 1))
+        FlightConfig(
+            safety=high, approach=ApproachConfig(takeoff_height_m=TAKEOFF_HEIGHT_MAX_M + 1)
+        )
     with pytest.raises(ConfigError, match=r"\[safety\] ceiling_m = 50 is above"):
         FlightConfig(safety=SafetyConfig(ceiling_m=50.0))
 
 
-@pytest.mark.parametrize("key, value, why", [("x_max_m", -0.5, "outside its range 0..100 m"),
-                                            ("x_min_m", -0.1, "surface, X = 0, inside")])
-def test_a_geofence_that_leaves_the_surface_outside_is_refused(tmp_path, capsys, key, value,
-                                                               why):
+@pytest.mark.parametrize(
+    "key, value, why",
+    [("x_max_m", -0.5, "outside its range 0..100 m"), ("x_min_m", -0.1, "surface, X = 0, inside")],
+)
+def test_a_geofence_that_leaves_the_surface_outside_is_refused(tmp_path, capsys, key, value, why):
     code, err = fly_with_config(tmp_path, capsys, f"[safety]\n{key} = {value}")
     assert code == 2 and len(err.splitlines()) == 1
     assert f"[safety] {key}" in err and f"= {value:g}" in err and why in err
@@ -107,12 +125,14 @@ def test_a_failsafe_high_above_the_floor_descends_before_it_cuts(tmp_path):
     assert all(b <= a + 1e-4 for a, b in zip(powered, powered[1:]))  # down, never up
     assert trace[cut][0] == pytest.approx(FAILSAFE_DROP_MAX_M, abs=0.05)  # cut at the bound
     descent_s = stop.t - t0
-    assert descent_s == pytest.approx((powered[0] - FAILSAFE_DROP_MAX_M) / FAILSAFE_DESCENT_MPS,
-                                      rel=0.25)
+    assert descent_s == pytest.approx(
+        (powered[0] - FAILSAFE_DROP_MAX_M) / FAILSAFE_DESCENT_MPS, rel=0.25
+    )
 
 
 def test_a_failsafe_low_above_the_floor_cuts_at_once(tmp_path):
-    world, res = high_flight(tmp_path, 1.0, FlightConfig(
-        safety=dataclasses.replace(SafetyConfig(), timeout_s=1.0)))
+    world, res = high_flight(
+        tmp_path, 1.0, FlightConfig(safety=dataclasses.replace(SafetyConfig(), timeout_s=1.0))
+    )
     assert res.outcome is EndReason.TIMEOUT
     assert world.sent[-1].thrust == 0.0

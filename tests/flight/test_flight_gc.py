@@ -36,6 +36,7 @@ def test_a_simulated_flight_sees_no_collection_between_its_first_and_last_tick(t
         for _ in range(50):
             a, b = [], []
             a.append(b), b.append(a)  # cycles: what the collector would chase
+
     try:
         assert gc.isenabled()
         res = Sim().fly(case1("ipts"), tmp_path / "f.jsonl", on_tick=on_tick)
@@ -59,6 +60,7 @@ def test_the_collector_stays_off_until_the_last_of_two_loops_ends():
             inner_done.wait(5.0)
             assert not gc.isenabled()  # the other loop ended; this one still runs
         return k < 3
+
     FixedRateLoop(ManualClock(0.0), 100.0).run(outer_tick)
     assert gc.isenabled()
 

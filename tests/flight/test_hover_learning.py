@@ -4,13 +4,10 @@ saturates at the driver's ceiling."""
 
 from __future__ import annotations
 
-import dataclasses
-import json
-
 import pytest
-
 from caseplans import case1_ipts as case1
 from simflight import NOISY, Sim
+
 from perchd.core.types import EndReason
 from perchd.core.vehicle import CRAZYFLIE_THRUST_MAX_N
 from perchd.drivers.thrust import CF_UNITS_MAX, CrazyflieThrust
@@ -65,8 +62,9 @@ def test_the_approach_meets_v0_at_the_trigger_despite_drag(tmp_path, drag):
 
 
 def test_the_default_thrust_cap_is_the_crazyflie_firmware_ceiling():
-    assert CRAZYFLIE_THRUST_MAX_N == pytest.approx(CrazyflieThrust().newtons(CF_UNITS_MAX),
-                                                   abs=1e-3)
+    assert CRAZYFLIE_THRUST_MAX_N == pytest.approx(
+        CrazyflieThrust().newtons(CF_UNITS_MAX), abs=1e-3
+    )
 
 
 def test_the_flight_saturates_at_the_drivers_ceiling(tmp_path):

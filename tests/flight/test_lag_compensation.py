@@ -13,9 +13,11 @@ from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, LagIdGains
 from perchd.logs.flightlog import read_log
 
-SLOW = {"drag 0.3/s": "sim://?drag=0.3&noise=0.001",
-        "drag 1/s": "sim://?drag=1.0&noise=0.001&seed=1",
-        "100 ms late + drag 0.5/s": "sim://?latency=0.1&drag=0.5&noise=0.001&seed=2"}
+SLOW = {
+    "drag 0.3/s": "sim://?drag=0.3&noise=0.001",
+    "drag 1/s": "sim://?drag=1.0&noise=0.001&seed=1",
+    "100 ms late + drag 0.5/s": "sim://?latency=0.1&drag=0.5&noise=0.001&seed=2",
+}
 
 
 def lag_event(log):
@@ -77,15 +79,18 @@ def test_a_refit_hands_its_drag_over_from_the_integral_without_a_step(tmp_path):
     # The approach's last lag flies the step into the plan's first acceleration
     # (ApproachConfig.lead_into_plan): a step of the plan's, not of a refit.
     base = FlightConfig()
-    base = dataclasses.replace(base, approach=dataclasses.replace(base.approach,
-                                                                  lead_into_plan=False))
+    base = dataclasses.replace(
+        base, approach=dataclasses.replace(base.approach, lead_into_plan=False)
+    )
     res = Sim("sim://?drag=1.0").fly(plan, tmp_path / "f.jsonl", base)
     assert res.outcome is EndReason.CONTACT
     fixed = dataclasses.replace(base, lag_id=LagIdGains(refit_s=3600.0))  # no refits
     Sim("sim://?drag=1.0").fly(plan, tmp_path / "once.jsonl", fixed)
     assert largest_approach_step(tmp_path / "f.jsonl") < 0.2
-    assert largest_approach_step(tmp_path / "f.jsonl") <= \
-        largest_approach_step(tmp_path / "once.jsonl") + 0.05
+    assert (
+        largest_approach_step(tmp_path / "f.jsonl")
+        <= largest_approach_step(tmp_path / "once.jsonl") + 0.05
+    )
 
 
 @pytest.mark.parametrize("push", [-0.3, 0.3])
@@ -107,8 +112,10 @@ def test_stage_2_flies_the_push_stage_1_met_and_touches_on_the_plans_speed(tmp_p
         assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.02)
         if push > 0.0:
             assert old.true_contact_speed > hi
-        refit = next((e for e in read_log(tmp_path / f"refit{seed}.jsonl").events
-                      if e.kind == "bias-refit"), None)
+        refit = next(
+            (e for e in read_log(tmp_path / f"refit{seed}.jsonl").events if e.kind == "bias-refit"),
+            None,
+        )
         assert refit is not None
         assert refit.values["bias_mps2"] == pytest.approx(push, abs=0.1)
 
@@ -133,7 +140,8 @@ def test_stage_2_flies_the_share_of_stage_1s_push_it_is_given(tmp_path, share):
     _, approach, refit = pushed_in_stage_1(tmp_path, LagIdGains(stage2_refit_share=share))
     assert refit["fitted_mps2"] == pytest.approx(0.3, abs=0.1)  # the draught, met in stage 1
     assert refit["bias_mps2"] == pytest.approx(
-        approach + share * (refit["fitted_mps2"] - approach), abs=1e-9)
+        approach + share * (refit["fitted_mps2"] - approach), abs=1e-9
+    )
 
 
 def test_stage_2_flies_this_flights_own_push_whole_and_reports_it(tmp_path):

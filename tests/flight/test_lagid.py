@@ -18,11 +18,20 @@ from perchd.flight.lagid import LagIdentifier, LagModel, _solve
 DT = 0.01
 
 
-def fly(lag_s: float, drag: float, bias: float = 0.0, accel: float = 0.75,
-        hold_s: float = 1.0, approach_s: float = 2.0, noise_m: float = 0.0, seed: int = 0,
-        cfg: LagIdGains = LagIdGains(),
-        brake: tuple[float, ...] | None = None, estimated: bool = False,
-        time_constant_s: float = 0.0) -> LagIdentifier:
+def fly(
+    lag_s: float,
+    drag: float,
+    bias: float = 0.0,
+    accel: float = 0.75,
+    hold_s: float = 1.0,
+    approach_s: float = 2.0,
+    noise_m: float = 0.0,
+    seed: int = 0,
+    cfg: LagIdGains = LagIdGains(),
+    brake: tuple[float, ...] | None = None,
+    estimated: bool = False,
+    time_constant_s: float = 0.0,
+) -> LagIdentifier:
     """Record a hold and an approach of the model Xddot = u(t - lag) - drag Xdot + bias, the
     command holding position until the approach, then `accel` plus drag at the speed
     reached; X measured with noise_m [m] of noise, Xdot with 10 noise_m / s (about the
@@ -70,12 +79,19 @@ def test_the_fit_finds_the_delay_and_the_drag_it_was_flown_with(lag_s, drag):
 
 @pytest.mark.parametrize("delay_s, time_constant_s", [(0.1, 0.2), (0.05, 0.1), (0.15, 0.05)])
 def test_a_first_order_lag_behind_the_delay_is_flown_as_delay_plus_time_constant(
-        delay_s, time_constant_s):
+    delay_s, time_constant_s
+):
     """An attitude loop's time constant T behind a delay: after a step the speed ends
     delay + T late. With first-order lags tried (LagIdGains.time_constant_max_s), the fit
     finds both, and the drag."""
-    fit = fly(delay_s, 0.3, time_constant_s=time_constant_s, noise_m=0.001,
-              estimated=True, cfg=LagIdGains(time_constant_max_s=0.3)).fit()
+    fit = fly(
+        delay_s,
+        0.3,
+        time_constant_s=time_constant_s,
+        noise_m=0.001,
+        estimated=True,
+        cfg=LagIdGains(time_constant_max_s=0.3),
+    ).fit()
     assert fit.model is not None, fit.why
     assert fit.model.lag_s == pytest.approx(delay_s + time_constant_s, abs=0.01)
     assert fit.model.time_constant_s == pytest.approx(time_constant_s, abs=0.03)
@@ -107,8 +123,9 @@ def test_the_refit_finds_the_push_of_the_braking_alone_with_lag_and_drag_kept():
     assert (since.lag_s, since.drag_per_s) == (base.lag_s, base.drag_per_s)
     assert since.bias_mps2 == pytest.approx(-0.15, abs=0.03)
     whole = ident.fit().model
-    assert abs(whole.bias_mps2 - whole.drag_per_s + 0.15 + 0.2) > \
-        3 * abs(since.bias_mps2 + 0.15)  # the push at 1 m/s, off in the fit of everything
+    assert abs(whole.bias_mps2 - whole.drag_per_s + 0.15 + 0.2) > 3 * abs(
+        since.bias_mps2 + 0.15
+    )  # the push at 1 m/s, off in the fit of everything
 
 
 def test_a_refit_over_too_few_ticks_is_refused():
@@ -136,8 +153,16 @@ def test_a_drag_that_noise_makes_negative_is_fitted_as_none_with_its_own_bias(se
     """No drag, no push, a short approach under 4 mm of noise: the joint fit's drag comes
     out at about -0.11 /s with a bias of about -0.04 m/s^2 beside it. Clipping only the
     drag kept that bias; the fit is the drag-free one instead."""
-    ident = fly(0.15, 0.0, hold_s=0.3, approach_s=1.0, noise_m=0.004, seed=seed,
-                cfg=LagIdGains(speed_span_min_mps=0.3), estimated=True)
+    ident = fly(
+        0.15,
+        0.0,
+        hold_s=0.3,
+        approach_s=1.0,
+        noise_m=0.004,
+        seed=seed,
+        cfg=LagIdGains(speed_span_min_mps=0.3),
+        estimated=True,
+    )
     m = ident.fit().model
     t, u, x, _ = (np.array(c) for c in zip(*ident._rows))
     joint = _solve(t, u[None], x, np.array([m.lag_s]))[1][0, :, 0]  # (drag, bias, ...)
@@ -148,8 +173,7 @@ def test_a_drag_that_noise_makes_negative_is_fitted_as_none_with_its_own_bias(se
 
 
 @pytest.mark.parametrize("lag_s", [0.13, 0.25, 0.35])
-def test_millimetre_mocap_noise_through_the_estimator_leaves_the_lag_within_a_tick(
-        lag_s):
+def test_millimetre_mocap_noise_through_the_estimator_leaves_the_lag_within_a_tick(lag_s):
     """The estimator's speed carries the mocap noise differentiated and correlated over
     tens of ticks; fitted on it, the lag moved by up to 0.02 s between seeds. The fit on
     positions stays within a tick over eight (the estimator's own smoothing adds 0-5 ms)."""
@@ -201,8 +225,6 @@ def test_the_prediction_adds_the_commands_still_in_flight():
     assert (x, v) == pytest.approx((-0.9, 1.0), abs=1e-9)
     dragged = LagModel(0.2, 0.5, 0.0, 0.0, 0, 0.0)  # drag takes 0.5 * 1 m/s for 0.2 s
     assert ident.predict(1.0, -1.0, 1.0, dragged, 0.2)[1] == pytest.approx(1.0, abs=1e-9)
-
-
 
 
 def test_a_first_order_response_is_predicted_through_its_filter():

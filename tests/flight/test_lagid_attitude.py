@@ -29,11 +29,19 @@ def lean_command(t: float) -> float:
     return -0.1 if t < 4.0 else 0.02
 
 
-def fly(delay_s: float, tc_s: float, noise: float = 0.0, offset: float = 0.0,
-        seen_as: float = 1.0, drag: float = 0.25, seconds: float = 4.5, seed: int = 0,
-        cfg: LagIdGains | None = None,
-        then: tuple[float, float, float] | None = None,
-        lean_per_mps: float = 0.0) -> LagIdentifier:
+def fly(
+    delay_s: float,
+    tc_s: float,
+    noise: float = 0.0,
+    offset: float = 0.0,
+    seen_as: float = 1.0,
+    drag: float = 0.25,
+    seconds: float = 4.5,
+    seed: int = 0,
+    cfg: LagIdGains | None = None,
+    then: tuple[float, float, float] | None = None,
+    lean_per_mps: float = 0.0,
+) -> LagIdentifier:
     """Record a flight whose lean answers the lean sent `delay_s` [s] late through a
     first-order lag `tc_s` [s] (integrated in 1 ms steps), Xddot = g lean - drag Xdot.
     The mocap measures each tick's lean 4 ms before the tick, with `noise` added, `offset`
@@ -55,8 +63,7 @@ def fly(delay_s: float, tc_s: float, noise: float = 0.0, offset: float = 0.0,
         measured_at = t - 0.004
         seen = history[round(measured_at / (DT / 10))] if k else 0.0
         ident.record(t, G * sent[-1], x + rng.gauss(0.0, 0.001), v)
-        ident.record_lean(t, sent[-1], measured_at,
-                          seen_as * seen + offset + rng.gauss(0.0, noise))
+        ident.record_lean(t, sent[-1], measured_at, seen_as * seen + offset + rng.gauss(0.0, noise))
         for n in range(10):  # to the next tick, the command sent at t held from t
             held = lean + lean_per_mps * v
             history.append(held)
@@ -68,8 +75,10 @@ def fly(delay_s: float, tc_s: float, noise: float = 0.0, offset: float = 0.0,
     return ident
 
 
-@pytest.mark.parametrize("delay_s, tc_s", [(0.11, 0.24), (0.115, 0.235), (0.025, 0.14),
-                                           (0.135, 0.16), (0.0, 0.07), (0.037, 0.113)])
+@pytest.mark.parametrize(
+    "delay_s, tc_s",
+    [(0.11, 0.24), (0.115, 0.235), (0.025, 0.14), (0.135, 0.16), (0.0, 0.07), (0.037, 0.113)],
+)
 def test_the_attitude_fit_finds_the_delay_and_the_time_constant(delay_s, tc_s):
     """Delays off the 10 ms ticks as well: no half-tick bias."""
     found = fly(delay_s, tc_s).lean_response()
@@ -90,8 +99,9 @@ def test_a_pure_delay_is_found_within_a_tick():
 @pytest.mark.parametrize("seed", range(4))
 def test_mocap_noise_and_a_trim_offset_leave_the_lag_within_a_few_milliseconds(seed):
     """0.2 deg of noise on each frame's attitude and a 1 deg trim (the markers)."""
-    found = fly(0.11, 0.24, noise=math.radians(0.2), offset=math.radians(1.0),
-                seed=seed).lean_response()
+    found = fly(
+        0.11, 0.24, noise=math.radians(0.2), offset=math.radians(1.0), seed=seed
+    ).lean_response()
     assert found is not None
     assert sum(found) == pytest.approx(0.35, abs=0.008)
 
@@ -184,8 +194,13 @@ def test_the_drag_is_fitted_to_the_lean_held_not_the_one_sent(from_lean):
     with up to g x 0.003 = 0.029 /s less net of that lean: fitted to the commands, the
     drag reads low (0.230; stage 2, slower than stage 1, then meets less push than the
     refit carries); fitted to the lean measured, it is the drag."""
-    fit = fly(0.11, 0.24, lean_per_mps=0.003, noise=math.radians(0.1),
-              cfg=LagIdGains(drag_from_attitude=from_lean)).fit()
+    fit = fly(
+        0.11,
+        0.24,
+        lean_per_mps=0.003,
+        noise=math.radians(0.1),
+        cfg=LagIdGains(drag_from_attitude=from_lean),
+    ).fit()
     assert fit.model is not None and fit.model.from_attitude, fit.why
     assert fit.model.drag_from_attitude is from_lean
     if from_lean:
@@ -195,8 +210,10 @@ def test_the_drag_is_fitted_to_the_lean_held_not_the_one_sent(from_lean):
 
 
 def test_the_positions_lag_is_fitted_when_the_attitude_is_not_used():
-    for ident in (fly(0.11, 0.24, seen_as=0.0),
-                  fly(0.11, 0.24, cfg=LagIdGains(from_attitude=False))):
+    for ident in (
+        fly(0.11, 0.24, seen_as=0.0),
+        fly(0.11, 0.24, cfg=LagIdGains(from_attitude=False)),
+    ):
         fit = ident.fit()
         assert fit.model is not None and not fit.model.from_attitude, fit.why
 

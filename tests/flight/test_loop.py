@@ -29,6 +29,7 @@ def test_a_slow_tick_is_an_overrun_its_missed_deadlines_are_skipped_and_the_stre
         if 3 <= k < 8:
             clock.advance(0.025)  # 2.5 periods
         return k < 20
+
     stats = loop.run(tick)
     assert ks[:5] == [0, 1, 2, 3, 6]  # after tick 3 ends at 0.055, tick 6 (0.06) is next
     s = stats.summary()

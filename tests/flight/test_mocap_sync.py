@@ -56,6 +56,7 @@ def test_a_tick_longer_than_a_frame_skips_to_the_newest_pose_and_counts_the_skip
         if k == 3:
             rt.clock.advance(2.5 / 120)  # 2.5 frames of work
         return k < 8
+
     s = loop.run(tick).summary("mocap")
     assert seqs[:5] == [1, 2, 3, 4, 6]  # frames 5 and 6 arrived during tick 3
     assert s.overruns == 1 and s.missed == 1 and s.max_streak == 1
@@ -169,20 +170,21 @@ def test_over_real_zmq_sockets_each_published_pose_releases_one_setpoint():
         while listening.is_set():
             if sub.poll(5):
                 got.append(json.loads(sub.recv_multipart()[1])["pose_seq"])
+
     receiver = threading.Thread(target=receive)
     receiver.start()
     pub = ZmqPosePublisher("tcp://127.0.0.1:0")
     source = open_source(pub.uri("cf1"), rt)
-    driver = ZmqSetpointDriver("zmq://test", f"tcp://127.0.0.1:{port}", rt, "cf1",
-                               bind=False, wait=2.0)
+    driver = ZmqSetpointDriver(
+        "zmq://test", f"tcp://127.0.0.1:{port}", rt, "cf1", bind=False, wait=2.0
+    )
     source.start()
     driver.connect()
     n = 40
 
     def publish():  # the next pose once the last one's setpoint is back: none is skipped
         for seq in range(1, n + 1):
-            pub.publish(Pose("cf1", seq, time.monotonic(), (-3.0, 0.0, 1.0),
-                             (0.0, 0.0, 0.0, 1.0)))
+            pub.publish(Pose("cf1", seq, time.monotonic(), (-3.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0)))
             deadline = time.monotonic() + 2.0
             while len(got) < seq and time.monotonic() < deadline:
                 time.sleep(0.001)
@@ -191,6 +193,7 @@ def test_over_real_zmq_sockets_each_published_pose_releases_one_setpoint():
         pose = source.latest()
         driver.send(Setpoint(t, 0.0, 0.0, 0.0, 0.3, pose.seq, Phase.HOLD))
         return pose.seq < n
+
     try:
         assert pub.wait_for_subscriber(2.0)
         sender = threading.Thread(target=publish)

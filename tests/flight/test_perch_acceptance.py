@@ -13,8 +13,11 @@ from perchd.logs.flightlog import read_log
 LINKS = {"nominal": "sim://", "latency+noise": NOISY, "latency+noise seed 1": NOISY + "&seed=1"}
 
 
-@pytest.fixture(scope="module", params=[(s, l) for s in ("ctdts", "ipts") for l in LINKS],
-                ids=lambda p: f"{p[0]}-{p[1]}")
+@pytest.fixture(
+    scope="module",
+    params=[(s, link) for s in ("ctdts", "ipts") for link in LINKS],
+    ids=lambda p: f"{p[0]}-{p[1]}",
+)
 def flown(request, tmp_path_factory):
     strategy, link = request.param
     plan = case1(strategy)
@@ -56,8 +59,12 @@ def test_the_log_has_one_row_per_tick_and_ends_in_contact(flown):
     assert [r.k for r in log.rows] == list(range(len(log.rows)))
     assert log.rows[-1].end == "CONTACT"
     phases = [r.phase for r in log.rows]
-    for a, b in [("hold", "approach"), ("approach", "stage1"), ("stage1", "stage2"),
-                 ("stage2", "contact")]:
+    for a, b in [
+        ("hold", "approach"),
+        ("approach", "stage1"),
+        ("stage1", "stage2"),
+        ("stage2", "contact"),
+    ]:
         assert phases.index(a) < phases.index(b)
 
 
@@ -95,6 +102,7 @@ def test_the_papers_clock_indexed_stage_two_also_perches(tmp_path):
 def test_after_contact_the_motors_are_cut_or_idled_as_configured(action, thrust, tmp_path):
     from perchd.core.types import Phase
     from perchd.flight.config import PostContact
+
     sim = Sim()
     cfg = FlightConfig(post_contact=PostContact(action), sync=LoopSync.FIXED)  # counts ticks
     res = sim.fly(case1("ctdts"), tmp_path / "f.jsonl", cfg)
@@ -108,8 +116,9 @@ def test_after_contact_the_motors_are_cut_or_idled_as_configured(action, thrust,
 @pytest.mark.parametrize("rate_hz", [50.0, 500.0])
 def test_the_loop_perches_as_well_at_50_and_500_hz(rate_hz, tmp_path):
     plan = case1("ipts")
-    res = Sim(NOISY).fly(plan, tmp_path / "f.jsonl",
-                         FlightConfig(rate_hz=rate_hz, sync=LoopSync.FIXED))
+    res = Sim(NOISY).fly(
+        plan, tmp_path / "f.jsonl", FlightConfig(rate_hz=rate_hz, sync=LoopSync.FIXED)
+    )
     assert res.outcome is EndReason.CONTACT
     assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.05)
     assert res.loop.ticks == pytest.approx(rate_hz * read_log(res.log).rows[-1].t, rel=0.01)
@@ -117,6 +126,7 @@ def test_the_loop_perches_as_well_at_50_and_500_hz(rate_hz, tmp_path):
 
 def _retarget_or_skip():
     import perchd.tau as tau
+
     if not hasattr(tau, "retarget"):
         pytest.skip("perchd.tau has no retarget yet")
     return tau.retarget
@@ -126,6 +136,7 @@ def _retarget_or_skip():
 def test_the_replan_policy_flies_a_plan_made_for_the_measured_trigger_state(strategy, tmp_path):
     _retarget_or_skip()
     from perchd.flight.config import TriggerConfig, TriggerPolicy
+
     plan = case1(strategy)
     cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN))
     res = Sim(NOISY).fly(plan, tmp_path / "f.jsonl", cfg)
@@ -149,6 +160,7 @@ def test_the_robust_policy_flies_a_certified_plan_from_the_measured_state(tmp_pa
     _retarget_or_skip()
     from perchd.flight.config import TriggerConfig, TriggerPolicy
     from perchd.tau import load_plan
+
     path = PLANS / "robust-n3-around-case1.json"
     if not path.exists():
         pytest.skip(f"{path.name} is not in this checkout")

@@ -44,8 +44,10 @@ def set_peak_v(doc):
 @pytest.fixture
 def no_links(monkeypatch):
     """Fail the test if `perchd fly` gets as far as opening a link."""
+
     def refuse(*_a, **_k):
         raise AssertionError("a link was opened for a plan that should be refused")
+
     monkeypatch.setattr(fly_command, "open_links", refuse)
 
 
@@ -56,13 +58,15 @@ def fly_refusal(capsys, plan: str, *extra: str) -> str:
     return err
 
 
-@pytest.mark.parametrize("edit, field", [
-    (set_limit("v_contact", [3, 4]), "v_contact [3, 4]"),
-    (set_limit("a_max", 0.1), "a_max = 0.1"),
-    (set_peak_v, "peaks.v"),
-])
-def test_perchd_fly_refuses_an_edited_plan_before_any_link(tmp_path, capsys, no_links, edit,
-                                                           field):
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (set_limit("v_contact", [3, 4]), "v_contact [3, 4]"),
+        (set_limit("a_max", 0.1), "a_max = 0.1"),
+        (set_peak_v, "peaks.v"),
+    ],
+)
+def test_perchd_fly_refuses_an_edited_plan_before_any_link(tmp_path, capsys, no_links, edit, field):
     err = fly_refusal(capsys, edited(tmp_path, edit))
     assert field in err
 
@@ -116,24 +120,44 @@ def test_fly_itself_refuses_an_edited_plan_before_it_engages(tmp_path):
 def test_a_campaign_refuses_an_edited_plan_before_its_table(tmp_path):
     path = edited(tmp_path, set_limit("v_contact", [3, 4]))
     table = tmp_path / "t.csv"
-    run = subprocess.run([sys.executable, "-m", "perchd", "sim", "--campaign", path,
-                          "--flights", "2", "--table", str(table)],
-                         capture_output=True, text=True, timeout=120, check=False)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "sim",
+            "--campaign",
+            path,
+            "--flights",
+            "2",
+            "--table",
+            str(table),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert run.returncode == 2 and "v_contact [3, 4]" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and not table.exists()
 
 
 def test_the_service_refuses_an_edited_plan_and_ctl_exits_2(tmp_path):
     from served import Service
+
     svc = Service(tmp_path)
     try:
         plan = svc.plans / "edited.json"
         plan.write_text(open(edited(tmp_path, set_limit("a_max", 0.1))).read())
         reply = svc.talk(json.dumps({"cmd": "fly", "plan": str(plan)}).encode() + b"\n", 1)[0]
         assert reply["ok"] is False and reply["refused"] == "plan" and "a_max" in reply["error"]
-        ctl = subprocess.run([sys.executable, "-m", "perchd", "ctl", "fly", str(plan),
-                              "--socket", str(svc.sock)],
-                             capture_output=True, text=True, timeout=60, check=False)
+        ctl = subprocess.run(
+            [sys.executable, "-m", "perchd", "ctl", "fly", str(plan), "--socket", str(svc.sock)],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
         assert ctl.returncode == 2 and "a_max" in ctl.stderr
         status = svc.talk(b'{"cmd": "status"}\n', 1)[0]
         assert status["state"] == "idle"

@@ -32,8 +32,8 @@ from perchd.flight.config import (
 )
 from perchd.flight.planner_worker import WorkerPlanner
 from perchd.logs.flightlog import read_log
-from perchd.sim.faults import Stop
 from perchd.session import open_session
+from perchd.sim.faults import Stop
 from perchd.tau import load_plan, retarget
 from perchd.tau.library import load_library
 
@@ -66,8 +66,7 @@ def alive(pid: int) -> bool:
     return _is_worker(pid)
 
 
-def real_time_flight(tmp_path: Path, cfg: FlightConfig, planner=None, uri: str = "sim://",
-                     **kw):
+def real_time_flight(tmp_path: Path, cfg: FlightConfig, planner=None, uri: str = "sim://", **kw):
     """One perch of the simulated vehicle on the real clock, in this process."""
     session = open_session(uri, clock=MonotonicClock())
     return session, session.fly(PLAN, tmp_path / "f.jsonl", cfg, planner=planner, **kw)
@@ -93,14 +92,21 @@ def assert_no_tick_held_up(log, t0: float, t1: float, period: float) -> None:
 
 # ------------------------------------------------------------------ real time: the deadline
 
-@pytest.mark.parametrize("fallback, outcome", [(TriggerFallback.PLAN, EndReason.CONTACT),
-                                               (TriggerFallback.REFUSE,
-                                                EndReason.TRIGGER_REFUSED)])
+
+@pytest.mark.parametrize(
+    "fallback, outcome",
+    [
+        (TriggerFallback.PLAN, EndReason.CONTACT),
+        (TriggerFallback.REFUSE, EndReason.TRIGGER_REFUSED),
+    ],
+)
 def test_a_replan_slower_than_its_deadline_takes_the_fallback_without_missing_a_tick(
-        tmp_path, fallback, outcome):
+    tmp_path, fallback, outcome
+):
     # ahead_v_tol_mps 0: no plan made ahead fits the measured speed, the trigger must ask.
-    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN, fallback=fallback,
-                                             ahead_v_tol_mps=0.0))
+    cfg = FlightConfig(
+        trigger=TriggerConfig(TriggerPolicy.REPLAN, fallback=fallback, ahead_v_tol_mps=0.0)
+    )
     slow = WorkerPlanner(PLAN, delay_s=SLOW_S)
     _, res = real_time_flight(tmp_path, cfg, slow)
     log = read_log(res.log)
@@ -139,29 +145,55 @@ def test_the_plan_made_ahead_is_flown_at_the_trigger_with_no_wait(tmp_path):
 
 # ------------------------------------------------------------- simulated time: reproducible
 
+
 @pytest.mark.parametrize("library", [None, LIBRARY])
 def test_on_a_simulated_clock_the_worker_flies_exactly_the_solve_in_the_tick(tmp_path, library):
     """The real worker on a simulated clock answers in the tick that asked (a solve takes no
     simulated time): the flight is bit for bit the one a solve in the tick flies, and its
     plan is the retarget of the measured trigger state."""
-    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN,
-                                             library=None if library is None else str(library)))
+    cfg = FlightConfig(
+        trigger=TriggerConfig(
+            TriggerPolicy.REPLAN, library=None if library is None else str(library)
+        )
+    )
     inline = Sim(NOISY).fly(PLAN, tmp_path / "inline.jsonl", cfg)
     worker = WorkerPlanner(PLAN, cfg.trigger.library, instant=True)
     sim = Sim(NOISY)
     from perchd.flight.run import fly
+
     try:
-        piped = fly(PLAN, sim.driver, sim.source, sim.runtime.clock, tmp_path / "worker.jsonl",
-                    cfg, world=sim.world, planner=worker)
+        piped = fly(
+            PLAN,
+            sim.driver,
+            sim.source,
+            sim.runtime.clock,
+            tmp_path / "worker.jsonl",
+            cfg,
+            world=sim.world,
+            planner=worker,
+        )
     finally:
         sim.source.close()
         sim.driver.close()
     assert inline.outcome is EndReason.CONTACT
-    same = ("outcome", "detail", "contact_speed", "perch_time", "plan_duration",
-            "v_contact_plan", "trigger", "true_contact_speed", "true_perch_time")
+    same = (
+        "outcome",
+        "detail",
+        "contact_speed",
+        "perch_time",
+        "plan_duration",
+        "v_contact_plan",
+        "trigger",
+        "true_contact_speed",
+        "true_perch_time",
+    )
     assert {k: getattr(piped, k) for k in same} == {k: getattr(inline, k) for k in same}
-    rows = lambda r: [dataclasses.replace(row, compute_s=0.0, jitter_s=0.0)  # noqa: E731
-                      for row in read_log(r.log).rows]
+
+    def rows(r):
+        return [
+            dataclasses.replace(row, compute_s=0.0, jitter_s=0.0) for row in read_log(r.log).rows
+        ]
+
     assert rows(piped) == rows(inline)
     lib = None if library is None else load_library(library)
     expected = retarget(PLAN, inline.trigger.x, inline.trigger.v, library=lib)
@@ -173,18 +205,25 @@ def test_on_a_simulated_clock_the_worker_flies_exactly_the_solve_in_the_tick(tmp
 def test_simulated_replans_fly_without_a_worker_process(tmp_path):
     before = worker_children(os.getpid())
     after: set[int] = set()
-    res = Sim(NOISY).fly(PLAN, tmp_path / "f.jsonl", REPLAN,
-                         on_tick=lambda st: after.update(worker_children(os.getpid())))
+    res = Sim(NOISY).fly(
+        PLAN,
+        tmp_path / "f.jsonl",
+        REPLAN,
+        on_tick=lambda st: after.update(worker_children(os.getpid())),
+    )
     assert res.outcome is EndReason.CONTACT and before == [] and after == set()
 
 
 # ----------------------------------------------------------- the worker ends with the flight
 
+
 def _ends_by_abort(session, tmp_path):
     from perchd.flight.run import FlightAbort
+
     abort = FlightAbort()
-    res = session.fly(PLAN, tmp_path / "f.jsonl", REPLAN, abort,
-                      on_tick=lambda st: st.t > 1.0 and abort.request())
+    res = session.fly(
+        PLAN, tmp_path / "f.jsonl", REPLAN, abort, on_tick=lambda st: st.t > 1.0 and abort.request()
+    )
     return res.outcome
 
 
@@ -192,6 +231,7 @@ def _ends_by_exception(session, tmp_path):
     def boom(st):
         if st.t > 1.0:
             raise RuntimeError("display died")
+
     with pytest.raises(RuntimeError):
         session.fly(PLAN, tmp_path / "f.jsonl", REPLAN, on_tick=boom)
     return EndReason.SOFTWARE_ERROR
@@ -202,9 +242,14 @@ def _ends_by_stale_mocap(session, tmp_path):
     return session.fly(PLAN, tmp_path / "f.jsonl", REPLAN).outcome
 
 
-@pytest.mark.parametrize("end, reason", [(_ends_by_abort, EndReason.OPERATOR_ABORT),
-                                         (_ends_by_exception, EndReason.SOFTWARE_ERROR),
-                                         (_ends_by_stale_mocap, EndReason.STALE_MOCAP)])
+@pytest.mark.parametrize(
+    "end, reason",
+    [
+        (_ends_by_abort, EndReason.OPERATOR_ABORT),
+        (_ends_by_exception, EndReason.SOFTWARE_ERROR),
+        (_ends_by_stale_mocap, EndReason.STALE_MOCAP),
+    ],
+)
 def test_the_worker_a_flight_starts_is_gone_when_it_ends(tmp_path, end, reason):
     seen: set[int] = set()
     session = open_session("sim://", clock=MonotonicClock())
@@ -217,8 +262,10 @@ def test_the_worker_a_flight_starts_is_gone_when_it_ends(tmp_path, end, reason):
             seen.update(worker_children(os.getpid()))
             if user is not None:
                 user(st)
+
         kw["on_tick"] = tick
         return fly_session(*args, **kw)
+
     session.fly = watching
     assert end(session, tmp_path) is reason
     assert seen, "no planner worker ran during the flight"
@@ -234,13 +281,30 @@ def _config(tmp_path: Path) -> Path:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_the_worker_does_not_outlive_perchd_fly_killed_mid_flight(tmp_path, sig):
     sim, mocap, driver = start_announced(
-        "sim", "--pose-out", "natnet://127.0.0.1:0", "--setpoint-in", "zmq://127.0.0.1:0")
+        "sim", "--pose-out", "natnet://127.0.0.1:0", "--setpoint-in", "zmq://127.0.0.1:0"
+    )
     try:
         agent = subprocess.Popen(
-            [sys.executable, "-m", "perchd", "fly", str(PLANS / "case1-ipts-n3.json"),
-             "--driver", driver, "--mocap", mocap, "--config", str(_config(tmp_path)),
-             "--log", str(tmp_path / "f.jsonl"), "--state", str(tmp_path / "v.json")],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "fly",
+                str(PLANS / "case1-ipts-n3.json"),
+                "--driver",
+                driver,
+                "--mocap",
+                mocap,
+                "--config",
+                str(_config(tmp_path)),
+                "--log",
+                str(tmp_path / "f.jsonl"),
+                "--state",
+                str(tmp_path / "v.json"),
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         try:
             workers: list[int] = []
             assert wait_for(lambda: workers.extend(worker_children(agent.pid)) or workers, 20.0)
@@ -258,6 +322,7 @@ def test_the_worker_does_not_outlive_perchd_fly_killed_mid_flight(tmp_path, sig)
 
 # ------------------------------------------------------------- over MAVLink, PX4-like
 
+
 class MavlinkBridge:
     """A PX4-like autopilot on loopback (the MAVLink double, pymavlink at both ends) whose
     attitude targets fly the simulated vehicle: each new SET_ATTITUDE_TARGET is decoded
@@ -266,6 +331,7 @@ class MavlinkBridge:
 
     def __init__(self, yaw_rad: float) -> None:
         from mavlink_double import PX4, VehicleDouble
+
         self.peer = VehicleDouble(PX4, airborne=True)
         self.hover = self.peer.params["MPC_THR_HOVER"]
         self.session = open_session("sim://", clock=MonotonicClock())
@@ -279,6 +345,7 @@ class MavlinkBridge:
 
     def _relay(self) -> None:
         from pymavlink.quaternion import Quaternion
+
         while self._on:
             targets = self.peer.targets
             if len(targets) > self._seen:
@@ -286,8 +353,9 @@ class MavlinkBridge:
                 t = targets[-1]
                 roll, pitch, _ = Quaternion(list(t.q)).euler
                 thrust = t.thrust * self.mass * 9.81 / self.hover
-                self.world.command(Setpoint(time.monotonic(), roll, -pitch, self.yaw, thrust,
-                                            -1, Phase.HOLD))
+                self.world.command(
+                    Setpoint(time.monotonic(), roll, -pitch, self.yaw, thrust, -1, Phase.HOLD)
+                )
             time.sleep(0.001)
 
     def close(self) -> None:
@@ -304,6 +372,7 @@ def test_over_mavlink_a_px4_like_vehicle_misses_no_tick_at_the_replan(tmp_path):
     from perchd.flight.frame import PerchFrame
     from perchd.flight.run import fly
     from perchd.mocap.base import open_source
+
     cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN, ahead_v_tol_mps=0.0))
     frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
     rig = MavlinkBridge(frame.yaw_facing)
@@ -314,8 +383,9 @@ def test_over_mavlink_a_px4_like_vehicle_misses_no_tick_at_the_replan(tmp_path):
         source.start()
         slow = WorkerPlanner(PLAN, delay_s=SLOW_S)
         try:
-            res = fly(PLAN, driver, source, rig.session.clock, tmp_path / "f.jsonl", cfg,
-                      planner=slow)
+            res = fly(
+                PLAN, driver, source, rig.session.clock, tmp_path / "f.jsonl", cfg, planner=slow
+            )
         finally:
             driver.close()
             source.close()
@@ -332,15 +402,24 @@ def test_over_mavlink_a_px4_like_vehicle_misses_no_tick_at_the_replan(tmp_path):
 def test_the_trigger_keys_are_read_from_the_config_file_and_bad_ones_named():
     from perchd.core.errors import ConfigError
     from perchd.service.config import config_from_dict
-    doc = {"version": 1, "trigger": {"policy": "replan", "fallback": "refuse",
-                                     "solve_max_s": 0.05, "ahead_v_tol_mps": 0.03}}
+
+    doc = {
+        "version": 1,
+        "trigger": {
+            "policy": "replan",
+            "fallback": "refuse",
+            "solve_max_s": 0.05,
+            "ahead_v_tol_mps": 0.03,
+        },
+    }
     tr = config_from_dict(doc).flight.trigger
-    assert (tr.fallback, tr.solve_max_s, tr.ahead_v_tol_mps) == (TriggerFallback.REFUSE, 0.05,
-                                                                 0.03)
+    assert (tr.fallback, tr.solve_max_s, tr.ahead_v_tol_mps) == (TriggerFallback.REFUSE, 0.05, 0.03)
     a = PLAN.peaks.a
     assert tr.deadline_s(a) == 0.05  # the cap, under v_tol_mps / a
     assert TriggerConfig().deadline_s(a) == pytest.approx(min(0.10 / a, (2 * 0.05 / a) ** 0.5))
     with pytest.raises(ConfigError, match=r"\[trigger\] fallback: expected 'plan' or 'refuse'"):
         config_from_dict({"version": 1, "trigger": {"fallback": "fly"}})
-    with pytest.raises(ConfigError, match=r"\[trigger\] solve_max_s = -1 s: outside its range 0..5 s"):
+    with pytest.raises(
+        ConfigError, match=r"\[trigger\] solve_max_s = -1 s: outside its range 0..5 s"
+    ):
         config_from_dict({"version": 1, "trigger": {"solve_max_s": -1}})

@@ -28,8 +28,10 @@ FAST_DRAG = "sim://?qdrag=0.3"
 def config(lead: bool = True, scale_gain: float = 3.0, **gains) -> FlightConfig:
     c = FlightConfig()
     return dataclasses.replace(
-        c, approach=dataclasses.replace(c.approach, lead_into_plan=lead),
-        tau_gains=dataclasses.replace(c.tau_gains, scale_gain=scale_gain, **gains))
+        c,
+        approach=dataclasses.replace(c.approach, lead_into_plan=lead),
+        tau_gains=dataclasses.replace(c.tau_gains, scale_gain=scale_gain, **gains),
+    )
 
 
 def stage1(log):
@@ -73,8 +75,9 @@ def test_stage_1_brings_a_vehicle_behind_the_plan_back_onto_it(tmp_path):
 def aimer(end_by_position: bool) -> Supervisor:
     """A supervisor in stage 1 of case 1's IPTS plan, triggered at 0, with a 0.2 s lag."""
     plan, c = case1("ipts"), FlightConfig()
-    cfg = dataclasses.replace(c, tau_gains=dataclasses.replace(
-        c.tau_gains, end_by_position=end_by_position))
+    cfg = dataclasses.replace(
+        c, tau_gains=dataclasses.replace(c.tau_gains, end_by_position=end_by_position)
+    )
     sup = Supervisor(plan, cfg, PerchFrame.from_surface((0, 0, 0), (1, 0, 0)))
     sup.trigger = Trigger(0.0, plan.x0, plan.v0, plan.x0, plan.v0, "flown as made")
     sup.response.ff = FeedForward(0.2)
@@ -90,11 +93,11 @@ def scale_aim(t: float, c: float, tau_ref: float, x_plan: float = -1.0) -> float
 
 def test_the_scale_correction_is_tau_ref_over_c_to_the_gamma_capped_and_faded():
     plan = case1("ipts")
-    assert scale_aim(0.1, 1.1, -1.5) == pytest.approx(-1.5 * 1.1 ** -3.0)  # gamma 3
-    assert scale_aim(0.1, 1.1, -0.6) == pytest.approx(-0.6 * 1.1 ** -1.5)  # |tau| / 2 lags
-    assert scale_aim(0.1, 0.9, -1.5) == pytest.approx(-1.5 * 0.9 ** -3.0)  # ahead: slower
+    assert scale_aim(0.1, 1.1, -1.5) == pytest.approx(-1.5 * 1.1**-3.0)  # gamma 3
+    assert scale_aim(0.1, 1.1, -0.6) == pytest.approx(-0.6 * 1.1**-1.5)  # |tau| / 2 lags
+    assert scale_aim(0.1, 0.9, -1.5) == pytest.approx(-1.5 * 0.9**-3.0)  # ahead: slower
     fading = plan.t_switch - 2.5 * 0.2
-    assert scale_aim(fading, 1.1, -1.5) == pytest.approx(-1.5 * 1.1 ** -1.5)
+    assert scale_aim(fading, 1.1, -1.5) == pytest.approx(-1.5 * 1.1**-1.5)
     assert scale_aim(plan.t_switch - 0.39, 1.1, -1.5) == -1.5  # within two lags: off
 
 
@@ -135,8 +138,10 @@ def test_the_braking_ends_where_the_plans_does_not_when():
     t = plan.t_switch - 0.05
     x = float(plan.x(t)) - 0.2
     seen = State(t, x, 1.2, 0, 0, 1, 0, 0, x / 1.2, 0, 0, 0, 1)
-    by_clock, by_place = (sup._stage1_aim(t, seen, sup._refs_at(t, x, 0.2))[1].a
-                          for sup in (aimer(False), aimer(True)))
+    by_clock, by_place = (
+        sup._stage1_aim(t, seen, sup._refs_at(t, x, 0.2))[1].a
+        for sup in (aimer(False), aimer(True))
+    )
     assert by_clock == 0.0
     assert by_place < -1.0
 
@@ -152,8 +157,9 @@ def test_the_hand_over_blends_the_clocks_aim_into_the_places():
     tau, aim = sup._stage1_aim(t, seen, Refs(tau_plan, x_plan, float(plan.v(t)), -0.8))
     gamma = 0.5 * min(3.0, -tau_plan / 0.4)
     s = plan_time_at(plan, x)
-    assert tau == pytest.approx(0.5 * tau_plan * 1.05 ** -gamma
-                                + 0.5 * float(plan.tau_ref(s)), rel=1e-6)
+    assert tau == pytest.approx(
+        0.5 * tau_plan * 1.05**-gamma + 0.5 * float(plan.tau_ref(s)), rel=1e-6
+    )
     assert aim.a == pytest.approx(0.5 * -0.8 + 0.5 * feed_forward_at(sup, s), rel=1e-6)
 
 
@@ -166,8 +172,7 @@ def test_a_vehicle_behind_the_plan_reaches_the_switch_nearer_the_plans_speed(tmp
     for on in (False, True):
         log = tmp_path / f"{on}.jsonl"
         c = config()
-        cfg = dataclasses.replace(c, tau_gains=dataclasses.replace(
-            c.tau_gains, end_by_position=on))
+        cfg = dataclasses.replace(c, tau_gains=dataclasses.replace(c.tau_gains, end_by_position=on))
         res = Sim(LATE_FAST_DRAG).fly(plan, log, cfg)
         assert res.outcome is EndReason.CONTACT
         switch[on] = next(r for r in read_log(log).rows if r.phase == "stage2").xdot

@@ -18,8 +18,9 @@ LATE_FAST_DRAG = "sim://?latency=0.1&attitude_tau=0.2&qdrag=0.2"
 def fly(tmp_path, uri: str, predicted: bool):
     """(result, the stage-2 event, the log row of the switch's tick)."""
     c, log = FlightConfig(), tmp_path / f"switch-{predicted}.jsonl"
-    cfg = dataclasses.replace(c, tau_gains=dataclasses.replace(
-        c.tau_gains, switch_predicted=predicted))
+    cfg = dataclasses.replace(
+        c, tau_gains=dataclasses.replace(c.tau_gains, switch_predicted=predicted)
+    )
     res = Sim(uri).fly(case1("ipts"), log, cfg)
     assert res.outcome is EndReason.CONTACT
     flown = read_log(log)
@@ -56,5 +57,7 @@ def test_a_vehicle_that_answers_within_the_gains_switches_on_the_measured_tau(tm
     flights = [fly(tmp_path, "sim://", predicted) for predicted in (False, True)]
     (_, off, _), (_, on, _) = flights
     assert on.detail == off.detail == "measured tau reached tau_s"
-    assert on.values["horizon_s"] == 0.0 and on.t - flights[1][0].trigger.t == \
-        off.t - flights[0][0].trigger.t
+    assert (
+        on.values["horizon_s"] == 0.0
+        and on.t - flights[1][0].trigger.t == off.t - flights[0][0].trigger.t
+    )

@@ -16,8 +16,8 @@ from perchd.flight.takeoff import (
     LIFTOFF_M,
     TakeoffProfile,
 )
-from perchd.sim.plant import PlantParams
 from perchd.session import open_session
+from perchd.sim.plant import PlantParams
 from perchd.sim.world import WorldParams
 
 HOLD_M = FlightConfig().approach.takeoff_height_m
@@ -27,8 +27,11 @@ def ground_flight(tmp_path, stick_s: float, uri: str = "sim://?start=-4.5,0,0"):
     """(result, true heights [(t, phase, z)] at every tick, the world) of a ground start."""
     session = open_session(uri, params=WorldParams(plant=PlantParams(stick_s=stick_s)))
     world, heights = session.world, []
-    res = session.fly(case1("ipts"), tmp_path / "f.jsonl", on_tick=lambda st: heights.append(
-        (st.t, st.phase.value, world.plant.p[2])))
+    res = session.fly(
+        case1("ipts"),
+        tmp_path / "f.jsonl",
+        on_tick=lambda st: heights.append((st.t, st.phase.value, world.plant.p[2])),
+    )
     return res, heights, world
 
 
@@ -37,16 +40,20 @@ def overshoot(heights) -> float:
     return max(z for _, phase, z in heights if phase in ("takeoff", "hold")) - HOLD_M
 
 
-@pytest.mark.parametrize("uri", ["sim://?start=-4.5,0,0",
-                                 "sim://?start=-4.5,0,0&latency=0.02&noise=0.001"])
+@pytest.mark.parametrize(
+    "uri", ["sim://?start=-4.5,0,0", "sim://?start=-4.5,0,0&latency=0.02&noise=0.001"]
+)
 @pytest.mark.parametrize("stick_s", [0.0, 0.35, 0.7, 1.0])
 def test_a_vehicle_stuck_to_the_ground_takes_off_without_overshoot_and_perches(
-        tmp_path, stick_s, uri):
+    tmp_path, stick_s, uri
+):
     """Before: 0.17 m (no sticking: the ramp's abrupt stop), 0.29 m (0.7 s), 0.37 m (1 s);
     `pytest -s` prints the figures (docs/safety.md "Ground take-off")."""
     res, heights, _ = ground_flight(tmp_path, stick_s, uri)
-    print(f"\ntake-off {uri} stick_s={stick_s}: overshoot {overshoot(heights):.3f} m, "
-          f"contact {res.true_contact_speed:.3f} m/s")
+    print(
+        f"\ntake-off {uri} stick_s={stick_s}: overshoot {overshoot(heights):.3f} m, "
+        f"contact {res.true_contact_speed:.3f} m/s"
+    )
     assert res.outcome is EndReason.CONTACT, res.detail
     assert overshoot(heights) <= 0.1
     assert res.true_contact_speed == pytest.approx(res.v_contact_plan, abs=0.05)
@@ -69,8 +76,10 @@ def test_a_vehicle_heavier_than_its_guess_still_leaves_the_ground(tmp_path, mass
     and 0.36 m)."""
     res, heights, _ = ground_flight(tmp_path, 0.0, f"sim://?start=-4.5,0,0&mass={mass_kg}")
     lift = next(t for t, _, z in heights if z > LIFTOFF_M)
-    print(f"\ntake-off mass {mass_kg} kg: off the ground after {lift:.2f} s, overshoot "
-          f"{overshoot(heights):.3f} m")
+    print(
+        f"\ntake-off mass {mass_kg} kg: off the ground after {lift:.2f} s, overshoot "
+        f"{overshoot(heights):.3f} m"
+    )
     assert res.outcome is EndReason.CONTACT, res.detail
     assert overshoot(heights) <= 0.15
 

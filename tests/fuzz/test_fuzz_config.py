@@ -23,6 +23,7 @@ FAST = settings(deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 def check(config: Config) -> None:
     """What a loaded config promises: every number finite, the service fields strings."""
+
     def numbers(obj):
         for value in vars(obj).values():
             if isinstance(value, float):
@@ -31,6 +32,7 @@ def check(config: Config) -> None:
                 yield from numbers(value)
             elif isinstance(value, tuple):
                 yield from (v for v in value if isinstance(v, float))
+
     assert all(math.isfinite(v) for v in numbers(config.flight))
     assert all(isinstance(getattr(config.service, k), str) for k in ("vehicle", "driver", "socket"))
 

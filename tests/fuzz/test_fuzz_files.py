@@ -21,11 +21,15 @@ from perchd.tau.planfile import load_plan
 
 ROOT = Path(__file__).resolve().parents[2]
 PLANS = [p.read_bytes() for p in sorted((ROOT / "plans").glob("*.json"))]
-CONFIGS = [(ROOT / "systemd" / "perchd.toml").read_bytes(),
-           b'version = 1\n[vehicle]\nmass_kg = 0.034\n[surface]\npoint = [0.0, 0.0, 1.5]\n']
-EXAMPLES = settings(max_examples=300, deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow,
-                                           HealthCheck.function_scoped_fixture])
+CONFIGS = [
+    (ROOT / "systemd" / "perchd.toml").read_bytes(),
+    b"version = 1\n[vehicle]\nmass_kg = 0.034\n[surface]\npoint = [0.0, 0.0, 1.5]\n",
+]
+EXAMPLES = settings(
+    max_examples=300,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 
 
 @pytest.fixture(scope="module")

@@ -21,9 +21,18 @@ from perchd.mocap.natnet.server import NatNetServer
 from perchd.mocap.natnet.wire import MalformedPacket
 
 V3 = Path(__file__).resolve().parents[1] / "fixtures" / "natnet" / "motive-2.1-natnet-3.0"
-MODELDEFS = [(V3 / f).read_bytes() for f in ("modeldef_packet_v3.bin", "modeldef_packet_v3_2.bin",
-                                              "modeldef_packet_skeleton_v3.bin", "modeldef_packet_v2.bin")]
-SERVERINFO = [(V3 / f).read_bytes() for f in ("serverinfo_packet_v3.bin", "serverinfo_packet_v2.bin")]
+MODELDEFS = [
+    (V3 / f).read_bytes()
+    for f in (
+        "modeldef_packet_v3.bin",
+        "modeldef_packet_v3_2.bin",
+        "modeldef_packet_skeleton_v3.bin",
+        "modeldef_packet_v2.bin",
+    )
+]
+SERVERINFO = [
+    (V3 / f).read_bytes() for f in ("serverinfo_packet_v3.bin", "serverinfo_packet_v2.bin")
+]
 VERSIONS = [(2, 5), (2, 9), (2, 10), (3, 0), (3, 1), (4, 0), (4, 1)]
 FAST = settings(deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -73,13 +82,18 @@ def server():
 
 requests = st.one_of(
     st.binary(max_size=80),
-    st.tuples(st.sampled_from(sorted(proto.KNOWN_IDS)), st.binary(max_size=40), st.integers(0, 0xFFFF))
-    .map(lambda t: t[0].to_bytes(2, "little") + t[2].to_bytes(2, "little") + t[1]),
-    st.text(max_size=30).map(lambda s: proto.string_request(s)))
+    st.tuples(
+        st.sampled_from(sorted(proto.KNOWN_IDS)), st.binary(max_size=40), st.integers(0, 0xFFFF)
+    ).map(lambda t: t[0].to_bytes(2, "little") + t[2].to_bytes(2, "little") + t[1]),
+    st.text(max_size=30).map(lambda s: proto.string_request(s)),
+)
 
 
-@settings(deadline=None, max_examples=60,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(
+    deadline=None,
+    max_examples=60,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 @given(st.lists(requests, min_size=1, max_size=5))
 def test_the_server_emulator_answers_a_connect_after_any_garbage(server, garbage):
     s, client = server

@@ -28,7 +28,15 @@ def load_or_refuse(doc):
     except PlanError as err:
         assert str(err), "a refusal says why"
         return None
-    figures = (plan.x0, plan.v0, plan.t_switch, plan.duration, plan.v_contact, plan.peaks.v, plan.peaks.a)
+    figures = (
+        plan.x0,
+        plan.v0,
+        plan.t_switch,
+        plan.duration,
+        plan.v_contact,
+        plan.peaks.v,
+        plan.peaks.a,
+    )
     assert all(math.isfinite(v) for v in figures), figures
     assert plan.x0 < 0 < plan.v0 and plan.duration > 0
     assert plan_from_json(plan_to_json(plan)) == plan  # what loads, saves and loads the same
@@ -80,6 +88,9 @@ def test_a_tau_dot_of_zero_or_below_is_a_plan_error_not_a_division_by_zero():
         try:
             plan_from_json(doc)
         except PlanError as err:
-            assert str(err) == f"stage1.c must be a positive tau-dot (with c <= 0 the vehicle never arrives), got {c!r}"
+            assert (
+                str(err)
+                == f"stage1.c must be a positive tau-dot (with c <= 0 the vehicle never arrives), got {c!r}"
+            )
         else:
             raise AssertionError(f"{strategy} with c = {c} loaded")

@@ -15,13 +15,13 @@ import zmq
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 from mutate import json_values, mutated_bytes, mutated_document
-from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, sender_of, setpoint_message
 
 from perchd.commands.sim import Counts, SetpointInbox, make_world
 from perchd.core.clock import ManualClock
 from perchd.core.types import Phase, Pose, Setpoint
-from perchd.sim.onesender import SenderGate
+from perchd.drivers.zmq import BadSetpoint, parse_setpoint_message, sender_of, setpoint_message
 from perchd.mocap.zmq import ZmqPoseSource, pose_message
+from perchd.sim.onesender import SenderGate
 
 POSE = Pose("cf1", 17, 4.9, (-3.0, 0.1, 1.0), (0.0, 0.0, 0.0, 1.0), True, 0.0)
 POSE_DOC = json.loads(pose_message(POSE))
@@ -31,10 +31,22 @@ FAST = settings(deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 @FAST
-@example([b'{"body": "cf1", "seq": 17, "t": 4.9, "p": [-3.0, 0.1, 1.0], "q": [0.0, 0.0, 0.0, 1.000000001]}',
-          b'{"body": "cf1", "seq": 18, "t": 4.9, "p": [NaN, 0.1, 1.0], "q": [0.0, 0.0, 0.0, 1.0], "valid": false}'])
-@given(st.lists(st.one_of(mutated_document(POSE_DOC).map(lambda d: json.dumps(d).encode()),
-                          mutated_bytes([json.dumps(POSE_DOC).encode()])), min_size=1, max_size=6))
+@example(
+    [
+        b'{"body": "cf1", "seq": 17, "t": 4.9, "p": [-3.0, 0.1, 1.0], "q": [0.0, 0.0, 0.0, 1.000000001]}',
+        b'{"body": "cf1", "seq": 18, "t": 4.9, "p": [NaN, 0.1, 1.0], "q": [0.0, 0.0, 0.0, 1.0], "valid": false}',
+    ]
+)
+@given(
+    st.lists(
+        st.one_of(
+            mutated_document(POSE_DOC).map(lambda d: json.dumps(d).encode()),
+            mutated_bytes([json.dumps(POSE_DOC).encode()]),
+        ),
+        min_size=1,
+        max_size=6,
+    )
+)
 def test_a_mutated_pose_is_taken_as_sent_or_counted_and_dropped(bodies):
     source = ZmqPoseSource("tcp://127.0.0.1:1", "cf1", ManualClock(5.0))
     for body in bodies:
@@ -46,9 +58,14 @@ def test_a_mutated_pose_is_taken_as_sent_or_counted_and_dropped(bodies):
             assert all(math.isfinite(v) for v in (*got.p, *got.q, got.t))
             if got.valid:  # as sent, the quaternion normalised
                 norm = math.sqrt(sum(v * v for v in sent["q"]))
-                assert got.p == tuple(sent["p"]) and got.q == pytest.approx([v / norm for v in sent["q"]])
+                assert got.p == tuple(sent["p"]) and got.q == pytest.approx(
+                    [v / norm for v in sent["q"]]
+                )
             else:  # as sent, or a placeholder when what was sent is not finite
-                assert (got.p, got.q) in ((tuple(sent["p"]), tuple(sent["q"])), ((0.0,) * 3, (0.0, 0.0, 0.0, 1.0)))
+                assert (got.p, got.q) in (
+                    (tuple(sent["p"]), tuple(sent["q"])),
+                    ((0.0,) * 3, (0.0, 0.0, 0.0, 1.0)),
+                )
             event("taken")
         else:
             event("dropped")
@@ -57,9 +74,14 @@ def test_a_mutated_pose_is_taken_as_sent_or_counted_and_dropped(bodies):
 
 
 @FAST
-@given(st.one_of(mutated_document(SP_DOC).map(lambda d: json.dumps(d).encode()),
-                 mutated_bytes([json.dumps(SP_DOC).encode()]), json_values.map(lambda v: json.dumps(v).encode()),
-                 st.binary(max_size=200)))
+@given(
+    st.one_of(
+        mutated_document(SP_DOC).map(lambda d: json.dumps(d).encode()),
+        mutated_bytes([json.dumps(SP_DOC).encode()]),
+        json_values.map(lambda v: json.dumps(v).encode()),
+        st.binary(max_size=200),
+    )
+)
 def test_a_mutated_setpoint_parses_to_finite_values_or_is_one_bad_setpoint(body):
     try:
         vehicle, seq, sp = parse_setpoint_message(body)
@@ -75,12 +97,19 @@ def test_a_mutated_setpoint_parses_to_finite_values_or_is_one_bad_setpoint(body)
 
 @pytest.fixture(scope="module")
 def inbox():
-    args = argparse.Namespace(latency=0.0, noise=0.0, start=None, surface=(0.0, 0.0, 0.0),
-                              normal=(1.0, 0.0, 0.0), body="cf1")
+    args = argparse.Namespace(
+        latency=0.0,
+        noise=0.0,
+        start=None,
+        surface=(0.0, 0.0, 0.0),
+        normal=(1.0, 0.0, 0.0),
+        body="cf1",
+    )
     counts = Counts()
     # the unnamed sender holds the vehicle throughout: a fuzzed sender id is refused
-    box = SetpointInbox("zmq://127.0.0.1:0", make_world(args), "cf1", counts,
-                        gate=SenderGate(live_s=math.inf))
+    box = SetpointInbox(
+        "zmq://127.0.0.1:0", make_world(args), "cf1", counts, gate=SenderGate(live_s=math.inf)
+    )
     pub = zmq.Context.instance().socket(zmq.PUB)
     pub.setsockopt(zmq.LINGER, 0)
     pub.connect("tcp://" + box.uri.split("//")[1].split("?")[0])
@@ -96,12 +125,21 @@ def inbox():
 
 
 frames = st.one_of(
-    st.lists(st.binary(max_size=40), min_size=1, max_size=4).map(lambda f: [b"setpoint", *f[1:]] if len(f) > 2 else f),
+    st.lists(st.binary(max_size=40), min_size=1, max_size=4).map(
+        lambda f: [b"setpoint", *f[1:]] if len(f) > 2 else f
+    ),
     mutated_document(SP_DOC).map(lambda d: [b"setpoint", json.dumps(d).encode()]),
-    st.just([b"setpoint", b"[" * 100_000]), st.just([b"setpoint"]), st.just([b"setpoint", b"{}", b"{}"]))
+    st.just([b"setpoint", b"[" * 100_000]),
+    st.just([b"setpoint"]),
+    st.just([b"setpoint", b"{}", b"{}"]),
+)
 
 
-@settings(deadline=None, max_examples=40, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(
+    deadline=None,
+    max_examples=40,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 @given(st.lists(frames, min_size=1, max_size=5))
 def test_the_sim_inbox_obeys_the_next_good_setpoint_whatever_came_before(inbox, batch):
     pub, counts, good = inbox

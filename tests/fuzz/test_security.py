@@ -38,6 +38,7 @@ as_root = pytest.mark.skipif(os.geteuid() != 0, reason="needs root to act as ano
 
 # ------------------------------------------------------------------ who may connect
 
+
 def connect_as(path: Path, uid: int, gid: int) -> dict | str:
     """Connect from a forked child running as uid/gid and ask for status: the reply, or the
     name of the error connect() gave."""
@@ -75,8 +76,12 @@ class Served:
         self.dir.chmod(0o755)
         self.path = self.dir / "c.sock"
         self.refusals: list[str] = []
-        self.server = ControlServer(self.path, lambda req: {"ok": True, "cmd": req["cmd"]},
-                                    peers=peers, on_refuse=self.refusals.append)
+        self.server = ControlServer(
+            self.path,
+            lambda req: {"ok": True, "cmd": req["cmd"]},
+            peers=peers,
+            on_refuse=self.refusals.append,
+        )
         self.done = threading.Event()
         self.thread = threading.Thread(target=self._loop, daemon=True)
         self.thread.start()
@@ -121,8 +126,11 @@ def test_a_peer_whose_uid_is_not_allowed_gets_one_error_line_and_is_closed(serve
         c.connect(str(served.path))
         reply = json.loads(c.makefile("rb").readline())
         assert c.recv(10) == b""  # closed after the refusal
-    assert reply == {"ok": False, "error": f"uid {me} (gid {os.getegid()}) may not use this control "
-                                           "socket; allow it with [service] allowed_users or allowed_groups"}
+    assert reply == {
+        "ok": False,
+        "error": f"uid {me} (gid {os.getegid()}) may not use this control "
+        "socket; allow it with [service] allowed_users or allowed_groups",
+    }
     assert served.refusals == [reply["error"]] and served.server.clients == {}
 
 
@@ -138,8 +146,11 @@ def test_another_user_in_the_sockets_group_is_refused_by_peer_credentials(served
 
 
 @as_root
-@pytest.mark.parametrize("served", [PeerPolicy.owner(uids=frozenset({NOBODY})),
-                                    PeerPolicy.owner(gids=frozenset({0}))], indirect=True)
+@pytest.mark.parametrize(
+    "served",
+    [PeerPolicy.owner(uids=frozenset({NOBODY})), PeerPolicy.owner(gids=frozenset({0}))],
+    indirect=True,
+)
 def test_a_configured_user_or_group_is_let_in(served):
     assert connect_as(served.path, NOBODY, 0) == {"ok": True, "cmd": "status"}
 
@@ -165,18 +176,27 @@ def test_more_clients_than_the_cap_are_refused_and_the_others_still_served(serve
 
 
 def test_allowed_users_and_groups_resolve_names_and_ids():
-    svc = config_from_dict({"version": 1, "service": {"allowed_users": ["nobody", 4321],
-                                                      "allowed_groups": ["root"]}}).service
-    assert svc.peer_policy() == PeerPolicy(frozenset({os.geteuid(), 0, NOBODY, 4321}), frozenset({0}))
+    svc = config_from_dict(
+        {"version": 1, "service": {"allowed_users": ["nobody", 4321], "allowed_groups": ["root"]}}
+    ).service
+    assert svc.peer_policy() == PeerPolicy(
+        frozenset({os.geteuid(), 0, NOBODY, 4321}), frozenset({0})
+    )
 
 
-@pytest.mark.parametrize("value, message", [
-    (["no-such-user-here"], "[service] allowed_users: no user named 'no-such-user-here' on this host"),
-    ("root", "[service] allowed_users: expected a list of names or numeric ids, got 'root'"),
-    ([-1], "[service] allowed_users: expected a list of names or numeric ids, got [-1]"),
-    ([True], "[service] allowed_users: expected a list of names or numeric ids, got [True]"),
-    ([""], "[service] allowed_users: expected a list of names or numeric ids, got ['']"),
-])
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        (
+            ["no-such-user-here"],
+            "[service] allowed_users: no user named 'no-such-user-here' on this host",
+        ),
+        ("root", "[service] allowed_users: expected a list of names or numeric ids, got 'root'"),
+        ([-1], "[service] allowed_users: expected a list of names or numeric ids, got [-1]"),
+        ([True], "[service] allowed_users: expected a list of names or numeric ids, got [True]"),
+        ([""], "[service] allowed_users: expected a list of names or numeric ids, got ['']"),
+    ],
+)
 def test_a_bad_allowed_users_entry_is_one_config_error(value, message):
     with pytest.raises(ConfigError) as err:
         config_from_dict({"version": 1, "service": {"allowed_users": value}})
@@ -200,9 +220,28 @@ def test_the_service_refuses_another_user_until_a_reload_allows_it():
 
 # ------------------------------------------------------------------ nothing is evaluated
 
-FORBIDDEN_MODULES = {"pickle", "cPickle", "_pickle", "marshal", "shelve", "dill", "cloudpickle", "yaml"}
-FORBIDDEN_CALLS = {"eval", "exec", "compile", "__import__", "os.system", "os.popen", "yaml.load",
-                   "pickle.loads", "pickle.load", "marshal.loads"}
+FORBIDDEN_MODULES = {
+    "pickle",
+    "cPickle",
+    "_pickle",
+    "marshal",
+    "shelve",
+    "dill",
+    "cloudpickle",
+    "yaml",
+}
+FORBIDDEN_CALLS = {
+    "eval",
+    "exec",
+    "compile",
+    "__import__",
+    "os.system",
+    "os.popen",
+    "yaml.load",
+    "pickle.loads",
+    "pickle.load",
+    "marshal.loads",
+}
 
 
 def dangers(source: str) -> list[str]:
@@ -210,24 +249,41 @@ def dangers(source: str) -> list[str]:
     found = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
-            found += [f"import {a.name}" for a in node.names if a.name.split(".")[0] in FORBIDDEN_MODULES]
-        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] in FORBIDDEN_MODULES:
+            found += [
+                f"import {a.name}" for a in node.names if a.name.split(".")[0] in FORBIDDEN_MODULES
+            ]
+        elif (
+            isinstance(node, ast.ImportFrom)
+            and (node.module or "").split(".")[0] in FORBIDDEN_MODULES
+        ):
             found.append(f"from {node.module} import")
         elif isinstance(node, ast.Call):
             name = ast.unparse(node.func)
             if name in FORBIDDEN_CALLS:
                 found.append(f"{name}()")
-            if any(k.arg == "shell" and not (isinstance(k.value, ast.Constant) and k.value.value is False)
-                   for k in node.keywords):
+            if any(
+                k.arg == "shell"
+                and not (isinstance(k.value, ast.Constant) and k.value.value is False)
+                for k in node.keywords
+            ):
                 found.append(f"{name}(shell=...)")
     return found
 
 
 def test_the_scanner_finds_each_kind_of_danger():
-    source = ("import pickle\nfrom yaml import load\neval('1')\nexec('x=1')\nos.system('ls')\n"
-              "subprocess.run('ls', shell=True)\nyaml.load(s)\n")
-    assert dangers(source) == ["import pickle", "from yaml import", "eval()", "exec()", "os.system()",
-                               "subprocess.run(shell=...)", "yaml.load()"]
+    source = (
+        "import pickle\nfrom yaml import load\neval('1')\nexec('x=1')\nos.system('ls')\n"
+        "subprocess.run('ls', shell=True)\nyaml.load(s)\n"
+    )
+    assert dangers(source) == [
+        "import pickle",
+        "from yaml import",
+        "eval()",
+        "exec()",
+        "os.system()",
+        "subprocess.run(shell=...)",
+        "yaml.load()",
+    ]
 
 
 def test_no_input_is_ever_evaluated_unpickled_or_given_to_a_shell():
@@ -236,12 +292,20 @@ def test_no_input_is_ever_evaluated_unpickled_or_given_to_a_shell():
     found = {str(f.relative_to(ROOT)): d for f in files if (d := dangers(f.read_text()))}
     assert found == {}
     text = "\n".join(f.read_text() for f in files)  # and by plain grep, for what ast might miss
-    for needle in (r"pickle\.load", r"yaml\.load\(", r"shell\s*=\s*True", r"(?<![\w.])(?<!def )eval\(",
-                   r"(?<![\w.])(?<!def )exec\(", r"literal_eval", r"import\s+pickle"):
+    for needle in (
+        r"pickle\.load",
+        r"yaml\.load\(",
+        r"shell\s*=\s*True",
+        r"(?<![\w.])(?<!def )eval\(",
+        r"(?<![\w.])(?<!def )exec\(",
+        r"literal_eval",
+        r"import\s+pickle",
+    ):
         assert re.findall(needle, text) == [], needle
 
 
 # ------------------------------------------------------------------ plan and config paths
+
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory):
@@ -264,23 +328,38 @@ def fly(service: Service, plan: str) -> dict:
 
 def test_a_plan_outside_the_plan_directory_is_refused(service):
     outside = service.tmp / "outside.json"
-    assert fly(service, str(outside)) == {"ok": False, "error": f"plan {outside}: outside the plan "
-                                          f"directory {service.plans} (plan_dir in [service])"}
-    assert fly(service, "../outside.json")["error"].startswith(f"plan {service.plans}/../outside.json: outside")
-    assert fly(service, "/dev/zero")["error"] == ("plan /dev/zero: outside the plan directory "
-                                                  f"{service.plans} (plan_dir in [service])")
+    assert fly(service, str(outside)) == {
+        "ok": False,
+        "error": f"plan {outside}: outside the plan "
+        f"directory {service.plans} (plan_dir in [service])",
+    }
+    assert fly(service, "../outside.json")["error"].startswith(
+        f"plan {service.plans}/../outside.json: outside"
+    )
+    assert fly(service, "/dev/zero")["error"] == (
+        f"plan /dev/zero: outside the plan directory {service.plans} (plan_dir in [service])"
+    )
 
 
 def test_a_symlink_escaping_the_plan_directory_is_refused(service):
     assert fly(service, "escape.json")["error"] == (
         f"plan {service.plans}/escape.json (a symlink to {service.tmp}/outside.json): outside the "
-        f"plan directory {service.plans} (plan_dir in [service])")
+        f"plan directory {service.plans} (plan_dir in [service])"
+    )
 
 
-@pytest.mark.parametrize("name, why", [
-    ("fifo.json", "not a regular file (a FIFO)"), ("dir.json", "not a regular file (a directory)"),
-    ("big.json", f"{(1 << 20) + PLAN.stat().st_size} bytes, over the 1048576 byte limit by {PLAN.stat().st_size}"),
-    ("missing.json", "cannot read (No such file or directory)")])
+@pytest.mark.parametrize(
+    "name, why",
+    [
+        ("fifo.json", "not a regular file (a FIFO)"),
+        ("dir.json", "not a regular file (a directory)"),
+        (
+            "big.json",
+            f"{(1 << 20) + PLAN.stat().st_size} bytes, over the 1048576 byte limit by {PLAN.stat().st_size}",
+        ),
+        ("missing.json", "cannot read (No such file or directory)"),
+    ],
+)
 def test_a_fifo_a_directory_an_oversized_or_missing_plan_is_one_refusal(service, name, why):
     assert fly(service, name) == {"ok": False, "error": f"plan {service.plans / name}: {why}"}
     assert service.talk(b'{"cmd": "status"}\n', 1)[0]["state"] == "idle"  # the FIFO did not hang it
@@ -296,35 +375,55 @@ def test_a_plan_inside_the_directory_flies_by_name_absolute_path_or_inner_symlin
 
 
 def test_ctl_fly_outside_the_plan_directory_prints_one_refusal_and_exits_1(service):
-    argv = [sys.executable, "-m", "perchd", "ctl", "--socket", str(service.sock), "fly",
-            str(service.tmp / "outside.json")]
+    argv = [
+        sys.executable,
+        "-m",
+        "perchd",
+        "ctl",
+        "--socket",
+        str(service.sock),
+        "fly",
+        str(service.tmp / "outside.json"),
+    ]
     done = subprocess.run(argv + ["--json"], capture_output=True, text=True, timeout=30)
     assert done.returncode == 1 and done.stderr == ""
-    assert json.loads(done.stdout)["error"].endswith("outside the plan directory "
-                                                     f"{service.plans} (plan_dir in [service])")
+    assert json.loads(done.stdout)["error"].endswith(
+        f"outside the plan directory {service.plans} (plan_dir in [service])"
+    )
     done = subprocess.run(argv, capture_output=True, text=True, timeout=30)  # readable: on stderr
     assert done.returncode == 1 and done.stdout == ""
     assert done.stderr.startswith("perchd ctl: ") and done.stderr.count("\n") == 1
     assert done.stderr.strip().endswith("(plan_dir in [service])")
 
 
-@pytest.mark.parametrize("make, why", [
-    (lambda p: os.mkfifo(p), "not a regular file (a FIFO)"),
-    (lambda p: p.mkdir(), "not a regular file (a directory)"),
-    (lambda p: p.write_bytes(b"version = 1\n" + b"#" * (1 << 20)), "1048588 bytes, over the 1048576 byte limit by 12"),
-    (lambda p: p.write_bytes(b"version = 1\n\xff\n"), "not UTF-8 text (byte 12)"),
-])
+@pytest.mark.parametrize(
+    "make, why",
+    [
+        (lambda p: os.mkfifo(p), "not a regular file (a FIFO)"),
+        (lambda p: p.mkdir(), "not a regular file (a directory)"),
+        (
+            lambda p: p.write_bytes(b"version = 1\n" + b"#" * (1 << 20)),
+            "1048588 bytes, over the 1048576 byte limit by 12",
+        ),
+        (lambda p: p.write_bytes(b"version = 1\n\xff\n"), "not UTF-8 text (byte 12)"),
+    ],
+)
 def test_a_config_path_that_is_no_regular_small_text_file_is_one_line_exit_2(tmp_path, make, why):
     config = tmp_path / "perchd.toml"
     make(config)
-    for args in (["serve", "--config", str(config), "--socket", str(tmp_path / "s")],
-                 ["fly", str(PLAN), "--driver", "sim://", "--mocap", "sim://", "--config", str(config)]):
-        done = subprocess.run([sys.executable, "-m", "perchd", *args], capture_output=True, text=True, timeout=30)
+    for args in (
+        ["serve", "--config", str(config), "--socket", str(tmp_path / "s")],
+        ["fly", str(PLAN), "--driver", "sim://", "--mocap", "sim://", "--config", str(config)],
+    ):
+        done = subprocess.run(
+            [sys.executable, "-m", "perchd", *args], capture_output=True, text=True, timeout=30
+        )
         assert (done.returncode, done.stderr.count("\n")) == (2, 1), done.stderr
         assert done.stderr.strip().endswith(f"config {config}: {why}")
 
 
 # ------------------------------------------------------------------ ZMQ binds
+
 
 @pytest.mark.parametrize("host", ["127.0.0.1", "127.0.0.53", "localhost", "::1", "[::1]"])
 def test_loopback_hosts_may_be_bound(host):
@@ -336,8 +435,10 @@ def test_loopback_hosts_may_be_bound(host):
 def test_any_other_bind_needs_public(host):
     with pytest.raises(UriError) as err:
         check_bind(host, False, "zmq://x")
-    assert str(err.value) == (f"zmq://x: refusing to bind {host}, which is not loopback; add public=1 "
-                              "to the URI to listen on the network")
+    assert str(err.value) == (
+        f"zmq://x: refusing to bind {host}, which is not loopback; add public=1 "
+        "to the URI to listen on the network"
+    )
     check_bind(host, True, "test")
 
 
@@ -352,23 +453,36 @@ def test_a_binding_zmq_source_or_driver_needs_public_off_loopback():
     from perchd.drivers.base import open_driver
 
     runtime = Runtime.real()
-    with pytest.raises(UriError, match=r"zmq://0.0.0.0:5555\?body=cf1&bind=1: refusing to bind 0.0.0.0"):
+    with pytest.raises(
+        UriError, match=r"zmq://0.0.0.0:5555\?body=cf1&bind=1: refusing to bind 0.0.0.0"
+    ):
         open_source("zmq://0.0.0.0:5555?body=cf1&bind=1", runtime)
     with pytest.raises(UriError, match=r"zmq://\*:5556\?bind=1: refusing to bind \*"):
         open_driver("zmq://*:5556?bind=1", runtime)
     # the opt-in is accepted (not started: tests never bind off loopback); connecting needs none
-    assert open_source("zmq://0.0.0.0:5555?body=cf1&bind=1&public=1", runtime).endpoint == "tcp://0.0.0.0:5555"
+    assert (
+        open_source("zmq://0.0.0.0:5555?body=cf1&bind=1&public=1", runtime).endpoint
+        == "tcp://0.0.0.0:5555"
+    )
     assert open_source("zmq://10.0.0.7:5555?body=cf1", runtime).endpoint == "tcp://10.0.0.7:5555"
     assert open_driver("zmq://0.0.0.0:5556?bind=1&public=1", runtime).bind is True
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--pose-out", "zmq://0.0.0.0:0", "--setpoint-in", "zmq://127.0.0.1:0"],
-     "pose publisher tcp://0.0.0.0:0: refusing to bind 0.0.0.0, which is not loopback"),
-    (["--pose-out", "zmq://127.0.0.1:0", "--setpoint-in", "zmq://0.0.0.0:0"],
-     "--setpoint-in zmq://0.0.0.0:0: refusing to bind 0.0.0.0, which is not loopback"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["--pose-out", "zmq://0.0.0.0:0", "--setpoint-in", "zmq://127.0.0.1:0"],
+            "pose publisher tcp://0.0.0.0:0: refusing to bind 0.0.0.0, which is not loopback",
+        ),
+        (
+            ["--pose-out", "zmq://127.0.0.1:0", "--setpoint-in", "zmq://0.0.0.0:0"],
+            "--setpoint-in zmq://0.0.0.0:0: refusing to bind 0.0.0.0, which is not loopback",
+        ),
+    ],
+)
 def test_perchd_sim_refuses_a_network_bind_without_public(args, message):
-    done = subprocess.run([sys.executable, "-m", "perchd", "sim", *args], capture_output=True,
-                          text=True, timeout=30)
+    done = subprocess.run(
+        [sys.executable, "-m", "perchd", "sim", *args], capture_output=True, text=True, timeout=30
+    )
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and message in done.stderr

@@ -11,10 +11,10 @@ import os
 import time
 
 import pytest
-from perchd.drivers.base import open_driver
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.drivers.base import open_driver
 
 pytestmark = pytest.mark.hardware
 pytest.importorskip("pymavlink")
@@ -35,8 +35,10 @@ def test_the_autopilot_takes_the_offboard_mode_and_stays_healthy():
 
 
 @needs_uri
-@pytest.mark.skipif(os.environ.get("PERCHD_HW_ARM") != "1",
-                    reason="arms the vehicle: set PERCHD_HW_ARM=1 with the propellers off")
+@pytest.mark.skipif(
+    os.environ.get("PERCHD_HW_ARM") != "1",
+    reason="arms the vehicle: set PERCHD_HW_ARM=1 with the propellers off",
+)
 def test_the_autopilot_arms_on_request_and_lands_on_failsafe():
     sep = "&" if "?" in URI else "?"
     with open_driver(URI + sep + "arm=1", Runtime.real()) as drv:

@@ -10,10 +10,10 @@ import os
 import time
 
 import pytest
-from perchd.drivers.base import open_driver
 
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.drivers.base import open_driver
 
 pytestmark = pytest.mark.hardware
 pytest.importorskip("cflib")
@@ -38,8 +38,10 @@ def test_the_radio_link_connects_and_stays_healthy_at_100_hz():
         assert cf.health().age < 0.1
 
 
-@pytest.mark.skipif(os.environ.get("PERCHD_HW_MOTORS") != "1",
-                    reason="spins the motors: set PERCHD_HW_MOTORS=1 with the propellers off")
+@pytest.mark.skipif(
+    os.environ.get("PERCHD_HW_MOTORS") != "1",
+    reason="spins the motors: set PERCHD_HW_MOTORS=1 with the propellers off",
+)
 def test_the_motors_spin_at_low_thrust_and_stop_on_failsafe():
     with open_driver(URI, Runtime.real()) as cf:
         assert all(stream(cf, Setpoint(0.0, 0.0, 0.0, 0.0, 0.03, 0, Phase.HOLD), 1.0))

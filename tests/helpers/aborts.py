@@ -22,8 +22,9 @@ def fly(tmp_path, cfg=FlightConfig(), setup=None, abort=None, on_tick=None):
     sim = Sim()
     if setup is not None:
         setup(sim)
-    res = sim.fly(case1("ipts"), tmp_path / "f.jsonl", cfg, abort,
-                  on_tick(sim) if on_tick else None)
+    res = sim.fly(
+        case1("ipts"), tmp_path / "f.jsonl", cfg, abort, on_tick(sim) if on_tick else None
+    )
     return sim, res
 
 

@@ -10,8 +10,13 @@ import sys
 
 def start_announced(*args: str, env: dict | None = None) -> tuple[subprocess.Popen, str, str]:
     """Start `python -m perchd ARGS`; its process and the mocap and driver URIs it announced."""
-    proc = subprocess.Popen([sys.executable, "-m", "perchd", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "perchd", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     line = proc.stderr.readline()
     found = re.search(r"ready: mocap (\S+) driver (\S+)", line)
     if found is None:

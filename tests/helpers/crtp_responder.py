@@ -66,7 +66,7 @@ class CrtpResponder:
         while self._alive:
             try:
                 data, addr = self.sock.recvfrom(64)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             except OSError:
                 return

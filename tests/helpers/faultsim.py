@@ -74,8 +74,16 @@ class Flown:
         return self.end_t - self.arrivals.claimed[self.log.rows[-1].pose_seq]
 
 
-def fly(tmp_path: Path, *faults: Any, cfg: FlightConfig = FIXED, uri: str = "sim://",
-        setup=None, on_tick=None, strategy: str = "ipts", name: str = "f") -> Flown:
+def fly(
+    tmp_path: Path,
+    *faults: Any,
+    cfg: FlightConfig = FIXED,
+    uri: str = "sim://",
+    setup=None,
+    on_tick=None,
+    strategy: str = "ipts",
+    name: str = "f",
+) -> Flown:
     sim = Sim(uri)
     arrivals = Arrivals()
     sim.world.faults.mocap[:] = [*faults, arrivals]
@@ -83,8 +91,9 @@ def fly(tmp_path: Path, *faults: Any, cfg: FlightConfig = FIXED, uri: str = "sim
     FLIGHTS["simulated"] += 1
     if setup is not None:
         setup(sim)
-    res = sim.fly(case1(strategy), tmp_path / f"{name}.jsonl", cfg,
-                  on_tick=on_tick(sim) if on_tick else None)
+    res = sim.fly(
+        case1(strategy), tmp_path / f"{name}.jsonl", cfg, on_tick=on_tick(sim) if on_tick else None
+    )
     return Flown(sim, res, read_log(res.log), arrivals)
 
 
@@ -95,25 +104,40 @@ def injected(*names: str, real_time: bool = False) -> None:
     FLIGHTS["real time"] += real_time
 
 
-def report(fault: str, detection: str, action: str, vehicle: str,
-           samples_s: list[float] | None = None) -> None:
+def report(
+    fault: str, detection: str, action: str, vehicle: str, samples_s: list[float] | None = None
+) -> None:
     """One table line; samples_s [s] detection times measured (min/median/max quoted)."""
     figures = ""
     if samples_s:
-        figures = (f"{1e3 * min(samples_s):.1f} / {1e3 * statistics.median(samples_s):.1f} / "
-                   f"{1e3 * max(samples_s):.1f} ms (n={len(samples_s)})")
-    TABLE.append({"fault": fault, "detection": detection, "measured": figures,
-                  "action": action, "vehicle": vehicle})
+        figures = (
+            f"{1e3 * min(samples_s):.1f} / {1e3 * statistics.median(samples_s):.1f} / "
+            f"{1e3 * max(samples_s):.1f} ms (n={len(samples_s)})"
+        )
+    TABLE.append(
+        {
+            "fault": fault,
+            "detection": detection,
+            "measured": figures,
+            "action": action,
+            "vehicle": vehicle,
+        }
+    )
     out = os.environ.get("PERCHD_FAULT_TABLE")
     if out:
-        Path(out).write_text(json.dumps({"table": TABLE, "injected": len(INJECTED),
-                                         "flights": FLIGHTS}, indent=1))
+        Path(out).write_text(
+            json.dumps({"table": TABLE, "injected": len(INJECTED), "flights": FLIGHTS}, indent=1)
+        )
 
 
 def table_lines() -> list[str]:
-    lines = [f"faults injected: {len(INJECTED)}; flights: {FLIGHTS['simulated']} simulated, "
-             f"{FLIGHTS['real time']} real time",
-             "fault | detection | measured min/median/max | action | vehicle"]
-    lines += [" | ".join((r["fault"], r["detection"], r["measured"] or "-", r["action"],
-                          r["vehicle"])) for r in TABLE]
+    lines = [
+        f"faults injected: {len(INJECTED)}; flights: {FLIGHTS['simulated']} simulated, "
+        f"{FLIGHTS['real time']} real time",
+        "fault | detection | measured min/median/max | action | vehicle",
+    ]
+    lines += [
+        " | ".join((r["fault"], r["detection"], r["measured"] or "-", r["action"], r["vehicle"]))
+        for r in TABLE
+    ]
     return lines

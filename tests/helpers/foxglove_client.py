@@ -32,8 +32,14 @@ def subscribe_all(ws) -> dict[int, dict]:
         assert op["op"] in ("serverInfo", "advertise", "status"), op
         channels = op.get("channels", []) if op["op"] == "advertise" else []
     subs = dict(enumerate(channels, start=1))
-    ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-        {"id": n, "channelId": ch["id"]} for n, ch in subs.items()]}))
+    ws.send(
+        json.dumps(
+            {
+                "op": "subscribe",
+                "subscriptions": [{"id": n, "channelId": ch["id"]} for n, ch in subs.items()],
+            }
+        )
+    )
     return subs
 
 

@@ -28,31 +28,41 @@ def start_harness(*args: str, env: dict | None = None) -> tuple[subprocess.Popen
     return start_announced("sim", "firmware", *args, "--json", env=env)
 
 
-def start_placed(*args: str, env: dict | None = None
-                 ) -> tuple[subprocess.Popen, str, str, list[str]]:
+def start_placed(
+    *args: str, env: dict | None = None
+) -> tuple[subprocess.Popen, str, str, list[str]]:
     """`perchd sim firmware ARGS --json` for a vehicle whose harness places the surface
     itself (PX4: ahead along its heading, said on stderr before the ready line): its
     process, mocap and driver URIs, and the `--surface ... --normal ...` options for
     `perchd fly` (none when the harness said nothing)."""
-    proc = subprocess.Popen([sys.executable, "-m", "perchd", "sim", "firmware", *args, "--json"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "perchd", "sim", "firmware", *args, "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     surface: list[str] = []
     for line in proc.stderr:
-        if (found := re.search(r"surface (\S+ \S+ \S+) normal (\S+ \S+ \S+)", line)):
+        if found := re.search(r"surface (\S+ \S+ \S+) normal (\S+ \S+ \S+)", line):
             surface = ["--surface", *found.group(1).split(), "--normal", *found.group(2).split()]
-        if (found := re.search(r"ready: mocap (\S+) driver (\S+)", line)):
+        if found := re.search(r"ready: mocap (\S+) driver (\S+)", line):
             return proc, found.group(1), found.group(2), surface
     proc.kill()
-    raise RuntimeError(f"perchd sim firmware {' '.join(args[:2])} did not start: "
-                       f"{proc.stderr.read()}")
+    raise RuntimeError(
+        f"perchd sim firmware {' '.join(args[:2])} did not start: {proc.stderr.read()}"
+    )
 
 
 def log_rows(log: Path) -> list[dict]:
     """The flight log's rows (docs/contracts.md, flight log), from complete lines only: a
     flight still flying may be half-way through writing its last one."""
     text = log.read_text() if log.exists() else ""
-    return [json.loads(line)["row"] for line in text[:text.rfind("\n") + 1].splitlines()
-            if line.startswith('{"row"')]
+    return [
+        json.loads(line)["row"]
+        for line in text[: text.rfind("\n") + 1].splitlines()
+        if line.startswith('{"row"')
+    ]
 
 
 def lag_event(log: Path) -> dict:
@@ -89,6 +99,7 @@ class YawWatch:
     def __init__(self, mocap: str) -> None:
         from perchd.core.runtime import Runtime
         from perchd.mocap.base import open_source
+
         self.src = open_source(mocap, Runtime.real())
         self.src.start()
         self.samples: list[tuple[float, float]] = []
@@ -99,6 +110,7 @@ class YawWatch:
 
     def _run(self) -> None:
         from perchd.sim.firmware.harness import yaw_of
+
         seq = 0
         while not self._stop.is_set():
             pose = self.src.wait(seq, 0.2)
@@ -119,8 +131,15 @@ class YawWatch:
 def flight_window(log: Path) -> tuple[float, float]:
     """[s] monotonic times of the flight's first and last control ticks (perchd fly's clock);
     an empty window when the flight ticked none."""
-    ticks = [json.loads(line)["row"]["t"] for line in log.read_text().splitlines()
-             if line.startswith('{"row"')] if log.exists() else []
+    ticks = (
+        [
+            json.loads(line)["row"]["t"]
+            for line in log.read_text().splitlines()
+            if line.startswith('{"row"')
+        ]
+        if log.exists()
+        else []
+    )
     return (ticks[0], ticks[-1]) if ticks else (0.0, -1.0)
 
 
@@ -129,8 +148,9 @@ def heading_error(yaws: list[float], heading: float) -> float:
     return max(abs(math.remainder(y - heading, math.tau)) for y in yaws)
 
 
-def kill_at_speed(fly: subprocess.Popen, log: Path, speed_mps: float,
-                  timeout_s: float) -> float | None:
+def kill_at_speed(
+    fly: subprocess.Popen, log: Path, speed_mps: float, timeout_s: float
+) -> float | None:
     """SIGKILL `perchd fly` once its flight log shows the approach at speed_mps toward the
     wall: time.monotonic() of the kill. None when the flight ended or never got there
     within timeout_s (it is killed then all the same)."""
@@ -151,22 +171,30 @@ def surface_normal(surface: list[str]) -> tuple[float, float, float]:
     """The unit normal of `perchd fly`'s --normal option (its default, 1 0 0, without one)."""
     if "--normal" not in surface:
         return (1.0, 0.0, 0.0)
-    n = [float(c) for c in surface[surface.index("--normal") + 1:][:3]]
+    n = [float(c) for c in surface[surface.index("--normal") + 1 :][:3]]
     size = math.sqrt(sum(c * c for c in n))
     return (n[0] / size, n[1] / size, n[2] / size)
 
 
-def after_kill(positions: list[tuple[float, tuple[float, float, float]]], killed: float,
-               normal: tuple[float, float, float]) -> dict:
+def after_kill(
+    positions: list[tuple[float, tuple[float, float, float]]],
+    killed: float,
+    normal: tuple[float, float, float],
+) -> dict:
     """From the mocap's positions [(time.monotonic() s, p m)] (YawWatch.positions): how far
     the vehicle went on toward the wall after the kill (the largest displacement along the
     normal), its speed along the normal over the 0.2 s before it, and its height after."""
+
     def along(a, b) -> float:
         return sum((b[i] - a[i]) * normal[i] for i in range(3))
+
     at_kill = min(positions, key=lambda s: abs(s[0] - killed))[1]
     before = min(positions, key=lambda s: abs(s[0] - (killed - 0.2)))[1]
     after = [(t - killed, along(at_kill, p), p[2]) for t, p in positions if t >= killed]
-    return {"further_toward_wall_m": max(d for _, d, _ in after),
-            "speed_at_kill_mps": along(before, at_kill) / 0.2,
-            "toward_wall_m_by_0_25_s": [round(d, 3) for _, d, _ in after][::25][:16],
-            "height_at_kill_m": at_kill[2], "final_height_m": after[-1][2]}
+    return {
+        "further_toward_wall_m": max(d for _, d, _ in after),
+        "speed_at_kill_mps": along(before, at_kill) / 0.2,
+        "toward_wall_m_by_0_25_s": [round(d, 3) for _, d, _ in after][::25][:16],
+        "height_at_kill_m": at_kill[2],
+        "final_height_m": after[-1][2],
+    }

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from perchd.core.ned import ned_vec
 from perchd.core.types import Phase, Pose, Setpoint
@@ -39,8 +39,14 @@ class PoseFeed:
         self._thread.join(timeout=1.0)
 
 
-def climb_and_compare(truth: Callable[[], Truth], drv, mass_kg: float, clock_now,
-                      seconds: float = 6.0, settle_s: float = 2.0) -> dict:
+def climb_and_compare(
+    truth: Callable[[], Truth],
+    drv,
+    mass_kg: float,
+    clock_now,
+    seconds: float = 6.0,
+    settle_s: float = 2.0,
+) -> dict:
     """Climb to 1 m on the true height (a PD at 50 Hz, level at the start heading), then
     compare LOCAL_POSITION_NED with the pose in NED once settle_s has passed."""
     z0, yaw = truth().p[2], yaw_of(truth().q)
@@ -58,7 +64,11 @@ def climb_and_compare(truth: Callable[[], Truth], drv, mass_kg: float, clock_now
             errs.append(math.dist(ekf, want))
             trace.append([round(c, 3) for c in (*ekf, *want)])
         time.sleep(0.02)
-    return {"climbed_m": truth().p[2] - z0, "samples": len(errs),
-            "max_error_m": max(errs) if errs else math.inf,
-            "mean_error_m": sum(errs) / len(errs) if errs else math.inf,
-            "vision_sent": drv.vision_sent, "trace_ekf_vs_mocap_ned": trace[::30]}
+    return {
+        "climbed_m": truth().p[2] - z0,
+        "samples": len(errs),
+        "max_error_m": max(errs) if errs else math.inf,
+        "mean_error_m": sum(errs) / len(errs) if errs else math.inf,
+        "vision_sent": drv.vision_sent,
+        "trace_ekf_vs_mocap_ned": trace[::30],
+    }

@@ -11,8 +11,15 @@ from scipy.integrate import solve_ivp
 def fly_tau(tau_ref, x0: float, t_end: float, n: int = 4001):
     """(t, X, V, A) from integrating the tau reference; V = X / tau, A by differentiation."""
     t = np.linspace(0.0, t_end, n)
-    sol = solve_ivp(lambda s, x: x / tau_ref(s), (0.0, t_end), [x0], t_eval=t,
-                    rtol=1e-11, atol=1e-13, method="DOP853")
+    sol = solve_ivp(
+        lambda s, x: x / tau_ref(s),
+        (0.0, t_end),
+        [x0],
+        t_eval=t,
+        rtol=1e-11,
+        atol=1e-13,
+        method="DOP853",
+    )
     x = sol.y[0]
     v = x / np.array([tau_ref(s) for s in t])
     a = np.gradient(v, t)

@@ -10,11 +10,43 @@ from perchd.logs.flightlog import FlightLogWriter, LogEvent, LogRow
 
 def log_seed(path: Path) -> bytes:
     """The log's bytes, written at `path` (a new file)."""
-    w = FlightLogWriter(path, {"plan": {"duration": 1.2, "v_contact": 0.8, "strategy": "ipts"},
-                               "config": {"rate_hz": 100.0, "sync": "clock"}})
+    w = FlightLogWriter(
+        path,
+        {
+            "plan": {"duration": 1.2, "v_contact": 0.8, "strategy": "ipts"},
+            "config": {"rate_hz": 100.0, "sync": "clock"},
+        },
+    )
     for k in range(4):
-        w.row(LogRow(k * 0.01, k, "stage1", -1.0, 1.0, -1.0, -1.0, -1.0, 1.0, -0.5, 0.0, 1.0,
-                     0.0, 0.1, 0.0, 0.3, -0.5, 0.0, 0.0, 0.01, 0.004, k, 0.0, 1e-4, None))
+        w.row(
+            LogRow(
+                k * 0.01,
+                k,
+                "stage1",
+                -1.0,
+                1.0,
+                -1.0,
+                -1.0,
+                -1.0,
+                1.0,
+                -0.5,
+                0.0,
+                1.0,
+                0.0,
+                0.1,
+                0.0,
+                0.3,
+                -0.5,
+                0.0,
+                0.0,
+                0.01,
+                0.004,
+                k,
+                0.0,
+                1e-4,
+                None,
+            )
+        )
     w.event(LogEvent(0.02, "contact", "touched", {"speed": 0.8, "flag": True}))
     w.close({"outcome": "CONTACT", "detail": "", "summary": {"contact_speed": 0.8}})
     return path.read_bytes()

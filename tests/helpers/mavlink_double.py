@@ -46,20 +46,32 @@ from perchd.drivers.base import open_driver
 ARDUPILOT, PX4 = 3, 12
 ACCEPTED, DENIED, FAILED = 0, 2, 4
 SAFE_PARAMS = {
-    ARDUPILOT: {"GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.35, "GUID_TIMEOUT": 0.5,
-                "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 2.0, "ATC_ANGLE_BOOST": 0.0,
-                "VISO_TYPE": 1.0, "EK3_SRC1_POSXY": 6.0, "EK3_SRC1_POSZ": 6.0,
-                "EK3_SRC1_YAW": 6.0},
-    PX4: {"MPC_THR_HOVER": 0.42, "COM_OF_LOSS_T": 0.3, "COM_OBL_RC_ACT": 4.0,
-          "EKF2_EV_CTRL": 11.0, "EKF2_HGT_REF": 3.0},
+    ARDUPILOT: {
+        "GUID_OPTIONS": 8.0,
+        "MOT_THST_HOVER": 0.35,
+        "GUID_TIMEOUT": 0.5,
+        "FS_GCS_ENABLE": 5.0,
+        "FS_GCS_TIMEOUT": 2.0,
+        "ATC_ANGLE_BOOST": 0.0,
+        "VISO_TYPE": 1.0,
+        "EK3_SRC1_POSXY": 6.0,
+        "EK3_SRC1_POSZ": 6.0,
+        "EK3_SRC1_YAW": 6.0,
+    },
+    PX4: {
+        "MPC_THR_HOVER": 0.42,
+        "COM_OF_LOSS_T": 0.3,
+        "COM_OBL_RC_ACT": 4.0,
+        "EKF2_EV_CTRL": 11.0,
+        "EKF2_HGT_REF": 3.0,
+    },
 }
 """Parameters with perchd's values: failsafe (docs/safety.md), mocap to the EKF
 (docs/firmware.md)."""
 PX4_INTS = {"COM_OBL_RC_ACT", "NAV_DLL_ACT", "EKF2_EV_CTRL", "EKF2_HGT_REF"}
 
 
-def connected(vehicle: "VehicleDouble", query: str = "", mass_kg: float = 0.5,
-              engage: bool = True):
+def connected(vehicle: VehicleDouble, query: str = "", mass_kg: float = 0.5, engage: bool = True):
     """perchd's MAVLink driver, connected to the double (query: more URI parameters) and,
     unless engage=False, engaged as a flight engages it (no poses)."""
     drv = open_driver(f"{vehicle.uri}?mass={mass_kg}{query}", Runtime.real())
@@ -76,8 +88,9 @@ def connected(vehicle: "VehicleDouble", query: str = "", mass_kg: float = 0.5,
 def agent_process(code: str) -> subprocess.Popen:
     """A Python process running `code`, returned once it prints "ready" (an agent that has
     taken the vehicle, for the tests that kill it)."""
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
-                            stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, stderr=subprocess.DEVNULL
+    )
     assert proc.stdout.readline().strip() == "ready"
     return proc
 
@@ -100,12 +113,22 @@ class Target:
 
 
 class VehicleDouble:
-    def __init__(self, autopilot: int = ARDUPILOT, params: dict[str, float] | None = None,
-                 refuse_arm: bool = False, *, airborne: bool = False, yaw_deg: float = 0.0,
-                 prompt: bool = True, heartbeat_s: float = 1.0,
-                 lock_partner: bool = False, spool_s: float = 0.0,
-                 timesync: bool = False, mavlink2: bool = False,
-                 vision_to_arm: int = 0) -> None:
+    def __init__(
+        self,
+        autopilot: int = ARDUPILOT,
+        params: dict[str, float] | None = None,
+        refuse_arm: bool = False,
+        *,
+        airborne: bool = False,
+        yaw_deg: float = 0.0,
+        prompt: bool = True,
+        heartbeat_s: float = 1.0,
+        lock_partner: bool = False,
+        spool_s: float = 0.0,
+        timesync: bool = False,
+        mavlink2: bool = False,
+        vision_to_arm: int = 0,
+    ) -> None:
         self.autopilot = autopilot
         self.params = dict(SAFE_PARAMS[autopilot]) if params is None else params
         self.refuse_arm = refuse_arm
@@ -116,15 +139,18 @@ class VehicleDouble:
         self.boot_s = 0.0  # [s] time.monotonic() at its boot: ATTITUDE's time_boot_ms
         self.landed_state = 2 if airborne else 1  # MAV_LANDED_STATE_IN_AIR / ON_GROUND
         self.partner = None  # lock_partner: the first address heard
-        self.conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=1,
-                                               source_component=1)
+        self.conn = mavutil.mavlink_connection(
+            "udpin:127.0.0.1:0", source_system=1, source_component=1
+        )
         if mavlink2:  # as ArduPilot and PX4 speak; the driver follows (extension fields)
             self.conn.auto_mavlink_version(b"\xfd")
         self.port = self.conn.port.getsockname()[1]
         self.uri = f"mavlink:udpout:127.0.0.1:{self.port}"
         self.custom_mode = 0 if autopilot == ARDUPILOT else (3 << 16)  # STABILIZE / POSCTL
         if airborne:
-            self.custom_mode = 5 if autopilot == ARDUPILOT else (4 << 16) | (3 << 24)  # LOITER / HOLD
+            self.custom_mode = (
+                5 if autopilot == ARDUPILOT else (4 << 16) | (3 << 24)
+            )  # LOITER / HOLD
         self.armed = airborne
         self.param_sets: list[tuple[str, float]] = []
         self.sys_state_interval: float | None = None
@@ -168,8 +194,9 @@ class VehicleDouble:
             if self.attitude_interval and now >= self._next_attitude:
                 self._next_attitude = now + self.attitude_interval
                 boot_ms = int((now - self.boot_s) * 1000) & 0xFFFFFFFF
-                self._send(lambda m: m.attitude_send(boot_ms, self.roll, self.pitch,
-                                                     self.yaw, 0, 0, 0))
+                self._send(
+                    lambda m: m.attitude_send(boot_ms, self.roll, self.pitch, self.yaw, 0, 0, 0)
+                )
             if self.target_interval and now >= self._next_target:
                 self._next_target = now + self.target_interval
                 applied = self.applied_thrust(now)
@@ -199,6 +226,7 @@ class VehicleDouble:
                 return ""
             conn.clients = {addr}
             return data
+
         conn.recv = recv
 
     def _send(self, fn) -> None:
@@ -226,8 +254,15 @@ class VehicleDouble:
             self.param_sets.append((msg.param_id, value))
             self._param_value(msg.param_id)
         elif kind == "SET_ATTITUDE_TARGET":
-            self.targets.append(Target(now, tuple(msg.q), msg.thrust, msg.type_mask,
-                                       (msg.target_system, msg.target_component)))
+            self.targets.append(
+                Target(
+                    now,
+                    tuple(msg.q),
+                    msg.thrust,
+                    msg.type_mask,
+                    (msg.target_system, msg.target_component),
+                )
+            )
             if self.armed and msg.thrust > 0 and self._spool_start is None:
                 self._spool_start = now
         elif kind == "VISION_POSITION_ESTIMATE":
@@ -235,7 +270,15 @@ class VehicleDouble:
         elif kind == "TIMESYNC" and msg.tc1 != 0:
             self.timesync_replies.append((now, msg.tc1, msg.ts1))
         elif kind == "COMMAND_LONG":
-            params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
+            params = (
+                msg.param1,
+                msg.param2,
+                msg.param3,
+                msg.param4,
+                msg.param5,
+                msg.param6,
+                msg.param7,
+            )
             self.commands.append((now, msg.command, params))
             self._ack(msg.command, self._command(msg.command, params, now))
 
@@ -247,7 +290,9 @@ class VehicleDouble:
 
     def _command(self, command: int, p: tuple[float, ...], now: float) -> int:
         if command == 176:
-            mode = int(p[1]) if self.autopilot == ARDUPILOT else (int(p[1]) << 16) | (int(p[2]) << 24)
+            mode = (
+                int(p[1]) if self.autopilot == ARDUPILOT else (int(p[1]) << 16) | (int(p[2]) << 24)
+            )
             if self.autopilot == PX4 and int(p[1]) == 6 and not self._offboard_ready(now):
                 return DENIED
             self.custom_mode = mode
@@ -278,7 +323,9 @@ class VehicleDouble:
         return self.targets[-1].thrust
 
     def _offboard_ready(self, now: float) -> bool:
-        return bool(self.targets) and now - self.targets[0].t > 1.0 and now - self.targets[-1].t < 0.5
+        return (
+            bool(self.targets) and now - self.targets[0].t > 1.0 and now - self.targets[-1].t < 0.5
+        )
 
     def _ack(self, command: int, result: int) -> None:
         self._send(lambda m: m.command_ack_send(command, result))

@@ -9,15 +9,36 @@ from typing import Any
 
 from hypothesis import strategies as st
 
-NASTY_NUMBERS = [0, -0.0, 1e-300, -1e-300, 1e300, -1e300, 2 ** 63, -2 ** 63, 10 ** 40,
-                 float("nan"), float("inf"), float("-inf")]
+NASTY_NUMBERS = [
+    0,
+    -0.0,
+    1e-300,
+    -1e-300,
+    1e300,
+    -1e300,
+    2**63,
+    -(2**63),
+    10**40,
+    float("nan"),
+    float("inf"),
+    float("-inf"),
+]
 
-json_scalars = (st.none() | st.booleans() | st.integers() | st.sampled_from(NASTY_NUMBERS)
-                | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=12))
+json_scalars = (
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.sampled_from(NASTY_NUMBERS)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=12)
+)
 json_values = st.recursive(
     json_scalars,
-    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner, max_size=5),
-    max_leaves=16)
+    lambda inner: (
+        st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner, max_size=5)
+    ),
+    max_leaves=16,
+)
 
 
 @st.composite
@@ -30,18 +51,22 @@ def mutated_bytes(draw, seeds: list[bytes]) -> bytes:
         if kind == "flip" and data:
             data[at] ^= draw(st.integers(1, 255))
         elif kind == "cut":
-            del data[at:at + draw(st.integers(1, 64))]
+            del data[at : at + draw(st.integers(1, 64))]
         elif kind == "insert":
             data[at:at] = draw(st.binary(min_size=1, max_size=16))
         else:
-            data[at:at + 4] = draw(st.sampled_from([b"\xff\xff\xff\x7f", b"\0\0\0\x80", b"\0\0\0\0"]))
+            data[at : at + 4] = draw(
+                st.sampled_from([b"\xff\xff\xff\x7f", b"\0\0\0\x80", b"\0\0\0\0"])
+            )
     return bytes(data)
 
 
 def _paths(doc: Any, prefix: tuple = ()) -> list[tuple]:
     """Every key/index path in a JSON document, containers included."""
     out = [prefix] if prefix else []
-    items = doc.items() if isinstance(doc, dict) else enumerate(doc) if isinstance(doc, list) else ()
+    items = (
+        doc.items() if isinstance(doc, dict) else enumerate(doc) if isinstance(doc, list) else ()
+    )
     for key, value in items:
         out += _paths(value, (*prefix, key))
     return out
@@ -70,15 +95,38 @@ def mutated_document(draw, doc: dict) -> Any:
             del parent[key]
         elif kind == "add" and isinstance(parent, dict):
             parent[draw(st.text(max_size=8))] = draw(json_values)
-        elif kind == "scale" and isinstance(parent[key], (int, float)) and not isinstance(parent[key], bool):
+        elif (
+            kind == "scale"
+            and isinstance(parent[key], (int, float))
+            and not isinstance(parent[key], bool)
+        ):
             parent[key] = parent[key] * draw(st.sampled_from([-1, 0, 0.5, 1 + 1e-9, 2, 1e6, 1e-6]))
     return doc
 
 
 NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
-NASTY_TOKENS = [b"1e999", b"-1e999", b"NaN", b"Infinity", b"nan", b"inf", b"9" * 400,
-                b"-" + b"9" * 400, b"9" * 5000, b"true", b"false", b"null", b'"1"', b"1e-400",
-                b"-0", b"[]", b"{}", b"0x10", b"0x" + b"f" * 4000, b"1_000"]
+NASTY_TOKENS = [
+    b"1e999",
+    b"-1e999",
+    b"NaN",
+    b"Infinity",
+    b"nan",
+    b"inf",
+    b"9" * 400,
+    b"-" + b"9" * 400,
+    b"9" * 5000,
+    b"true",
+    b"false",
+    b"null",
+    b'"1"',
+    b"1e-400",
+    b"-0",
+    b"[]",
+    b"{}",
+    b"0x10",
+    b"0x" + b"f" * 4000,
+    b"1_000",
+]
 
 
 @st.composite

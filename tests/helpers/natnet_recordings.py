@@ -40,7 +40,9 @@ def session_packets() -> list[Recorded]:
     out = []
     for line in (SESSION / "index.jsonl").read_text().splitlines():
         row = json.loads(line)
-        out.append(Recorded(row["i"], row["msg_id"], (SESSION / "packets" / row["file"]).read_bytes()))
+        out.append(
+            Recorded(row["i"], row["msg_id"], (SESSION / "packets" / row["file"]).read_bytes())
+        )
     return out
 
 

@@ -40,13 +40,19 @@ class _TwoStage:
 
     def tau_ref(self, t):
         t = np.asarray(t, float)
-        return np.where(t <= self.t_switch, self._tau1(np.minimum(t, self.t_switch)),
-                        self.tau_s + (t - self.t_switch))
+        return np.where(
+            t <= self.t_switch,
+            self._tau1(np.minimum(t, self.t_switch)),
+            self.tau_s + (t - self.t_switch),
+        )
 
     def x(self, t):
         t = np.asarray(t, float)
-        return np.where(t <= self.t_switch, self._x1(np.minimum(t, self.t_switch)),
-                        -self.v_contact * (self.duration - t))
+        return np.where(
+            t <= self.t_switch,
+            self._x1(np.minimum(t, self.t_switch)),
+            -self.v_contact * (self.duration - t),
+        )
 
     def v(self, t):
         t = np.asarray(t, float)
@@ -75,7 +81,7 @@ class RefCtdts(_TwoStage):
         return self.v0 * self._base(t) ** (1 / self.c - 1)
 
     def _a1(self, t):
-        return self.v0 ** 2 / self.x0 * (1 - self.c) * self._base(t) ** (1 / self.c - 2)
+        return self.v0**2 / self.x0 * (1 - self.c) * self._base(t) ** (1 / self.c - 2)
 
 
 def ctdts(x0=-3.0, v0=1.5, tau_s=-0.5, v_c=1.0) -> RefCtdts:
@@ -90,7 +96,7 @@ class RefIpts(_TwoStage):
     strategy: str = "ipts"
 
     def _p(self, t):
-        return sum(ki * t ** i for i, ki in enumerate(self.k))
+        return sum(ki * t**i for i, ki in enumerate(self.k))
 
     def _P(self, t):
         return sum(ki / (i + 1) * t ** (i + 1) for i, ki in enumerate(self.k))
@@ -113,7 +119,7 @@ def ipts(x0=-3.0, v0=1.5, tau_s=-0.5, k123=(-0.7166, -0.1907, 0.0067)) -> RefIpt
     from scipy.optimize import brentq
 
     k = (v0 / x0, *k123)
-    p = lambda t: sum(ki * t ** i for i, ki in enumerate(k)) - 1.0 / tau_s  # noqa: E731
+    p = lambda t: sum(ki * t**i for i, ki in enumerate(k)) - 1.0 / tau_s  # noqa: E731
     grid = np.linspace(0.0, 10.0, 2001)
     i = int(np.argmax(np.sign(p(grid)) != np.sign(p(grid[0]))))
     t_s = brentq(p, grid[i - 1], grid[i])

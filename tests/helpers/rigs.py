@@ -11,12 +11,11 @@ import threading
 import time
 from typing import Protocol
 
-from perchd.drivers.thrust import CrazyflieThrust, G
-
 from perchd.core.clock import MonotonicClock
 from perchd.core.runtime import Runtime
 from perchd.core.types import Phase, Setpoint
 from perchd.core.vehicle import CRAZYFLIE_MASS_KG
+from perchd.drivers.thrust import CrazyflieThrust, G
 from perchd.sim.world import SimWorld, WorldParams
 
 MASS = CRAZYFLIE_MASS_KG
@@ -52,6 +51,7 @@ class Rig(Protocol):
 class CrazyflieRig(RealLink):
     def __init__(self) -> None:
         from crtp_responder import CrtpResponder
+
         self.peer = CrtpResponder()
         self.uri = self.peer.uri
         self._model = CrazyflieThrust()
@@ -61,8 +61,11 @@ class CrazyflieRig(RealLink):
         if not sps:
             return None
         s = sps[-1]
-        return (math.radians(s.roll_deg), math.radians(-s.wire_pitch_deg),
-                self._model.newtons(s.thrust))
+        return (
+            math.radians(s.roll_deg),
+            math.radians(-s.wire_pitch_deg),
+            self._model.newtons(s.thrust),
+        )
 
     def stopped(self) -> bool:
         return bool(self.peer.stops())
@@ -79,11 +82,13 @@ class MavlinkRig(RealLink):
 
     def __init__(self) -> None:
         from mavlink_double import ARDUPILOT, SAFE_PARAMS, VehicleDouble
+
         self.peer = VehicleDouble(params={**SAFE_PARAMS[ARDUPILOT], "MOT_THST_HOVER": self.HOVER})
         self.uri = f"{self.peer.uri}?mass={MASS}"
 
     def commanded(self):
         from pymavlink.quaternion import Quaternion
+
         targets = [t for t in self.peer.targets if t.thrust > 0]
         if not targets:
             return None
@@ -103,6 +108,7 @@ class MavlinkRig(RealLink):
 class ZmqRig(RealLink):
     def __init__(self) -> None:
         from zmq_subscriber import SetpointSubscriber
+
         self.peer = SetpointSubscriber()
         self.uri = self.peer.uri
 

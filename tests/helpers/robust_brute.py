@@ -15,18 +15,18 @@ from scipy.integrate import solve_ivp
 
 @dataclass(frozen=True)
 class Flight:
-    reaches: bool          # tau reached tau_s with tau finite and negative on the way
-    t_s: float             # [s]
-    v_peak: float          # [m/s]
-    a_peak: float          # [m/s^2] max |acceleration|
-    v_contact: float       # [m/s] speed at t_s
+    reaches: bool  # tau reached tau_s with tau finite and negative on the way
+    t_s: float  # [s]
+    v_peak: float  # [m/s]
+    a_peak: float  # [m/s^2] max |acceleration|
+    v_contact: float  # [m/s] speed at t_s
 
 
 def fly(k, x0: float, v0: float, tau_s: float, horizon: float = 30.0) -> Flight:
     coeffs = [v0 / x0, *k]
 
     def p(t):
-        return sum(c * t ** i for i, c in enumerate(coeffs))
+        return sum(c * t**i for i, c in enumerate(coeffs))
 
     t = np.linspace(0.0, horizon, 300_001)
     pt = p(t)
@@ -35,12 +35,13 @@ def fly(k, x0: float, v0: float, tau_s: float, horizon: float = 30.0) -> Flight:
     if not len(hit) or (len(first_zero) and first_zero[0] < hit[0]):
         return Flight(False, np.nan, np.nan, np.nan, np.nan)
     lo, hi = t[hit[0] - 1], t[hit[0]]
-    for _ in range(60):                     # bisection on the grid bracket
+    for _ in range(60):  # bisection on the grid bracket
         mid = (lo + hi) / 2
         lo, hi = (mid, hi) if p(mid) > 1.0 / tau_s else (lo, mid)
     t_s = hi
-    sol = solve_ivp(lambda tt, x: p(tt) * x, (0.0, t_s), [x0], dense_output=True,
-                    rtol=1e-11, atol=1e-12)
+    sol = solve_ivp(
+        lambda tt, x: p(tt) * x, (0.0, t_s), [x0], dense_output=True, rtol=1e-11, atol=1e-12
+    )
     tt = np.linspace(0.0, t_s, 20_001)
     v = sol.sol(tt)[0] * p(tt)
     a = np.gradient(v, tt, edge_order=2)

@@ -25,8 +25,10 @@ class Service:
         with open(self.log, "wb") as log:  # a file, not a pipe nobody drains
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "perchd", "serve", "--config", str(self.config)],
-                stdout=subprocess.DEVNULL, stderr=log,
-                preexec_fn=lambda: os.umask(0))  # 0660 must not rely on the umask
+                stdout=subprocess.DEVNULL,
+                stderr=log,
+                preexec_fn=lambda: os.umask(0),
+            )  # 0660 must not rely on the umask
         deadline = time.monotonic() + 20
         while not self.sock.exists():
             assert self.proc.poll() is None and time.monotonic() < deadline, "serve did not start"
@@ -46,8 +48,10 @@ class Service:
         return [json.loads(x) for x in buf.splitlines()]
 
     def write_config(self, extra: str = "") -> None:
-        self.config.write_text(f'version = 1\n[service]\nsocket = "{self.sock}"\n'
-                               f'plan_dir = "{self.plans}"\nlog_dir = "{self.tmp / "logs"}"\n{extra}')
+        self.config.write_text(
+            f'version = 1\n[service]\nsocket = "{self.sock}"\n'
+            f'plan_dir = "{self.plans}"\nlog_dir = "{self.tmp / "logs"}"\n{extra}'
+        )
 
     def reload(self, extra: str) -> None:
         """New [service] lines, applied by SIGHUP; returns once the service has reloaded."""

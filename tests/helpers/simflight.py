@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from caseplans import case1  # noqa: F401  (re-exported: the flight tests' plan)
-from perchd.core.uri import parse_uri
-from perchd.core.uriparams import split_sim
-from perchd.drivers.base import open_driver
 
 from perchd.core.clock import ManualClock
 from perchd.core.runtime import Runtime
+from perchd.core.uri import parse_uri
+from perchd.core.uriparams import split_sim
+from perchd.drivers.base import open_driver
 from perchd.flight.config import FlightConfig
 from perchd.flight.run import FlightAbort, FlightResult, fly
 from perchd.mocap.base import open_source
@@ -33,12 +34,26 @@ class Sim:
         self.driver.connect()
         self.source.start()
 
-    def fly(self, plan: Any, log: Path, cfg: FlightConfig = FlightConfig(),
-            abort: FlightAbort | None = None,
-            on_tick: Callable[[Any], None] | None = None) -> FlightResult:
+    def fly(
+        self,
+        plan: Any,
+        log: Path,
+        cfg: FlightConfig = FlightConfig(),
+        abort: FlightAbort | None = None,
+        on_tick: Callable[[Any], None] | None = None,
+    ) -> FlightResult:
         try:
-            return fly(plan, self.driver, self.source, self.runtime.clock, log, cfg, abort,
-                       on_tick, world=self.world)
+            return fly(
+                plan,
+                self.driver,
+                self.source,
+                self.runtime.clock,
+                log,
+                cfg,
+                abort,
+                on_tick,
+                world=self.world,
+            )
         finally:
             self.source.close()
             self.driver.close()

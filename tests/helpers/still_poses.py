@@ -16,10 +16,14 @@ from perchd.mocap.zmq import ZmqPosePublisher
 
 
 class StillPoses:
-    def __init__(self, p: tuple[float, float, float] = (-4.5, 0.0, 1.0), body: str = "cf1",
-                 rate_hz: float = 100.0,
-                 velocity: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 natnet: bool = False) -> None:
+    def __init__(
+        self,
+        p: tuple[float, float, float] = (-4.5, 0.0, 1.0),
+        body: str = "cf1",
+        rate_hz: float = 100.0,
+        velocity: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        natnet: bool = False,
+    ) -> None:
         if natnet:
             self.pub = NatNetServer([body]).start()
             self.uri = f"{self.pub.uri}&body={body}"
@@ -39,8 +43,10 @@ class StillPoses:
         rng, t0 = random.Random(0), time.monotonic()
         while not self._stop.wait(self.period):
             self.sent, t = self.sent + 1, time.monotonic()
-            p = tuple(c + v * (t - t0) + rng.gauss(0.0, 0.0005)
-                      for c, v in zip(self.p, self.velocity, strict=True))
+            p = tuple(
+                c + v * (t - t0) + rng.gauss(0.0, 0.0005)
+                for c, v in zip(self.p, self.velocity, strict=True)
+            )
             with self._lock:
                 self._published[round(t * 1e6)] = p
             self.pub.publish(Pose(self.body, self.sent, t, p, (0.0, 0.0, 0.0, 1.0)))

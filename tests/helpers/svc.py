@@ -43,7 +43,7 @@ class NotifyListener:
             self.sock.settimeout(left)
             try:
                 self.messages.append(self.sock.recv(4096).decode())
-            except socket.timeout:
+            except TimeoutError:
                 pass
 
     def count(self, field: str) -> int:
@@ -55,7 +55,7 @@ class NotifyListener:
             self.sock.settimeout(left)
             try:
                 self.messages.append(self.sock.recv(4096).decode())
-            except socket.timeout:
+            except TimeoutError:
                 return
 
     def close(self) -> None:
@@ -63,17 +63,23 @@ class NotifyListener:
 
 
 def write_config(tmp: Path, tables: str = "", **service: str) -> Path:
-    lines = ["version = 1", "[service]",
-             f'socket = "{tmp / "control.sock"}"', f'log_dir = "{tmp / "logs"}"',
-             f'plan_dir = "{PLANS}"', *(f'{k} = "{v}"' for k, v in service.items())]
+    lines = [
+        "version = 1",
+        "[service]",
+        f'socket = "{tmp / "control.sock"}"',
+        f'log_dir = "{tmp / "logs"}"',
+        f'plan_dir = "{PLANS}"',
+        *(f'{k} = "{v}"' for k, v in service.items()),
+    ]
     path = tmp / "perchd.toml"
     path.write_text("\n".join(lines) + "\n" + tables)
     return path
 
 
 def perchd(*args: str, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "perchd", *args], capture_output=True,
-                          text=True, timeout=30, **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "perchd", *args], capture_output=True, text=True, timeout=30, **kw
+    )
 
 
 def ctl(sock: Path, *args: str) -> dict:
@@ -82,8 +88,10 @@ def ctl(sock: Path, *args: str) -> dict:
     return json.loads(done.stdout)
 
 
-ACTIVATE = ("import os, sys; os.dup2(int(sys.argv[1]), 3); "
-            "os.environ['LISTEN_PID'] = str(os.getpid()); os.execvp(sys.argv[2], sys.argv[2:])")
+ACTIVATE = (
+    "import os, sys; os.dup2(int(sys.argv[1]), 3); "
+    "os.environ['LISTEN_PID'] = str(os.getpid()); os.execvp(sys.argv[2], sys.argv[2:])"
+)
 """What systemd does between fork and exec for socket activation: the socket at fd 3 and
 LISTEN_PID set to the pid that exec keeps (sd_listen_fds(3))."""
 
@@ -92,22 +100,38 @@ class Serve:
     """`perchd serve` under a test notify socket; .sock is its control socket. With
     `listen`, started as systemd's socket activation starts it: that socket at fd 3."""
 
-    def __init__(self, tmp: Path, notify: NotifyListener, *extra: str, tables: str = "",
-                 listen: socket.socket | None = None, prefix: tuple[str, ...] = (),
-                 **service: str) -> None:
+    def __init__(
+        self,
+        tmp: Path,
+        notify: NotifyListener,
+        *extra: str,
+        tables: str = "",
+        listen: socket.socket | None = None,
+        prefix: tuple[str, ...] = (),
+        **service: str,
+    ) -> None:
         """prefix: a command the service runs under (prlimit, setpriv)."""
         self.config = write_config(tmp, tables, **service)
         self.sock = tmp / "control.sock"
         env = {**os.environ, "NOTIFY_SOCKET": notify.address, "WATCHDOG_USEC": "2000000"}
-        cmd = [*prefix, sys.executable, "-m", "perchd", "serve", "--config", str(self.config),
-               *extra]
+        cmd = [
+            *prefix,
+            sys.executable,
+            "-m",
+            "perchd",
+            "serve",
+            "--config",
+            str(self.config),
+            *extra,
+        ]
         fds: tuple[int, ...] = ()
         if listen is not None:
             fds = (listen.fileno(),)
             cmd = [sys.executable, "-c", ACTIVATE, str(listen.fileno()), *cmd]
             env.update(LISTEN_FDS="1", LISTEN_FDNAMES="control")
-        self.proc = subprocess.Popen(cmd, env=env, pass_fds=fds, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen(
+            cmd, env=env, pass_fds=fds, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
 
     def wait_phase(self, phases: set[str], timeout: float = 10.0) -> dict:
         deadline = time.monotonic() + timeout
@@ -137,8 +161,13 @@ class SimProcess:
 
     def __init__(self) -> None:
         self.proc, self.mocap, self.driver = start_announced(
-            "sim", "--pose-out", "natnet://127.0.0.1:0", "--setpoint-in", "zmq://127.0.0.1:0",
-            "--json")
+            "sim",
+            "--pose-out",
+            "natnet://127.0.0.1:0",
+            "--setpoint-in",
+            "zmq://127.0.0.1:0",
+            "--json",
+        )
 
     def summary(self) -> dict:
         self.proc.terminate()

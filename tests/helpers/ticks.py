@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from perchd.core.types import EndReason, Phase, Setpoint
 
@@ -22,8 +22,9 @@ def level(thrust: float, t: float = 0.0, seq: int = 0) -> Setpoint:
     return Setpoint(t, 0.0, 0.0, 0.0, thrust, seq, Phase.STAGE1)
 
 
-def ticks_until_lost(driver, rate_hz: float, setpoint: Setpoint,
-                     kill: Callable[[], None], max_ticks: int = 50) -> int | None:
+def ticks_until_lost(
+    driver, rate_hz: float, setpoint: Setpoint, kill: Callable[[], None], max_ticks: int = 50
+) -> int | None:
     """Send `setpoint` and check health once per tick, as the supervisor does; call `kill`
     between tick 0 and tick 1. Returns how many ticks after the kill the link was reported
     lost (and the driver's failsafe called, as the supervisor would), or None."""

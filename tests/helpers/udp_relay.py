@@ -33,8 +33,10 @@ class UdpRelay:
         self._order = itertools.count()
         self._wake = threading.Condition()
         self._alive = True
-        self._threads = [threading.Thread(target=fn, daemon=True, name=f"relay-{n}")
-                         for n, fn in (("up", self._up), ("down", self._down), ("out", self._out))]
+        self._threads = [
+            threading.Thread(target=fn, daemon=True, name=f"relay-{n}")
+            for n, fn in (("up", self._up), ("down", self._down), ("out", self._out))
+        ]
         for t in self._threads:
             t.start()
 
@@ -62,7 +64,7 @@ class UdpRelay:
         while self._alive:
             try:
                 data, addr = self.front.recvfrom(2048)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             except OSError:
                 return
@@ -74,7 +76,7 @@ class UdpRelay:
         while self._alive:
             try:
                 data = self.back.recv(2048)
-            except (socket.timeout, ConnectionRefusedError):
+            except (TimeoutError, ConnectionRefusedError):
                 continue  # the peer is gone; keep relaying whatever comes
             except OSError:
                 return

@@ -14,8 +14,33 @@ from perchd.logs.flightlog import SCHEMA, FlightLogWriter, LogEvent, LogRow, rea
 
 
 def row(k, end=None):
-    return LogRow(k * 0.01, k, "stage1", -1.0 + k * 0.01, 1.0, -1.0, -1.0, -1.0, 1.0, -0.5,
-                  0.0, 1.0, 0.0, 0.1, 0.0, 0.3, -0.5, 0.0, 0.0, 0.01, 0.004, k, 0.0, 1e-4, end)
+    return LogRow(
+        k * 0.01,
+        k,
+        "stage1",
+        -1.0 + k * 0.01,
+        1.0,
+        -1.0,
+        -1.0,
+        -1.0,
+        1.0,
+        -0.5,
+        0.0,
+        1.0,
+        0.0,
+        0.1,
+        0.0,
+        0.3,
+        -0.5,
+        0.0,
+        0.0,
+        0.01,
+        0.004,
+        k,
+        0.0,
+        1e-4,
+        end,
+    )
 
 
 def test_every_row_is_on_disk_as_soon_as_it_is_written(tmp_path):
@@ -61,6 +86,7 @@ def test_a_file_that_is_not_a_flight_log_is_one_clear_error(tmp_path):
 
 # --- a log that is not perchd's, or not whole: one PerchdError naming it, never another error --
 
+
 def good_log(tmp_path):
     w = FlightLogWriter(tmp_path / "good.jsonl", {"plan": {"duration": 1.0}})
     for k in range(3):
@@ -72,7 +98,7 @@ def good_log(tmp_path):
 def edited(lines, i, edit):
     doc = json.loads(lines[i])
     edit(doc)
-    return b"\n".join([*lines[:i], json.dumps(doc).encode(), *lines[i + 1:]]) + b"\n"
+    return b"\n".join([*lines[:i], json.dumps(doc).encode(), *lines[i + 1 :]]) + b"\n"
 
 
 BAD_LOGS = {
@@ -81,13 +107,15 @@ BAD_LOGS = {
     "another schema": lambda lines: b'{"schema": "perchd.flightlog/9"}\n' + b"\n".join(lines[1:]),
     "a header that is a list": lambda lines: b"[1, 2]\n" + b"\n".join(lines[1:]),
     "a row field that is text": lambda lines: edited(lines, 1, lambda d: d["row"].update(x="1")),
-    "a row of 400 digits": lambda lines: edited(lines, 1, lambda d: d["row"].update(t=10 ** 400)),
+    "a row of 400 digits": lambda lines: edited(lines, 1, lambda d: d["row"].update(t=10**400)),
     "a row with NaN": lambda lines: edited(lines, 1, lambda d: d["row"].update(tau=math.nan)),
     "a row with a bool": lambda lines: edited(lines, 1, lambda d: d["row"].update(t=True)),
     "a row missing a field": lambda lines: edited(lines, 1, lambda d: d["row"].pop("phase")),
     "a row with an unknown field": lambda lines: edited(lines, 1, lambda d: d["row"].update(q=1)),
     "an end that is a number": lambda lines: edited(lines, -1, lambda d: d.update(end=1)),
-    "a plan duration of text": lambda lines: edited(lines, 0, lambda d: d.update(plan={"duration": "1"})),
+    "a plan duration of text": lambda lines: edited(
+        lines, 0, lambda d: d.update(plan={"duration": "1"})
+    ),
     "1e999": lambda lines: lines[0] + b'\n{"row": {"t": 1e999}}\n',
     "a line that is a list": lambda lines: lines[0] + b"\n[1]\n" + lines[1] + b"\n",
 }
@@ -110,4 +138,3 @@ def test_a_log_that_is_not_a_regular_file_is_refused_at_once(tmp_path, kind):
         os.mkfifo(path)
     with pytest.raises(PerchdError, match="not a regular file"):
         read_log(path)
-

@@ -36,9 +36,26 @@ def sim():
 def test_a_client_subscribed_during_the_flight_receives_the_flight_log_s_values(sim, tmp_path):
     log = tmp_path / "f.jsonl"
     fly = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", sim.driver, "--mocap",
-         sim.mocap, "--log", str(log), "--json", "--foxglove", "127.0.0.1:0"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "fly",
+            str(PLAN),
+            "--driver",
+            sim.driver,
+            "--mocap",
+            sim.mocap,
+            "--log",
+            str(log),
+            "--json",
+            "--foxglove",
+            "127.0.0.1:0",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         subs, got = watch(serving_url(fly))
         out, _ = fly.communicate(timeout=30)
@@ -63,41 +80,61 @@ def test_a_client_subscribed_during_the_flight_receives_the_flight_log_s_values(
     assert len(rows_seen) > 0.5 * len(flown.rows)
     for topic, received in live.items():
         if topic != FLIGHT:  # from the subscription on, each one the export's, in order
-            assert received == export[topic][-len(received):], topic
-    (t_end, final), = export[FLIGHT]
+            assert received == export[topic][-len(received) :], topic
+    ((t_end, final),) = export[FLIGHT]
     assert live[FLIGHT][-1] == (t_end, final) and final["complete"] is True
     assert all(p["complete"] is False for _, p in live[FLIGHT][:-1])
 
 
 def test_without_the_extra_the_flag_is_one_line_naming_it(tmp_path):
     """The extra is checked before anything flies; simulated here by hiding the package."""
-    code = ("import sys; sys.modules['foxglove'] = None; from perchd.cli import main; "
-            f"sys.exit(main(['fly', {str(PLAN)!r}, '--driver', 'sim://', '--mocap', 'sim://', "
-            f"'--log', {str(tmp_path / 'f.jsonl')!r}, '--foxglove', '0']))")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=60)
+    code = (
+        "import sys; sys.modules['foxglove'] = None; from perchd.cli import main; "
+        f"sys.exit(main(['fly', {str(PLAN)!r}, '--driver', 'sim://', '--mocap', 'sim://', "
+        f"'--log', {str(tmp_path / 'f.jsonl')!r}, '--foxglove', '0']))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2
-    assert done.stderr.strip() == ("perchd fly: foxglove is not installed: "
-                                   "pip install 'perchd[foxglove]'")
+    assert done.stderr.strip() == (
+        "perchd fly: foxglove is not installed: pip install 'perchd[foxglove]'"
+    )
     assert not (tmp_path / "f.jsonl").exists()
 
 
-@pytest.mark.parametrize("address, message", [
-    ("taken", "port is taken"),
-    ("localhost:http", "expected [HOST:]PORT"),
-    ("70000", "expected [HOST:]PORT"),
-])
-def test_a_taken_port_or_a_bad_address_is_refused_before_anything_flies(address, message,
-                                                                         tmp_path):
+@pytest.mark.parametrize(
+    "address, message",
+    [
+        ("taken", "port is taken"),
+        ("localhost:http", "expected [HOST:]PORT"),
+        ("70000", "expected [HOST:]PORT"),
+    ],
+)
+def test_a_taken_port_or_a_bad_address_is_refused_before_anything_flies(address, message, tmp_path):
     with socket.socket() as holder:
         holder.bind(("127.0.0.1", 0))
         holder.listen(1)
         if address == "taken":
             address = f"127.0.0.1:{holder.getsockname()[1]}"
         done = subprocess.run(
-            [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", "sim://", "--mocap",
-             "sim://", "--log", str(tmp_path / "f.jsonl"), "--foxglove", address],
-            capture_output=True, text=True, timeout=60)
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "fly",
+                str(PLAN),
+                "--driver",
+                "sim://",
+                "--mocap",
+                "sim://",
+                "--log",
+                str(tmp_path / "f.jsonl"),
+                "--foxglove",
+                address,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and message in done.stderr and address in done.stderr
     assert not (tmp_path / "f.jsonl").exists()
@@ -106,9 +143,27 @@ def test_a_taken_port_or_a_bad_address_is_refused_before_anything_flies(address,
 def test_ctrl_c_to_the_process_group_still_publishes_the_flight_s_end(sim, tmp_path):
     """Ctrl-C reaches the view's process too: it ignores it and publishes the SIGNAL end."""
     fly = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "fly", str(PLAN), "--driver", sim.driver, "--mocap",
-         sim.mocap, "--log", str(tmp_path / "f.jsonl"), "--json", "--foxglove", "127.0.0.1:0"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "fly",
+            str(PLAN),
+            "--driver",
+            sim.driver,
+            "--mocap",
+            sim.mocap,
+            "--log",
+            str(tmp_path / "f.jsonl"),
+            "--json",
+            "--foxglove",
+            "127.0.0.1:0",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     watched: list = []
     try:
         url = serving_url(fly)

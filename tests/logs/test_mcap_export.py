@@ -70,8 +70,11 @@ def test_every_row_and_event_is_on_its_channel_at_its_clock_time(flown, tmp_path
         covered |= set(stream.fields)
     assert covered == set(ROW_FIELDS)  # every row value is exported somewhere
 
-    changes = [(ns(r["t"]), r["phase"]) for i, r in enumerate(rows)
-               if i == 0 or rows[i - 1]["phase"] != r["phase"]]
+    changes = [
+        (ns(r["t"]), r["phase"])
+        for i, r in enumerate(rows)
+        if i == 0 or rows[i - 1]["phase"] != r["phase"]
+    ]
     assert [(m[0], m[2]["phase"]) for m in got[PHASE]] == changes
     assert [m[2]["previous"] for m in got[PHASE]] == [None] + [p for _, p in changes[:-1]]
     assert {"stage1", "stage2", "contact"} <= {p for _, p in changes}
@@ -80,13 +83,14 @@ def test_every_row_and_event_is_on_its_channel_at_its_clock_time(flown, tmp_path
     assert [m[0] for m in got[EVENTS]] == [ns(e["t"]) for e in events]
     assert {"stage1", "contact"} <= {e["kind"] for e in events}
 
-    (t0, _, flight), = got[FLIGHT]
+    ((t0, _, flight),) = got[FLIGHT]
     assert flight == {"header": objs[0], "end": objs[-1]["end"], "complete": True}
     assert t0 == ns(rows[0]["t"])
     every = sorted(m[0] for msgs in got.values() for m in msgs)
     with open(tmp_path / "f.mcap", "rb") as f:  # the file's own order is by log time
-        assert [m.log_time for _, _, m in make_reader(f).iter_messages(log_time_order=False)] \
-            == every
+        assert [
+            m.log_time for _, _, m in make_reader(f).iter_messages(log_time_order=False)
+        ] == every
 
 
 def test_a_log_cut_short_exports_what_it_has_and_says_so(flown, tmp_path, capsys):
@@ -133,8 +137,7 @@ def test_a_file_that_is_not_a_flight_log_is_one_line_and_exit_2(tmp_path, capsys
     assert "cannot read" in capsys.readouterr().err
 
 
-def test_without_the_mcap_package_one_line_names_the_extra(flown, tmp_path, capsys,
-                                                           monkeypatch):
+def test_without_the_mcap_package_one_line_names_the_extra(flown, tmp_path, capsys, monkeypatch):
     def missing(module: str, extra: str):
         raise MissingExtraError(module.split(".")[0], extra)
 
@@ -145,8 +148,9 @@ def test_without_the_mcap_package_one_line_names_the_extra(flown, tmp_path, caps
     assert not (tmp_path / "o.mcap").exists()
 
 
-def test_the_real_require_names_the_extra_when_mcap_cannot_be_imported(flown, tmp_path, capsys,
-                                                                       monkeypatch):
+def test_the_real_require_names_the_extra_when_mcap_cannot_be_imported(
+    flown, tmp_path, capsys, monkeypatch
+):
     for name in ("mcap", "mcap.writer"):
         monkeypatch.setitem(sys.modules, name, None)  # import of mcap halted: as if absent
     assert export(flown, tmp_path / "o.mcap") == 2
@@ -159,8 +163,20 @@ PLAN = Path(__file__).resolve().parents[2] / "plans" / "case1-ipts-n3.json"
 
 
 def fly(log: Path, *more: str) -> int:
-    return main(["fly", str(PLAN), "--driver", "sim://", "--mocap", "sim://", "--log", str(log),
-                 "--json", *more])
+    return main(
+        [
+            "fly",
+            str(PLAN),
+            "--driver",
+            "sim://",
+            "--mocap",
+            "sim://",
+            "--log",
+            str(log),
+            "--json",
+            *more,
+        ]
+    )
 
 
 def test_fly_log_mcap_writes_the_jsonl_beside_it_and_the_same_export(tmp_path, capsys):

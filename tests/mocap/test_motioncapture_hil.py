@@ -23,16 +23,39 @@ pytest.importorskip("motioncapture")
 def test_the_agent_perches_on_perchd_sim_read_through_libmotioncapture(tmp_path):
     plan = case1_ipts()
     sim, natnet, driver = start_announced(
-        "sim", "--pose-out", f"natnet://127.0.0.1:0?multicast=1&data_port={free_udp_port()}",
-        "--setpoint-in", "zmq://127.0.0.1:0", "--exit-on-stop", "--json")
+        "sim",
+        "--pose-out",
+        f"natnet://127.0.0.1:0?multicast=1&data_port={free_udp_port()}",
+        "--setpoint-in",
+        "zmq://127.0.0.1:0",
+        "--exit-on-stop",
+        "--json",
+    )
     try:
         command_port = re.search(r"natnet://127\.0\.0\.1:(\d+)", natnet).group(1)
-        mocap = ("motioncapture://optitrack?hostname=127.0.0.1&interface_ip=127.0.0.1"
-                 f"&port_command={command_port}&body=cf1")
+        mocap = (
+            "motioncapture://optitrack?hostname=127.0.0.1&interface_ip=127.0.0.1"
+            f"&port_command={command_port}&body=cf1"
+        )
         done = subprocess.run(
-            [sys.executable, "-m", "perchd", "fly", str(PLANS / "case1-ipts-n3.json"),
-             "--driver", driver, "--mocap", mocap, "--log", str(tmp_path / "hil.jsonl"),
-             "--json"], capture_output=True, text=True, timeout=60)
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "fly",
+                str(PLANS / "case1-ipts-n3.json"),
+                "--driver",
+                driver,
+                "--mocap",
+                mocap,
+                "--log",
+                str(tmp_path / "hil.jsonl"),
+                "--json",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         report = json.loads(sim.communicate(timeout=10)[0])
     finally:
         if sim.poll() is None:

@@ -29,12 +29,19 @@ YAW_30 = (0.0, 0.0, math.sin(math.radians(15)), math.cos(math.radians(15)))  # w
 
 
 def reader(command_port: int, **extra: str):
-    query = "&".join(f"{k}={v}" for k, v in {"hostname": "127.0.0.1",
-                                             "interface_ip": "127.0.0.1",
-                                             "port_command": command_port, "body": "cf1",
-                                             **extra}.items())
-    return open_motioncapture(parse_uri(f"motioncapture://optitrack?{query}"),
-                              Runtime(MonotonicClock()))
+    query = "&".join(
+        f"{k}={v}"
+        for k, v in {
+            "hostname": "127.0.0.1",
+            "interface_ip": "127.0.0.1",
+            "port_command": command_port,
+            "body": "cf1",
+            **extra,
+        }.items()
+    )
+    return open_motioncapture(
+        parse_uri(f"motioncapture://optitrack?{query}"), Runtime(MonotonicClock())
+    )
 
 
 def emulator(version=(4, 1)) -> NatNetServer:
@@ -63,8 +70,9 @@ def closing_time(src) -> float:
     return time.monotonic() - began
 
 
-@pytest.mark.parametrize("version", [(3, 0), (3, 1), (4, 0), (4, 1)],
-                         ids=["3.0", "3.1", "4.0", "4.1"])
+@pytest.mark.parametrize(
+    "version", [(3, 0), (3, 1), (4, 0), (4, 1)], ids=["3.0", "3.1", "4.0", "4.1"]
+)
 def test_libmotioncaptures_optitrack_backend_reads_the_emulator(version):
     server = emulator(version)
     publish(server)
@@ -109,8 +117,11 @@ def test_a_server_that_never_answers_fails_within_the_timeout():
         silent.bind(("127.0.0.1", 0))
         src = reader(silent.getsockname()[1], timeout="0.5")
         began = time.monotonic()
-        with pytest.raises(LinkError, match=r"^motioncapture optitrack 127\.0\.0\.1: no answer "
-                                            r"within 0\.5 s"):
+        with pytest.raises(
+            LinkError,
+            match=r"^motioncapture optitrack 127\.0\.0\.1: no answer "
+            r"within 0\.5 s",
+        ):
             src.start()
         assert time.monotonic() - began < 1.0
 

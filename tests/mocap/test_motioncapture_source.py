@@ -25,8 +25,7 @@ WAND = "wand(0,0,1,1,0,0,0)"
 
 
 def source(query: str):
-    return open_motioncapture(parse_uri(f"motioncapture://mock?{query}"),
-                              Runtime(MonotonicClock()))
+    return open_motioncapture(parse_uri(f"motioncapture://mock?{query}"), Runtime(MonotonicClock()))
 
 
 def mock_frames(rigid_bodies: str, seqs: range) -> list[str]:
@@ -40,8 +39,11 @@ def mock_frames(rigid_bodies: str, seqs: range) -> list[str]:
 
 def test_a_body_that_appears_vanishes_and_comes_back():
     src = source("body=cf1")
-    frames = (mock_frames(f"{CF1};{WAND}", range(1, 4)) + mock_frames(WAND, range(4, 7))
-              + mock_frames(CF1, range(7, 10)))
+    frames = (
+        mock_frames(f"{CF1};{WAND}", range(1, 4))
+        + mock_frames(WAND, range(4, 7))
+        + mock_frames(CF1, range(7, 10))
+    )
     seen = []
     for line in frames:
         src.handle_line(line, time.monotonic())
@@ -102,18 +104,23 @@ def test_a_body_the_system_does_not_have_is_dropped_every_frame():
 
 def test_the_librarys_connect_error_is_one_line():
     with pytest.raises(LinkError, match=r"^motioncapture optitrack not-an-ip: Invalid argument$"):
-        open_motioncapture(parse_uri("motioncapture://optitrack?hostname=not-an-ip&body=cf1"),
-                           Runtime(MonotonicClock())).start()
+        open_motioncapture(
+            parse_uri("motioncapture://optitrack?hostname=not-an-ip&body=cf1"),
+            Runtime(MonotonicClock()),
+        ).start()
 
 
-@pytest.mark.parametrize("uri, message", [
-    ("motioncapture://nokov?body=cf1", r"has no backend 'nokov'; it has: mock, optitrack"),
-    ("motioncapture://mock?body=cf1&hostnme=x", "unknown parameter 'hostnme'"),
-    ("motioncapture://optitrack?body=cf1&port_command=1510a", "not a whole number"),
-    ("motioncapture://mock?rigid_bodies=x", "body=NAME"),
-    ("motioncapture://mock?body=cf1&up=x", "up='x' must be y"),
-    ("motioncapture://mock?body=cf1&timeout=0", "timeout=0 s is outside"),
-])
+@pytest.mark.parametrize(
+    "uri, message",
+    [
+        ("motioncapture://nokov?body=cf1", r"has no backend 'nokov'; it has: mock, optitrack"),
+        ("motioncapture://mock?body=cf1&hostnme=x", "unknown parameter 'hostnme'"),
+        ("motioncapture://optitrack?body=cf1&port_command=1510a", "not a whole number"),
+        ("motioncapture://mock?rigid_bodies=x", "body=NAME"),
+        ("motioncapture://mock?body=cf1&up=x", "up='x' must be y"),
+        ("motioncapture://mock?body=cf1&timeout=0", "timeout=0 s is outside"),
+    ],
+)
 def test_bad_uris_are_one_line(uri, message):
     with pytest.raises(UriError, match=message):
         open_motioncapture(parse_uri(uri), Runtime(MonotonicClock()))

@@ -30,7 +30,9 @@ YAW_90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))  # world frame, about Z
 
 
 def serve(version=(4, 1), multicast=False, clock=None, **kw) -> NatNetServer:
-    return NatNetServer({"cf1": 1, "wand": 2}, version, multicast=multicast, clock=clock, **kw).start()
+    return NatNetServer(
+        {"cf1": 1, "wand": 2}, version, multicast=multicast, clock=clock, **kw
+    ).start()
 
 
 def connect(server: NatNetServer, runtime: Runtime, extra: str = ""):
@@ -48,14 +50,18 @@ def collect(server, source, poses_in, timeout=2.0):
 
 
 @pytest.mark.parametrize("multicast", [False, True], ids=["unicast", "multicast"])
-@pytest.mark.parametrize("version", [(2, 9), (3, 0), (4, 0), (4, 1)], ids=lambda v: f"{v[0]}.{v[1]}")
+@pytest.mark.parametrize(
+    "version", [(2, 9), (3, 0), (4, 0), (4, 1)], ids=lambda v: f"{v[0]}.{v[1]}"
+)
 def test_world_poses_go_through_motive_y_up_and_come_back(version, multicast):
     runtime = Runtime.real()
     server = serve(version, multicast)
     source = connect(server, runtime)
     try:
         assert source.version == version and source.multicast == multicast
-        sent = [Pose("cf1", 0, runtime.clock.now(), (0.5 + i, -1.25, 2.0), YAW_90) for i in range(3)]
+        sent = [
+            Pose("cf1", 0, runtime.clock.now(), (0.5 + i, -1.25, 2.0), YAW_90) for i in range(3)
+        ]
         got = collect(server, source, sent)
     finally:
         source.close()
@@ -85,7 +91,9 @@ def test_latency_on_the_real_clock_adds_the_transit_to_the_servers_delay():
     server = serve((4, 1))
     source = connect(server, runtime)
     try:
-        pose = collect(server, source, [Pose("cf1", 0, runtime.clock.now() - 0.004, (1.0, 0.0, 0.0), LEVEL)])[0]
+        pose = collect(
+            server, source, [Pose("cf1", 0, runtime.clock.now() - 0.004, (1.0, 0.0, 0.0), LEVEL)]
+        )[0]
     finally:
         source.close()
         server.close()
@@ -114,7 +122,9 @@ def test_a_body_can_be_named_by_its_id_and_then_carries_its_name():
     source = open_natnet(parse_uri(server.uri + "&body=2"), runtime)
     source.start()
     try:
-        pose = collect(server, source, [Pose("wand", 0, runtime.clock.now(), (0.0, 1.0, 2.0), LEVEL)])[0]
+        pose = collect(
+            server, source, [Pose("wand", 0, runtime.clock.now(), (0.0, 1.0, 2.0), LEVEL)]
+        )[0]
     finally:
         source.close()
         server.close()
@@ -133,22 +143,26 @@ def test_an_unknown_body_is_refused_naming_the_servers_bodies():
 def test_no_server_is_a_link_error_within_the_timeout():
     start = time.monotonic()
     with pytest.raises(LinkError, match="no NatNet server answered at 127.0.0.1:9 within 0.2 s"):
-        open_natnet(parse_uri("natnet://127.0.0.1:9?body=cf1&local=127.0.0.1&timeout=0.2"),
-                    Runtime.real()).start()
+        open_natnet(
+            parse_uri("natnet://127.0.0.1:9?body=cf1&local=127.0.0.1&timeout=0.2"), Runtime.real()
+        ).start()
     assert time.monotonic() - start < 1.0
 
 
-@pytest.mark.parametrize("query, message", [
-    ("", "body=NAME"),
-    ("body=cf1&up=x", "up='x'"),
-    ("body=cf1&transport=tcp", "transport='tcp'"),
-    ("body=cf1&multicast=10.0.0.1", "not a multicast address"),
-    ("body=cf1&local=nowhere", "local='nowhere'"),
-    ("body=cf1&data_port=70000", "data_port=70000 is outside"),
-    ("body=cf1&data_port=1511.5", "not a whole port"),
-    ("body=cf1&timeout=abc", "timeout='abc' is not a number"),
-    ("body=cf1&bodyy=cf1", "unknown parameter 'bodyy'"),
-])
+@pytest.mark.parametrize(
+    "query, message",
+    [
+        ("", "body=NAME"),
+        ("body=cf1&up=x", "up='x'"),
+        ("body=cf1&transport=tcp", "transport='tcp'"),
+        ("body=cf1&multicast=10.0.0.1", "not a multicast address"),
+        ("body=cf1&local=nowhere", "local='nowhere'"),
+        ("body=cf1&data_port=70000", "data_port=70000 is outside"),
+        ("body=cf1&data_port=1511.5", "not a whole port"),
+        ("body=cf1&timeout=abc", "timeout='abc' is not a number"),
+        ("body=cf1&bodyy=cf1", "unknown parameter 'bodyy'"),
+    ],
+)
 def test_bad_natnet_uris_get_one_clear_line(query, message):
     with pytest.raises(UriError, match=message):
         config_from_uri(parse_uri(f"natnet://10.0.0.5?{query}"))
@@ -157,7 +171,10 @@ def test_bad_natnet_uris_get_one_clear_line(query, message):
 def test_a_multicast_group_in_the_uri_selects_multicast():
     config = config_from_uri(parse_uri("natnet://10.0.0.5:1510?body=cf1&multicast=239.255.42.99"))
     assert (config.transport, config.multicast_group, config.command_port) == (
-        "multicast", "239.255.42.99", 1510)
+        "multicast",
+        "239.255.42.99",
+        1510,
+    )
 
 
 def frame_of(server: NatNetServer, number: int, p=(1.0, 2.0, 3.0), body_id: int = 1) -> bytes:
@@ -178,8 +195,10 @@ def test_bad_packets_are_counted_and_dropped_while_good_ones_flow(multicast, cap
         "truncated": [good[:-9], good[:40]],
         "oversized": [good + b"\0\0\0\0"],
         "out_of_order": [frame_of(server, 99)],
-        "bad_value": [frame_of(server, 101, (math.nan, 0.0, 0.0)),
-                      frame_of(server, 102, (1e9, 0.0, 0.0))],
+        "bad_value": [
+            frame_of(server, 101, (math.nan, 0.0, 0.0)),
+            frame_of(server, 102, (1e9, 0.0, 0.0)),
+        ],
         "no_body": [frame_of(server, 103, body_id=5)],
     }
     try:
@@ -221,6 +240,7 @@ def test_the_emulator_streams_at_its_rate_with_the_newest_pose():
 def test_the_emulator_answers_motives_string_requests():
     server = serve((4, 1), rate_hz=120.0)
     import socket
+
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.settimeout(1.0)
     try:
@@ -243,7 +263,9 @@ def test_the_client_follows_its_body_when_motive_redefines_the_models():
     server = serve((4, 1))
     source = connect(server, runtime)
     try:
-        first = collect(server, source, [Pose("cf1", 0, runtime.clock.now(), (1.0, 0.0, 0.0), LEVEL)])[0]
+        first = collect(
+            server, source, [Pose("cf1", 0, runtime.clock.now(), (1.0, 0.0, 0.0), LEVEL)]
+        )[0]
         server.redefine({"wand": 1, "cf1": 7})
         deadline, pose = time.monotonic() + 3.0, None
         while pose is None and time.monotonic() < deadline:
@@ -260,18 +282,24 @@ def test_the_client_follows_its_body_when_motive_redefines_the_models():
 def test_a_server_answering_garbage_is_a_link_error_not_a_traceback():
     import socket
     import threading
+
     fake = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     fake.bind(("127.0.0.1", 0))
 
     def answer():
         _, address = fake.recvfrom(2048)
         fake.sendto(proto.pack(proto.NAT_SERVERINFO, b"Motive\0"), address)  # cut short
+
     thread = threading.Thread(target=answer)
     thread.start()
     try:
         with pytest.raises(LinkError, match="natnet 127.0.0.1: .*bytes"):
-            open_natnet(parse_uri(f"natnet://127.0.0.1:{fake.getsockname()[1]}?body=cf1"
-                                  "&local=127.0.0.1&timeout=1"), Runtime.real()).start()
+            open_natnet(
+                parse_uri(
+                    f"natnet://127.0.0.1:{fake.getsockname()[1]}?body=cf1&local=127.0.0.1&timeout=1"
+                ),
+                Runtime.real(),
+            ).start()
     finally:
         thread.join()
         fake.close()

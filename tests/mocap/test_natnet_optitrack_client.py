@@ -38,8 +38,9 @@ def stop(client) -> None:
 @pytest.mark.parametrize("version", [(3, 0), (4, 1)], ids=["3.0", "4.1"])
 def test_optitracks_client_reads_the_emulator(version, multicast, capsys):
     clock = MonotonicClock()
-    server = NatNetServer({"cf1": 1, "wand": 2}, version, rate_hz=100.0,
-                          multicast=multicast).start()
+    server = NatNetServer(
+        {"cf1": 1, "wand": 2}, version, rate_hz=100.0, multicast=multicast
+    ).start()
     server.publish(Pose("cf1", 0, clock.now(), (0.5, 1.0, 1.5), (0.0, 0.0, 0.0, 1.0)))
     bodies, frames, printed = [], [], []
     client = natnetsdk.NatNetClient()
@@ -48,14 +49,18 @@ def test_optitracks_client_reads_the_emulator(version, multicast, capsys):
     client.set_use_multicast(multicast)
     client.command_port, client.data_port = server.command_port, server.data_port
     loopback_member = joined_on_loopback(server.group) if multicast else None
-    client.set_print_level(10 ** 9)  # quiet frames, but print the model definitions
+    client.set_print_level(10**9)  # quiet frames, but print the model definitions
     client.rigid_body_listener = lambda body_id, p, q: bodies.append((body_id, p, q))
     client.new_frame_listener = frames.append
     try:
         assert client.run()
         _until(lambda: len(frames) >= 5)
-        client.send_request(client.command_socket, client.NAT_REQUEST_MODELDEF, "",
-                            ("127.0.0.1", server.command_port))
+        client.send_request(
+            client.command_socket,
+            client.NAT_REQUEST_MODELDEF,
+            "",
+            ("127.0.0.1", server.command_port),
+        )
         _until(lambda: printed.append(capsys.readouterr().out) or "cf1" in "".join(printed))
     finally:
         stop(client)
@@ -75,8 +80,11 @@ def joined_on_loopback(group: str) -> socket.socket:
     """A socket holding `group` on loopback: Linux then hands the group's datagrams that
     arrive there to every socket bound to their port on 0.0.0.0 (IP_MULTICAST_ALL)."""
     member = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    member.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
-                      socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
+    member.setsockopt(
+        socket.IPPROTO_IP,
+        socket.IP_ADD_MEMBERSHIP,
+        socket.inet_aton(group) + socket.inet_aton("127.0.0.1"),
+    )
     return member
 
 

@@ -17,8 +17,9 @@ from perchd.mocap.outputs import NATNET_OPTIONS, natnet_options_help, open_pose_
 
 def test_the_announced_data_port_is_free_for_a_client_to_bind():
     port = free_udp_port()
-    out = open_pose_output(f"natnet://127.0.0.1:0?multicast=1&data_port={port}", ["cf1"],
-                           MonotonicClock())
+    out = open_pose_output(
+        f"natnet://127.0.0.1:0?multicast=1&data_port={port}", ["cf1"], MonotonicClock()
+    )
     try:
         assert out.server.server_info().data_port == port
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as client:
@@ -36,12 +37,15 @@ def test_an_ephemeral_server_announces_a_free_data_port(query):
         out.close()
 
 
-@pytest.mark.parametrize("query, message", [
-    ("group=10.0.0.1", "group=10.0.0.1 is not a multicast address"),
-    ("data_port=70000", "data_port=70000 is outside"),
-    ("data_port=1.5", "not a whole port"),
-    ("port=1511", "unknown parameter 'port'"),
-])
+@pytest.mark.parametrize(
+    "query, message",
+    [
+        ("group=10.0.0.1", "group=10.0.0.1 is not a multicast address"),
+        ("data_port=70000", "data_port=70000 is outside"),
+        ("data_port=1.5", "not a whole port"),
+        ("port=1511", "unknown parameter 'port'"),
+    ],
+)
 def test_bad_options_are_one_line(query, message):
     with pytest.raises(UriError, match=message):
         open_pose_output(f"natnet://127.0.0.1:0?{query}", ["cf1"], MonotonicClock())

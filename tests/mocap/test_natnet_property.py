@@ -73,7 +73,7 @@ def test_the_unmutated_real_packets_all_become_poses():
     assert source.stats().poses == len(REAL) and source.stats().dropped == 0
 
 
-f32 = st.integers(-2 ** 20, 2 ** 20).map(lambda i: i / 1024.0)  # exactly representable
+f32 = st.integers(-(2**20), 2**20).map(lambda i: i / 1024.0)  # exactly representable
 vec3 = st.tuples(f32, f32, f32)
 quat = st.tuples(f32, f32, f32, f32)
 
@@ -81,30 +81,61 @@ quat = st.tuples(f32, f32, f32, f32)
 @st.composite
 def frames(draw, version) -> Frame:
     old = version < (3, 0)
-    markers = st.lists(st.tuples(vec3, st.integers(0, 99), f32), max_size=3).map(tuple) if old \
+    markers = (
+        st.lists(st.tuples(vec3, st.integers(0, 99), f32), max_size=3).map(tuple)
+        if old
         else st.just(())
-    body = st.builds(RigidBodySample, st.integers(0, 1000), vec3, quat,
-                     f32 if version >= (2, 0) else st.just(0.0),
-                     st.booleans() if version >= (2, 6) else st.just(True), markers)
-    marker = st.builds(LabeledMarker, st.integers(-2 ** 31, 2 ** 31 - 1), vec3, f32,
-                       st.integers(0, 63) if version >= (2, 6) else st.just(0),
-                       f32 if version >= (3, 0) else st.just(0.0))
-    device = st.builds(AnalogDevice, st.integers(0, 9),
-                       st.lists(st.lists(f32, max_size=3).map(tuple), max_size=2).map(tuple))
-    stamps = st.integers(1, 2 ** 63) if version >= (3, 0) else st.none()
-    timing = Timing(draw(f32 if version >= (2, 6) else st.just(0.0)), draw(stamps), draw(stamps),
-                    draw(stamps), draw(f32) if old else None, draw(st.integers(0, 2 ** 32 - 1)),
-                    draw(st.integers(0, 2 ** 32 - 1)),
-                    *(draw(st.integers(0, 2 ** 32 - 1)) for _ in range(2) if version >= (4, 1)))
-    lists = lambda s, allowed=True: st.lists(s, max_size=3).map(tuple) if allowed else st.just(())
+    )
+    body = st.builds(
+        RigidBodySample,
+        st.integers(0, 1000),
+        vec3,
+        quat,
+        f32 if version >= (2, 0) else st.just(0.0),
+        st.booleans() if version >= (2, 6) else st.just(True),
+        markers,
+    )
+    marker = st.builds(
+        LabeledMarker,
+        st.integers(-(2**31), 2**31 - 1),
+        vec3,
+        f32,
+        st.integers(0, 63) if version >= (2, 6) else st.just(0),
+        f32 if version >= (3, 0) else st.just(0.0),
+    )
+    device = st.builds(
+        AnalogDevice,
+        st.integers(0, 9),
+        st.lists(st.lists(f32, max_size=3).map(tuple), max_size=2).map(tuple),
+    )
+    stamps = st.integers(1, 2**63) if version >= (3, 0) else st.none()
+    timing = Timing(
+        draw(f32 if version >= (2, 6) else st.just(0.0)),
+        draw(stamps),
+        draw(stamps),
+        draw(stamps),
+        draw(f32) if old else None,
+        draw(st.integers(0, 2**32 - 1)),
+        draw(st.integers(0, 2**32 - 1)),
+        *(draw(st.integers(0, 2**32 - 1)) for _ in range(2) if version >= (4, 1)),
+    )
+
+    def lists(s, allowed=True):
+        return st.lists(s, max_size=3).map(tuple) if allowed else st.just(())
+
     return Frame(
-        draw(st.integers(-2 ** 31, 2 ** 31 - 1)), draw(lists(body)), timing,
+        draw(st.integers(-(2**31), 2**31 - 1)),
+        draw(lists(body)),
+        timing,
         draw(lists(st.tuples(st.text("abcxyz ", min_size=1, max_size=8), lists(vec3)))),
         draw(lists(vec3)),
         draw(lists(st.builds(Skeleton, st.integers(0, 9), lists(body)), version >= (2, 1))),
-        (), draw(lists(marker, version >= (2, 3))), draw(lists(device, version >= (2, 9))),
+        (),
+        draw(lists(marker, version >= (2, 3))),
+        draw(lists(device, version >= (2, 9))),
         draw(lists(device, version >= (2, 11))),
-        draw(st.integers(0, 3)) if version >= (2, 6) else 0)
+        draw(st.integers(0, 3)) if version >= (2, 6) else 0,
+    )
 
 
 @settings(max_examples=40, deadline=None)

@@ -45,7 +45,10 @@ def test_the_reference_frame_carries_motives_stamps_and_latency():
     frame = decode_frame(payload(V3 / "mocapframe_packet_v3.bin"), (3, 0))
     t = frame.timing
     assert (t.camera_mid_exposure, t.data_received, t.transmit) == (
-        1416497730518, 1416497745808, 1416497748722)
+        1416497730518,
+        1416497745808,
+        1416497748722,
+    )
     clock_hz = proto.decode_server_info(payload(V3 / "serverinfo_packet_v3.bin")).clock_hz
     assert clock_hz == 3312787
     assert (t.transmit - t.camera_mid_exposure) / clock_hz == pytest.approx(5.50e-3, abs=0.005e-3)
@@ -68,10 +71,13 @@ def test_a_natnet_2_10_frame_has_an_untracked_body_and_a_21_bone_skeleton():
     assert len(frame.labeled_markers) == 44
 
 
-@pytest.mark.parametrize("motive, version, timestamped", [
-    ("1.5.0", (2, 5), False), ("1.7.2", (2, 7), True), ("1.9.0", (2, 9), True)])
+@pytest.mark.parametrize(
+    "motive, version, timestamped",
+    [("1.5.0", (2, 5), False), ("1.7.2", (2, 7), True), ("1.9.0", (2, 9), True)],
+)
 def test_natnet_2_5_to_2_9_frames_decode_with_the_version_their_server_announces(
-        motive, version, timestamped):
+    motive, version, timestamped
+):
     info = proto.decode_server_info(payload(V2X / f"frame-motive-{motive}-000.bin"))
     assert info.version == version
     numbers = []
@@ -91,7 +97,8 @@ def test_server_info_and_model_definitions_decode():
     assert (info.data_port, info.multicast, info.multicast_group) == (1511, True, "239.255.42.99")
     defs = natdefs.decode_model_defs(payload(V3 / "modeldef_packet_v3.bin"), (3, 0))
     assert [(b.name, b.id, b.parent_id, len(b.markers)) for b in defs.rigid_bodies] == [
-        ("RaceQuad", 2, -1, 5)]
+        ("RaceQuad", 2, -1, 5)
+    ]
     assert [name for name, _ in defs.marker_sets] == ["RaceQuad", "all"]
     cameras = natdefs.decode_model_defs(payload(V3 / "modeldef_packet_v3_2.bin"), (3, 0))
     assert cameras.body_ids() == {"crossbow": 54}
@@ -105,8 +112,9 @@ def test_server_info_and_model_definitions_decode():
 
 def test_the_encoder_reproduces_motives_bytes():
     for name, decode, encode in [
-            ("mocapframe_packet_v3.bin", decode_frame, encode_frame),
-            ("modeldef_packet_v3.bin", natdefs.decode_model_defs, natdefs.encode_model_defs)]:
+        ("mocapframe_packet_v3.bin", decode_frame, encode_frame),
+        ("modeldef_packet_v3.bin", natdefs.decode_model_defs, natdefs.encode_model_defs),
+    ]:
         body = payload(V3 / name)
         assert encode(decode(body, (3, 0)), (3, 0)) == body
 
@@ -115,7 +123,10 @@ def test_client_requests_match_what_natnetlib_sends():
     connect = packet(V3 / "connect_packet_v3.bin")
     assert proto.connect_request((3, 0, 0, 0)) == connect
     assert proto.pack(proto.NAT_REQUEST_MODELDEF) == packet(V3 / "requestmodeldef_packet_v3.bin")
-    request, response = packet(V3 / "echorequest_packet_v3.bin"), packet(V3 / "echoresponse_packet_v3.bin")
+    request, response = (
+        packet(V3 / "echorequest_packet_v3.bin"),
+        packet(V3 / "echoresponse_packet_v3.bin"),
+    )
     stamp = struct.unpack_from("<Q", request, 4)[0]
     assert proto.echo_request(stamp) == request
     assert proto.decode_echo_response(response[4:])[0] == stamp
@@ -123,10 +134,18 @@ def test_client_requests_match_what_natnetlib_sends():
 
 def test_the_client_replays_the_whole_session_from_recorded_motive_over_udp():
     motive = RecordedMotive()
-    source = NatNetSource(NatNetConfig("127.0.0.1", "RaceQuad", command_port=motive.port,
-                                       transport="unicast", local="127.0.0.1", up=UpAxis.Z,
-                                       connect_timeout_s=0.3),
-                          Runtime.real().clock)
+    source = NatNetSource(
+        NatNetConfig(
+            "127.0.0.1",
+            "RaceQuad",
+            command_port=motive.port,
+            transport="unicast",
+            local="127.0.0.1",
+            up=UpAxis.Z,
+            connect_timeout_s=0.3,
+        ),
+        Runtime.real().clock,
+    )
     try:
         source.start()
         assert source.version == (3, 0) and not source.multicast

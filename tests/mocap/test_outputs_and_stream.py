@@ -18,10 +18,16 @@ from perchd.mocap.stream import Drop, PoseLimits, PoseStream, RateLimitedWarning
 LEVEL = (0.0, 0.0, 0.0, 1.0)
 
 
-@pytest.mark.parametrize("text", [
-    "natnet://127.0.0.1:0", "natnet://127.0.0.1:0?version=3.0&rate=200",
-    "natnet://127.0.0.1:0?version=2.9&multicast=1", "natnet://127.0.0.1:0?multicast=1&up=z",
-    "zmq://127.0.0.1:0"])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "natnet://127.0.0.1:0",
+        "natnet://127.0.0.1:0?version=3.0&rate=200",
+        "natnet://127.0.0.1:0?version=2.9&multicast=1",
+        "natnet://127.0.0.1:0?multicast=1&up=z",
+        "zmq://127.0.0.1:0",
+    ],
+)
 def test_an_output_opened_by_uri_is_read_back_by_the_uri_it_names(text):
     runtime = Runtime.real()
     output = open_pose_output(text, ["cf1"], runtime.clock)
@@ -39,23 +45,27 @@ def test_an_output_opened_by_uri_is_read_back_by_the_uri_it_names(text):
     assert pose is not None and pose.p == pytest.approx((0.5, 1.5, 2.5))
 
 
-@pytest.mark.parametrize("text, message", [
-    ("udp://127.0.0.1:5", "natnet://HOST"),
-    ("zmq://127.0.0.1", "zmq://HOST:PORT"),
-    ("natnet://127.0.0.1:0?version=5.0", "outside the NatNet 2.0..4.1"),
-    ("natnet://127.0.0.1:0?version=four", "not MAJOR.MINOR"),
-    ("natnet://127.0.0.1:0?rate=0", "rate=0 Hz is outside"),
-    ("natnet://127.0.0.1:0?speed=1", "unknown parameter 'speed'"),
-    ("natnet://127.0.0.1:0?up=w", "up='w'"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("udp://127.0.0.1:5", "natnet://HOST"),
+        ("zmq://127.0.0.1", "zmq://HOST:PORT"),
+        ("natnet://127.0.0.1:0?version=5.0", "outside the NatNet 2.0..4.1"),
+        ("natnet://127.0.0.1:0?version=four", "not MAJOR.MINOR"),
+        ("natnet://127.0.0.1:0?rate=0", "rate=0 Hz is outside"),
+        ("natnet://127.0.0.1:0?speed=1", "unknown parameter 'speed'"),
+        ("natnet://127.0.0.1:0?up=w", "up='w'"),
+    ],
+)
 def test_bad_output_uris_get_one_clear_line(text, message):
     with pytest.raises(UriError, match=message):
         open_pose_output(text, ["cf1"], Runtime.real().clock)
 
 
 def stream(**limits) -> PoseStream:
-    return PoseStream("cf1", PoseLimits(**limits),
-                      RateLimitedWarning(logging.getLogger("test.stream"), "test"))
+    return PoseStream(
+        "cf1", PoseLimits(**limits), RateLimitedWarning(logging.getLogger("test.stream"), "test")
+    )
 
 
 def pose(seq, p=(0.0, 0.0, 1.0), q=LEVEL, valid=True, latency=0.0) -> Pose:
@@ -78,10 +88,16 @@ def test_a_quaternion_is_normalised_and_an_invalid_pose_is_kept_printable():
     assert s.latest().p == (0.0, 0.0, 0.0) and not s.latest().valid
 
 
-@pytest.mark.parametrize("bad, reason", [
-    (pose(1, latency=0.6), Drop.STALE), (pose(1, latency=-0.1), Drop.STALE),
-    (pose(1, p=(0.0, math.inf, 0.0)), Drop.BAD_VALUE), (pose(1, p=(2000.0, 0.0, 0.0)), Drop.BAD_VALUE),
-    (pose(1, q=(0.0, 0.0, 0.0, 0.5)), Drop.BAD_VALUE)])
+@pytest.mark.parametrize(
+    "bad, reason",
+    [
+        (pose(1, latency=0.6), Drop.STALE),
+        (pose(1, latency=-0.1), Drop.STALE),
+        (pose(1, p=(0.0, math.inf, 0.0)), Drop.BAD_VALUE),
+        (pose(1, p=(2000.0, 0.0, 0.0)), Drop.BAD_VALUE),
+        (pose(1, q=(0.0, 0.0, 0.0, 0.5)), Drop.BAD_VALUE),
+    ],
+)
 def test_unbelievable_poses_are_dropped_with_their_reason(bad, reason):
     s = stream()
     assert not s.offer(bad)

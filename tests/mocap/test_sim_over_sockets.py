@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 from caseplans import case1_ipts
-from perchd.drivers.base import open_driver
 
 import perchd.flight.run as flight
 from perchd.core.clock import ManualClock
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
+from perchd.drivers.base import open_driver
 from perchd.mocap.base import open_source
 from perchd.mocap.outputs import open_pose_output
 from perchd.mocap.relay import RelayedSource
@@ -28,8 +28,14 @@ def perch(tmp_path: Path, output: str | None):
         source = RelayedSource(source, open_pose_output(output, ["cf1"], runtime.clock), runtime)
     source.start()
     try:
-        result = flight.fly(case1_ipts(), driver, source, runtime.clock,
-                            tmp_path / "flight.jsonl", world=runtime.sim)
+        result = flight.fly(
+            case1_ipts(),
+            driver,
+            source,
+            runtime.clock,
+            tmp_path / "flight.jsonl",
+            world=runtime.sim,
+        )
     finally:
         source.close()
         driver.close()
@@ -41,9 +47,11 @@ def in_process(tmp_path_factory):
     return perch(tmp_path_factory.mktemp("in_process"), None)[0]
 
 
-@pytest.mark.parametrize("output", [
-    "natnet://127.0.0.1:0", "natnet://127.0.0.1:0?version=3.0&multicast=1",
-    "zmq://127.0.0.1:0"], ids=["natnet-4.1-unicast", "natnet-3.0-multicast", "zmq"])
+@pytest.mark.parametrize(
+    "output",
+    ["natnet://127.0.0.1:0", "natnet://127.0.0.1:0?version=3.0&multicast=1", "zmq://127.0.0.1:0"],
+    ids=["natnet-4.1-unicast", "natnet-3.0-multicast", "zmq"],
+)
 def test_a_perch_over_sockets_ends_as_the_in_process_one(output, in_process, tmp_path):
     result, stats = perch(tmp_path, output)
     assert in_process.outcome is EndReason.CONTACT

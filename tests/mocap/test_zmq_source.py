@@ -39,7 +39,9 @@ def link():
 
 def test_poses_arrive_as_sent_with_their_latency(link):
     publisher, source, runtime = link
-    sent = Pose("cf1", 17, runtime.clock.now() - 0.010, (1.0, -2.0, 0.5), (0.0, 0.0, 0.6, 0.8), False)
+    sent = Pose(
+        "cf1", 17, runtime.clock.now() - 0.010, (1.0, -2.0, 0.5), (0.0, 0.0, 0.6, 0.8), False
+    )
     publisher.publish(sent)
     got = source.wait(-1, 2.0)
     assert (got.body, got.seq, got.p, got.q, got.valid) == ("cf1", 17, sent.p, sent.q, False)
@@ -49,8 +51,13 @@ def test_poses_arrive_as_sent_with_their_latency(link):
 def test_the_message_is_the_contract_json():
     pose = Pose("cf1", 17, 12.345, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), True, 0.004)
     assert json.loads(pose_message(pose)) == {
-        "body": "cf1", "seq": 17, "t": 12.345, "p": [1.0, 2.0, 3.0], "q": [0.0, 0.0, 0.0, 1.0],
-        "valid": True}
+        "body": "cf1",
+        "seq": 17,
+        "t": 12.345,
+        "p": [1.0, 2.0, 3.0],
+        "q": [0.0, 0.0, 0.0, 1.0],
+        "valid": True,
+    }
     assert parse_pose_message(pose_message(pose)) == ("cf1", 17, 12.345, pose.p, pose.q, True)
 
 
@@ -63,15 +70,34 @@ def test_bad_messages_are_counted_and_dropped_while_good_ones_flow(link):
         return json.dumps({**fields, **changes}).encode()
 
     bad = {
-        "garbage": [[b"pose", b"{not json"], [b"pose", b"[1, 2]"], [b"pose", good(5)[:-1]],
-                    [b"pose", good(5, q=[0, 0, 1])], [b"pose", json.dumps({"body": "cf1", "seq": "5", "t": now, "p": [0, 0, 0],
-                                            "q": [0, 0, 0, 1]}).encode()],
-                    [b"pose", good(5, valid="yes")], [b"pose", good(5), b"extra"]],
+        "garbage": [
+            [b"pose", b"{not json"],
+            [b"pose", b"[1, 2]"],
+            [b"pose", good(5)[:-1]],
+            [b"pose", good(5, q=[0, 0, 1])],
+            [
+                b"pose",
+                json.dumps(
+                    {"body": "cf1", "seq": "5", "t": now, "p": [0, 0, 0], "q": [0, 0, 0, 1]}
+                ).encode(),
+            ],
+            [b"pose", good(5, valid="yes")],
+            [b"pose", good(5), b"extra"],
+        ],
         "oversized": [[b"pose", b" " * (70 * 1024)]],
-        "bad_value": [[b"pose", good(6, (math.nan, 0, 0))], [b"pose", good(7, (1e7, 0, 0))],
-                      [b"pose", good(8, q=[0, 0, 0, 3])]],
-        "stale": [[b"pose", json.dumps({"body": "cf1", "seq": 9, "t": now - 5.0, "p": [0, 0, 0],
-                                        "q": [0, 0, 0, 1]}).encode()]],
+        "bad_value": [
+            [b"pose", good(6, (math.nan, 0, 0))],
+            [b"pose", good(7, (1e7, 0, 0))],
+            [b"pose", good(8, q=[0, 0, 0, 3])],
+        ],
+        "stale": [
+            [
+                b"pose",
+                json.dumps(
+                    {"body": "cf1", "seq": 9, "t": now - 5.0, "p": [0, 0, 0], "q": [0, 0, 0, 1]}
+                ).encode(),
+            ]
+        ],
         "wrong_body": [[b"pose", good(10).replace(b'"cf1"', b'"cf2"')]],
         "out_of_order": [[b"pose", good(3)]],
     }
@@ -117,18 +143,20 @@ def test_a_simulated_clock_gives_exact_latency():
     assert pose.latency == pytest.approx(0.02) and pose.t == pytest.approx(2.98)
 
 
-@pytest.mark.parametrize("uri, message", [
-    ("zmq://127.0.0.1:5555", "body=NAME is required"),
-    ("zmq://127.0.0.1?body=cf1", "needs host and port"),
-    ("zmq://127.0.0.1:5555?body=cf1&clock=gps", "clock='gps'"),
-    ("zmq://127.0.0.1:5555?body=cf1&bind=maybe", "bind='maybe'"),
-    ("zmq://127.0.0.1:5555?body=cf1&max_age=-1", "max_age=-1 s is outside"),
-    ("zmq://127.0.0.1:5555?body=cf1&boddy=x", "unknown parameter 'boddy'"),
-])
+@pytest.mark.parametrize(
+    "uri, message",
+    [
+        ("zmq://127.0.0.1:5555", "body=NAME is required"),
+        ("zmq://127.0.0.1?body=cf1", "needs host and port"),
+        ("zmq://127.0.0.1:5555?body=cf1&clock=gps", "clock='gps'"),
+        ("zmq://127.0.0.1:5555?body=cf1&bind=maybe", "bind='maybe'"),
+        ("zmq://127.0.0.1:5555?body=cf1&max_age=-1", "max_age=-1 s is outside"),
+        ("zmq://127.0.0.1:5555?body=cf1&boddy=x", "unknown parameter 'boddy'"),
+    ],
+)
 def test_bad_zmq_uris_get_one_clear_line(uri, message):
     with pytest.raises(UriError, match=message):
         open_source(uri, Runtime.real())
-
 
 
 def test_a_source_can_bind_and_the_publisher_connect():
@@ -148,18 +176,35 @@ def test_a_source_can_bind_and_the_publisher_connect():
 
 json_values = st.recursive(
     st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
-    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner, max_size=4),
-    max_leaves=12)
-fields = st.fixed_dictionaries({}, optional={
-    "body": st.sampled_from(["cf1", "cf2", 3]), "seq": json_values | st.integers(),
-    "t": json_values, "p": json_values | st.lists(st.floats(), min_size=3, max_size=3),
-    "q": json_values | st.lists(st.floats(), min_size=4, max_size=4), "valid": json_values})
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner, max_size=4)
+    ),
+    max_leaves=12,
+)
+fields = st.fixed_dictionaries(
+    {},
+    optional={
+        "body": st.sampled_from(["cf1", "cf2", 3]),
+        "seq": json_values | st.integers(),
+        "t": json_values,
+        "p": json_values | st.lists(st.floats(), min_size=3, max_size=3),
+        "q": json_values | st.lists(st.floats(), min_size=4, max_size=4),
+        "valid": json_values,
+    },
+)
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.lists(st.one_of(
-    st.lists(st.binary(max_size=64), max_size=3),
-    fields.map(lambda f: [b"pose", json.dumps(f).encode()])), min_size=1, max_size=6))
+@given(
+    st.lists(
+        st.one_of(
+            st.lists(st.binary(max_size=64), max_size=3),
+            fields.map(lambda f: [b"pose", json.dumps(f).encode()]),
+        ),
+        min_size=1,
+        max_size=6,
+    )
+)
 def test_arbitrary_messages_never_raise_and_are_counted(messages):
     source = ZmqPoseSource("tcp://127.0.0.1:1", "cf1", ManualClock(5.0))
     for frames in messages:

@@ -68,8 +68,11 @@ def talk(path, payload: bytes, lines: int):
 
 
 def test_each_line_gets_one_reply_and_bad_lines_get_errors(served, tmp_path):
-    replies = talk(tmp_path / "c.sock", b'{"cmd":"status"}\nnot json\n[1,2]\n{"cmd":"boom"}\n'
-                                        b'{"cmd": "status", "x": 1}\n', 5)
+    replies = talk(
+        tmp_path / "c.sock",
+        b'{"cmd":"status"}\nnot json\n[1,2]\n{"cmd":"boom"}\n{"cmd": "status", "x": 1}\n',
+        5,
+    )
     assert replies[0] == {"ok": True, "echo": {"cmd": "status"}}
     assert replies[1]["ok"] is False and "malformed request" in replies[1]["error"]
     assert replies[2] == {"ok": False, "error": 'a request is a JSON object with a "cmd" string'}
@@ -144,10 +147,15 @@ def wait_until(cond, timeout=5.0):
 
 
 def test_a_duplicate_key_is_refused_in_one_line(served, tmp_path):
-    replies = talk(tmp_path / "c.sock", b'{"cmd": "status", "cmd": "fly"}\n'
-                                        b'{"cmd": "status", "x": {"a": 1, "a": 2}}\n', 2)
-    assert replies == [{"ok": False, "error": "malformed request: key 'cmd' given twice"},
-                       {"ok": False, "error": "malformed request: key 'a' given twice"}]
+    replies = talk(
+        tmp_path / "c.sock",
+        b'{"cmd": "status", "cmd": "fly"}\n{"cmd": "status", "x": {"a": 1, "a": 2}}\n',
+        2,
+    )
+    assert replies == [
+        {"ok": False, "error": "malformed request: key 'cmd' given twice"},
+        {"ok": False, "error": "malformed request: key 'a' given twice"},
+    ]
     assert served.calls == []
 
 
@@ -158,7 +166,9 @@ def test_a_silent_client_is_closed_after_the_idle_timeout_and_a_talking_one_is_n
     assert json.loads(talking.makefile("rb").readline())["ok"] is True
     bounded.server.clock.advance(15.0)  # silent 35 s, talking 15 s
     assert json.loads(silent.makefile("rb").readline()) == {
-        "ok": False, "error": "closed: nothing received for 30 s"}
+        "ok": False,
+        "error": "closed: nothing received for 30 s",
+    }
     assert silent.recv(10) == b""
     talking.sendall(b'{"cmd": "status"}\n')
     assert json.loads(talking.makefile("rb").readline())["ok"] is True
@@ -167,9 +177,14 @@ def test_a_silent_client_is_closed_after_the_idle_timeout_and_a_talking_one_is_n
 def test_over_the_bound_only_abort_is_served(bounded):
     conns = held(bounded, 2)
     over = talk(bounded.server.path, b'{"cmd": "status"}\n', 1)[0]
-    assert over == {"ok": False, "error": "2 clients connected already (the bound); over it only "
-                                          "abort is served: try again once one closes"}
-    assert talk(bounded.server.path, b'{"cmd": "abort"}\n', 1) == [{"ok": True, "echo": {"cmd": "abort"}}]
+    assert over == {
+        "ok": False,
+        "error": "2 clients connected already (the bound); over it only "
+        "abort is served: try again once one closes",
+    }
+    assert talk(bounded.server.path, b'{"cmd": "abort"}\n', 1) == [
+        {"ok": True, "echo": {"cmd": "abort"}}
+    ]
     conns[0].sendall(b'{"cmd": "status"}\n')  # the held ones are served as before
     assert json.loads(conns[0].makefile("rb").readline())["ok"] is True
 
@@ -180,7 +195,8 @@ def test_a_full_reserve_gives_way_to_the_newest_connection(bounded):
     assert all(c.reserved for c in list(bounded.server.clients.values())[2:])
     assert talk(bounded.server.path, b'{"cmd": "abort"}\n', 1)[0]["echo"] == {"cmd": "abort"}
     assert json.loads(reserve[0].makefile("rb").readline())["error"].startswith(
-        "2 clients connected already (the bound)")
+        "2 clients connected already (the bound)"
+    )
     bounded.server.clock.advance(RESERVED_WAIT_S + 0.1)  # a reserve slot is held briefly
     assert json.loads(reserve[1].makefile("rb").readline())["error"].startswith("closed: nothing")
     regular[0].sendall(b'{"cmd": "status"}\n')  # the bound's own clients were left alone

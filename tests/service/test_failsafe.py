@@ -33,12 +33,16 @@ def set_modes(d: VehicleDouble) -> list[int]:
     return [m for _, m in d.modes]
 
 
-@pytest.mark.parametrize("double, land", [((ARDUPILOT, GUIDED_NOGPS), LAND),
-                                          ((PX4, PX4_OFFBOARD), PX4_AUTO_LAND)],
-                         indirect=["double"], ids=["ardupilot", "px4"])
+@pytest.mark.parametrize(
+    "double, land",
+    [((ARDUPILOT, GUIDED_NOGPS), LAND), ((PX4, PX4_OFFBOARD), PX4_AUTO_LAND)],
+    indirect=["double"],
+    ids=["ardupilot", "px4"],
+)
 def test_mavlink_in_perchds_mode_is_landed(double, land):
-    done = failsafe("--driver", double.uri, SERVICE_RESULT="signal", EXIT_CODE="killed",
-                    EXIT_STATUS="KILL")
+    done = failsafe(
+        "--driver", double.uri, SERVICE_RESULT="signal", EXIT_CODE="killed", EXIT_STATUS="KILL"
+    )
     assert done.returncode == 0, done.stderr
     assert done.stdout.count("\n") == 1 and "LAND commanded" in done.stdout
     assert "(SERVICE_RESULT=signal, EXIT_CODE=killed, EXIT_STATUS=KILL)" in done.stdout
@@ -69,7 +73,10 @@ def test_no_vehicle_is_one_line_and_exit_1_within_the_timeout_unless_the_stop_wa
         failed = failsafe("--driver", uri, SERVICE_RESULT="exit-code")
         clean = failsafe("--driver", uri, SERVICE_RESULT="success")
     assert failed.returncode == 1 and failed.stderr.count("\n") == 1
-    assert "no heartbeat from the vehicle" in failed.stderr and "SERVICE_RESULT=exit-code" in failed.stderr
+    assert (
+        "no heartbeat from the vehicle" in failed.stderr
+        and "SERVICE_RESULT=exit-code" in failed.stderr
+    )
     assert clean.returncode == 0 and "stopped cleanly after its own failsafe" in clean.stdout
 
 
@@ -109,14 +116,17 @@ def test_crazyflie_without_a_keeper_gets_the_stop_setpoint(responder):
 
 def test_crazyflie_whose_keeper_still_holds_the_link_is_left_to_it(responder):
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-    keeper = subprocess.Popen([sys.executable, "-m", "perchd.drivers.cflink", str(theirs.fileno()),
-                               responder.uri, "3.0"], pass_fds=(theirs.fileno(),))
+    keeper = subprocess.Popen(
+        [sys.executable, "-m", "perchd.drivers.cflink", str(theirs.fileno()), responder.uri, "3.0"],
+        pass_fds=(theirs.fileno(),),
+    )
     theirs.close()
     agent = threading.Event()  # set: the agent has gone quiet
 
     def alive() -> None:  # the driver's alive message; without it the keeper lands at once
         while not agent.wait(0.02):
             ours.send(b"A")
+
     threading.Thread(target=alive, daemon=True).start()  # from the start, as the driver's
     try:
         ours.settimeout(15)

@@ -20,8 +20,15 @@ pytestmark = pytest.mark.slow
 def flying(tmp_path, notify):
     """A service on sim:// in the middle of a flight that hovers 30 s before its approach, so
     the abort comes before contact however loaded the machine; yields it and the log path."""
-    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://",
-                  tables="[approach]\nhold_s = 30.0\n")
+    serve = Serve(
+        tmp_path,
+        notify,
+        "--driver",
+        "sim://",
+        "--mocap",
+        "sim://",
+        tables="[approach]\nhold_s = 30.0\n",
+    )
     try:
         notify.wait_for("READY=1", timeout=30.0)
         started = ctl(serve.sock, "fly", PLAN.name)
@@ -40,7 +47,9 @@ def exhaust(sock) -> list[socket.socket]:
         idle.append(c)
     refused = perchd("ctl", "--socket", str(sock), "status")
     assert refused.returncode == 1 and refused.stderr.count("\n") == 1
-    assert refused.stderr.startswith(f"perchd ctl: {MAX_CLIENTS} clients connected already (the bound)")
+    assert refused.stderr.startswith(
+        f"perchd ctl: {MAX_CLIENTS} clients connected already (the bound)"
+    )
     return idle
 
 

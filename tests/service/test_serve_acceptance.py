@@ -36,7 +36,9 @@ def test_sigterm_mid_flight_sends_the_failsafe_closes_the_log_and_exits_0(tmp_pa
         started = ctl(serve.sock, "fly", str(PLAN))
         assert started["ok"] and started["flying"]
         assert ctl(serve.sock, "fly", str(PLAN)) == {
-            "ok": False, "error": "a flight is in progress; abort it or wait"}
+            "ok": False,
+            "error": "a flight is in progress; abort it or wait",
+        }
         mid = serve.wait_phase({"stage1"})
         assert mid["state"] == "flying" and mid["x"] < 0
         pings = notify.count("WATCHDOG=1")
@@ -65,7 +67,9 @@ def test_abort_over_the_socket_ends_the_flight_and_the_service_flies_again(tmp_p
         serve.wait_phase({"takeoff", "hold", "approach"})
         assert ctl(serve.sock, "abort")["aborting"] is True
         deadline = time.monotonic() + 5
-        while (st := ctl(serve.sock, "status"))["state"] == "flying" and time.monotonic() < deadline:
+        while (st := ctl(serve.sock, "status"))[
+            "state"
+        ] == "flying" and time.monotonic() < deadline:
             time.sleep(0.05)
         assert st["last"]["outcome"] == "OPERATOR_ABORT" and st["last"]["failsafe_sent"]
         assert ctl(serve.sock, "abort") == {"ok": True, "flying": False, "failsafe_sent": True}
@@ -130,7 +134,10 @@ def test_the_idle_watchdog_stops_when_the_link_to_the_vehicle_dies(tmp_path, not
         notify.messages.clear()
         notify.drain(1.5)
         assert notify.count("WATCHDOG=1") == 0  # systemd would now restart the service
-        assert ctl(serve.sock, "fly", str(PLAN)) == {"ok": False, "error": "the link to the vehicle is down"}
+        assert ctl(serve.sock, "fly", str(PLAN)) == {
+            "ok": False,
+            "error": "the link to the vehicle is down",
+        }
         serve.proc.send_signal(signal.SIGTERM)
         code, _ = serve.stop()
     finally:
@@ -143,8 +150,23 @@ def test_a_flight_through_ctl_wait_perches_on_the_configured_surface(tmp_path, n
     serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://", tables=wall)
     try:
         notify.wait_for("READY=1")
-        done = subprocess.run([sys.executable, "-m", "perchd", "ctl", "fly", str(PLAN), "--wait", "--json",
-                               "--socket", str(serve.sock)], capture_output=True, text=True, timeout=30)
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "perchd",
+                "ctl",
+                "fly",
+                str(PLAN),
+                "--wait",
+                "--json",
+                "--socket",
+                str(serve.sock),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         serve.proc.send_signal(signal.SIGTERM)
         serve.stop()
     finally:
@@ -152,5 +174,8 @@ def test_a_flight_through_ctl_wait_perches_on_the_configured_surface(tmp_path, n
     out = json.loads(done.stdout)
     assert done.returncode == 0 and out["outcome"] == "CONTACT"
     assert out["true_contact_speed"] is not None  # the simulated wall is where the config says
-    assert 0.7 <= out["contact_speed"] <= 1.0 and abs(out["perch_time"] / out["plan_duration"] - 1) < 0.05
+    assert (
+        0.7 <= out["contact_speed"] <= 1.0
+        and abs(out["perch_time"] / out["plan_duration"] - 1) < 0.05
+    )
     assert out["loop"]["jitter_median_s"] < 0.005  # paced on the real clock, not simulated time

@@ -34,8 +34,9 @@ def poses():
 
 def taken(v: VehicleDouble, since: float = 0.0) -> list:
     """Everything that would move the vehicle: mode and arming commands, attitude targets."""
-    return [c for t, c, _ in v.commands if c in (176, 400) and t > since] + \
-        [x for x in v.targets if x.t > since]
+    return [c for t, c, _ in v.commands if c in (176, 400) and t > since] + [
+        x for x in v.targets if x.t > since
+    ]
 
 
 def serve(tmp_path, notify, v: VehicleDouble, poses: StillPoses) -> Serve:
@@ -57,8 +58,9 @@ def fly_and_abort(s: Serve, v: VehicleDouble) -> None:
     assert ctl(s.sock, "status")["state"] == "idle"
 
 
-def test_an_idle_service_sends_no_mode_change_and_no_attitude_target(tmp_path, notify,
-                                                                      vehicle, poses):
+def test_an_idle_service_sends_no_mode_change_and_no_attitude_target(
+    tmp_path, notify, vehicle, poses
+):
     s = serve(tmp_path, notify, vehicle, poses)
     try:
         vehicle.wait_for(lambda: False, timeout=1.5)
@@ -73,7 +75,8 @@ def test_an_idle_service_sends_no_mode_change_and_no_attitude_target(tmp_path, n
 
 
 def test_a_flight_engages_and_after_its_failsafe_land_stays_across_a_restart(
-        tmp_path, notify, vehicle, poses):
+    tmp_path, notify, vehicle, poses
+):
     s = serve(tmp_path, notify, vehicle, poses)
     try:
         fly_and_abort(s, vehicle)
@@ -104,8 +107,9 @@ def visions_within(v: VehicleDouble, seconds: float) -> int:
     return sum(1 for t, _ in v.visions if t > start)
 
 
-def test_the_mocap_reaches_the_vehicle_between_flights_each_pose_once(tmp_path, notify,
-                                                                       vehicle, poses):
+def test_the_mocap_reaches_the_vehicle_between_flights_each_pose_once(
+    tmp_path, notify, vehicle, poses
+):
     """An EKF on mocap alone needs it while a failsafe's LAND descends after the flight,
     and before the next (docs/safety.md "Between flights")."""
     s = serve(tmp_path, notify, vehicle, poses)

@@ -43,14 +43,23 @@ def test_refused_the_service_runs_says_why_once_and_refuses_flights(tmp_path, no
     if shutil.which("prlimit") is None or (ROOT_USER and shutil.which("setpriv") is None):
         pytest.skip("needs util-linux prlimit and setpriv")
     drop = ("setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice") if ROOT_USER else ()
-    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://",
-                  tables=REALTIME.format(prio=50), prefix=("prlimit", "--rtprio=0", *drop))
+    serve = Serve(
+        tmp_path,
+        notify,
+        "--driver",
+        "sim://",
+        "--mocap",
+        "sim://",
+        tables=REALTIME.format(prio=50),
+        prefix=("prlimit", "--rtprio=0", *drop),
+    )
     try:
         notify.wait_for("READY=1")
         refused = ctl(serve.sock, "fly", str(PLAN))
         assert refused["ok"] is False
-        assert refused["error"].startswith("[service] realtime refused: SCHED_FIFO priority 50 "
-                                           "refused")
+        assert refused["error"].startswith(
+            "[service] realtime refused: SCHED_FIFO priority 50 refused"
+        )
         assert "LimitRTPRIO=50" in refused["error"]
         assert ctl(serve.sock, "status")["scheduling"] == refused["error"]
         serve.proc.send_signal(signal.SIGTERM)
@@ -66,8 +75,9 @@ def test_refused_the_service_runs_says_why_once_and_refuses_flights(tmp_path, no
 @pytest.mark.slow
 @pytest.mark.skipif(not ROOT_USER, reason="granted only with CAP_SYS_NICE (root here)")
 def test_granted_every_thread_of_the_service_runs_fifo(tmp_path, notify):
-    serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://",
-                  tables=REALTIME.format(prio=1))
+    serve = Serve(
+        tmp_path, notify, "--driver", "sim://", "--mocap", "sim://", tables=REALTIME.format(prio=1)
+    )
     try:
         notify.wait_for("READY=1")
         status = ctl(serve.sock, "status")

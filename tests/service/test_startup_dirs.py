@@ -21,15 +21,26 @@ SYSTEMD = Path(__file__).resolve().parents[2] / "systemd"
 @pytest.mark.parametrize("key", ["log_dir", "plan_dir"])
 def test_an_unusable_directory_stops_the_start_before_ready(tmp_path, key):
     (tmp_path / "file").write_text("not a directory")
-    dirs = {"log_dir": tmp_path / "logs", "plan_dir": tmp_path / "plans",
-            key: tmp_path / "file" / "sub"}
+    dirs = {
+        "log_dir": tmp_path / "logs",
+        "plan_dir": tmp_path / "plans",
+        key: tmp_path / "file" / "sub",
+    }
     config = tmp_path / "perchd.toml"
-    config.write_text("version = 1\n[service]\n" + f'socket = "{tmp_path / "c.sock"}"\n'
-                      + "".join(f'{k} = "{v}"\n' for k, v in dirs.items()))
+    config.write_text(
+        "version = 1\n[service]\n"
+        + f'socket = "{tmp_path / "c.sock"}"\n'
+        + "".join(f'{k} = "{v}"\n' for k, v in dirs.items())
+    )
     notify = NotifyListener(tmp_path / "notify.sock")
     env = {**os.environ, "NOTIFY_SOCKET": notify.address}
-    done = subprocess.run([sys.executable, "-m", "perchd", "serve", "--config", str(config)],
-                          env=env, capture_output=True, text=True, timeout=30)
+    done = subprocess.run(
+        [sys.executable, "-m", "perchd", "serve", "--config", str(config)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     notify.sock.settimeout(0.2)
     try:
         while True:
@@ -44,6 +55,7 @@ def test_an_unusable_directory_stops_the_start_before_ready(tmp_path, key):
 
 def test_a_missing_log_dir_is_made(tmp_path):
     from perchd.service.daemon import check_dirs
+
     svc = ServiceConfig(plan_dir=str(tmp_path / "p"), log_dir=str(tmp_path / "l" / "m"))
     check_dirs(svc)
     assert (tmp_path / "l" / "m").is_dir() and (tmp_path / "p").is_dir()
@@ -59,8 +71,9 @@ def test_default_dirs_follow_the_unit():
     assert apply_overrides(given, {"log_dir": "/x"}, env).service.log_dir == "/x"
 
 
-@pytest.mark.parametrize("unit, logs", [("perchd.service", "perchd"),
-                                        ("perchd@.service", "perchd/%i")])
+@pytest.mark.parametrize(
+    "unit, logs", [("perchd.service", "perchd"), ("perchd@.service", "perchd/%i")]
+)
 def test_the_units_logs_directory_agrees_with_the_default_log_dir(unit, logs):
     parser = configparser.ConfigParser(strict=False, interpolation=None)
     parser.read_string((SYSTEMD / unit).read_text())
@@ -72,4 +85,6 @@ def test_the_units_logs_directory_agrees_with_the_default_log_dir(unit, logs):
         assert svc.log_dir == default == env["LOGS_DIRECTORY"]
     else:
         assert svc.log_dir == "/var/log/perchd/cf1"
-    assert re.search(r"log_dir = \"%s\"" % re.escape(default), (SYSTEMD / "perchd.toml").read_text())
+    assert re.search(
+        r'log_dir = "' + re.escape(default) + r'"', (SYSTEMD / "perchd.toml").read_text()
+    )

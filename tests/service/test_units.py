@@ -18,7 +18,11 @@ ANALYZE = shutil.which("systemd-analyze") or "/usr/bin/systemd-analyze"
 
 def staged(tmp_path: Path, name: str, as_name: str | None = None, edit=lambda s: s) -> Path:
     """The unit in a temporary directory, ExecStart pointing at an executable that exists."""
-    text = (SYSTEMD / name).read_text().replace("/opt/perchd/bin/perchd", sys.executable + " -m perchd")
+    text = (
+        (SYSTEMD / name)
+        .read_text()
+        .replace("/opt/perchd/bin/perchd", sys.executable + " -m perchd")
+    )
     out = tmp_path / (as_name or name)
     out.write_text(edit(text))
     return out
@@ -31,12 +35,17 @@ def require_analyze() -> None:
 
 def verify(*units: Path) -> subprocess.CompletedProcess:
     require_analyze()
-    return subprocess.run([ANALYZE, "verify", *map(str, units)], capture_output=True,
-                          text=True, timeout=60)
+    return subprocess.run(
+        [ANALYZE, "verify", *map(str, units)], capture_output=True, text=True, timeout=60
+    )
 
 
-UNITS = [("perchd.service", None), ("perchd@.service", "perchd@cf1.service"),
-         ("perchd.socket", None), ("perchd@.socket", "perchd@cf1.socket")]
+UNITS = [
+    ("perchd.service", None),
+    ("perchd@.service", "perchd@cf1.service"),
+    ("perchd.socket", None),
+    ("perchd@.socket", "perchd@cf1.socket"),
+]
 OLDER_SYSTEMD = "Type=notify\nExecReload=/bin/kill -HUP $MAINPID"
 """systemd/README.md's replacement for Type=notify-reload on systemd before 253."""
 
@@ -56,12 +65,17 @@ def test_every_unit_verifies_without_a_word(tmp_path):
         return
     as_is = verify(*(staged(tmp_path, n, a) for n, a in UNITS))
     complaints = (as_is.stdout + as_is.stderr).strip().splitlines()
-    assert len(complaints) == 2 and all(c.endswith("Failed to parse service type, ignoring: "
-                                                   "notify-reload") for c in complaints)
+    assert len(complaints) == 2 and all(
+        c.endswith("Failed to parse service type, ignoring: notify-reload") for c in complaints
+    )
     older = tmp_path / "older"
     older.mkdir()
-    done = verify(*(staged(older, n, a, edit=lambda s: s.replace("Type=notify-reload", OLDER_SYSTEMD))
-                    for n, a in UNITS))
+    done = verify(
+        *(
+            staged(older, n, a, edit=lambda s: s.replace("Type=notify-reload", OLDER_SYSTEMD))
+            for n, a in UNITS
+        )
+    )
     assert done.returncode == 0 and (done.stdout + done.stderr).strip() == ""
 
 
@@ -70,7 +84,9 @@ def test_the_readme_gives_the_older_systemd_lines_the_test_verifies():
 
 
 def test_verify_does_complain_about_a_broken_unit(tmp_path):
-    broken = staged(tmp_path, "perchd.service", edit=lambda s: s.replace("Type=notify-reload", "Type=notifyy"))
+    broken = staged(
+        tmp_path, "perchd.service", edit=lambda s: s.replace("Type=notify-reload", "Type=notifyy")
+    )
     done = verify(broken)
     assert "Failed to parse service type" in done.stdout + done.stderr
 
@@ -106,12 +122,17 @@ def test_each_instance_has_its_own_config_socket_and_directories():
 
 
 def test_the_udev_rule_gives_plugdev_the_crazyradio_and_the_crazyflie():
-    rules = [r for r in (SYSTEMD / "70-crazyradio.rules").read_text().splitlines()
-             if r and not r.startswith("#")]
+    rules = [
+        r
+        for r in (SYSTEMD / "70-crazyradio.rules").read_text().splitlines()
+        if r and not r.startswith("#")
+    ]
     products = {r.split('ATTRS{idProduct}=="')[1][:4] for r in rules}
     assert products == {"7777", "0101"}
-    assert all('ATTRS{idVendor}=="1915"' in r and 'GROUP="plugdev"' in r and 'MODE="0664"' in r
-               for r in rules)
+    assert all(
+        'ATTRS{idVendor}=="1915"' in r and 'GROUP="plugdev"' in r and 'MODE="0664"' in r
+        for r in rules
+    )
 
 
 @pytest.mark.parametrize("name", ["perchd.service", "perchd@.service"])
@@ -135,8 +156,9 @@ def test_real_time_is_granted_not_imposed(name):
     assert "#CPUSchedulingPolicy=fifo" in text and "#CPUAffinity=" in text
 
 
-@pytest.mark.parametrize("service, sock", [("perchd.service", "perchd.socket"),
-                                           ("perchd@.service", "perchd@.socket")])
+@pytest.mark.parametrize(
+    "service, sock", [("perchd.service", "perchd.socket"), ("perchd@.service", "perchd@.socket")]
+)
 def test_each_socket_unit_listens_where_its_service_would_bind(service, sock):
     s, k = section(service), section(sock, "Socket")
     assert k["ListenStream"] == s["ExecStart"].split("--socket ")[1].split()[0]

@@ -7,7 +7,6 @@ the loop resumes, the pings come back, and the flight still ends properly."""
 from __future__ import annotations
 
 import signal
-import socket
 import time
 
 import pytest
@@ -32,13 +31,13 @@ def test_a_stall_holds_the_next_caller_once_for_its_length_on_the_worlds_clock()
     world = SimWorld(WorldParams(stall=Stall(0.5, 2.0)), clock)
     clock.advance(0.4)
     world.latest_pose()
-    assert clock.now() == pytest.approx(10.4)       # not yet
+    assert clock.now() == pytest.approx(10.4)  # not yet
     clock.advance(0.2)
     world.latest_pose()
-    assert clock.now() == pytest.approx(12.6)       # the call took 2 s of simulated time
+    assert clock.now() == pytest.approx(12.6)  # the call took 2 s of simulated time
     world.latest_pose()
-    assert clock.now() == pytest.approx(12.6)       # once only
-    assert world.latest_pose().t > 12.5             # and the world caught up afterwards
+    assert clock.now() == pytest.approx(12.6)  # once only
+    assert world.latest_pose().t > 12.5  # and the world caught up afterwards
 
 
 def test_on_the_real_clock_a_stalled_call_really_blocks():
@@ -48,13 +47,16 @@ def test_on_the_real_clock_a_stalled_call_really_blocks():
     assert time.monotonic() - t0 >= 0.2
 
 
-@pytest.mark.parametrize("text, words", [
-    ("1", "stall='1' must be AT,FOR in seconds"),
-    ("1,x", "stall='1,x' must be AT,FOR in seconds"),
-    ("-1,2", "stall AT=-1 s is outside 0..3600 s"),
-    ("1,0", "stall FOR=0 s is outside 0..60 s (above 0)"),
-    ("1,61", "stall FOR=61 s is outside 0..60 s"),
-])
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("1", "stall='1' must be AT,FOR in seconds"),
+        ("1,x", "stall='1,x' must be AT,FOR in seconds"),
+        ("-1,2", "stall AT=-1 s is outside 0..3600 s"),
+        ("1,0", "stall FOR=0 s is outside 0..60 s (above 0)"),
+        ("1,61", "stall FOR=61 s is outside 0..60 s"),
+    ],
+)
 def test_a_bad_stall_option_is_one_error_naming_it(text, words):
     with pytest.raises(UriError, match=words.replace("(", r"\(").replace(")", r"\)")):
         world_params_from_uri(parse_uri(f"sim://?stall={text}"))
@@ -78,7 +80,7 @@ class Pings:
             self.listener.sock.settimeout(left)
             try:
                 msg = self.listener.sock.recv(4096).decode()
-            except socket.timeout:
+            except TimeoutError:
                 return
             self.listener.messages.append(msg)
             if "WATCHDOG=1" in msg.split("\n"):
@@ -107,33 +109,33 @@ def test_a_stalled_control_loop_stops_the_watchdog_and_a_resumed_one_pings_again
     pings = Pings(notify)
     try:
         notify.wait_for("READY=1")
-        pings.collect(1.2)                                 # idle: the service loop pings
+        pings.collect(1.2)  # idle: the service loop pings
         flying_at = time.monotonic()
         started = ctl(serve.sock, "fly", str(PLAN))
         assert started["ok"], started
-        pings.collect(at + 0.5)                            # now inside the stall
-        frozen = ctl(serve.sock, "status")                 # the service still answers...
+        pings.collect(at + 0.5)  # now inside the stall
+        frozen = ctl(serve.sock, "status")  # the service still answers...
         pings.collect(1.0)
         still = ctl(serve.sock, "status")
         assert still["state"] == "flying" and still["t"] == frozen["t"]  # ...the loop does not
         resumed = phase_after(serve, pings, {"approach", "stage1"}, 5.0)
         assert resumed["state"] == "flying" and resumed["t"] > frozen["t"]
-        pings.collect(0.6)                                 # flying again: ticks ping again
+        pings.collect(0.6)  # flying again: ticks ping again
         back_at = time.monotonic()
         assert ctl(serve.sock, "abort")["aborting"] is True
-        pings.collect(1.2)                                 # idle again
+        pings.collect(1.2)  # idle again
         serve.proc.send_signal(signal.SIGTERM)
         code, err = serve.stop()
     finally:
         serve.kill()
     assert code == 0, err
     longest = max(pings.gaps(flying_at))
-    assert WATCHDOG_S < longest < length + 0.6           # systemd would have restarted it
+    assert WATCHDOG_S < longest < length + 0.6  # systemd would have restarted it
     # Pings every WATCHDOG_USEC / 4 = 0.5 s when healthy; the bound that matters is < 2 s.
     assert max(pings.gaps(end=flying_at)) < 1.0
     stall_end = next(b for a, b in zip(pings.times, pings.times[1:]) if b - a == longest)
     after = [t for t in pings.times if stall_end <= t <= back_at]
-    assert len(after) >= 2 and max(pings.gaps(stall_end)) < 1.0   # resumed, idle after too
+    assert len(after) >= 2 and max(pings.gaps(stall_end)) < 1.0  # resumed, idle after too
     log = read_log(started["log"])
     assert log.complete and log.end["outcome"] == "OPERATOR_ABORT"
     assert log.end["summary"]["failsafe_sent"] is True
@@ -148,12 +150,19 @@ def test_sigterm_while_the_loop_is_stalled_ends_the_flight_once_it_resumes(tmp_p
     # The fixed-rate loop: the stalled link holds a tick, which then ends the flight. (The
     # default mocap-synchronous loop is held waiting for the stalled world's next frame, and
     # its first tick after the stall ends it.)
-    serve = Serve(tmp_path, notify, "--driver", f"sim://?stall={at},{length}", "--mocap", "sim://",
-                  tables='[flight]\nsync = "fixed"\n')
+    serve = Serve(
+        tmp_path,
+        notify,
+        "--driver",
+        f"sim://?stall={at},{length}",
+        "--mocap",
+        "sim://",
+        tables='[flight]\nsync = "fixed"\n',
+    )
     try:
         notify.wait_for("READY=1")
         started = ctl(serve.sock, "fly", str(PLAN))
-        time.sleep(at + 0.5)                               # inside the stall
+        time.sleep(at + 0.5)  # inside the stall
         frozen = ctl(serve.sock, "status")["t"]
         sent = time.monotonic()
         serve.proc.send_signal(signal.SIGTERM)
@@ -163,9 +172,9 @@ def test_sigterm_while_the_loop_is_stalled_ends_the_flight_once_it_resumes(tmp_p
         serve.kill()
     assert code == 0, err
     assert "flight ended: SIGNAL" in err and "sending the failsafe directly" not in err
-    assert 1.0 < took < length                             # waited for the stall, no longer
+    assert 1.0 < took < length  # waited for the stall, no longer
     log = read_log(started["log"])
     assert log.complete and log.end["outcome"] == "SIGNAL"
     assert log.end["summary"]["failsafe_sent"] is True
-    assert log.rows[-1].end == "SIGNAL"                   # the stalled tick ended the flight
+    assert log.rows[-1].end == "SIGNAL"  # the stalled tick ended the flight
     assert frozen < log.rows[-1].t - log.rows[0].t < frozen + 0.05  # the tick after `frozen`

@@ -33,8 +33,18 @@ def main() -> None:
     hang_now = bool(hang) and not os.path.exists(hang)
     if hang_now:
         open(hang, "w").close()
-    seen = {"imu": 0, "extpose": 0, "baro": 0, "rpyt": [], "echo": 0, "other": 0,
-            "acc_last": None, "gyro_last": None, "pose_last": None, "pid": os.getpid()}
+    seen = {
+        "imu": 0,
+        "extpose": 0,
+        "baro": 0,
+        "rpyt": [],
+        "echo": 0,
+        "other": 0,
+        "acc_last": None,
+        "gyro_last": None,
+        "pose_last": None,
+        "pid": os.getpid(),
+    }
 
     def report(*_):
         path = os.environ.get("FAKE_CF2_REPORT")
@@ -49,7 +59,7 @@ def main() -> None:
         sock.sendto(b"\xf3", peer)
         try:
             data, addr = sock.recvfrom(64)
-        except socket.timeout:
+        except TimeoutError:
             continue
         if data == b"\xf3":
             break
@@ -65,8 +75,12 @@ def main() -> None:
             seen["imu"] += 1
             raw = struct.unpack("<6h", data[2:])
             seen["acc_last"], seen["gyro_last"] = raw[:3], raw[3:]
-            if (not calibrated and not hang_now and seen["imu"] >= 1024
-                    and time.monotonic() - t0 > 1.0):
+            if (
+                not calibrated
+                and not hang_now
+                and seen["imu"] >= 1024
+                and time.monotonic() - t0 > 1.0
+            ):
                 calibrated = True
                 sock.sendto(bytes([data[0], 0x01]), reply_to)
         elif hdr == 0x90 and len(data) >= 2 and data[1] == 2:

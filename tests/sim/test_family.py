@@ -12,22 +12,23 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from simflight import PLANS
 
+from perchd.campaign.familyrun import PARAMETERS, FamilyRow, fly_member, parameters
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, TriggerConfig, TriggerPolicy
 from perchd.sim.family import FAMILY, LAB_THRUST_MIN_SHARE, FamilyVehicle, lab_config, sample
-from perchd.campaign.familyrun import PARAMETERS, FamilyRow, fly_member, parameters
 from perchd.tau import load_plan
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.integers(0, 2 ** 32 - 1))
+@given(st.integers(0, 2**32 - 1))
 def test_every_draw_is_inside_its_range(seed):
     for member in sample(25, seed):
         for name, value in parameters(member).items():
             span = getattr(FAMILY, name)
             assert span.lo <= value <= span.hi, (name, value)
         assert member.plant.thrust_max_n == pytest.approx(
-            member.thrust_to_weight * member.plant.mass_kg * member.plant.g)
+            member.thrust_to_weight * member.plant.mass_kg * member.plant.g
+        )
 
 
 def test_the_draws_span_their_ranges_and_the_mass_is_log_uniform():
@@ -35,8 +36,10 @@ def test_the_draws_span_their_ranges_and_the_mass_is_log_uniform():
     for name in PARAMETERS:
         span = getattr(FAMILY, name)
         scale = math.log if span.log else float
-        places = [(scale(parameters(m)[name]) - scale(span.lo)) / (scale(span.hi) - scale(span.lo))
-                  for m in members]
+        places = [
+            (scale(parameters(m)[name]) - scale(span.lo)) / (scale(span.hi) - scale(span.lo))
+            for m in members
+        ]
         assert min(places) < 0.01 and max(places) > 0.99, name
     masses = [m.plant.mass_kg for m in members]
     geometric_middle = math.sqrt(FAMILY.mass_kg.lo * FAMILY.mass_kg.hi)  # 0.27 kg
@@ -65,11 +68,16 @@ def test_lab_config_sets_mass_and_thrust_and_keeps_everything_else():
     assert v.g == base.vehicle.g
 
 
-def corner(member: FamilyVehicle, mass_kg: float, thrust_to_weight: float,
-           **plant: float) -> FamilyVehicle:
+def corner(
+    member: FamilyVehicle, mass_kg: float, thrust_to_weight: float, **plant: float
+) -> FamilyVehicle:
     """`member` with its mass, full thrust and any other plant field set."""
-    p = dataclasses.replace(member.plant, mass_kg=mass_kg,
-                            thrust_max_n=thrust_to_weight * mass_kg * member.plant.g, **plant)
+    p = dataclasses.replace(
+        member.plant,
+        mass_kg=mass_kg,
+        thrust_max_n=thrust_to_weight * mass_kg * member.plant.g,
+        **plant,
+    )
     return dataclasses.replace(member, plant=p)
 
 
@@ -77,17 +85,30 @@ def corners() -> list[FamilyVehicle]:
     """Lightest and weakest, heaviest, slowest attitude, longest delay, slowest motors with
     most drag, slowest and latest mocap: one each, the rest drawn."""
     f, ms = FAMILY, sample(6, 2)
-    slow_mocap = dataclasses.replace(ms[5], mocap=dataclasses.replace(
-        ms[5].mocap, rate_hz=f.mocap_rate_hz.lo, latency_s=f.mocap_latency_s.hi,
-        noise_m=f.mocap_noise_m.hi))
+    slow_mocap = dataclasses.replace(
+        ms[5],
+        mocap=dataclasses.replace(
+            ms[5].mocap,
+            rate_hz=f.mocap_rate_hz.lo,
+            latency_s=f.mocap_latency_s.hi,
+            noise_m=f.mocap_noise_m.hi,
+        ),
+    )
     return [
         corner(ms[0], f.mass_kg.lo, f.thrust_to_weight.lo),
         corner(ms[1], f.mass_kg.hi, f.thrust_to_weight.hi),
         corner(ms[2], 0.3, 2.0, attitude_tau_s=f.attitude_tau_s.hi),
         corner(ms[3], 0.3, 2.0, latency_s=f.latency_s.hi),
-        corner(ms[4], 0.3, 2.0, motor_tau_s=f.motor_tau_s.hi, drag_per_s=f.drag_per_s.hi,
-               qdrag_per_m=f.qdrag_per_m.hi),
-        slow_mocap]
+        corner(
+            ms[4],
+            0.3,
+            2.0,
+            motor_tau_s=f.motor_tau_s.hi,
+            drag_per_s=f.drag_per_s.hi,
+            qdrag_per_m=f.qdrag_per_m.hi,
+        ),
+        slow_mocap,
+    ]
 
 
 @pytest.mark.slow
@@ -109,4 +130,5 @@ def test_a_corner_of_the_family_flies_into_a_well_formed_row(member, tmp_path):
     assert row.on_time == (touched and abs(row.perch_error_pct) <= 3.0)
     if touched:
         assert row.perch_error_pct == pytest.approx(
-            100.0 * (row.perch_time - row.plan_duration) / row.plan_duration)
+            100.0 * (row.perch_time - row.plan_duration) / row.plan_duration
+        )

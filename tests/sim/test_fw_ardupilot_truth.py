@@ -36,14 +36,28 @@ ORIGIN = GeoOrigin(-353632610, 1491652300, 584.0)
 
 def ned_quat(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
     """(w, x, y, z) of FRD -> NED Z-Y-X angles, as SIM_STATE's q1..q4."""
-    cr, sr, cp, sp = math.cos(roll / 2), math.sin(roll / 2), math.cos(pitch / 2), math.sin(pitch / 2)
+    cr, sr, cp, sp = (
+        math.cos(roll / 2),
+        math.sin(roll / 2),
+        math.cos(pitch / 2),
+        math.sin(pitch / 2),
+    )
     cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
 
 
-def state(lat=ORIGIN.lat_e7, lon=ORIGIN.lon_e7, alt=ORIGIN.alt_m, q=(1.0, 0.0, 0.0, 0.0),
-          v=(0.0, 0.0, 0.0)) -> SimState:
+def state(
+    lat=ORIGIN.lat_e7,
+    lon=ORIGIN.lon_e7,
+    alt=ORIGIN.alt_m,
+    q=(1.0, 0.0, 0.0, 0.0),
+    v=(0.0, 0.0, 0.0),
+) -> SimState:
     return SimState(q, lat, lon, alt, v, (0.0, 0.0, 0.0))
 
 
@@ -59,8 +73,9 @@ def test_vectors_rotate_into_a_z_up_world(frame, expect):
     assert world_vec((1.0, 2.0, 3.0), frame) == pytest.approx(expect, abs=1e-12)
 
 
-@pytest.mark.parametrize("roll, pitch, yaw", [(0.2, 0.0, 0.0), (0.0, 0.3, 0.0),
-                                              (0.0, 0.0, 0.7), (0.1, -0.2, 2.5)])
+@pytest.mark.parametrize(
+    "roll, pitch, yaw", [(0.2, 0.0, 0.0), (0.0, 0.3, 0.0), (0.0, 0.0, 0.7), (0.1, -0.2, 2.5)]
+)
 def test_nwu_attitude_keeps_roll_and_negates_pitch_and_yaw(roll, pitch, yaw):
     """NED nose-up pitch is perchd's nose-up too: perchd's pitch is positive nose down
     about +Y (left), ArduPilot's positive nose up about +Y (right) - the driver's map
@@ -104,9 +119,23 @@ def test_quantised_position_is_smoothed_by_the_velocity():
 
 
 def test_sim_state_lat_int_is_preferred_to_the_float():
-    m = SimpleNamespace(q1=1.0, q2=0.0, q3=0.0, q4=0.0, lat=-353632608.0, lon=1491652352.0,
-                        lat_int=-353632610, lon_int=1491652300, alt=584.0, vn=0.0, ve=0.0,
-                        vd=0.0, xgyro=0.0, ygyro=0.0, zgyro=0.0)
+    m = SimpleNamespace(
+        q1=1.0,
+        q2=0.0,
+        q3=0.0,
+        q4=0.0,
+        lat=-353632608.0,
+        lon=1491652352.0,
+        lat_int=-353632610,
+        lon_int=1491652300,
+        alt=584.0,
+        vn=0.0,
+        ve=0.0,
+        vd=0.0,
+        xgyro=0.0,
+        ygyro=0.0,
+        zgyro=0.0,
+    )
     s = SimState.from_msg(m)
     assert (s.lat_e7, s.lon_e7) == (-353632610, 1491652300)
 
@@ -142,13 +171,15 @@ def test_driver_uri_listens_where_serial1_sends_and_arms():
 def test_instance_vision_and_stock_params_reach_sitl(tmp_path):
     top = argparse.ArgumentParser()
     register_under(top.add_subparsers().add_parser("sim"))
-    args = top.parse_args(["sim", "firmware", "--arducopter", "/fw/arducopter", "--instance",
-                           "1", "--vision"])
+    args = top.parse_args(
+        ["sim", "firmware", "--arducopter", "/fw/arducopter", "--instance", "1", "--vision"]
+    )
     p = arducopter_params(args)
     assert "-I1" in sitl_argv(p, "a.parm,b.parm", 1, 2) and p.vision
     assert dict(p.params)["ATC_ANGLE_BOOST"] == 0.0 and dict(p.params)["FS_GCS_ENABLE"] == 5.0
-    stock = arducopter_params(top.parse_args(["sim", "firmware", "--arducopter", "x",
-                                              "--stock-params"]))
+    stock = arducopter_params(
+        top.parse_args(["sim", "firmware", "--arducopter", "x", "--stock-params"])
+    )
     assert stock.params == (("GUID_OPTIONS", 8.0),)
     parm = boot_parm(tmp_path, VISION_BOOT_PARAMS).read_text()
     assert "VISO_TYPE 1\n" in parm and "GPS1_TYPE 0\n" in parm and "EK3_SRC1_YAW 6\n" in parm
@@ -182,8 +213,18 @@ def test_command_line_takes_arducopter_defaults_and_frame(tmp_path):
     top = argparse.ArgumentParser()
     sim = top.add_subparsers().add_parser("sim")
     register_under(sim)
-    args = top.parse_args(["sim", "firmware", "--arducopter", "/fw/arducopter", "--defaults",
-                           str(tmp_path / "x.parm"), "--frame", "enu"])
+    args = top.parse_args(
+        [
+            "sim",
+            "firmware",
+            "--arducopter",
+            "/fw/arducopter",
+            "--defaults",
+            str(tmp_path / "x.parm"),
+            "--frame",
+            "enu",
+        ]
+    )
     p = arducopter_params(args)
     assert (p.binary, p.defaults, p.frame) == ("/fw/arducopter", str(tmp_path / "x.parm"), "enu")
     assert p.start == (-4.5, 0.0, 0.0) and p.surface == ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
@@ -196,6 +237,7 @@ def test_ned_undoes_the_world_rotation_at_any_yaw0(yaw0):
     """One rotation both ways: truth into the world (harnesses), mocap back to NED (driver)."""
     from perchd.core.ned import ned_quat, ned_vec
     from perchd.sim.plant import quaternion
+
     v = (0.3, -1.2, 2.0)
     assert world_vec(ned_vec(v, yaw0), yaw0) == pytest.approx(v, abs=1e-12)
     q = quaternion(0.1, -0.2, 0.7)

@@ -31,15 +31,21 @@ FAKE = Path(__file__).with_name("fake_cf2.py")
 def fake(tmp_path, monkeypatch):
     """An executable that runs the fake firmware, and where it reports on SIGTERM."""
     exe = tmp_path / "cf2"
-    exe.write_text(f"#!/bin/sh\nexec {sys.executable} {FAKE} \"$@\"\n")
+    exe.write_text(f'#!/bin/sh\nexec {sys.executable} {FAKE} "$@"\n')
     exe.chmod(0o755)
     monkeypatch.setenv("FAKE_CF2_REPORT", str(tmp_path / "report.json"))
     return exe
 
 
 def params(exe: Path, tmp_path: Path, **kw) -> Cf2Params:
-    return Cf2Params(str(exe), link="udp://127.0.0.1:0", start=(-1.0, 0.0, 0.0),
-                     log=tmp_path / "fw.log", settle_s=0.2, **kw)
+    return Cf2Params(
+        str(exe),
+        link="udp://127.0.0.1:0",
+        start=(-1.0, 0.0, 0.0),
+        log=tmp_path / "fw.log",
+        settle_s=0.2,
+        **kw,
+    )
 
 
 def alive(pid: int) -> bool:
@@ -105,7 +111,8 @@ def test_cf2_gets_a_handshake_1khz_imu_and_ext_pose_and_is_ready(fake, tmp_path)
 
 
 def test_a_firmware_that_stalls_before_calibrating_is_killed_and_launched_again(
-        fake, tmp_path, monkeypatch):
+    fake, tmp_path, monkeypatch
+):
     monkeypatch.setenv("FAKE_CF2_HANG", str(tmp_path / "hung-once"))
     with ProcessGroup() as procs:
         v = Cf2Vehicle(params(fake, tmp_path, calibration_timeout_s=2.0))
@@ -141,6 +148,7 @@ def test_a_firmware_that_never_runs_is_one_link_error_naming_the_launches(tmp_pa
 def test_perchds_crazyflie_driver_reaches_the_firmware_through_the_relay(fake, tmp_path):
     pytest.importorskip("cflib")
     from perchd.drivers.base import open_driver
+
     with ProcessGroup() as procs:
         v = Cf2Vehicle(params(fake, tmp_path))
         try:
@@ -162,10 +170,25 @@ def test_perchds_crazyflie_driver_reaches_the_firmware_through_the_relay(fake, t
 
 def test_perchd_sim_firmware_announces_itself_and_stops_everything_on_sigterm(fake, tmp_path):
     proc = subprocess.Popen(
-        [sys.executable, "-m", "perchd", "sim", "firmware", "--cf2", str(fake),
-         "--link", "udp://127.0.0.1:0", "--fw-log", str(tmp_path / "fw.log"), "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])})
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "sim",
+            "firmware",
+            "--cf2",
+            str(fake),
+            "--link",
+            "udp://127.0.0.1:0",
+            "--fw-log",
+            str(tmp_path / "fw.log"),
+            "--json",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])},
+    )
     try:
         line = proc.stderr.readline()
         found = re.search(r"^perchd sim: ready: mocap (zmq://\S+) driver (udp://\S+)$", line)
@@ -185,18 +208,29 @@ def test_perchd_sim_firmware_announces_itself_and_stops_everything_on_sigterm(fa
     assert summary["contact"] is None and summary["final"]["p"] == [-4.5, 0.0, 0.0]
 
 
-@pytest.mark.skipif(not Path("/usr/bin/setpriv").exists() and not os.path.exists(
-    "/bin/setpriv"), reason="util-linux's setpriv is not installed")
+@pytest.mark.skipif(
+    not Path("/usr/bin/setpriv").exists() and not os.path.exists("/bin/setpriv"),
+    reason="util-linux's setpriv is not installed",
+)
 def test_a_firmware_dies_with_a_harness_killed_by_sigkill(tmp_path):
     """A harness SIGKILLed cannot stop its children: the kernel does (tied_to_parent)."""
     pidfile = tmp_path / "child.pid"
-    harness = subprocess.Popen([sys.executable, "-c", (
-        "import sys, time\n"
-        "from pathlib import Path\n"
-        "from perchd.sim.firmware.harness import ProcessGroup\n"
-        "proc = ProcessGroup().launch(['sleep', '60'], Path(sys.argv[1]))\n"
-        "Path(sys.argv[2]).write_text(str(proc.pid))\n"
-        "time.sleep(60)\n"), str(tmp_path / "fw.log"), str(pidfile)])
+    harness = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            (
+                "import sys, time\n"
+                "from pathlib import Path\n"
+                "from perchd.sim.firmware.harness import ProcessGroup\n"
+                "proc = ProcessGroup().launch(['sleep', '60'], Path(sys.argv[1]))\n"
+                "Path(sys.argv[2]).write_text(str(proc.pid))\n"
+                "time.sleep(60)\n"
+            ),
+            str(tmp_path / "fw.log"),
+            str(pidfile),
+        ]
+    )
     try:
         deadline = time.monotonic() + 10.0
         while not pidfile.exists() or not pidfile.read_text():

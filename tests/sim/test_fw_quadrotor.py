@@ -48,14 +48,18 @@ def test_rotor_speed_below_pwm_min_is_zero_and_saturates_at_omega_max():
     assert M.omega_ref(65535) == 3052.0  # 3052.4 unclamped
 
 
-@pytest.mark.parametrize("pattern, axis, sign", [
-    ([HOVER - 500, HOVER - 500, HOVER + 500, HOVER + 500], 0, +1),  # left rotors up: roll right
-    ([HOVER + 500, HOVER + 500, HOVER - 500, HOVER - 500], 0, -1),
-    ([HOVER - 500, HOVER + 500, HOVER + 500, HOVER - 500], 1, +1),  # rear rotors up: nose down
-    ([HOVER + 500, HOVER - 500, HOVER - 500, HOVER + 500], 1, -1),
-    ([HOVER - 500, HOVER + 500, HOVER - 500, HOVER + 500], 2, +1),  # cw rotors up: turns ccw
-    ([HOVER + 500, HOVER - 500, HOVER + 500, HOVER - 500], 2, -1),
-], ids=["roll+", "roll-", "pitch+", "pitch-", "yaw+", "yaw-"])
+@pytest.mark.parametrize(
+    "pattern, axis, sign",
+    [
+        ([HOVER - 500, HOVER - 500, HOVER + 500, HOVER + 500], 0, +1),  # left rotors up: roll right
+        ([HOVER + 500, HOVER + 500, HOVER - 500, HOVER - 500], 0, -1),
+        ([HOVER - 500, HOVER + 500, HOVER + 500, HOVER - 500], 1, +1),  # rear rotors up: nose down
+        ([HOVER + 500, HOVER - 500, HOVER - 500, HOVER + 500], 1, -1),
+        ([HOVER - 500, HOVER + 500, HOVER - 500, HOVER + 500], 2, +1),  # cw rotors up: turns ccw
+        ([HOVER + 500, HOVER - 500, HOVER + 500, HOVER - 500], 2, -1),
+    ],
+    ids=["roll+", "roll-", "pitch+", "pitch-", "yaw+", "yaw-"],
+)
 def test_each_motor_pattern_turns_the_body_about_its_own_axis_only(pattern, axis, sign):
     q = run(spun_up(pattern), pattern, 0.05)
     w = q.gyro()
@@ -65,12 +69,18 @@ def test_each_motor_pattern_turns_the_body_about_its_own_axis_only(pattern, axis
 
 
 def test_a_right_roll_moves_right_and_a_nose_down_pitch_moves_forward():
-    right = run(spun_up([HOVER - 300, HOVER - 300, HOVER + 300, HOVER + 300]),
-                [HOVER - 300, HOVER - 300, HOVER + 300, HOVER + 300], 0.1)
+    right = run(
+        spun_up([HOVER - 300, HOVER - 300, HOVER + 300, HOVER + 300]),
+        [HOVER - 300, HOVER - 300, HOVER + 300, HOVER + 300],
+        0.1,
+    )
     right = run(right, [HOVER + 200] * 4, 0.3)
     assert right.v[1] < -0.05 and abs(right.v[0]) < 1e-6  # body y is left: right is -y
-    down = run(spun_up([HOVER - 300, HOVER + 300, HOVER + 300, HOVER - 300]),
-               [HOVER - 300, HOVER + 300, HOVER + 300, HOVER - 300], 0.1)
+    down = run(
+        spun_up([HOVER - 300, HOVER + 300, HOVER + 300, HOVER - 300]),
+        [HOVER - 300, HOVER + 300, HOVER + 300, HOVER - 300],
+        0.1,
+    )
     down = run(down, [HOVER + 200] * 4, 0.3)
     assert down.v[0] > 0.05 and abs(down.v[1]) < 1e-6
 

@@ -15,7 +15,8 @@ from perchd.sim.firmware import cf2wire as wire
 def test_an_imu_sample_at_rest_reads_plus_one_g_on_z_as_2048():
     # 9.81 m/s^2 / 9.81 / (32 / 65536) = 2048 = 0x0800, little-endian 00 08
     assert wire.imu_packet((0.0, 0.0, 9.81), (0.0, 0.0, 0.0)) == bytes.fromhex(
-        "90 00 0000 0000 0008 0000 0000 0000")
+        "90 00 0000 0000 0008 0000 0000 0000"
+    )
 
 
 def test_gyro_lsbs_are_4000_over_65536_degrees_per_second():
@@ -61,17 +62,30 @@ def test_motor_packets_decode_little_endian_pwm():
     assert wire.motors_packet(10000, 20000, 30000, 65535) == data
 
 
-@pytest.mark.parametrize("data, kind", [
-    (b"\xf3", wire.Kind.HANDSHAKE),
-    (bytes.fromhex("90 0000 0000 0000 0000"), wire.Kind.MOTORS),
-    (bytes.fromhex("9C 0000 0000 0000 0000"), wire.Kind.MOTORS),  # reserved bits set
-    (bytes.fromhex("9001"), wire.Kind.CALIBRATED),
-    (bytes.fromhex("9C01"), wire.Kind.CALIBRATED),
-    (bytes.fromhex("9000"), wire.Kind.CLIENT),
-    (bytes.fromhex("FC 7064"), wire.Kind.CLIENT),  # a link echo for cflib
-    (bytes.fromhex("91 0000 0000 0000 0000"), wire.Kind.CLIENT),  # port 9 channel 1
-    (bytes.fromhex("30" + "00" * 14), wire.Kind.CLIENT),
-], ids=["hello", "motors", "motors-reserved", "calibrated", "calibrated-reserved",
-        "port9-other", "echo", "port9-ch1", "rpyt"])
+@pytest.mark.parametrize(
+    "data, kind",
+    [
+        (b"\xf3", wire.Kind.HANDSHAKE),
+        (bytes.fromhex("90 0000 0000 0000 0000"), wire.Kind.MOTORS),
+        (bytes.fromhex("9C 0000 0000 0000 0000"), wire.Kind.MOTORS),  # reserved bits set
+        (bytes.fromhex("9001"), wire.Kind.CALIBRATED),
+        (bytes.fromhex("9C01"), wire.Kind.CALIBRATED),
+        (bytes.fromhex("9000"), wire.Kind.CLIENT),
+        (bytes.fromhex("FC 7064"), wire.Kind.CLIENT),  # a link echo for cflib
+        (bytes.fromhex("91 0000 0000 0000 0000"), wire.Kind.CLIENT),  # port 9 channel 1
+        (bytes.fromhex("30" + "00" * 14), wire.Kind.CLIENT),
+    ],
+    ids=[
+        "hello",
+        "motors",
+        "motors-reserved",
+        "calibrated",
+        "calibrated-reserved",
+        "port9-other",
+        "echo",
+        "port9-ch1",
+        "rpyt",
+    ],
+)
 def test_datagrams_from_the_firmware_are_sorted_by_header_and_length(data, kind):
     assert wire.classify(data) is kind

@@ -32,12 +32,24 @@ def until(cond, send, timeout=5.0) -> None:
 
 @pytest.fixture
 def inbox():
-    args = argparse.Namespace(latency=0.0, noise=0.0, start=None, surface=(0.0, 0.0, 0.0),
-                              normal=(1.0, 0.0, 0.0), body="cf1")
+    args = argparse.Namespace(
+        latency=0.0,
+        noise=0.0,
+        start=None,
+        surface=(0.0, 0.0, 0.0),
+        normal=(1.0, 0.0, 0.0),
+        body="cf1",
+    )
     counts, lines = Counts(), []
     # live forever: which sender holds the vehicle must not depend on this machine's speed
-    box = SetpointInbox("zmq://127.0.0.1:0", make_world(args), "cf1", counts,
-                        log=lines.append, gate=SenderGate(live_s=math.inf))
+    box = SetpointInbox(
+        "zmq://127.0.0.1:0",
+        make_world(args),
+        "cf1",
+        counts,
+        log=lines.append,
+        gate=SenderGate(live_s=math.inf),
+    )
     yield box, counts, lines
     box.close()
 
@@ -53,8 +65,9 @@ def test_a_second_sender_is_refused_counted_and_named_until_the_first_stops(inbo
         second.failsafe(EndReason.OPERATOR_ABORT)  # its stop must not stop the first's flight
         until(lambda: counts.foreign >= 4, lambda: None)
         assert counts.stops == 0 and box.gate.holder == first.sender
-        assert lines == [(f"refusing sender {second.sender}: sender {first.sender} is steering "
-                          "the vehicle")]
+        assert lines == [
+            (f"refusing sender {second.sender}: sender {first.sender} is steering the vehicle")
+        ]
         first.failsafe(EndReason.CONTACT)
         until(lambda: counts.stops == 1, lambda: None)
         taken = counts.setpoints

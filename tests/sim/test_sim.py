@@ -7,14 +7,14 @@ import math
 import statistics
 
 import pytest
-from perchd.core.uri import parse_uri
-from perchd.core.uriparams import split_sim
-from perchd.drivers.base import open_driver
 
 from perchd.core.clock import ManualClock
 from perchd.core.errors import UriError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.core.uri import parse_uri
+from perchd.core.uriparams import split_sim
+from perchd.drivers.base import open_driver
 from perchd.mocap.base import open_source
 
 G = 9.81

@@ -11,8 +11,8 @@ from robust_brute import fly, worst_over_box
 from perchd.tau.certify import Box, certify_box, first_switch, scale_functions
 
 LIMITS = dict(v_contact=(0.7, 1.0), v_max=2.5, a_max=1.4, tau_s=-0.5)
-K3 = (-0.3111, -0.3082, 0.02853)                  # an order-3 k found by perchd's search
-BOX3 = Box((-3.65, -2.94), (0.67, 2.49))          # and a box it holds over
+K3 = (-0.3111, -0.3082, 0.02853)  # an order-3 k found by perchd's search
+BOX3 = Box((-3.65, -2.94), (0.67, 2.49))  # and a box it holds over
 TABLE2 = {  # the paper's Table 2 as printed: k_1..k_n, Z_0 (= x0) range, V_0 range
     3: ((-0.60, -0.057, 0.054), (-3.88, -3.73), (1.89, 1.99)),
     4: ((-0.60, 0.15, -0.31, 0.14), (-2.92, -2.0), (1.0, 1.65)),
@@ -46,16 +46,19 @@ def test_a_box_the_brute_force_confirms_is_certified_with_bounds_that_cover_it()
 
 def test_the_worst_case_duration_is_that_of_the_largest_tau0_magnitude():
     cert = certify(K3, BOX3)
-    slowest = fly(K3, BOX3.x0[0], BOX3.v0[0], -0.5)   # x0 most negative, slowest
+    slowest = fly(K3, BOX3.x0[0], BOX3.v0[0], -0.5)  # x0 most negative, slowest
     fastest = fly(K3, BOX3.x0[1], BOX3.v0[1], -0.5)
     assert cert.duration[1] == pytest.approx(slowest.t_s + 0.5, abs=1e-5)
     assert cert.duration[0] == pytest.approx(fastest.t_s + 0.5, abs=1e-5)
 
 
-@pytest.mark.parametrize("box, limit", [
-    (Box((-3.80, -2.94), (0.67, 2.49)), "v_contact_high"),
-    (Box((-3.65, -2.50), (0.67, 2.49)), "v_contact_low"),
-])
+@pytest.mark.parametrize(
+    "box, limit",
+    [
+        (Box((-3.80, -2.94), (0.67, 2.49)), "v_contact_high"),
+        (Box((-3.65, -2.50), (0.67, 2.49)), "v_contact_low"),
+    ],
+)
 def test_a_box_with_a_violating_state_is_refused_naming_limit_and_state(box, limit):
     cert = certify(K3, box)
     assert not cert.certified and cert.violation is not None
@@ -91,7 +94,7 @@ def test_paper_table2_low_orders_never_reach_tau_s_anywhere_in_their_box(order):
     k, x0r, v0r = TABLE2[order]
     cert = certify(k, Box(x0r, v0r))
     assert not cert.certified and cert.violation.limit == "tau_s"
-    for x0 in np.linspace(*x0r, 4):        # docs/errata.md §7: nowhere in the printed ranges
+    for x0 in np.linspace(*x0r, 4):  # docs/errata.md §7: nowhere in the printed ranges
         for v0 in np.linspace(*v0r, 4):
             assert not fly(k, x0, v0, -0.5).reaches
 
@@ -134,7 +137,12 @@ def test_whatever_it_certifies_the_brute_force_confirms(scale, dk):
     elif cert.violation is not None:
         v = cert.violation
         f = fly(k, v.x0, v.v0, -0.5)
-        broken = {"v_contact_low": f.v_contact < 0.7, "v_contact_high": f.v_contact > 1.0,
-                  "v_max": f.v_peak > 2.5, "a_max": f.a_peak > 1.4 - 1e-4,
-                  "tau_s": not f.reaches, "tau": not f.reaches}[v.limit]
+        broken = {
+            "v_contact_low": f.v_contact < 0.7,
+            "v_contact_high": f.v_contact > 1.0,
+            "v_max": f.v_peak > 2.5,
+            "a_max": f.a_peak > 1.4 - 1e-4,
+            "tau_s": not f.reaches,
+            "tau": not f.reaches,
+        }[v.limit]
         assert broken, cert.reason

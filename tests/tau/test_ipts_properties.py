@@ -13,11 +13,15 @@ from perchd.tau import plan_ipts
 from perchd.tau.ipts import MAX_ORDER, InfeasiblePlan
 
 X0, V0, TAU_S, WINDOW = -3.0, 1.5, -0.5, (0.7, 1.0)
-REL = 1e-6   # relative slack on a limit met with equality
+REL = 1e-6  # relative slack on a limit met with equality
 SLOWER = 1e-6  # [s] a looser plan may be slower by no more than solver tolerance
 
-SETTINGS = settings(max_examples=5, deadline=None, derandomize=True,
-                    suppress_health_check=[HealthCheck.filter_too_much, HealthCheck.too_slow])
+SETTINGS = settings(
+    max_examples=5,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.filter_too_much, HealthCheck.too_slow],
+)
 
 
 # -- an evaluation of the plan that shares nothing with perchd.tau's checks ------------------
@@ -26,7 +30,7 @@ def evaluate(plan, n: int = 20001):
     X = x0 exp(integral of p) by the trapezoid rule, V = X p, A = X (p' + p^2)."""
     k = np.asarray(plan.k, float)
     t = np.linspace(0.0, plan.t_switch, n)
-    p = sum(ki * t ** i for i, ki in enumerate(k))
+    p = sum(ki * t**i for i, ki in enumerate(k))
     dp = sum(i * ki * t ** (i - 1) for i, ki in enumerate(k) if i)
     integral = np.concatenate([[0.0], np.cumsum(0.5 * (p[1:] + p[:-1]) * np.diff(t))])
     x = plan.x0 * np.exp(integral)
@@ -36,8 +40,8 @@ def evaluate(plan, n: int = 20001):
 def assert_meets(plan, x0, v0, tau_s, window, v_max, a_max):
     t, tau, x, v, a = evaluate(plan)
     assert plan.k[0] == pytest.approx(v0 / x0, rel=1e-12)
-    assert np.all(tau < 0)                                   # closing the whole way
-    assert np.all(tau[:-1] < tau_s)                          # no earlier switch
+    assert np.all(tau < 0)  # closing the whole way
+    assert np.all(tau[:-1] < tau_s)  # no earlier switch
     assert tau[-1] == pytest.approx(tau_s, abs=1e-7)
     assert plan.duration == pytest.approx(plan.t_switch - tau_s, abs=1e-12)
     assert window[0] * (1 - REL) <= v[-1] <= window[1] * (1 + REL)
@@ -47,11 +51,17 @@ def assert_meets(plan, x0, v0, tau_s, window, v_max, a_max):
 
 
 # -- random feasible cases ------------------------------------------------------------------
-states = st.tuples(st.floats(1.5, 4.0), st.floats(0.8, 2.2), st.floats(0.15, 0.45),
-                   st.floats(0.4, 1.1), st.floats(0.0, 0.4))
-tight = st.tuples(st.floats(1.05, 1.6), st.floats(0.6, 3.0))     # v_max / v0, a_max
-looser = st.tuples(st.floats(1.0, 20.0), st.floats(1.0, 20.0), st.floats(0.0, 0.2),
-                   st.floats(0.0, 0.2))
+states = st.tuples(
+    st.floats(1.5, 4.0),
+    st.floats(0.8, 2.2),
+    st.floats(0.15, 0.45),
+    st.floats(0.4, 1.1),
+    st.floats(0.0, 0.4),
+)
+tight = st.tuples(st.floats(1.05, 1.6), st.floats(0.6, 3.0))  # v_max / v0, a_max
+looser = st.tuples(
+    st.floats(1.0, 20.0), st.floats(1.0, 20.0), st.floats(0.0, 0.2), st.floats(0.0, 0.2)
+)
 
 
 def case(state, lim):
@@ -114,7 +124,7 @@ def check_certificate(err, x0, v0, tau_s, window, v_max, a_max, order=3):
             assert v_max < max(v0, window[0])
         else:
             v_c = np.linspace(*window, 2001)
-            brake = (v0 ** 2 - v_c ** 2) / (2 * (-x0 + tau_s * v_c))
+            brake = (v0**2 - v_c**2) / (2 * (-x0 + tau_s * v_c))
             assert brake.min() > a_max
         return
     # order-specific: limits raised to what the closest plan needs do plan, and meet them

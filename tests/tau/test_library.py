@@ -36,8 +36,9 @@ def test_a_warm_replan_matches_a_cold_global_solve_to_1e_4_s(lib):
         x0 = rng.uniform(lib.x0s[0], lib.x0s[-1])
         v0 = rng.uniform(lib.v0s[0], lib.v0s[-1])
         warm = lib.replan(x0, v0)
-        cold = plan_ipts(x0, v0, CASE1["tau_s"], CASE1["v_contact"], CASE1["v_max"],
-                         CASE1["a_max"], 3)
+        cold = plan_ipts(
+            x0, v0, CASE1["tau_s"], CASE1["v_contact"], CASE1["v_max"], CASE1["a_max"], 3
+        )
         assert warm.duration == pytest.approx(cold.duration, abs=1e-4)
         assert (warm.x0, warm.v0, warm.k[0]) == (x0, v0, v0 / x0)
         assert warm.peaks.a <= 1.4 * (1 + 1e-9) and warm.peaks.v <= 2.5
@@ -49,12 +50,14 @@ def test_at_a_grid_node_the_replan_is_the_stored_plan(lib):
     assert plan.t_switch == pytest.approx(node.t_switch, abs=1e-9)
 
 
-@pytest.mark.parametrize("x0, v0, message", [
-    (-3.5, 1.5, "x0 = -3.5 m is outside the library's grid -3.3..-2.7 m by 0.2 m"),
-    (-3.0, 1.75, "v0 = 1.75 m/s is outside the library's grid 1.3..1.7 m/s by 0.05 m/s"),
-])
-def test_a_state_outside_the_grid_is_refused_naming_the_axis_and_by_how_much(lib, x0, v0,
-                                                                             message):
+@pytest.mark.parametrize(
+    "x0, v0, message",
+    [
+        (-3.5, 1.5, "x0 = -3.5 m is outside the library's grid -3.3..-2.7 m by 0.2 m"),
+        (-3.0, 1.75, "v0 = 1.75 m/s is outside the library's grid 1.3..1.7 m/s by 0.05 m/s"),
+    ],
+)
+def test_a_state_outside_the_grid_is_refused_naming_the_axis_and_by_how_much(lib, x0, v0, message):
     with pytest.raises(PlanError, match=message.replace(".", r"\.")):
         lib.replan(x0, v0)
 
@@ -63,14 +66,20 @@ def test_a_saved_library_loads_back_equal(lib):
     assert library_from_json(json.loads(json.dumps(library_to_json(lib)))) == lib
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(schema="perchd.plan/1"), "schema must be 'perchd.planlib/1'"),
-    (lambda d: d["nodes"][1][2]["k"].__setitem__(0, -0.4), r"nodes\[1\]\[2\]: k_0 must be v0/x0"),
-    (lambda d: d["nodes"][0][0]["k"].__setitem__(2, 0.5), r"nodes\[0\]\[0\]: tau\(t_switch\)"),
-    (lambda d: d["nodes"][3].pop(), r"nodes\[3\] must be a list of 9"),
-    (lambda d: d.update(x0=[-3.0, -3.1] + d["x0"][2:]), "x0 must list at least 2 increasing"),
-    (lambda d: d["limits"].update(a_max="fast"), "limits.a_max must be a finite number"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d.update(schema="perchd.plan/1"), "schema must be 'perchd.planlib/1'"),
+        (
+            lambda d: d["nodes"][1][2]["k"].__setitem__(0, -0.4),
+            r"nodes\[1\]\[2\]: k_0 must be v0/x0",
+        ),
+        (lambda d: d["nodes"][0][0]["k"].__setitem__(2, 0.5), r"nodes\[0\]\[0\]: tau\(t_switch\)"),
+        (lambda d: d["nodes"][3].pop(), r"nodes\[3\] must be a list of 9"),
+        (lambda d: d.update(x0=[-3.0, -3.1] + d["x0"][2:]), "x0 must list at least 2 increasing"),
+        (lambda d: d["limits"].update(a_max="fast"), "limits.a_max must be a finite number"),
+    ],
+)
 def test_a_tampered_library_is_refused_naming_the_field(edit, message):
     doc = json.loads(LIBRARY.read_text())
     edit(doc)
@@ -80,24 +89,75 @@ def test_a_tampered_library_is_refused_naming_the_field(edit, message):
 
 def test_perchd_plan_library_builds_a_file_the_replan_reads(tmp_path):
     out = tmp_path / "lib.json"
-    run = subprocess.run([sys.executable, "-m", "perchd", "plan", "library", "--x0", "-3.1", "-2.9",
-                          "--v0", "1.45", "1.55", "--nodes", "2", "2", "--tau-s", "-0.5",
-                          "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4",
-                          "--out", str(out), "--json"], capture_output=True, text=True)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "plan",
+            "library",
+            "--x0",
+            "-3.1",
+            "-2.9",
+            "--v0",
+            "1.45",
+            "1.55",
+            "--nodes",
+            "2",
+            "2",
+            "--tau-s",
+            "-0.5",
+            "--v-contact",
+            "0.7",
+            "1.0",
+            "--v-max",
+            "2.5",
+            "--a-max",
+            "1.4",
+            "--out",
+            str(out),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["plans"] == 4
     plan = load_library(out).replan(-3.0, 1.5)
-    assert plan.duration == pytest.approx(load_plan(ROOT / "plans" / "case1-ipts-n3.json").duration,
-                                          abs=1e-4)
+    assert plan.duration == pytest.approx(
+        load_plan(ROOT / "plans" / "case1-ipts-n3.json").duration, abs=1e-4
+    )
 
 
 def test_perchd_plan_library_with_an_empty_range_is_one_line_and_exit_2(tmp_path):
-    run = subprocess.run([sys.executable, "-m", "perchd", "plan", "library", "--x0", "-2", "-3",
-                          "--v0", "1", "2", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0",
-                          "--out", str(tmp_path / "l.json")], capture_output=True, text=True)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "perchd",
+            "plan",
+            "library",
+            "--x0",
+            "-2",
+            "-3",
+            "--v0",
+            "1",
+            "2",
+            "--tau-s",
+            "-0.5",
+            "--v-contact",
+            "0.7",
+            "1.0",
+            "--out",
+            str(tmp_path / "l.json"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert run.returncode == 2
     assert run.stderr.strip().splitlines() == [
-        "perchd plan: library x0 grid needs LO < HI and at least 2 nodes, got -2..-3 with 11"]
+        "perchd plan: library x0 grid needs LO < HI and at least 2 nodes, got -2..-3 with 11"
+    ]
 
 
 def test_the_supervisor_replans_from_the_library_at_the_measured_trigger(tmp_path):
@@ -129,10 +189,13 @@ def test_a_library_for_another_plan_or_policy_is_refused_before_flying():
         FlightConfig(trigger=TriggerConfig(library=str(LIBRARY)))
 
 
-@pytest.mark.parametrize("order, a_max, message", [
-    (12, 1.4, "order must be 1..9, got 12"),
-    (3, 0.2, "no node of the grid has a plan; at x0 = -3.3 m, v0 = 1.3 m/s: no order-3 IPTS"),
-])
+@pytest.mark.parametrize(
+    "order, a_max, message",
+    [
+        (12, 1.4, "order must be 1..9, got 12"),
+        (3, 0.2, "no node of the grid has a plan; at x0 = -3.3 m, v0 = 1.3 m/s: no order-3 IPTS"),
+    ],
+)
 def test_a_library_with_no_plan_to_hold_is_refused_not_written_empty(order, a_max, message):
     from perchd.tau.library import build_library
 

@@ -31,17 +31,20 @@ def _doc():
     return plan_to_json(plan_ctdts(-3, 1.5, -0.5, 1.0, 1.4))
 
 
-@pytest.mark.parametrize("edit, field", [
-    (lambda d: d.update(duration=2.0), "duration"),
-    (lambda d: d["peaks"].update(a=1.0), "peaks.a"),
-    (lambda d: d.update(schema="perchd.plan/9"), "schema"),
-    (lambda d: d.update(strategy="magic"), "strategy"),
-    (lambda d: d.pop("x0"), "x0"),
-    (lambda d: d.update(v0="fast"), "v0"),
-    (lambda d: d["stage1"].update(c=float("nan")), "stage1.c"),
-    (lambda d: d["limits"].update(v_contact=[1.0]), "limits.v_contact"),
-    (lambda d: d.update(x0=3.0), "x0"),
-])
+@pytest.mark.parametrize(
+    "edit, field",
+    [
+        (lambda d: d.update(duration=2.0), "duration"),
+        (lambda d: d["peaks"].update(a=1.0), "peaks.a"),
+        (lambda d: d.update(schema="perchd.plan/9"), "schema"),
+        (lambda d: d.update(strategy="magic"), "strategy"),
+        (lambda d: d.pop("x0"), "x0"),
+        (lambda d: d.update(v0="fast"), "v0"),
+        (lambda d: d["stage1"].update(c=float("nan")), "stage1.c"),
+        (lambda d: d["limits"].update(v_contact=[1.0]), "limits.v_contact"),
+        (lambda d: d.update(x0=3.0), "x0"),
+    ],
+)
 def test_a_tampered_or_malformed_file_is_refused_naming_the_field(tmp_path, edit, field):
     doc = _doc()
     edit(doc)

@@ -27,7 +27,19 @@ from perchd.tau.robustplan import check_plan
 LIM = RobustLimits(-0.5, (0.7, 1.0), 2.5, 1.4)
 PLANS = sorted((Path(__file__).parents[2] / "plans").glob("robust-*.json"))
 K3 = (-0.3111, -0.3082, 0.02853)
-ARGS = ["plan", "robust", "--tau-s", "-0.5", "--v-contact", "0.7", "1.0", "--v-max", "2.5", "--a-max", "1.4"]
+ARGS = [
+    "plan",
+    "robust",
+    "--tau-s",
+    "-0.5",
+    "--v-contact",
+    "0.7",
+    "1.0",
+    "--v-max",
+    "2.5",
+    "--a-max",
+    "1.4",
+]
 
 
 @pytest.fixture(scope="module")
@@ -51,12 +63,13 @@ def test_its_worst_duration_is_the_slowest_corner_and_beats_the_paper_table2_k(c
     assert r.certificate.duration[1] < 2.5
 
 
-@pytest.mark.parametrize("order, box", [(4, Box((-2.92, -2.0), (1.0, 1.65))),
-                                        (5, Box((-3.43, -2.0), (1.4, 2.15)))])
+@pytest.mark.parametrize(
+    "order, box", [(4, Box((-2.92, -2.0), (1.0, 1.65))), (5, Box((-3.43, -2.0), (1.4, 2.15)))]
+)
 def test_paper_table2_boxes_4_and_5_cannot_be_held_by_any_k(order, box):
     ratio, k0 = contact_ratio(box)
     assert ratio > 1.0 / 0.7
-    lo, hi = box.segment(k0)            # two states on one ray: contact speeds scale with |x0|
+    lo, hi = box.segment(k0)  # two states on one ray: contact speeds scale with |x0|
     assert hi / lo == pytest.approx(ratio)
     with pytest.raises(PlanError, match="no k of any order"):
         fastest_k(order, box, LIM, maxiter=1)
@@ -66,7 +79,9 @@ def test_shrinking_finds_the_certified_sub_box_about_a_state():
     grown = Box((-3.8, -2.94), (0.67, 2.49))
     r = shrink_until_certified(K3, grown, LIM, about=(-3.0, 1.5))
     assert r.certificate.certified and r.box.contains(-3.0, 1.5)
-    assert r.box.area < grown.area and not LIM.certify(K3, r.box.scaled(1.02, (-3.0, 1.5))).certified
+    assert (
+        r.box.area < grown.area and not LIM.certify(K3, r.box.scaled(1.02, (-3.0, 1.5))).certified
+    )
 
 
 def test_retarget_keeps_k1_to_kn_and_takes_k0_from_the_measured_state():
@@ -79,14 +94,17 @@ def test_retarget_keeps_k1_to_kn_and_takes_k0_from_the_measured_state():
         retarget_k(K3, box, -3.2, 2.6)
 
 
-@pytest.mark.parametrize("extra, words", [
-    (["--x0", "-3.9", "-3.7", "--v0", "1.8"], "--x0 and --v0 go together"),
-    (["--x0", "-3.7", "-3.9", "--v0", "1.8", "2.0"], "--x0 LO must be below HI"),
-    (["--x0", "3", "--v0", "1.5"], "--x0 must be < 0"),
-    (["--x0", "-3", "--v0", "1", "2", "3"], "--v0 takes LO HI"),
-    (["--x0", "-3.43", "-2", "--v0", "1.4", "2.15", "--order", "5"], "no k of any order"),
-    (["--order", "9"], "--order must be 1..7"),
-])
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--x0", "-3.9", "-3.7", "--v0", "1.8"], "--x0 and --v0 go together"),
+        (["--x0", "-3.7", "-3.9", "--v0", "1.8", "2.0"], "--x0 LO must be below HI"),
+        (["--x0", "3", "--v0", "1.5"], "--x0 must be < 0"),
+        (["--x0", "-3", "--v0", "1", "2", "3"], "--v0 takes LO HI"),
+        (["--x0", "-3.43", "-2", "--v0", "1.4", "2.15", "--order", "5"], "no k of any order"),
+        (["--order", "9"], "--order must be 1..7"),
+    ],
+)
 def test_bad_input_is_one_line_and_exit_2(extra, words, tmp_path, capsys):
     assert perchd(ARGS + extra + ["--out", str(tmp_path / "P.json")]) == 2
     err = capsys.readouterr().err
@@ -95,8 +113,19 @@ def test_bad_input_is_one_line_and_exit_2(extra, words, tmp_path, capsys):
 
 def test_plan_robust_writes_a_plan_file_plan_check_recertifies(tmp_path, capsys):
     out = tmp_path / "P.json"
-    argv = ARGS + ["--x0", "-3.9", "-3.7", "--v0", "1.8", "2.0", "--maxiter", "8",
-                   "--out", str(out), "--json"]
+    argv = ARGS + [
+        "--x0",
+        "-3.9",
+        "-3.7",
+        "--v0",
+        "1.8",
+        "2.0",
+        "--maxiter",
+        "8",
+        "--out",
+        str(out),
+        "--json",
+    ]
     assert perchd(argv) == 0
     summary = json.loads(capsys.readouterr().out)
     plan = load_plan(out)
@@ -132,7 +161,7 @@ def test_a_robust_plan_whose_k0_is_not_its_v0_over_x0_is_refused():
 
 @pytest.mark.parametrize("path", PLANS, ids=[p.name for p in PLANS])
 def test_every_robust_plan_in_plans_loads_is_certified_and_flies_inside_its_limits(path):
-    plan = load_plan(path)                 # re-derives every stored figure
+    plan = load_plan(path)  # re-derives every stored figure
     cert = check_plan(plan)
     assert cert.certified
     assert plan.extra["certificate"]["area"] == pytest.approx(Box(*plan.robust).area)
@@ -142,7 +171,8 @@ def test_every_robust_plan_in_plans_loads_is_certified_and_flies_inside_its_limi
     rng = np.random.default_rng(1)
     (xl, xh), (vl, vh) = plan.robust
     for x0, v0 in [(xl, vl), (xh, vh), (xl, vh), (xh, vl)] + [
-            (rng.uniform(xl, xh), rng.uniform(vl, vh)) for _ in range(3)]:
+        (rng.uniform(xl, xh), rng.uniform(vl, vh)) for _ in range(3)
+    ]:
         f = fly(plan.k[1:], x0, v0, -0.5)
         assert f.reaches and f.v_peak <= 2.5 and f.a_peak <= 1.4 + 1e-4
         assert 0.7 <= f.v_contact <= 1.0
@@ -162,7 +192,9 @@ def test_perchd_retarget_of_a_robust_plan_keeps_k_and_refuses_outside_the_box():
     x0, v0 = (xl + xh) / 2 + 0.01, (vl + vh) / 2 - 0.02
     new = retarget(plan, x0, v0)
     assert new.k[1:] == plan.k[1:] and new.k[0] == pytest.approx(v0 / x0)
-    assert new.robust == plan.robust and new.duration == pytest.approx(fly(new.k[1:], x0, v0, -0.5).t_s + 0.5, abs=1e-5)
+    assert new.robust == plan.robust and new.duration == pytest.approx(
+        fly(new.k[1:], x0, v0, -0.5).t_s + 0.5, abs=1e-5
+    )
     with pytest.raises(PlanError, match="outside the robust box"):
         retarget(plan, xl - 0.01, v0)
 
@@ -171,8 +203,14 @@ def test_the_box_search_seeded_with_a_certified_box_returns_a_certified_larger_o
     from perchd.tau.robust import RobustResult, largest_box
 
     seed_box = Box((-3.65, -2.94), (0.67, 2.49))
-    r = largest_box(3, LIM, maxiter=1, popsize=3, polish_evals=150,
-                    start=RobustResult(K3, seed_box, LIM.certify(K3, seed_box)))
+    r = largest_box(
+        3,
+        LIM,
+        maxiter=1,
+        popsize=3,
+        polish_evals=150,
+        start=RobustResult(K3, seed_box, LIM.certify(K3, seed_box)),
+    )
     assert r.certificate.certified and r.box.area >= seed_box.area
     w = worst_over_box(r.k, r.box.x0, r.box.v0, -0.5, n=4)
     assert w["reaches"] and w["v_peak"] <= 2.5 and w["a_peak"] <= 1.4 + 1e-4

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from perchd.console.argcheck import numbers_as_values, within
 from perchd.commands.plan.library import check_library
 from perchd.commands.plan.library import register as register_library
 from perchd.commands.plan.robust import register as register_robust
+from perchd.console.argcheck import numbers_as_values, within
 from perchd.console.outputs import draw
 from perchd.core.errors import PlanError
 from perchd.core.safefile import check_output, read_regular, write_text
@@ -36,9 +36,11 @@ def register(sub) -> None:
     check = plan_sub.add_parser("check", help="re-derive and verify a plan file or plan library")
     check.add_argument("file", help="a plan (perchd.plan/1) or a plan library (perchd.planlib/1)")
     check.add_argument("--json", action="store_true", help="print one JSON object")
-    check.add_argument("--plot", metavar="FILE.png",
-                       help="draw X, V, A and tau against time into this new image "
-                            "(its directory must exist)")
+    check.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help="draw X, V, A and tau against time into this new image (its directory must exist)",
+    )
     check.add_argument("--force", action="store_true", help="overwrite an existing --plot file")
     check.set_defaults(run=run_check)
 
@@ -54,8 +56,10 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def _limit_args(p: argparse.ArgumentParser, searched: bool) -> None:
     """--v-max and --a-max; unset means unconstrained, which the help and the run both say."""
-    for flag, what, unit in (("--v-max", "peak closing speed", "m/s"),
-                             ("--a-max", "peak |acceleration|", "m/s^2")):
+    for flag, what, unit in (
+        ("--v-max", "peak closing speed", "m/s"),
+        ("--a-max", "peak |acceleration|", "m/s^2"),
+    ):
         as_ = f", searched as {UNBOUNDED:g} {unit}" if searched else ""
         p.add_argument(flag, type=float, help=f"{what} limit [{unit}] (default: none{as_})")
 
@@ -72,8 +76,13 @@ def _ctdts(plan_sub) -> None:
     _common(p)
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
     p.add_argument("--v-contact", type=float, required=True, help="contact speed [m/s]")
-    p.add_argument("--v-window", type=float, nargs=2, metavar=("LO", "HI"),
-                   help="contact speeds the vehicle tolerates [m/s] (default: V_c only)")
+    p.add_argument(
+        "--v-window",
+        type=float,
+        nargs=2,
+        metavar=("LO", "HI"),
+        help="contact speeds the vehicle tolerates [m/s] (default: V_c only)",
+    )
     _limit_args(p, searched=False)
     p.set_defaults(run=lambda a: _make(a, _plan_ctdts))
 
@@ -82,11 +91,18 @@ def _ipts(plan_sub) -> None:
     p = plan_sub.add_parser("ipts", help="inverse polynomial, minimum time, then constant speed")
     _common(p)
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"),
-                   help="contact speeds allowed [m/s], V_l <= V_u")
+    p.add_argument(
+        "--v-contact",
+        type=float,
+        nargs=2,
+        required=True,
+        metavar=("LO", "HI"),
+        help="contact speeds allowed [m/s], V_l <= V_u",
+    )
     _limit_args(p, searched=True)
-    p.add_argument("--order", type=int, default=3,
-                   help=f"polynomial order 1..{MAX_ORDER} (default: 3)")
+    p.add_argument(
+        "--order", type=int, default=3, help=f"polynomial order 1..{MAX_ORDER} (default: 3)"
+    )
     p.set_defaults(run=lambda a: _make(a, _plan_ipts))
 
 
@@ -95,8 +111,11 @@ def _note_unset_limits(a, searched: bool) -> None:
     for name, unit in (("v_max", "m/s"), ("a_max", "m/s^2")):
         if getattr(a, name) is None:
             as_ = f" (searched as {UNBOUNDED:g} {unit})" if searched else ""
-            print(f"perchd plan: note: no --{name.replace('_', '-')} given: {name} is "
-                  f"unconstrained{as_}", file=sys.stderr)
+            print(
+                f"perchd plan: note: no --{name.replace('_', '-')} given: {name} is "
+                f"unconstrained{as_}",
+                file=sys.stderr,
+            )
 
 
 def _plan_ctds(a):
@@ -126,10 +145,22 @@ def check_numbers(a) -> None:
     """Every numeric flag finite and of sane size, before numpy sees it (1e308 overflowed there)."""
     within("--x0", a.x0, -MAX_METRES, MAX_METRES, "m", PlanError)
     within("--v0", a.v0, -MAX_SPEED, MAX_SPEED, "m/s", PlanError)
-    for flag, unit in (("tau_s", "s"), ("v_contact", "m/s"), ("v_window", "m/s"), ("c", ""),
-                       ("v_max", "m/s"), ("a_max", "m/s^2")):
-        within("--" + flag.replace("_", "-"), getattr(a, flag, None), -MAX_SPEED, MAX_SPEED,
-               unit, PlanError)
+    for flag, unit in (
+        ("tau_s", "s"),
+        ("v_contact", "m/s"),
+        ("v_window", "m/s"),
+        ("c", ""),
+        ("v_max", "m/s"),
+        ("a_max", "m/s^2"),
+    ):
+        within(
+            "--" + flag.replace("_", "-"),
+            getattr(a, flag, None),
+            -MAX_SPEED,
+            MAX_SPEED,
+            unit,
+            PlanError,
+        )
 
 
 def _make(args, planner) -> int:
@@ -176,22 +207,32 @@ def _schema(text: str) -> object:
 
 
 def table(rep, plan) -> str:
-    params = f"c = {plan.c:.4f}" if plan.c is not None else \
-        "k = (" + ", ".join(f"{k:.4f}" for k in plan.k) + ")"
-    rows = [("strategy", f"{rep.strategy}{'' if rep.order is None else f' n={rep.order}'}"),
-            ("trigger", f"x0 = {rep.x0:g} m, v0 = {rep.v0:g} m/s"),
-            ("stage 1", params),
-            ("switch", "-" if rep.tau_s is None else
-             f"tau_s = {rep.tau_s:g} s at t = {rep.t_switch:.4f} s"),
-            ("duration", f"{rep.duration:.4f} s"),
-            ("contact speed", f"{rep.v_contact:.4f} m/s"),
-            ("peak speed", f"{rep.v_peak:.4f} m/s"),
-            ("peak |accel|", f"{rep.a_peak:.4f} m/s^2"),
-            ("lower bound", f"{rep.bound:.4f} s (ratio {rep.ratio:.4f})"),
-            ("robust box", "-" if rep.robust is None else
-             f"x0 {rep.robust['x0']} m, v0 {rep.robust['v0']} m/s (certified)"
-             if rep.feasible else "NOT certified"),
-            ("feasible", "yes" if rep.feasible else "NO: " + "; ".join(rep.violations))]
+    params = (
+        f"c = {plan.c:.4f}"
+        if plan.c is not None
+        else "k = (" + ", ".join(f"{k:.4f}" for k in plan.k) + ")"
+    )
+    rows = [
+        ("strategy", f"{rep.strategy}{'' if rep.order is None else f' n={rep.order}'}"),
+        ("trigger", f"x0 = {rep.x0:g} m, v0 = {rep.v0:g} m/s"),
+        ("stage 1", params),
+        (
+            "switch",
+            "-" if rep.tau_s is None else f"tau_s = {rep.tau_s:g} s at t = {rep.t_switch:.4f} s",
+        ),
+        ("duration", f"{rep.duration:.4f} s"),
+        ("contact speed", f"{rep.v_contact:.4f} m/s"),
+        ("peak speed", f"{rep.v_peak:.4f} m/s"),
+        ("peak |accel|", f"{rep.a_peak:.4f} m/s^2"),
+        ("lower bound", f"{rep.bound:.4f} s (ratio {rep.ratio:.4f})"),
+        (
+            "robust box",
+            "-"
+            if rep.robust is None
+            else f"x0 {rep.robust['x0']} m, v0 {rep.robust['v0']} m/s (certified)"
+            if rep.feasible
+            else "NOT certified",
+        ),
+        ("feasible", "yes" if rep.feasible else "NO: " + "; ".join(rep.violations)),
+    ]
     return "\n".join(f"{k:>14}  {v}" for k, v in rows)
-
-

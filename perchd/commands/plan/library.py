@@ -23,21 +23,52 @@ from perchd.tau.planfile import load_json
 
 def register(plan_sub) -> None:
     """Add `library` to the `perchd plan` subparsers."""
-    p = numbers_as_values(plan_sub.add_parser(
-        "library", help="IPTS plans over a grid of trigger states, one file"))
-    p.add_argument("--x0", type=float, nargs=2, required=True, metavar=("LO", "HI"),
-                   help="trigger gaps the grid spans [m], < 0")
-    p.add_argument("--v0", type=float, nargs=2, required=True, metavar=("LO", "HI"),
-                   help="trigger closing speeds the grid spans [m/s], > 0")
-    p.add_argument("--nodes", type=int, nargs=2, default=(11, 13), metavar=("NX", "NV"),
-                   help="grid nodes along x0 and v0 (default 11 13)")
+    p = numbers_as_values(
+        plan_sub.add_parser("library", help="IPTS plans over a grid of trigger states, one file")
+    )
+    p.add_argument(
+        "--x0",
+        type=float,
+        nargs=2,
+        required=True,
+        metavar=("LO", "HI"),
+        help="trigger gaps the grid spans [m], < 0",
+    )
+    p.add_argument(
+        "--v0",
+        type=float,
+        nargs=2,
+        required=True,
+        metavar=("LO", "HI"),
+        help="trigger closing speeds the grid spans [m/s], > 0",
+    )
+    p.add_argument(
+        "--nodes",
+        type=int,
+        nargs=2,
+        default=(11, 13),
+        metavar=("NX", "NV"),
+        help="grid nodes along x0 and v0 (default 11 13)",
+    )
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"),
-                   help="contact speeds allowed [m/s], 0 < LO <= HI")
-    p.add_argument("--v-max", type=float,
-                   help="peak closing speed limit [m/s] (default: none, searched as 1000 m/s)")
-    p.add_argument("--a-max", type=float,
-                   help="peak |acceleration| limit [m/s^2] (default: none, searched as 1000 m/s^2)")
+    p.add_argument(
+        "--v-contact",
+        type=float,
+        nargs=2,
+        required=True,
+        metavar=("LO", "HI"),
+        help="contact speeds allowed [m/s], 0 < LO <= HI",
+    )
+    p.add_argument(
+        "--v-max",
+        type=float,
+        help="peak closing speed limit [m/s] (default: none, searched as 1000 m/s)",
+    )
+    p.add_argument(
+        "--a-max",
+        type=float,
+        help="peak |acceleration| limit [m/s^2] (default: none, searched as 1000 m/s^2)",
+    )
     p.add_argument("--order", type=int, default=3, help="polynomial order 1..9 (default: 3)")
     p.add_argument("--out", required=True, help="library file to write; its directory must exist")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
@@ -51,20 +82,34 @@ def run(a) -> int:
     start = time.perf_counter()
     progress = Progress(a.nodes[0] * a.nodes[1], "nodes", "plan library", lines=False)
     try:
-        lib = build_library(tuple(a.x0), tuple(a.v0), tuple(a.nodes), a.tau_s,
-                            tuple(a.v_contact), a.v_max, a.a_max, a.order,
-                            progress=progress.at)
+        lib = build_library(
+            tuple(a.x0),
+            tuple(a.v0),
+            tuple(a.nodes),
+            a.tau_s,
+            tuple(a.v_contact),
+            a.v_max,
+            a.a_max,
+            a.order,
+            progress=progress.at,
+        )
     finally:
         progress.close()
     write_text(Path(a.out), library_text(lib), "--out", a.force)
     plans = sum(node is not None for row in lib.nodes for node in row)
-    out = {"library": a.out, "nodes": len(lib.x0s) * len(lib.v0s), "plans": plans,
-           "build_s": time.perf_counter() - start}
+    out = {
+        "library": a.out,
+        "nodes": len(lib.x0s) * len(lib.v0s),
+        "plans": plans,
+        "build_s": time.perf_counter() - start,
+    }
     if a.json:
         print(json.dumps(out))
     else:
-        print(f"{out['library']}: {plans} of {out['nodes']} nodes have a plan "
-              f"(built in {out['build_s']:.1f} s)")
+        print(
+            f"{out['library']}: {plans} of {out['nodes']} nodes have a plan "
+            f"(built in {out['build_s']:.1f} s)"
+        )
     return 0  # nodes without a plan are reported; replans near them fall back on neighbours
 
 
@@ -81,20 +126,36 @@ def check_library(path: str, text: str, as_json: bool) -> int:
             plans += 1
             rep = report(make_plan("ipts", x0, v0, lib.tau_s, lib.limits, k=node.k))
             if not rep.feasible:
-                broken.append(f"nodes[{i}][{j}] (x0 {x0:g} m, v0 {v0:g} m/s): "
-                              + "; ".join(rep.violations))
-    out = {"schema": SCHEMA, "strategy": "ipts", "order": lib.order,
-           "x0": [lib.x0s[0], lib.x0s[-1]], "v0": [lib.v0s[0], lib.v0s[-1]],
-           "nodes": len(lib.x0s) * len(lib.v0s), "plans": plans, "feasible": not broken,
-           "violations": broken}
+                broken.append(
+                    f"nodes[{i}][{j}] (x0 {x0:g} m, v0 {v0:g} m/s): " + "; ".join(rep.violations)
+                )
+    out = {
+        "schema": SCHEMA,
+        "strategy": "ipts",
+        "order": lib.order,
+        "x0": [lib.x0s[0], lib.x0s[-1]],
+        "v0": [lib.v0s[0], lib.v0s[-1]],
+        "nodes": len(lib.x0s) * len(lib.v0s),
+        "plans": plans,
+        "feasible": not broken,
+        "violations": broken,
+    }
     if as_json:
         print(json.dumps(out))
     else:
-        print(f"library: IPTS order {lib.order}, x0 {out['x0'][0]:g}..{out['x0'][1]:g} m "
-              f"({len(lib.x0s)} nodes) x v0 {out['v0'][0]:g}..{out['v0'][1]:g} m/s "
-              f"({len(lib.v0s)} nodes)")
-        print(f"plans: {plans} of {out['nodes']} nodes; "
-              + ("every one meets the limits" if not broken else "NOT feasible: " + broken[0]
-                 + (f" (and {len(broken) - 1} more)" if len(broken) > 1 else "")))
+        print(
+            f"library: IPTS order {lib.order}, x0 {out['x0'][0]:g}..{out['x0'][1]:g} m "
+            f"({len(lib.x0s)} nodes) x v0 {out['v0'][0]:g}..{out['v0'][1]:g} m/s "
+            f"({len(lib.v0s)} nodes)"
+        )
+        print(
+            f"plans: {plans} of {out['nodes']} nodes; "
+            + (
+                "every one meets the limits"
+                if not broken
+                else "NOT feasible: "
+                + broken[0]
+                + (f" (and {len(broken) - 1} more)" if len(broken) > 1 else "")
+            )
+        )
     return 0 if not broken else 1
-

@@ -32,23 +32,46 @@ from perchd.tau.robustplan import certified_plan, check_plan
 
 def register(plan_sub) -> None:
     """Add `robust` to the `perchd plan` subparsers."""
-    p = numbers_as_values(plan_sub.add_parser(
-        "robust", help="one IPTS k certified over a box of trigger states"))
+    p = numbers_as_values(
+        plan_sub.add_parser("robust", help="one IPTS k certified over a box of trigger states")
+    )
     p.add_argument("--x0", type=float, nargs="+", metavar="X", help="box LO HI, or nominal [m]")
     p.add_argument("--v0", type=float, nargs="+", metavar="V", help="box LO HI, or nominal [m/s]")
     p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument("--v-contact", type=float, nargs=2, required=True, metavar=("LO", "HI"),
-                   help="contact speeds allowed [m/s], 0 < LO <= HI")
+    p.add_argument(
+        "--v-contact",
+        type=float,
+        nargs=2,
+        required=True,
+        metavar=("LO", "HI"),
+        help="contact speeds allowed [m/s], 0 < LO <= HI",
+    )
     p.add_argument("--v-max", type=float, required=True, help="peak closing speed limit [m/s]")
     p.add_argument("--a-max", type=float, required=True, help="peak |acceleration| limit [m/s^2]")
     p.add_argument("--order", type=int, default=3, help="polynomial order (default: 3)")
-    p.add_argument("--search-x0", type=float, nargs=2, default=(-4.0, -0.5), metavar=("LO", "HI"),
-                   help="where boxes are looked for when none is given [m] (default: -4 -0.5)")
-    p.add_argument("--search-v0", type=float, nargs=2, default=None, metavar=("LO", "HI"),
-                   help="[m/s], default 0.2 .. v_max")
-    p.add_argument("--maxiter", type=int, default=40, help="differential-evolution generations (default: 40)")
+    p.add_argument(
+        "--search-x0",
+        type=float,
+        nargs=2,
+        default=(-4.0, -0.5),
+        metavar=("LO", "HI"),
+        help="where boxes are looked for when none is given [m] (default: -4 -0.5)",
+    )
+    p.add_argument(
+        "--search-v0",
+        type=float,
+        nargs=2,
+        default=None,
+        metavar=("LO", "HI"),
+        help="[m/s], default 0.2 .. v_max",
+    )
+    p.add_argument(
+        "--maxiter", type=int, default=40, help="differential-evolution generations (default: 40)"
+    )
     p.add_argument("--seed", type=int, default=0, help="search random seed (default: 0)")
-    p.add_argument("--start", metavar="PLAN", help="a lower-order robust plan whose k seeds the search")
+    p.add_argument(
+        "--start", metavar="PLAN", help="a lower-order robust plan whose k seeds the search"
+    )
     p.add_argument("--out", required=True, help="plan file to write; its directory must exist")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -58,11 +81,13 @@ def register(plan_sub) -> None:
 def limits_from(args):
 
     lo, hi = args.v_contact
-    checks = [("--tau-s", args.tau_s < 0, f"must be < 0, got {args.tau_s:g}"),
-              ("--v-contact", 0 < lo <= hi, f"needs 0 < LO <= HI, got {lo:g} {hi:g}"),
-              ("--v-max", args.v_max >= hi, f"{args.v_max:g} is below V_u = {hi:g}"),
-              ("--a-max", args.a_max > 0, f"must be > 0, got {args.a_max:g}"),
-              ("--order", 1 <= args.order <= 7, f"must be 1..7, got {args.order}")]
+    checks = [
+        ("--tau-s", args.tau_s < 0, f"must be < 0, got {args.tau_s:g}"),
+        ("--v-contact", 0 < lo <= hi, f"needs 0 < LO <= HI, got {lo:g} {hi:g}"),
+        ("--v-max", args.v_max >= hi, f"{args.v_max:g} is below V_u = {hi:g}"),
+        ("--a-max", args.a_max > 0, f"must be > 0, got {args.a_max:g}"),
+        ("--order", 1 <= args.order <= 7, f"must be 1..7, got {args.order}"),
+    ]
     for name, ok, why in checks:
         if not ok:
             raise PlanError(f"{name} {why}")
@@ -73,7 +98,9 @@ def _pair(name: str, values, sign: int):
     if values is None:
         return None
     if len(values) not in (1, 2):
-        raise PlanError(f"{name} takes LO HI (a box) or one value (a nominal state), got {len(values)}")
+        raise PlanError(
+            f"{name} takes LO HI (a box) or one value (a nominal state), got {len(values)}"
+        )
     if any(sign * v <= 0 for v in values):
         raise PlanError(f"{name} must be {'< 0' if sign < 0 else '> 0'}, got {values}")
     if len(values) == 2 and not values[0] < values[1]:
@@ -93,14 +120,30 @@ def run(args) -> int:
     progress = Progress(args.maxiter, "generations", "plan robust", lines=False)
     try:
         if x0 is not None and len(x0) == 2:
-            result, nominal = fastest_k(args.order, Box(x0, v0), lim, seed=args.seed,
-                                        maxiter=args.maxiter, progress=progress.at), None
+            result, nominal = (
+                fastest_k(
+                    args.order,
+                    Box(x0, v0),
+                    lim,
+                    seed=args.seed,
+                    maxiter=args.maxiter,
+                    progress=progress.at,
+                ),
+                None,
+            )
             mode = "box"
         else:
             nominal = None if x0 is None else (x0[0], v0[0])
             dom = SearchDomain(s_search, v_search, contains=nominal)
-            result = largest_box(args.order, lim, dom, seed=args.seed, maxiter=args.maxiter,
-                                 start=_start(args.start, lim), progress=progress.at)
+            result = largest_box(
+                args.order,
+                lim,
+                dom,
+                seed=args.seed,
+                maxiter=args.maxiter,
+                start=_start(args.start, lim),
+                progress=progress.at,
+            )
             mode = "grow" if nominal else "largest"
     finally:
         progress.close()
@@ -108,9 +151,15 @@ def run(args) -> int:
     plan = certified_plan(result, lim, nominal)
     write_text(Path(args.out), plan_text(plan), "--out", args.force)
     cert = plan.extra["certificate"]
-    summary = {"mode": mode, "order": args.order, "k": list(plan.k[1:]),
-               "robust": {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])},
-               "area": cert["area"], "duration_worst": cert["duration"][1], "out": args.out}
+    summary = {
+        "mode": mode,
+        "order": args.order,
+        "k": list(plan.k[1:]),
+        "robust": {"x0": list(plan.robust[0]), "v0": list(plan.robust[1])},
+        "area": cert["area"],
+        "duration_worst": cert["duration"][1],
+        "out": args.out,
+    }
     print(json.dumps(summary) if args.json else _table(summary))
     return 0
 
@@ -128,9 +177,12 @@ def _start(path, lim):
 
 def _table(s: dict) -> str:
     r = s["robust"]
-    return "\n".join([
-        f"robust IPTS order {s['order']} ({s['mode']}): k_1..k_n = "
-        + ", ".join(f"{k:.6g}" for k in s["k"]),
-        f"certified box: x0 {r['x0'][0]:.4f} .. {r['x0'][1]:.4f} m, "
-        f"v0 {r['v0'][0]:.4f} .. {r['v0'][1]:.4f} m/s, area {s['area']:.4f} m*m/s",
-        f"worst-case duration {s['duration_worst']:.4f} s; written to {s['out']}"])
+    return "\n".join(
+        [
+            f"robust IPTS order {s['order']} ({s['mode']}): k_1..k_n = "
+            + ", ".join(f"{k:.6g}" for k in s["k"]),
+            f"certified box: x0 {r['x0'][0]:.4f} .. {r['x0'][1]:.4f} m, "
+            f"v0 {r['v0'][0]:.4f} .. {r['v0'][1]:.4f} m/s, area {s['area']:.4f} m*m/s",
+            f"worst-case duration {s['duration_worst']:.4f} s; written to {s['out']}",
+        ]
+    )

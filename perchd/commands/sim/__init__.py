@@ -38,14 +38,14 @@ from typing import Any
 from perchd.commands.sim import campaign as campaign_cli
 from perchd.commands.sim import firmware as sim_firmware
 from perchd.commands.sim import report as sim_report
-from perchd.console.argcheck import numbers_as_values, within
 from perchd.commands.sim.campaign import add_arguments
+from perchd.console.argcheck import numbers_as_values, within
 from perchd.console.flightargs import check_geometry
-from perchd.flight.config import MAX_COORD_M
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.interrupts import catching
 from perchd.core.netbind import port_error
+from perchd.flight.config import MAX_COORD_M
 from perchd.mocap.outputs import natnet_options_help, open_pose_output
 from perchd.sim.plant import PlantParams
 from perchd.sim.receiver import Counts, SetpointInbox
@@ -61,30 +61,64 @@ STOP_GRACE_S = 0.5
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("sim", help="run the simulated vehicle as its own process",
-                              description=__doc__.splitlines()[0], epilog=EPILOG,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "sim",
+        help="run the simulated vehicle as its own process",
+        description=__doc__.splitlines()[0],
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     numbers_as_values(p)
-    p.add_argument("--pose-out", help="natnet://HOST[:PORT][?KEY=VALUE&...] (options below) or "
-                                       "zmq://HOST:PORT (required without --campaign)")
-    p.add_argument("--setpoint-in", help="zmq://HOST:PORT to bind for setpoints (required "
-                                          "without --campaign)")
+    p.add_argument(
+        "--pose-out",
+        help="natnet://HOST[:PORT][?KEY=VALUE&...] (options below) or "
+        "zmq://HOST:PORT (required without --campaign)",
+    )
+    p.add_argument(
+        "--setpoint-in", help="zmq://HOST:PORT to bind for setpoints (required without --campaign)"
+    )
     p.add_argument("--body", default="cf1", help="rigid body name (default cf1)")
-    p.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"),
-                   help="[m] start position, hovering when Z > 0 (default 4.5 m before the "
-                        "surface, 1 m above it)")
+    p.add_argument(
+        "--start",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="[m] start position, hovering when Z > 0 (default 4.5 m before the "
+        "surface, 1 m above it)",
+    )
     p.add_argument("--latency", type=float, default=0.0, help="[s] setpoint-to-vehicle delay")
     p.add_argument("--noise", type=float, default=0.0, help="[m] mocap noise std per axis")
-    p.add_argument("--surface", nargs=3, type=float, metavar=("X", "Y", "Z"),
-                   default=(0.0, 0.0, 0.0), help="[m] a point on the surface (default 0 0 0)")
-    p.add_argument("--normal", nargs=3, type=float, metavar=("NX", "NY", "NZ"),
-                   default=(1.0, 0.0, 0.0), help="approach direction (default 1 0 0)")
-    p.add_argument("--watchdog", nargs=2, type=float, metavar=("LEVEL_S", "CUT_S"),
-                   default=(0.5, 2.0), help="[s] without a setpoint: level out after LEVEL_S, "
-                   "cut the motors and lock after CUT_S (default 0.5 2, the Crazyflie's)")
+    p.add_argument(
+        "--surface",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        default=(0.0, 0.0, 0.0),
+        help="[m] a point on the surface (default 0 0 0)",
+    )
+    p.add_argument(
+        "--normal",
+        nargs=3,
+        type=float,
+        metavar=("NX", "NY", "NZ"),
+        default=(1.0, 0.0, 0.0),
+        help="approach direction (default 1 0 0)",
+    )
+    p.add_argument(
+        "--watchdog",
+        nargs=2,
+        type=float,
+        metavar=("LEVEL_S", "CUT_S"),
+        default=(0.5, 2.0),
+        help="[s] without a setpoint: level out after LEVEL_S, "
+        "cut the motors and lock after CUT_S (default 0.5 2, the Crazyflie's)",
+    )
     p.add_argument("--duration", type=float, help="[s] stop serving after this long")
-    p.add_argument("--exit-on-stop", action="store_true",
-                   help="exit once the agent has sent `stop` (the flight ended)")
+    p.add_argument(
+        "--exit-on-stop",
+        action="store_true",
+        help="exit once the agent has sent `stop` (the flight ended)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_arguments(p)
     p.set_defaults(run=run)
@@ -100,16 +134,25 @@ def make_world(args: argparse.Namespace) -> Any:
         raise UriError(f"--noise {args.noise:g} m is outside 0..0.1 m")
     check_geometry(args.surface, args.normal, "--surface", "--normal")
     within("--start", args.start, -MAX_COORD_M, MAX_COORD_M, "m")
-    params = WorldParams(plant=PlantParams(latency_s=args.latency),
-                         mocap=MocapParams(noise_m=args.noise),
-                         start=tuple(args.start) if args.start else None,
-                         surface_point=tuple(args.surface), surface_normal=tuple(args.normal),
-                         body=args.body)
+    params = WorldParams(
+        plant=PlantParams(latency_s=args.latency),
+        mocap=MocapParams(noise_m=args.noise),
+        start=tuple(args.start) if args.start else None,
+        surface_point=tuple(args.surface),
+        surface_normal=tuple(args.normal),
+        body=args.body,
+    )
     return SimWorld(params, MonotonicClock())
 
 
-def serve(world: Any, output: Any, counts: Counts, done: threading.Event,
-          until: float | None, exit_on_stop: bool) -> None:
+def serve(
+    world: Any,
+    output: Any,
+    counts: Counts,
+    done: threading.Event,
+    until: float | None,
+    exit_on_stop: bool,
+) -> None:
     """Publish each pose as it arrives, in real time, until told to stop."""
     last = -1
     while not done.is_set():
@@ -125,20 +168,37 @@ def serve(world: Any, output: Any, counts: Counts, done: threading.Event,
         done.wait(max(0.0, min(world.next_arrival() - world.clock.now(), 0.05)))
 
 
-def summary(world: Any, counts: Counts, mocap_uri: str, driver_uri: str,
-            watchdog: SetpointWatchdog | None = None) -> dict[str, Any]:
+def summary(
+    world: Any,
+    counts: Counts,
+    mocap_uri: str,
+    driver_uri: str,
+    watchdog: SetpointWatchdog | None = None,
+) -> dict[str, Any]:
     c = world.contact
     st = world.state()
-    out = {"contact": c is not None, "contact_t": c.t - world.t0 if c else None,
-           "contact_speed": c.speed if c else None, "setpoints": counts.setpoints,
-           "stops": counts.stops, "rejected": counts.rejected, "foreign": counts.foreign,
-           "poses": counts.poses,
-           "mocap": mocap_uri, "driver": driver_uri,
-           "vehicle": {"z_m": st.p[2], "thrust_n": st.thrust}}
+    out = {
+        "contact": c is not None,
+        "contact_t": c.t - world.t0 if c else None,
+        "contact_speed": c.speed if c else None,
+        "setpoints": counts.setpoints,
+        "stops": counts.stops,
+        "rejected": counts.rejected,
+        "foreign": counts.foreign,
+        "poses": counts.poses,
+        "mocap": mocap_uri,
+        "driver": driver_uri,
+        "vehicle": {"z_m": st.p[2], "thrust_n": st.thrust},
+    }
     if watchdog is not None:  # the silences [s] at which it acted
-        out["watchdog"] = {"level_s": watchdog.params.level_s, "cut_s": watchdog.params.cut_s,
-                           "levelled_after_s": watchdog.levels, "cut_after_s": watchdog.cuts,
-                           "locked": watchdog.locked, "refused": watchdog.refused}
+        out["watchdog"] = {
+            "level_s": watchdog.params.level_s,
+            "cut_s": watchdog.params.cut_s,
+            "levelled_after_s": watchdog.levels,
+            "cut_after_s": watchdog.cuts,
+            "locked": watchdog.locked,
+            "refused": watchdog.refused,
+        }
     return out
 
 
@@ -163,8 +223,9 @@ def run(args: argparse.Namespace) -> int:
     mocap_uri = output.uri(args.body)
     until = None if args.duration is None else time.monotonic() + args.duration
     with catching(done.set) as caught:  # before "ready": a signal from then on is caught
-        print(f"perchd sim: ready: mocap {mocap_uri} driver {inbox.uri}", file=sys.stderr,
-              flush=True)
+        print(
+            f"perchd sim: ready: mocap {mocap_uri} driver {inbox.uri}", file=sys.stderr, flush=True
+        )
         try:
             serve(world, output, counts, done, until, args.exit_on_stop)
         finally:
@@ -174,11 +235,16 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
     else:
-        contact = (f"contact at {result['contact_speed']:.3f} m/s, {result['contact_t']:.3f} s "
-                   "after start" if result["contact"] else "no contact")
-        print(f"{contact}; {counts.setpoints} setpoints, {counts.stops} stops, "
-              f"{counts.rejected} rejected, {counts.foreign} from a second sender, "
-              f"{counts.poses} poses; watchdog: "
-              f"{len(inbox.watchdog.levels)} levels, {len(inbox.watchdog.cuts)} cuts")
+        contact = (
+            f"contact at {result['contact_speed']:.3f} m/s, {result['contact_t']:.3f} s after start"
+            if result["contact"]
+            else "no contact"
+        )
+        print(
+            f"{contact}; {counts.setpoints} setpoints, {counts.stops} stops, "
+            f"{counts.rejected} rejected, {counts.foreign} from a second sender, "
+            f"{counts.poses} poses; watchdog: "
+            f"{len(inbox.watchdog.levels)} levels, {len(inbox.watchdog.cuts)} cuts"
+        )
     caught.say("sim", "stopped serving; the summary covers the run so far")
     return caught.exit_code(0)

@@ -27,6 +27,11 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+from perchd.campaign import flights as cp
+from perchd.campaign.batches import CampaignJob, fly_campaign
+from perchd.campaign.engine import open_engine, parse_cluster
+from perchd.campaign.results import CampaignTable, digest, summary_path
+from perchd.campaign.tableformats import have_pyarrow
 from perchd.console.flightargs import load_config
 from perchd.console.progress import Progress
 from perchd.core.errors import ConfigError
@@ -35,57 +40,107 @@ from perchd.core.safefile import OutputError, check_output
 from perchd.flight.config import TriggerPolicy
 from perchd.flight.planguard import check_flight_plan
 from perchd.logs.flightlog import jsonable
-from perchd.campaign import flights as cp
-from perchd.campaign.batches import CampaignJob, fly_campaign
-from perchd.campaign.engine import open_engine, parse_cluster
-from perchd.campaign.results import CampaignTable, digest, summary_path
-from perchd.campaign.tableformats import have_pyarrow
 from perchd.tau import load_plan
 
 DEFAULT_FLIGHTS = 20
 LIVE_ONLY = ("pose_out", "setpoint_in", "duration", "exit_on_stop")
 """Options of a live `perchd sim` (all unset by default) that mean nothing to a campaign."""
-CAMPAIGN_DEFAULTS = {"flights": None, "grid": None, "x0": None, "v0": None, "gust": 0.0,
-                     "seed": 0, "policy": None, "config": None, "table": None, "logs": None,
-                     "jobs": 1, "force": False, "cluster": None}
+CAMPAIGN_DEFAULTS = {
+    "flights": None,
+    "grid": None,
+    "x0": None,
+    "v0": None,
+    "gust": 0.0,
+    "seed": 0,
+    "policy": None,
+    "config": None,
+    "table": None,
+    "logs": None,
+    "jobs": 1,
+    "force": False,
+    "cluster": None,
+}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
-        "campaign", "many simulated flights of one plan in this process, on a simulated "
+        "campaign",
+        "many simulated flights of one plan in this process, on a simulated "
         "clock; --latency, --noise, --surface, --normal and --json apply too, and --start "
-        "(default: far enough back for each trigger state)")
+        "(default: far enough back for each trigger state)",
+    )
     g.add_argument("--campaign", metavar="P.json", help="fly this plan file many times")
     n = g.add_mutually_exclusive_group()
     n.add_argument("--flights", type=int, help=f"random trigger states (default {DEFAULT_FLIGHTS})")
-    n.add_argument("--grid", nargs=2, type=int, metavar=("NX", "NV"),
-                   help="a grid of NX x NV trigger states, corners included (default: random draws)")
-    g.add_argument("--x0", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="[m] trigger gap range (default: the plan's robust box less 0.04, "
-                        "else its x0 +- 10 %%)")
-    g.add_argument("--v0", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="[m/s] closing speed range (default as --x0)")
-    g.add_argument("--gust", type=float, default=CAMPAIGN_DEFAULTS["gust"], metavar="DV",
-                   help="[m/s] one velocity kick per flight, uniform in +-DV per axis, at "
-                        "10..60 %% of the plan's duration after the trigger (default 0: none)")
-    g.add_argument("--seed", type=int, default=CAMPAIGN_DEFAULTS["seed"], help="seed of every draw (default 0)")
-    g.add_argument("--policy", choices=("robust", "replan", "refuse"),
-                   help="trigger policy (default robust for a plan with a box, else replan)")
+    n.add_argument(
+        "--grid",
+        nargs=2,
+        type=int,
+        metavar=("NX", "NV"),
+        help="a grid of NX x NV trigger states, corners included (default: random draws)",
+    )
+    g.add_argument(
+        "--x0",
+        nargs=2,
+        type=float,
+        metavar=("LO", "HI"),
+        help="[m] trigger gap range (default: the plan's robust box less 0.04, "
+        "else its x0 +- 10 %%)",
+    )
+    g.add_argument(
+        "--v0",
+        nargs=2,
+        type=float,
+        metavar=("LO", "HI"),
+        help="[m/s] closing speed range (default as --x0)",
+    )
+    g.add_argument(
+        "--gust",
+        type=float,
+        default=CAMPAIGN_DEFAULTS["gust"],
+        metavar="DV",
+        help="[m/s] one velocity kick per flight, uniform in +-DV per axis, at "
+        "10..60 %% of the plan's duration after the trigger (default 0: none)",
+    )
+    g.add_argument(
+        "--seed", type=int, default=CAMPAIGN_DEFAULTS["seed"], help="seed of every draw (default 0)"
+    )
+    g.add_argument(
+        "--policy",
+        choices=("robust", "replan", "refuse"),
+        help="trigger policy (default robust for a plan with a box, else replan)",
+    )
     g.add_argument("--config", help="flight configuration file (TOML), as for perchd fly")
-    g.add_argument("--table", help="outcome table, .parquet (pyarrow) or .csv; its directory "
-                                   "must exist; the same command again resumes it (default "
-                                   "./campaigns/<time>-<plan>.parquet, or .csv without "
-                                   "pyarrow; directory made)")
-    g.add_argument("--logs", help="keep each flight's log (flight-NNNN.jsonl) in this existing "
-                                  "directory (default: none kept)")
-    g.add_argument("--force", action="store_true",
-                   help="overwrite an existing --table file or flight logs in --logs")
-    g.add_argument("--jobs", type=int, default=CAMPAIGN_DEFAULTS["jobs"],
-                   help="worker processes on this machine (default 1: this process)")
-    g.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
-                   help="where flights run: local[:N], N worker processes here (a Dask "
-                        "LocalCluster, or a process pool without Dask; N defaults to --jobs), "
-                        "or a Dask scheduler's address (pip install 'perchd[cluster]')")
+    g.add_argument(
+        "--table",
+        help="outcome table, .parquet (pyarrow) or .csv; its directory "
+        "must exist; the same command again resumes it (default "
+        "./campaigns/<time>-<plan>.parquet, or .csv without "
+        "pyarrow; directory made)",
+    )
+    g.add_argument(
+        "--logs",
+        help="keep each flight's log (flight-NNNN.jsonl) in this existing "
+        "directory (default: none kept)",
+    )
+    g.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite an existing --table file or flight logs in --logs",
+    )
+    g.add_argument(
+        "--jobs",
+        type=int,
+        default=CAMPAIGN_DEFAULTS["jobs"],
+        help="worker processes on this machine (default 1: this process)",
+    )
+    g.add_argument(
+        "--cluster",
+        metavar="local[:N]|tcp://HOST:PORT",
+        help="where flights run: local[:N], N worker processes here (a Dask "
+        "LocalCluster, or a process pool without Dask; N defaults to --jobs), "
+        "or a Dask scheduler's address (pip install 'perchd[cluster]')",
+    )
 
 
 def check_mode(args: argparse.Namespace) -> None:
@@ -94,16 +149,19 @@ def check_mode(args: argparse.Namespace) -> None:
         given = [o for o in LIVE_ONLY if getattr(args, o) not in (None, False)]
         if given:
             opts = ", ".join("--" + o.replace("_", "-") for o in given)
-            raise ConfigError(f"{opts}: for a live simulator, not a --campaign (which flies "
-                              "in this process)")
+            raise ConfigError(
+                f"{opts}: for a live simulator, not a --campaign (which flies in this process)"
+            )
         return
     given = [o for o, v in CAMPAIGN_DEFAULTS.items() if getattr(args, o) != v]
     if given:
         opts = ", ".join("--" + o for o in given)
         raise ConfigError(f"{opts}: only with --campaign P.json")
     if not args.pose_out or not args.setpoint_in:
-        raise ConfigError("--pose-out and --setpoint-in are required (or --campaign P.json "
-                          "for simulated flights in this process)")
+        raise ConfigError(
+            "--pose-out and --setpoint-in are required (or --campaign P.json "
+            "for simulated flights in this process)"
+        )
 
 
 def _stat(s: Any, fmt: str, scale: float = 1.0) -> str:
@@ -115,16 +173,19 @@ def _stat(s: Any, fmt: str, scale: float = 1.0) -> str:
 def summary_text(summary: Any, table: Path, wall_s: float) -> str:
     outcomes = ", ".join(f"{k} {v}" for k, v in summary.outcomes.items())
     contacts = summary.outcomes.get("CONTACT", 0)
-    return "\n".join([
-        f"flights: {summary.flights} in {wall_s:.1f} s; {outcomes}",
-        f"contact inside the plan's window: {summary.in_window} of {summary.flights}",
-        f"contact speed min / median / max: {_stat(summary.contact_speed, '.3f')} m/s "
-        f"({contacts} contacts); - plan: {_stat(summary.speed_error_mps, '+.3f')} m/s",
-        f"perch time - plan: {_stat(summary.perch_error_s, '+.1f', 1e3)} ms "
-        f"({_stat(summary.perch_error_pct, '+.2f')} %)",
-        f"trigger - aim: x {_stat(summary.trigger_dx_m, '+.3f')} m, "
-        f"v {_stat(summary.trigger_dv_mps, '+.3f')} m/s",
-        f"table: {table}"])
+    return "\n".join(
+        [
+            f"flights: {summary.flights} in {wall_s:.1f} s; {outcomes}",
+            f"contact inside the plan's window: {summary.in_window} of {summary.flights}",
+            f"contact speed min / median / max: {_stat(summary.contact_speed, '.3f')} m/s "
+            f"({contacts} contacts); - plan: {_stat(summary.speed_error_mps, '+.3f')} m/s",
+            f"perch time - plan: {_stat(summary.perch_error_s, '+.1f', 1e3)} ms "
+            f"({_stat(summary.perch_error_pct, '+.2f')} %)",
+            f"trigger - aim: x {_stat(summary.trigger_dx_m, '+.3f')} m, "
+            f"v {_stat(summary.trigger_dv_mps, '+.3f')} m/s",
+            f"table: {table}",
+        ]
+    )
 
 
 def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
@@ -138,8 +199,15 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
         raise ConfigError(f"--latency {args.latency:g} s is outside 0..1 s")
     if not 0.0 <= args.noise <= 0.1:
         raise ConfigError(f"--noise {args.noise:g} m is outside 0..0.1 m")
-    spread = cp.Spread(tuple(args.x0 or xr), tuple(args.v0 or vr), args.latency, args.noise,
-                       args.gust, tuple(args.start) if args.start else None, args.seed)
+    spread = cp.Spread(
+        tuple(args.x0 or xr),
+        tuple(args.v0 or vr),
+        args.latency,
+        args.noise,
+        args.gust,
+        tuple(args.start) if args.start else None,
+        args.seed,
+    )
     policy = TriggerPolicy(args.policy) if args.policy else cp.default_policy(plan)
     cfg = cp.campaign_config(load_config(args), policy)
     check_flight_plan(plan, cfg)  # before the table is made: exit 2 naming the field
@@ -161,7 +229,9 @@ def table_path(args: argparse.Namespace) -> Path:
             return table
         return check_output(args.table, "--table", args.force, inputs=(args.campaign,))
     suffix = ".parquet" if have_pyarrow() else ".csv"
-    table = Path("campaigns") / f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}{suffix}"
+    table = (
+        Path("campaigns") / f"{time.strftime('%Y%m%d-%H%M%S')}-{Path(args.campaign).stem}{suffix}"
+    )
     return check_output(table, "--table", args.force) if table.parent.is_dir() else table
 
 
@@ -179,8 +249,13 @@ def identity(args: argparse.Namespace, cfg: Any, spread: Any, flights: int) -> d
     """What makes a campaign's table: the plan file, policy, configuration, spread and draw
     (not where or how fast it flies)."""
     draw = {"grid": list(args.grid)} if args.grid else {"flights": flights}
-    return {"plan": digest(Path(args.campaign).read_bytes()), "policy": cfg.trigger.policy.value,
-            "config": digest(jsonable(cfg)), "spread": asdict(spread), "draw": draw}
+    return {
+        "plan": digest(Path(args.campaign).read_bytes()),
+        "policy": cfg.trigger.policy.value,
+        "config": digest(jsonable(cfg)),
+        "spread": asdict(spread),
+        "draw": draw,
+    }
 
 
 def run(args: argparse.Namespace) -> int:
@@ -211,8 +286,11 @@ def run(args: argparse.Namespace) -> int:
         finally:
             progress.close()
             close_quietly(engine)
-            where = {"engine": engine.name if engine else None, "resumed": results.resumed,
-                     "flown": len(results.rows) - results.resumed}
+            where = {
+                "engine": engine.name if engine else None,
+                "resumed": results.resumed,
+                "flown": len(results.rows) - results.resumed,
+            }
             rows = results.finish(len(specs), {**where, "wall_s": time.monotonic() - t0})
     report(args, cfg, spread, rows, table, time.monotonic() - t0, stopped, len(specs), where)
     if stopped is not None:
@@ -232,21 +310,43 @@ def close_quietly(engine: Any) -> None:
             signal.signal(s, handler)
 
 
-def report(args, cfg, spread, rows: list[Any], table: Path, wall: float,
-           stopped: "Stopped | None", planned: int, where: dict[str, Any]) -> None:
+def report(
+    args,
+    cfg,
+    spread,
+    rows: list[Any],
+    table: Path,
+    wall: float,
+    stopped: Stopped | None,
+    planned: int,
+    where: dict[str, Any],
+) -> None:
     """The summary of the table's flights (all of them unless `stopped`)."""
     summary = cp.summarize(rows)
     if args.json:
-        print(json.dumps({**asdict(summary), "plan": args.campaign, "policy": cfg.trigger.policy.value,
-                          "spread": asdict(spread), "table": str(table), "wall_s": wall,
-                          "interrupted": None if stopped is None else stopped.name,
-                          "planned": planned, **where}))
+        print(
+            json.dumps(
+                {
+                    **asdict(summary),
+                    "plan": args.campaign,
+                    "policy": cfg.trigger.policy.value,
+                    "spread": asdict(spread),
+                    "table": str(table),
+                    "wall_s": wall,
+                    "interrupted": None if stopped is None else stopped.name,
+                    "planned": planned,
+                    **where,
+                }
+            )
+        )
     else:
         print(summary_text(summary, table, wall))
     if stopped is not None:
-        print(f"perchd sim: interrupted by {stopped.name} after {len(rows)} of {planned} "
-              f"flights; the table holds those, and the same command flies the rest",
-              file=sys.stderr)
+        print(
+            f"perchd sim: interrupted by {stopped.name} after {len(rows)} of {planned} "
+            f"flights; the table holds those, and the same command flies the rest",
+            file=sys.stderr,
+        )
 
 
 class Stopped(BaseException):
@@ -261,10 +361,12 @@ class Stopped(BaseException):
 @contextlib.contextmanager
 def on_signals():
     """SIGINT and SIGTERM raise Stopped in the main thread while the campaign runs."""
+
     def stop(signum, _frame):
         for s in (signal.SIGINT, signal.SIGTERM):  # once: the first signal decides
             signal.signal(s, signal.SIG_IGN)
         raise Stopped(signum)
+
     previous = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield

@@ -11,22 +11,29 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from perchd.commands.sim.campaign import summary_text
-from perchd.core.safefile import OutputError
-from perchd.campaign.plot import WORST_COLUMNS, plot_campaign, text, worst
 from perchd.campaign.flights import FlightRow, summarize
+from perchd.campaign.plot import WORST_COLUMNS, plot_campaign, text, worst
 from perchd.campaign.results import summary_path
 from perchd.campaign.tableformats import table_format
+from perchd.commands.sim.campaign import summary_text
+from perchd.core.safefile import OutputError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("report", help="a campaign table's summary and plots",
-                       description=__doc__.splitlines()[0])
+    p = sub.add_parser(
+        "report", help="a campaign table's summary and plots", description=__doc__.splitlines()[0]
+    )
     p.add_argument("table", metavar="TABLE", help="a campaign's .parquet or .csv table")
-    p.add_argument("--plots", metavar="DIR", help="draw the figures (PNG) into this existing "
-                                                  "directory")
-    p.add_argument("--worst", type=int, default=10, metavar="N",
-                   help="flights listed and drawn as the worst (default 10)")
+    p.add_argument(
+        "--plots", metavar="DIR", help="draw the figures (PNG) into this existing directory"
+    )
+    p.add_argument(
+        "--worst",
+        type=int,
+        default=10,
+        metavar="N",
+        help="flights listed and drawn as the worst (default 10)",
+    )
     p.add_argument("--json", action="store_true", help="the summary as one JSON object")
     p.add_argument("--force", action="store_true", help="overwrite existing figures")
     p.set_defaults(run=run)
@@ -54,12 +61,24 @@ def run(args: argparse.Namespace) -> int:
         raise OutputError(f"--plots {args.plots}: not an existing directory (perchd creates none)")
     summary, bad = summarize(rows), worst(rows, args.worst)
     meta = made(table)
-    plots = [str(p) for p in plot_campaign(rows, Path(args.plots), args.force, args.worst)] \
-        if args.plots else []
+    plots = (
+        [str(p) for p in plot_campaign(rows, Path(args.plots), args.force, args.worst)]
+        if args.plots
+        else []
+    )
     if args.json:
-        print(json.dumps({**asdict(summary), "table": str(table), "plots": plots,
-                          "complete": meta.get("complete"), "campaign": meta.get("campaign"),
-                          "worst": [asdict(r) for r in bad]}))
+        print(
+            json.dumps(
+                {
+                    **asdict(summary),
+                    "table": str(table),
+                    "plots": plots,
+                    "complete": meta.get("complete"),
+                    "campaign": meta.get("campaign"),
+                    "worst": [asdict(r) for r in bad],
+                }
+            )
+        )
         return 0
     print(summary_text(summary, table, meta.get("wall_s", 0.0)))
     print("worst: " + "  ".join(c for c, _ in WORST_COLUMNS))

@@ -26,15 +26,18 @@ FAILSAFE_RULES = (
     ParamRule("FS_GCS_TIMEOUT", lambda v: 0.0 < v <= 2.0 + F32, "<= 2 s", const(2.0)),
     # perchd's mapping already divides thrust by cos(tilt) (flight/control.py): a second
     # 1/cos(tilt) in ArduPilot's attitude controller is +10 % at 25 deg
-    ParamRule("ATC_ANGLE_BOOST", lambda v: int(v) == 0, "0 (perchd compensates tilt)",
-              const(0)),
+    ParamRule("ATC_ANGLE_BOOST", lambda v: int(v) == 0, "0 (perchd compensates tilt)", const(0)),
 )
 """What the vehicle does once perchd is gone, and what it does to perchd's thrust."""
 
 VISION_RULES = (
     ParamRule("VISO_TYPE", lambda v: int(v) == 1, "1 (MAVLink)", const(1), reboot=True),
-    *(ParamRule(f"EK3_SRC1_{axis}", lambda v: int(v) == EXTNAV, f"{EXTNAV} (ExternalNav)",
-                const(EXTNAV)) for axis in ("POSXY", "POSZ", "YAW")),
+    *(
+        ParamRule(
+            f"EK3_SRC1_{axis}", lambda v: int(v) == EXTNAV, f"{EXTNAV} (ExternalNav)", const(EXTNAV)
+        )
+        for axis in ("POSXY", "POSZ", "YAW")
+    ),
 )
 """Its EKF on perchd's mocap (vision.py) for position and heading."""
 
@@ -57,7 +60,8 @@ class ArduPilot:
         if not options & GUIDED_THRUST_BIT:
             raise ConfigError(
                 f"{uri}: GUID_OPTIONS={options} lacks bit 3 (thrust as thrust); "
-                f"set GUID_OPTIONS={options | GUIDED_THRUST_BIT} on the vehicle")
+                f"set GUID_OPTIONS={options | GUIDED_THRUST_BIT} on the vehicle"
+            )
 
     def param_wire(self, name: str, value: float) -> tuple[float, int]:
         return float(value), MAV_PARAM_TYPE_REAL32

@@ -68,8 +68,16 @@ class Brake:
         return brake_for(v_ned, self.heading_ned, self.hover, self.t_s)
 
     def pack(self) -> bytes:
-        return struct.pack(WIRE, *self.q_ned, self.thrust, self.duration_s, *self.v_ne,
-                           self.heading_ned, self.hover, self.t_s)
+        return struct.pack(
+            WIRE,
+            *self.q_ned,
+            self.thrust,
+            self.duration_s,
+            *self.v_ne,
+            self.heading_ned,
+            self.hover,
+            self.t_s,
+        )
 
     @classmethod
     def unpack(cls, data: bytes) -> Brake:
@@ -106,8 +114,15 @@ def brake_for(v_ned: Vec3, heading_ned: float, hover_fraction: float, t_s: float
     [rad] (lean_for), thrust holding height."""
     roll, pitch, duration = lean_for(v_ned, heading_ned)
     thrust = min(hover_fraction / (math.cos(roll) * math.cos(pitch)), 1.0)
-    return Brake(quaternion_wxyz(roll, pitch, heading_ned), thrust, duration,
-                 (v_ned[0], v_ned[1]), heading_ned, hover_fraction, t_s)
+    return Brake(
+        quaternion_wxyz(roll, pitch, heading_ned),
+        thrust,
+        duration,
+        (v_ned[0], v_ned[1]),
+        heading_ned,
+        hover_fraction,
+        t_s,
+    )
 
 
 class WillSchedule:

@@ -48,4 +48,3 @@ class Dialect(Protocol):
 
 def rules_for(dialect: Dialect, vision: bool) -> tuple[ParamRule, ...]:
     return dialect.failsafe_rules + (dialect.vision_rules if vision else ())
-

@@ -71,7 +71,8 @@ NO_HEARTBEAT_CAUSES = (
     f"offboard port: use mavlink:udpin:127.0.0.1:{OFFBOARD_PORT} (SITL instance N: "
     f"{OFFBOARD_PORT}+N); a PX4 that already heard a udpout: link from another source "
     "port answers only that one (restart it, use udpin:, or keep one port with ?sport=); "
-    "ArduPilot SITL: mavlink:tcp:127.0.0.1:5760 or its --out udp port with udpin:")
+    "ArduPilot SITL: mavlink:tcp:127.0.0.1:5760 or its --out udp port with udpin:"
+)
 RIVAL_LISTEN_S = 0.5
 """[s] connect() listens at least this long for another GCS's or companion's targets: an
 offboard stream comes at 2 Hz or more (PX4 leaves OFFBOARD below it)."""
@@ -80,10 +81,24 @@ offboard stream comes at 2 Hz or more (PX4 leaves OFFBOARD below it)."""
 class MavlinkDriver(DriverBase):
     """The Driver (drivers/base.py) of a MAVLink autopilot; options as uri.py reads them."""
 
-    def __init__(self, uri: str, device: str, runtime: Runtime, *, mass_kg: float | None,
-                 hover: float | None, arm: bool, timeout: float, stream_hz: float,
-                 wait: float, yaw0: float | None = 0.0, configure: bool = False,
-                 sport: int | None = None, vision: bool = True, tilt: bool = True) -> None:
+    def __init__(
+        self,
+        uri: str,
+        device: str,
+        runtime: Runtime,
+        *,
+        mass_kg: float | None,
+        hover: float | None,
+        arm: bool,
+        timeout: float,
+        stream_hz: float,
+        wait: float,
+        yaw0: float | None = 0.0,
+        configure: bool = False,
+        sport: int | None = None,
+        vision: bool = True,
+        tilt: bool = True,
+    ) -> None:
         self.uri, self.device, self.clock = uri, device, runtime.clock
         self.mass_kg = self.uri_mass = mass_kg  # uri_mass: the URI's mass=, for bind_mass
         self.hover, self.arm, self.timeout = hover, arm, timeout
@@ -143,8 +158,10 @@ class MavlinkDriver(DriverBase):
         self._stopped = self._engaged = False
         if self.tilt is not None:  # another link, maybe another boot: its clock learnt anew
             self.tilt = TiltCorrection()
-        self._tickers = [Ticker(0.0, self._receive, "mavlink-receive").start(),
-                         Ticker(KEEPALIVE_S / 2, self._keepalive, "mavlink-keepalive").start()]
+        self._tickers = [
+            Ticker(0.0, self._receive, "mavlink-receive").start(),
+            Ticker(KEEPALIVE_S / 2, self._keepalive, "mavlink-keepalive").start(),
+        ]
         try:
             self._setup(Waiter(self._link, self.uri, self.wait, MonotonicClock(), self._pump))
         except BaseException:
@@ -164,9 +181,13 @@ class MavlinkDriver(DriverBase):
             self._airborne_before_arm = steps.prestream(model.hover_fraction)
             self._engaged = True
             steps.switch_mode()
-            self._guard.flying(self._link, self.vehicle.target, steps.dialect.land,
-                               self.mocap_uri if self.vision else None,
-                               self.vehicle.flight_mode or 0)
+            self._guard.flying(
+                self._link,
+                self.vehicle.target,
+                steps.dialect.land,
+                self.mocap_uri if self.vision else None,
+                self.vehicle.flight_mode or 0,
+            )
             if self.arm:
                 steps.arm(self.vision, self._fed)
                 if steps.dialect.spools_up and not self._airborne_before_arm:
@@ -181,8 +202,9 @@ class MavlinkDriver(DriverBase):
             self._yaw0.align((self.vehicle.yaw_ned or 0.0) + setpoint.yaw)
         self._stream.level_yaw = ned_yaw(setpoint.yaw, self.yaw0)
         tilt = NO_TILT if self.tilt is None else self.tilt.correction(self.clock.now())
-        self._stream.send(ned_attitude(setpoint, self.yaw0, tilt),
-                          self.model.fraction(setpoint.thrust))
+        self._stream.send(
+            ned_attitude(setpoint, self.yaw0, tilt), self.model.fraction(setpoint.thrust)
+        )
 
     def observe_pose(self, pose: Any) -> None:
         """Each pose goes to the autopilot's EKF once (vision.py) unless vision=0, and is
@@ -214,7 +236,9 @@ class MavlinkDriver(DriverBase):
         if self._refused:
             return LinkHealth(False, age, f"connection lost: {self._refused}")
         if age > self.timeout:
-            return LinkHealth(False, age, f"connection lost: no message from the vehicle for {age:.2f} s")
+            return LinkHealth(
+                False, age, f"connection lost: no message from the vehicle for {age:.2f} s"
+            )
         if not self._stopped and v.left_flight_mode():
             return LinkHealth(False, age, f"vehicle left the offboard mode (custom mode {v.mode})")
         return LinkHealth(True, age)
@@ -227,8 +251,7 @@ class MavlinkDriver(DriverBase):
         # an EKF on mocap alone would dead-reckon the rest of the landing (docs/safety.md,
         # "The mocap relayed after the death"): the sentinel relays it until the end,
         # unless new links to this vehicle feed it from now on
-        self._release(handover=hand_over and self._engaged and self.vehicle.armed
-                      and self.vision)
+        self._release(handover=hand_over and self._engaged and self.vehicle.armed and self.vision)
 
     def bind_mass(self, mass_kg: float) -> None:
         """The flight's mass for the thrust model (rebuilt if connect() already made it)."""
@@ -248,22 +271,34 @@ class MavlinkDriver(DriverBase):
     # -- connection setup --------------------------------------------------------------
     def _setup(self, waiter: Waiter) -> None:
         if self.mass_kg is None:
-            raise ConfigError(f"{self.uri}: the vehicle mass is unknown: fly with a flight "
-                              f"config ([vehicle] mass_kg) or add ?mass=KG")
+            raise ConfigError(
+                f"{self.uri}: the vehicle mass is unknown: fly with a flight "
+                f"config ([vehicle] mass_kg) or add ?mass=KG"
+            )
         v = self.vehicle
-        waiter.until(("HEARTBEAT",), lambda: v.heard_s is not None,
-                     "a heartbeat from the vehicle", causes=NO_HEARTBEAT_CAUSES)
+        waiter.until(
+            ("HEARTBEAT",),
+            lambda: v.heard_s is not None,
+            "a heartbeat from the vehicle",
+            causes=NO_HEARTBEAT_CAUSES,
+        )
         dialect = v.dialect
         if dialect is None:
-            raise LinkError(f"{self.uri}: autopilot type {v.autopilot} is neither ArduPilot nor PX4")
+            raise LinkError(
+                f"{self.uri}: autopilot type {v.autopilot} is neither ArduPilot nor PX4"
+            )
         self._params = params = ParamIO(waiter, v.target)
         self._stream = SetpointStream(waiter.link, v.target, self.clock)
         self._takeover = Takeover(waiter.link, waiter, v, self._stream, dialect, self.uri)
         self._ask_streams(waiter.link, v.target)
         dialect.check_setup(self.uri, params.read)
-        check_params(self.uri, rules_for(dialect, self.vision), params.read,
-                     lambda name, value: params.write(name, *dialect.param_wire(name, value)),
-                     self.configure)
+        check_params(
+            self.uri,
+            rules_for(dialect, self.vision),
+            params.read,
+            lambda name, value: params.write(name, *dialect.param_wire(name, value)),
+            self.configure,
+        )
         hover = self.hover if self.hover is not None else params.read(dialect.hover_param)
         try:
             self.model = NormalisedThrust(self.mass_kg, hover)
@@ -274,9 +309,12 @@ class MavlinkDriver(DriverBase):
 
     def _ask_streams(self, link: Connection, target: tuple[int, int]) -> None:
         """The messages the driver reads, at the rates it needs them."""
-        for msg_id, hz in ((ATTITUDE_ID, self.stream_hz),
-                           (EXTENDED_SYS_STATE_ID, LANDED_STATE_HZ),
-                           (ATTITUDE_TARGET_ID, STATUS_HZ), (LOCAL_POSITION_NED_ID, STATUS_HZ)):
+        for msg_id, hz in (
+            (ATTITUDE_ID, self.stream_hz),
+            (EXTENDED_SYS_STATE_ID, LANDED_STATE_HZ),
+            (ATTITUDE_TARGET_ID, STATUS_HZ),
+            (LOCAL_POSITION_NED_ID, STATUS_HZ),
+        ):
             link.command(target, CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
 
     # -- engaging ----------------------------------------------------------------------
@@ -320,8 +358,9 @@ class MavlinkDriver(DriverBase):
         if kind == "PARAM_VALUE" and self._params is not None and v.dialect is not None:
             self._params.on_value(msg.param_id, v.dialect.param_value(msg))
         elif kind == "ATTITUDE" and self.tilt is not None:
-            self.tilt.on_estimate(msg.time_boot_ms * 1e-3, v.heard_s, float(msg.roll),
-                                  float(msg.pitch))
+            self.tilt.on_estimate(
+                msg.time_boot_ms * 1e-3, v.heard_s, float(msg.roll), float(msg.pitch)
+            )
         elif kind == "TIMESYNC" and msg.tc1 == 0 and self._link is not None:
             link = self._link
             link.send(link.mav.timesync_encode(*timesync_reply(msg.ts1, self.clock.now())))

@@ -30,18 +30,27 @@ class SentinelGuard:
     def started(self) -> bool:
         return self._sentinel is not None
 
-    def flying(self, link: Connection, target: tuple[int, int], land: Mode,
-               mocap: str | None, flight_mode: int) -> None:
+    def flying(
+        self,
+        link: Connection,
+        target: tuple[int, int],
+        land: Mode,
+        mocap: str | None,
+        flight_mode: int,
+    ) -> None:
         """perchd flies the vehicle `target` on `link` in `flight_mode` (custom_mode): the
         sentinel, started on the first call, is to `land` it should this process die and
         relay `mocap` (None: nothing). One that cannot start is warned of, not raised."""
         if self._sentinel is None:
             try:
-                self._sentinel = Sentinel(link, target, (land.main, land.sub), mocap,
-                                          flight_mode)
+                self._sentinel = Sentinel(link, target, (land.main, land.sub), mocap, flight_mode)
             except (OSError, ValueError) as err:
-                log.warning("%s: no MAVLink sentinel (%s): if this process dies, only the "
-                            "autopilot's own failsafe acts", self.uri, err)
+                log.warning(
+                    "%s: no MAVLink sentinel (%s): if this process dies, only the "
+                    "autopilot's own failsafe acts",
+                    self.uri,
+                    err,
+                )
                 return
             self._yaw0_told = None
         self._sentinel.flying(True)
@@ -51,8 +60,7 @@ class SentinelGuard:
         if self._sentinel is not None:
             self._sentinel.flying(False)
 
-    def renew(self, pose: Any, yaw0: float | None, heading_ned: float,
-              hover: float | None) -> None:
+    def renew(self, pose: Any, yaw0: float | None, heading_ned: float, hover: float | None) -> None:
         """Every pose the flight uses: every WILL_PERIOD_S, the brake against its velocity
         at `heading_ned` [rad] with `hover` thrust (None: no brake now), in the frame yaw0
         [rad] (None: none known, no brake), which is told when it changed."""

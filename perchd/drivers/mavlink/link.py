@@ -99,8 +99,11 @@ class Connection:
 
     def recv(self, timeout_s: float) -> Any | None:
         """The next message within timeout_s [s]; None for none (or unparseable bytes)."""
-        msg = self.conn.recv_match(blocking=True, timeout=timeout_s) if self._sock is None \
+        msg = (
+            self.conn.recv_match(blocking=True, timeout=timeout_s)
+            if self._sock is None
             else self._recv_connected(timeout_s)
+        )
         return None if msg is None or msg.get_type() == "BAD_DATA" else msg
 
     def pump(self, timeout_s: float, handle: Handler) -> None:
@@ -191,21 +194,30 @@ def bind_source_port(conn: Any, port: int, uri: str) -> None:
         raise LinkError(f"{uri}: cannot bind source port {port}: {err.strerror or err}") from None
 
 
-def open_connection(device: str, uri: str, sport: int | None = None,
-                    on_refused: Callable[[], None] = _nothing) -> Connection:
+def open_connection(
+    device: str, uri: str, sport: int | None = None, on_refused: Callable[[], None] = _nothing
+) -> Connection:
     """Our connection to `device` as SOURCE; a udpout: link from source port `sport` (None:
     an ephemeral one) that reports a refusal through on_refused()."""
     from pymavlink import mavutil
-    conn = mavutil.mavlink_connection(device, source_system=SOURCE[0],
-                                      source_component=SOURCE[1])
+
+    conn = mavutil.mavlink_connection(device, source_system=SOURCE[0], source_component=SOURCE[1])
     if sport is not None:
         bind_source_port(conn, sport, uri)
     return Connection(conn, on_refused if device.startswith("udpout:") else None)
 
 
-def wait_for(conn: Connection, types: Collection[str], predicate: Callable[[Any], bool],
-             timeout_s: float, clock: Clock, *, ask: Callable[[], None] | None = None,
-             ask_every_s: float = math.inf, idle: Callable[[], None] = _nothing) -> Any | None:
+def wait_for(
+    conn: Connection,
+    types: Collection[str],
+    predicate: Callable[[Any], bool],
+    timeout_s: float,
+    clock: Clock,
+    *,
+    ask: Callable[[], None] | None = None,
+    ask_every_s: float = math.inf,
+    idle: Callable[[], None] = _nothing,
+) -> Any | None:
     """The first message of `types` conn's receiver hands on from now with predicate(msg)
     true, or None once timeout_s [s] on `clock` have passed. ask() (the request the answer
     is awaited to) goes out once listening, so no answer slips past, and again every
@@ -240,14 +252,32 @@ class Waiter:
     clock: Clock
     idle: Callable[[], None] = _nothing
 
-    def until(self, types: Collection[str], done: Callable[[], bool], what: str, *,
-              causes: str = "", ask: Callable[[], None] | None = None,
-              ask_every_s: float = math.inf) -> None:
+    def until(
+        self,
+        types: Collection[str],
+        done: Callable[[], bool],
+        what: str,
+        *,
+        causes: str = "",
+        ask: Callable[[], None] | None = None,
+        ask_every_s: float = math.inf,
+    ) -> None:
         """Until done() (the link owner's state), checked now and on each message of
         `types`; ask() as in wait_for."""
-        if not done() and wait_for(self.link, types, lambda _msg: done(), self.wait_s,
-                                   self.clock, ask=ask, ask_every_s=ask_every_s,
-                                   idle=self.idle) is None:
+        if (
+            not done()
+            and wait_for(
+                self.link,
+                types,
+                lambda _msg: done(),
+                self.wait_s,
+                self.clock,
+                ask=ask,
+                ask_every_s=ask_every_s,
+                idle=self.idle,
+            )
+            is None
+        ):
             hint = f": {causes}" if causes else ""
             raise LinkError(f"{self.uri}: waited {self.wait_s:g} s for {what} in vain{hint}")
 
@@ -271,9 +301,14 @@ class ParamIO:
         """Asked again every PARAM_ASK_S: a PARAM_REQUEST_READ can be lost."""
         link = self.waiter.link
         self.waiter.until(
-            ("PARAM_VALUE",), lambda: name in self.values, f"parameter {name}",
-            ask=lambda: link.send(link.mav.param_request_read_encode(
-                *self.target, name.encode(), -1)), ask_every_s=PARAM_ASK_S)
+            ("PARAM_VALUE",),
+            lambda: name in self.values,
+            f"parameter {name}",
+            ask=lambda: link.send(
+                link.mav.param_request_read_encode(*self.target, name.encode(), -1)
+            ),
+            ask_every_s=PARAM_ASK_S,
+        )
         return self.values[name]
 
     def write(self, name: str, wire: float, kind: int) -> float:

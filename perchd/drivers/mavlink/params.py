@@ -38,22 +38,33 @@ def const(value: float) -> Callable[[float], float]:
     return lambda _old: value
 
 
-def check_params(uri: str, rules: tuple[ParamRule, ...], read: Callable[[str], float],
-                 write: Callable[[str, float], float], configure: bool) -> None:
+def check_params(
+    uri: str,
+    rules: tuple[ParamRule, ...],
+    read: Callable[[str], float],
+    write: Callable[[str, float], float],
+    configure: bool,
+) -> None:
     """Refuse unsafe values by name, or (configure) set them and read them back.
     read(name) -> value; write(name, value) -> the value read back after setting it."""
     bad = [(r, v) for r in rules if not r.ok(v := read(r.name))]
     if bad and not configure:
         named = "; ".join(f"{r.name}={v:g} (wanted {r.wanted})" for r, v in bad)
-        raise ConfigError(f"{uri}: unsafe autopilot parameters: {named}; set them "
-                          f"on the vehicle or add configure=1 to the driver URI")
+        raise ConfigError(
+            f"{uri}: unsafe autopilot parameters: {named}; set them "
+            f"on the vehicle or add configure=1 to the driver URI"
+        )
     for rule, old in bad:
         new = write(rule.name, rule.target(old))
         if not rule.ok(new):
-            raise ConfigError(f"{uri}: set {rule.name}={rule.target(old):g} but the vehicle "
-                              f"reads back {new:g} (wanted {rule.wanted})")
+            raise ConfigError(
+                f"{uri}: set {rule.name}={rule.target(old):g} but the vehicle "
+                f"reads back {new:g} (wanted {rule.wanted})"
+            )
         log.warning("%s: set %s from %g to %g (configure=1)", uri, rule.name, old, new)
     rebooting = [r.name for r, _ in bad if r.reboot]
     if rebooting:
-        raise ConfigError(f"{uri}: set {', '.join(rebooting)}, which the autopilot reads only "
-                          f"at boot: reboot the vehicle and connect again")
+        raise ConfigError(
+            f"{uri}: set {', '.join(rebooting)}, which the autopilot reads only "
+            f"at boot: reboot the vehicle and connect again"
+        )

@@ -39,17 +39,20 @@ AUTO_LAND = px4_mode(4, 6)
 
 FAILSAFE_RULES = (
     ParamRule("COM_OF_LOSS_T", lambda v: 0.0 < v <= 0.3 + F32, "<= 0.3 s", const(0.3)),
-    ParamRule("COM_OBL_RC_ACT", lambda v: int(v) in (4, 5), "4 (Land) or 5 (Hold)",
-              const(4)),
+    ParamRule("COM_OBL_RC_ACT", lambda v: int(v) in (4, 5), "4 (Land) or 5 (Hold)", const(4)),
 )
 """What the vehicle does once perchd is gone."""
 
 VISION_RULES = (
-    ParamRule("EKF2_EV_CTRL", lambda v: int(v) & EV_POS_YAW == EV_POS_YAW,
-              f"bits 0, 1 and 3 set (e.g. {EV_POS_YAW}: position and yaw)",
-              lambda v: float(int(v) | EV_POS_YAW)),
-    ParamRule("EKF2_HGT_REF", lambda v: int(v) == EV_HEIGHT, f"{EV_HEIGHT} (vision)",
-              const(EV_HEIGHT)),
+    ParamRule(
+        "EKF2_EV_CTRL",
+        lambda v: int(v) & EV_POS_YAW == EV_POS_YAW,
+        f"bits 0, 1 and 3 set (e.g. {EV_POS_YAW}: position and yaw)",
+        lambda v: float(int(v) | EV_POS_YAW),
+    ),
+    ParamRule(
+        "EKF2_HGT_REF", lambda v: int(v) == EV_HEIGHT, f"{EV_HEIGHT} (vision)", const(EV_HEIGHT)
+    ),
 )
 """Its EKF on perchd's mocap (vision.py) for position, height and heading."""
 

@@ -19,8 +19,8 @@ import threading
 from collections.abc import Callable
 from typing import Protocol
 
-from perchd.core.types import Pose
 from perchd.core.childproc import say
+from perchd.core.types import Pose
 from perchd.drivers.mavlink.vision import vision_estimate, vision_message
 
 RELAY_MAX_S = 120.0
@@ -54,9 +54,11 @@ class VisionRelay:
     (vision.py); start() begins the relay on its own thread, stop() ends it and closes the
     poses."""
 
-    def __init__(self, poses: PoseStream, source: tuple[int, int],
-                 send: Callable[[bytes], None]) -> None:
+    def __init__(
+        self, poses: PoseStream, source: tuple[int, int], send: Callable[[bytes], None]
+    ) -> None:
         from pymavlink import mavutil
+
         self.poses = poses
         self._mav = mavutil.mavlink.MAVLink(None, *source)
         self._send = send
@@ -65,8 +67,9 @@ class VisionRelay:
         self.sent = 0
 
     def start(self, yaw0: float) -> None:
-        self._thread = threading.Thread(target=self._run, args=(yaw0,), name="vision-relay",
-                                        daemon=True)
+        self._thread = threading.Thread(
+            target=self._run, args=(yaw0,), name="vision-relay", daemon=True
+        )
         self._thread.start()
 
     def stop(self) -> None:

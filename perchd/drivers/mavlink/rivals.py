@@ -13,8 +13,9 @@ from perchd.drivers.mavlink.link import SOURCE
 from perchd.drivers.mavlink.vehicle import GCS_OR_COMPANION, VehicleView
 from perchd.drivers.targetlock import TargetBusy
 
-STEERING = frozenset({"SET_ATTITUDE_TARGET", "SET_POSITION_TARGET_LOCAL_NED",
-                      "SET_POSITION_TARGET_GLOBAL_INT"})
+STEERING = frozenset(
+    {"SET_ATTITUDE_TARGET", "SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"}
+)
 KINDS = {6: "GCS", 18: "companion"}  # MAV_TYPE of a heartbeat from GCS_OR_COMPANION
 
 
@@ -42,9 +43,13 @@ class RivalWatch:
         if self.steering:
             (system, component), message = next(iter(self.steering.items()))
             what = self.kinds.get((system, component), "GCS or companion")
-            raise TargetBusy(f"{uri}: another {what} (system {system}, component {component}) "
-                             f"is steering the vehicle ({message}); stop it first")
+            raise TargetBusy(
+                f"{uri}: another {what} (system {system}, component {component}) "
+                f"is steering the vehicle ({message}); stop it first"
+            )
         if vehicle.armed and vehicle.mode == dialect.flight.custom and not ours:
-            raise TargetBusy(f"{uri}: the vehicle is armed in its offboard mode already (custom "
-                             f"mode {vehicle.mode}): another GCS or companion flies it; stop it "
-                             "first")
+            raise TargetBusy(
+                f"{uri}: the vehicle is armed in its offboard mode already (custom "
+                f"mode {vehicle.mode}): another GCS or companion flies it; stop it "
+                "first"
+            )

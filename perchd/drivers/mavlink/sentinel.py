@@ -44,9 +44,9 @@ import threading
 import time
 from dataclasses import dataclass
 
-from perchd.core.types import Vec3
 from perchd.core import childproc
 from perchd.core.childproc import say
+from perchd.core.types import Vec3
 from perchd.drivers.mavlink.brake import (
     BRAKE_ROUNDS,
     LEVEL_MAX_S,
@@ -84,26 +84,32 @@ YAW0_WIRE = "<d"
 log = logging.getLogger("perchd.drivers.mavlink.sentinel")
 
 
-def command_frame(source: tuple[int, int], target: tuple[int, int], command: int,
-                  *params: float) -> bytes:
+def command_frame(
+    source: tuple[int, int], target: tuple[int, int], command: int, *params: float
+) -> bytes:
     """COMMAND_LONG from `source` (the driver's system and component), framed in the
     MAVLink version pymavlink speaks here (the driver's own)."""
     from pymavlink import mavutil
+
     mav = mavutil.mavlink.MAVLink(None, *source)
     p = (*params, *[0.0] * (7 - len(params)))
     return mav.command_long_encode(*target, command, 0, *p).pack(mav)
 
 
-def land_frame(source: tuple[int, int], target: tuple[int, int], main: int, sub: int
-               ) -> bytes:
+def land_frame(source: tuple[int, int], target: tuple[int, int], main: int, sub: int) -> bytes:
     """DO_SET_MODE to the LAND mode."""
     return command_frame(source, target, CMD_DO_SET_MODE, CUSTOM_MODE_ENABLED, main, sub)
 
 
-def attitude_frame(source: tuple[int, int], target: tuple[int, int],
-                   q: tuple[float, float, float, float], thrust: float) -> bytes:
+def attitude_frame(
+    source: tuple[int, int],
+    target: tuple[int, int],
+    q: tuple[float, float, float, float],
+    thrust: float,
+) -> bytes:
     """SET_ATTITUDE_TARGET of an attitude (w, x, y, z; FRD in NED) and normalised thrust."""
     from pymavlink import mavutil
+
     mav = mavutil.mavlink.MAVLink(None, *source)
     return attitude_target(mav, 0, target, q, thrust).pack(mav)
 
@@ -133,13 +139,25 @@ def agent_death(ctl: socket.socket) -> Death | None:
         if not msg and flying:
             return Death(brake, yaw0)
         if not msg:
-            return Death(None, yaw0, handover=True, said="the agent died between flights: "
-                         "relaying the mocap, commanding nothing") if flown else None
+            return (
+                Death(
+                    None,
+                    yaw0,
+                    handover=True,
+                    said="the agent died between flights: relaying the mocap, commanding nothing",
+                )
+                if flown
+                else None
+            )
         if msg == b"R":
             return None
         if msg == b"L":
-            return Death(None, yaw0, handover=True,
-                         said="the agent handed over its landing vehicle: relaying the mocap")
+            return Death(
+                None,
+                yaw0,
+                handover=True,
+                said="the agent handed over its landing vehicle: relaying the mocap",
+            )
         if msg in (b"F", b"D"):
             flying = msg == b"F"
             flown = flown or flying
@@ -149,8 +167,9 @@ def agent_death(ctl: socket.socket) -> Death | None:
             (yaw0,) = struct.unpack(YAW0_WIRE, msg[1:])
 
 
-def fly_brake(link: SentinelLink, source: tuple[int, int], target: tuple[int, int],
-              brake: Brake) -> None:
+def fly_brake(
+    link: SentinelLink, source: tuple[int, int], target: tuple[int, int], brake: Brake
+) -> None:
     """Fly the brake if it is fresh (one left before the agent's mocap stopped is not):
     its lean for its duration, then level until the autopilot's own velocity says the
     vehicle has stopped (brake.py)."""
@@ -159,8 +178,11 @@ def fly_brake(link: SentinelLink, source: tuple[int, int], target: tuple[int, in
     if time.monotonic() - brake.t_s > WILL_MAX_AGE_S:
         say("mavsentinel", "the brake left is stale: LAND at once")
         return
-    link.send(command_frame(source, target, CMD_SET_MESSAGE_INTERVAL, LOCAL_POSITION_NED_ID,
-                            VELOCITY_INTERVAL_US))
+    link.send(
+        command_frame(
+            source, target, CMD_SET_MESSAGE_INTERVAL, LOCAL_POSITION_NED_ID, VELOCITY_INTERVAL_US
+        )
+    )
     for _ in range(BRAKE_ROUNDS):
         v = brake_round(link, source, target, brake)
         if v is None or brake.stopped(v):
@@ -168,24 +190,33 @@ def fly_brake(link: SentinelLink, source: tuple[int, int], target: tuple[int, in
         brake = brake.again(v)
 
 
-def brake_round(link: SentinelLink, source: tuple[int, int], target: tuple[int, int],
-                brake: Brake) -> tuple[float, float, float] | None:
+def brake_round(
+    link: SentinelLink, source: tuple[int, int], target: tuple[int, int], brake: Brake
+) -> tuple[float, float, float] | None:
     """Lean for the brake's duration, then level until stopped (LEVEL_MAX_S at most):
     the autopilot's newest velocity [m/s, NED] then, None if it sent none."""
-    leaned = hold(link, attitude_frame(source, target, brake.q_ned, brake.thrust),
-                  brake.duration_s)
+    leaned = hold(link, attitude_frame(source, target, brake.q_ned, brake.thrust), brake.duration_s)
     heard: list[tuple[float, float, float]] = []
 
     def stopped() -> bool:
         v = link.poll()
         heard.extend([v] if v is not None else [])
         return bool(heard) and brake.stopped(heard[-1])
+
     level = hold(link, attitude_frame(source, target, *brake.level), LEVEL_MAX_S, stopped)
     v = heard[-1] if heard else None
-    why = ("no velocity heard" if v is None else "stopped" if brake.stopped(v)
-           else f"still at {math.hypot(*v[:2]):.2f} m/s")
-    say("mavsentinel", f"braked {leaned:.2f} s against {math.hypot(*brake.v_ne):.2f} m/s, "
-                       f"level {level:.2f} s ({why})")
+    why = (
+        "no velocity heard"
+        if v is None
+        else "stopped"
+        if brake.stopped(v)
+        else f"still at {math.hypot(*v[:2]):.2f} m/s"
+    )
+    say(
+        "mavsentinel",
+        f"braked {leaned:.2f} s against {math.hypot(*brake.v_ne):.2f} m/s, "
+        f"level {level:.2f} s ({why})",
+    )
     return v
 
 
@@ -204,10 +235,12 @@ class SentinelLink:
     come from two threads (the relay's and the main one); what the vehicle sent since is
     read without blocking (poll)."""
 
-    def __init__(self, fd: int, dest: str, source: tuple[int, int], target: tuple[int, int]
-                 ) -> None:
+    def __init__(
+        self, fd: int, dest: str, source: tuple[int, int], target: tuple[int, int]
+    ) -> None:
         self.fd, self.dest, self.target = fd, dest, target
         from pymavlink import mavutil
+
         self._parser = mavutil.mavlink.MAVLink(None)
         self._parser.robust_parsing = True
         self._mav = mavutil.mavlink.MAVLink(None, *source)
@@ -257,8 +290,7 @@ class SentinelLink:
         return b"".join(chunks)
 
 
-def follow_landing(link: SentinelLink, relay: VisionRelay, flight_mode: int,
-                   died_s: float) -> str:
+def follow_landing(link: SentinelLink, relay: VisionRelay, flight_mode: int, died_s: float) -> str:
     """Relay until the landing is over: the vehicle disarmed (DISARMED_GRACE_S later), or
     back in the offboard mode `flight_mode` after it left it (a new agent has it: two
     streams must not feed one EKF), or silent for VEHICLE_SILENT_S, or the relay stopped,
@@ -304,8 +336,9 @@ def land(link: SentinelLink, frame: bytes) -> int:
     return 0 if sent else 1
 
 
-def prepared_relay(mocap: str, source: tuple[int, int], link: SentinelLink,
-                   open_poses: PoseOpener | None) -> VisionRelay | None:
+def prepared_relay(
+    mocap: str, source: tuple[int, int], link: SentinelLink, open_poses: PoseOpener | None
+) -> VisionRelay | None:
     """The relay of the mocap URI (opened by open_poses, not started), or None: none given,
     or it cannot be opened (said on stderr: the brake and LAND still act)."""
     if mocap == "-" or open_poses is None:
@@ -332,8 +365,13 @@ def start_relay(relay: VisionRelay | None, yaw0: float | None) -> bool:
     return True
 
 
-def brake_and_land(link: SentinelLink, source: tuple[int, int], target: tuple[int, int],
-                   mode: tuple[int, int], brake: Brake | None) -> int:
+def brake_and_land(
+    link: SentinelLink,
+    source: tuple[int, int],
+    target: tuple[int, int],
+    mode: tuple[int, int],
+    brake: Brake | None,
+) -> int:
     """The brake left, if any, then LAND (land's result)."""
     if brake is not None:
         try:
@@ -351,7 +389,7 @@ def main(argv: list[str], open_poses: PoseOpener | None = None) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     ctl_fd, link_fd, dest = int(argv[0]), int(argv[1]), argv[2]
-    source, target, mode = (tuple(map(int, argv[i:i + 2])) for i in (3, 5, 7))
+    source, target, mode = (tuple(map(int, argv[i : i + 2])) for i in (3, 5, 7))
     link = SentinelLink(link_fd, dest, source, target)
     relay = prepared_relay(argv[9], source, link, open_poses)
     death = agent_death(socket.socket(fileno=ctl_fd))
@@ -365,8 +403,7 @@ def main(argv: list[str], open_poses: PoseOpener | None = None) -> int:
         say("mavsentinel", "relaying the mocap until the landing is over")
         childproc.let_go_of_pipes()  # a pipe's reader is not kept waiting for the landing
         try:
-            why = "the link is gone" if rc else follow_landing(link, relay, int(argv[10]),
-                                                              died_s)
+            why = "the link is gone" if rc else follow_landing(link, relay, int(argv[10]), died_s)
         finally:
             relay.stop()
         say("mavsentinel", f"mocap relay ended: {why}")
@@ -380,12 +417,24 @@ class Sentinel:
     flying(True/False) tells it whether perchd flies the vehicle; release() ends it
     without acting."""
 
-    def __init__(self, link: Connection, target: tuple[int, int], mode: tuple[int, int],
-                 mocap: str | None = None, flight_mode: int = 0) -> None:
+    def __init__(
+        self,
+        link: Connection,
+        target: tuple[int, int],
+        mode: tuple[int, int],
+        mocap: str | None = None,
+        flight_mode: int = 0,
+    ) -> None:
         link_fd, dest = link.endpoint()
         self._sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        argv = [str(theirs.fileno()), str(link_fd), dest,
-                *map(str, (*link.source, *target, *mode)), mocap or "-", str(flight_mode)]
+        argv = [
+            str(theirs.fileno()),
+            str(link_fd),
+            dest,
+            *map(str, (*link.source, *target, *mode)),
+            mocap or "-",
+            str(flight_mode),
+        ]
         try:
             self._proc = childproc.start(ENTRY_MODULE, argv, (theirs.fileno(), link_fd))
         finally:
@@ -430,8 +479,10 @@ class Sentinel:
             try:
                 self._sock.send(msg)
             except OSError as err:
-                log.warning("the MAVLink sentinel is gone (%s): if the agent dies, only the "
-                            "autopilot's own failsafe acts", err)
+                log.warning(
+                    "the MAVLink sentinel is gone (%s): if the agent dies, only the "
+                    "autopilot's own failsafe acts",
+                    err,
+                )
                 self._sock.close()
                 self._sock = None
-

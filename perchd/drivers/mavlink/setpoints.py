@@ -30,8 +30,9 @@ OFFBOARD after COM_OF_LOSS_T = 0.5 s without one; ArduPilot levels after 1 s).""
 def ned_attitude(sp: Setpoint, yaw0: float = 0.0, tilt: Tilt = NO_TILT) -> Quaternion:
     """perchd's Z-up attitude as the FRD-in-NED quaternion an autopilot takes, its roll and
     pitch moved by `tilt` (FRD in NED)."""
-    return quaternion_wxyz(sp.roll + tilt.roll_rad, -sp.pitch + tilt.pitch_rad,
-                           ned_yaw(sp.yaw, yaw0))
+    return quaternion_wxyz(
+        sp.roll + tilt.roll_rad, -sp.pitch + tilt.pitch_rad, ned_yaw(sp.yaw, yaw0)
+    )
 
 
 def ned_yaw(yaw: float, yaw0: float) -> float:
@@ -44,11 +45,13 @@ def level_ned(yaw_ned: float) -> Quaternion:
     return quaternion_wxyz(0.0, 0.0, yaw_ned)
 
 
-def attitude_target(mav: object, boot_ms: int, target: tuple[int, int], q: Quaternion,
-                    thrust: float) -> object:
+def attitude_target(
+    mav: object, boot_ms: int, target: tuple[int, int], q: Quaternion, thrust: float
+) -> object:
     """SET_ATTITUDE_TARGET from pymavlink's encoder `mav`."""
-    return mav.set_attitude_target_encode(boot_ms, *target, IGNORE_BODY_RATES, list(q),
-                                          0.0, 0.0, 0.0, thrust)
+    return mav.set_attitude_target_encode(
+        boot_ms, *target, IGNORE_BODY_RATES, list(q), 0.0, 0.0, 0.0, thrust
+    )
 
 
 class SetpointStream:

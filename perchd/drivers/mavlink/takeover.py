@@ -62,13 +62,18 @@ class Takeover:
         `hover` thrust (zero thrust would drop it for as long as the switch takes), on the
         ground with none; for the dialect's prestream_s. Whether it is airborne."""
         v = self.vehicle
-        self.waiter.until(("ATTITUDE",), lambda: v.yaw_ned is not None,
-                          "the vehicle's attitude (ATTITUDE)")
+        self.waiter.until(
+            ("ATTITUDE",), lambda: v.yaw_ned is not None, "the vehicle's attitude (ATTITUDE)"
+        )
         heading, airborne = v.yaw_ned, v.airborne()
         thrust = hover if airborne else 0.0
-        log.info("%s: taking over %s, streaming level at heading %.1f deg, thrust %.3f",
-                 self.uri, "in the air" if airborne else "on the ground",
-                 math.degrees(heading), thrust)
+        log.info(
+            "%s: taking over %s, streaming level at heading %.1f deg, thrust %.3f",
+            self.uri,
+            "in the air" if airborne else "on the ground",
+            math.degrees(heading),
+            thrust,
+        )
         self.stream.level(heading, thrust)
         if self.dialect.prestream_s > 0.0:
             self.waiter.pause(self.dialect.prestream_s)  # the keep-alive streams meanwhile
@@ -81,13 +86,16 @@ class Takeover:
         v.acks.pop(CMD_DO_SET_MODE, None)
         v.mode_seen = False
         result = lambda: v.acks.get(CMD_DO_SET_MODE, MAV_RESULT_IN_PROGRESS)  # noqa: E731
-        self.waiter.until(REPLIES, lambda: v.mode == mode.custom
-                          or result() != MAV_RESULT_IN_PROGRESS,
-                          f"the switch to custom mode {mode.custom}",
-                          ask=lambda: self.link.set_mode(v.target, mode.main, mode.sub))
+        self.waiter.until(
+            REPLIES,
+            lambda: v.mode == mode.custom or result() != MAV_RESULT_IN_PROGRESS,
+            f"the switch to custom mode {mode.custom}",
+            ask=lambda: self.link.set_mode(v.target, mode.main, mode.sub),
+        )
         if v.mode != mode.custom and result() != MAV_RESULT_ACCEPTED:
-            raise LinkError(f"{self.uri}: the vehicle refused custom mode {mode.custom} "
-                            f"(MAV_RESULT {result()})")
+            raise LinkError(
+                f"{self.uri}: the vehicle refused custom mode {mode.custom} (MAV_RESULT {result()})"
+            )
         v.switched(mode.custom)
 
     def arm(self, again: bool, fed: Callable[[], str]) -> None:
@@ -98,16 +106,23 @@ class Takeover:
         deadline = time.monotonic() + self.waiter.wait_s
         while True:
             v.acks.pop(CMD_ARM, None)
-            self.waiter.until(REPLIES, lambda: v.armed or v.acks.get(CMD_ARM, 0) not in (
-                MAV_RESULT_ACCEPTED, MAV_RESULT_IN_PROGRESS), "arming",
-                ask=lambda: self.link.command(v.target, CMD_ARM, 1))
+            self.waiter.until(
+                REPLIES,
+                lambda: (
+                    v.armed
+                    or v.acks.get(CMD_ARM, 0) not in (MAV_RESULT_ACCEPTED, MAV_RESULT_IN_PROGRESS)
+                ),
+                "arming",
+                ask=lambda: self.link.command(v.target, CMD_ARM, 1),
+            )
             if v.armed:
                 return
             if not again or time.monotonic() + ARM_RETRY_S > deadline:
                 break
             self.waiter.pause(ARM_RETRY_S)
-        raise LinkError(f"{self.uri}: the vehicle refused to arm "
-                        f"(MAV_RESULT {v.acks.get(CMD_ARM)}){fed()}")
+        raise LinkError(
+            f"{self.uri}: the vehicle refused to arm (MAV_RESULT {v.acks.get(CMD_ARM)}){fed()}"
+        )
 
     def spool_up(self, hover: float) -> None:
         """Hold the vehicle on the ground, level, at a fraction of the `hover` thrust until
@@ -117,6 +132,9 @@ class Takeover:
         v = self.vehicle
         v.thrust = None
         self.stream.level(self.stream.level_yaw or 0.0, SPOOL_FRACTION * hover)
-        self.waiter.until(("ATTITUDE_TARGET",), lambda: (v.thrust or 0.0) > 0.0,
-                          "the motors to spool up (ATTITUDE_TARGET thrust above 0)")
+        self.waiter.until(
+            ("ATTITUDE_TARGET",),
+            lambda: (v.thrust or 0.0) > 0.0,
+            "the motors to spool up (ATTITUDE_TARGET thrust above 0)",
+        )
         log.info("%s: spooled up (ATTITUDE_TARGET thrust %.3f)", self.uri, v.thrust)

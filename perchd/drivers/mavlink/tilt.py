@@ -112,22 +112,28 @@ class TiltCorrection:
             te, roll_e, pitch_e = self._estimates.popleft()
             true = self._mocap_at(te)
             if true is not None:
-                self._update(te, Tilt(math.remainder(roll_e - true.roll_rad, math.tau),
-                                      pitch_e - true.pitch_rad))
+                self._update(
+                    te,
+                    Tilt(
+                        math.remainder(roll_e - true.roll_rad, math.tau), pitch_e - true.pitch_rad
+                    ),
+                )
 
     def correction(self, now: float) -> Tilt:
         """[rad] to add to the setpoint's roll and pitch (FRD in NED) at time now [s]."""
         if self._fast is None or self._at is None or now - self._at > STALE_S:
             return NO_TILT
-        clamp = lambda v: max(-MAX_RAD, min(MAX_RAD, v))
-        return Tilt(clamp(self._fast.roll_rad - self._slow.roll_rad),
-                    clamp(self._fast.pitch_rad - self._slow.pitch_rad))
+        return Tilt(
+            _clamp(self._fast.roll_rad - self._slow.roll_rad),
+            _clamp(self._fast.pitch_rad - self._slow.pitch_rad),
+        )
 
     def _mocap_at(self, t: float) -> Tilt | None:
         """The mocap's angles interpolated at t; None outside the poses kept. Searched from
         the newest: an estimate is paired within a pose or two of it."""
-        before = next((i for i in range(len(self._poses) - 1, -1, -1)
-                       if self._poses[i][0] < t), None)
+        before = next(
+            (i for i in range(len(self._poses) - 1, -1, -1) if self._poses[i][0] < t), None
+        )
         if before is None or before == len(self._poses) - 1:  # not inside the poses kept
             return None
         (t0, r0, p0), (t1, r1, p1) = self._poses[before], self._poses[before + 1]
@@ -146,5 +152,12 @@ class TiltCorrection:
 
 
 def _toward(a: Tilt, b: Tilt, gain: float) -> Tilt:
-    return Tilt(a.roll_rad + gain * (b.roll_rad - a.roll_rad),
-                a.pitch_rad + gain * (b.pitch_rad - a.pitch_rad))
+    return Tilt(
+        a.roll_rad + gain * (b.roll_rad - a.roll_rad),
+        a.pitch_rad + gain * (b.pitch_rad - a.pitch_rad),
+    )
+
+
+def _clamp(v: float) -> float:
+    """[rad] a tilt error within +-MAX_RAD."""
+    return max(-MAX_RAD, min(MAX_RAD, v))

@@ -45,13 +45,18 @@ def open_mavlink(uri: Uri, runtime: Runtime) -> MavlinkDriver:
     require("pymavlink", "mavlink")
     device, query = split_query(uri.path)
     if not device.startswith(("udpout:", "udpin:", "udp:", "tcp:", "/dev/", "COM")):
-        raise UriError(f"{uri.raw}: expected mavlink:udpin:HOST:PORT (PX4: udpin:127.0.0.1:"
-                       f"{OFFBOARD_PORT}; or udpout:, tcp:, a serial device)")
+        raise UriError(
+            f"{uri.raw}: expected mavlink:udpin:HOST:PORT (PX4: udpin:127.0.0.1:"
+            f"{OFFBOARD_PORT}; or udpout:, tcp:, a serial device)"
+        )
     _check_network_port(uri.raw, device)
     opts = Uri(uri.raw, uri.scheme, "", None, device, query)
     mass = float_param(opts, "mass", None, 0.01, 50.0, " kg")
     return MavlinkDriver(
-        uri.raw, device, runtime, mass_kg=mass,
+        uri.raw,
+        device,
+        runtime,
+        mass_kg=mass,
         hover=float_param(opts, "hover", None, 0.05, 0.95),
         arm=bool_param(opts, "arm"),
         timeout=float_param(opts, "timeout", 1.5, 0.01, 30.0, " s"),
@@ -61,7 +66,8 @@ def open_mavlink(uri: Uri, runtime: Runtime) -> MavlinkDriver:
         configure=bool_param(opts, "configure"),
         sport=source_port(opts, device),
         vision=bool_param(opts, "vision", True),
-        tilt=bool_param(opts, "tilt", True))
+        tilt=bool_param(opts, "tilt", True),
+    )
 
 
 def _check_network_port(raw: str, device: str) -> None:

@@ -103,5 +103,6 @@ class VehicleView:
         if msg.get_srcSystem() == self.target[0]:
             self.mode = msg.custom_mode
             self.mode_seen = self.mode_seen or (
-                self.flight_mode is not None and self.mode == self.flight_mode)
+                self.flight_mode is not None and self.mode == self.flight_mode
+            )
             self.armed = bool(msg.base_mode & ARMED_FLAG)

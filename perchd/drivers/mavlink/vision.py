@@ -56,8 +56,9 @@ COVARIANCE = covariance()
 def vision_estimate(pose: Pose, yaw0: float) -> VisionEstimate:
     """A world pose (Z up, FLU body) as the autopilot's NED position and FRD attitude."""
     w, x, y, z = ned_quat(pose.q, yaw0)
-    return VisionEstimate(int(round(pose.t * 1e6)), ned_vec(pose.p, yaw0),
-                          euler_zyx((x, y, z, w)), COVARIANCE)
+    return VisionEstimate(
+        int(round(pose.t * 1e6)), ned_vec(pose.p, yaw0), euler_zyx((x, y, z, w)), COVARIANCE
+    )
 
 
 def vision_message(mav: Any, v: VisionEstimate) -> Any:

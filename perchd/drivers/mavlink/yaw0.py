@@ -49,5 +49,6 @@ class Yaw0:
 
     def align(self, value: float) -> None:
         self.value = value
-        log.info("%s: yaw0=auto: world X is at autopilot heading %.1f deg", self.uri,
-                 math.degrees(value))
+        log.info(
+            "%s: yaw0=auto: world X is at autopilot heading %.1f deg", self.uri, math.degrees(value)
+        )

@@ -77,8 +77,9 @@ class NatNetSource(ThreadedSource):
         self.config = config
         self.body = config.body
         self._clock = clock
-        self._stream = PoseStream(config.body, config.limits,
-                                  RateLimitedWarning(log, f"natnet {config.server}"))
+        self._stream = PoseStream(
+            config.body, config.limits, RateLimitedWarning(log, f"natnet {config.server}")
+        )
         self._server = (config.server, config.command_port)
         self._command: socket.socket | None = None
         self._data: socket.socket | None = None
@@ -134,15 +135,18 @@ class NatNetSource(ThreadedSource):
         payload = self._ask(proto.connect_request(), proto.NAT_SERVERINFO)
         info = proto.decode_server_info(payload)
         if not proto.SUPPORTED[0] <= info.version <= proto.SUPPORTED[1]:
-            raise LinkError(f"natnet {self.config.server}: server speaks NatNet "
-                            f"{info.version[0]}.{info.version[1]}, perchd reads 2.0 to 4.1")
+            raise LinkError(
+                f"natnet {self.config.server}: server speaks NatNet "
+                f"{info.version[0]}.{info.version[1]}, perchd reads 2.0 to 4.1"
+            )
         self.multicast = self._choose_transport(info)
         if info.clock_hz:
             self._sync = ClockSync(info.clock_hz)
             self._initial_sync()
         self.info = info
         self.models = natdefs.decode_model_defs(
-            self._ask(proto.pack(proto.NAT_REQUEST_MODELDEF), proto.NAT_MODELDEF), info.version)
+            self._ask(proto.pack(proto.NAT_REQUEST_MODELDEF), proto.NAT_MODELDEF), info.version
+        )
         return info
 
     def _choose_transport(self, info: proto.ServerInfo) -> bool:
@@ -168,8 +172,10 @@ class NatNetSource(ThreadedSource):
                     continue
                 if message_id == want:
                     return payload
-        raise LinkError(f"no NatNet server answered at {self._server[0]}:{self._server[1]} "
-                        f"within {self.config.connect_timeout_s} s")
+        raise LinkError(
+            f"no NatNet server answered at {self._server[0]}:{self._server[1]} "
+            f"within {self.config.connect_timeout_s} s"
+        )
 
     def _initial_sync(self, echoes: int = 8) -> None:
         """A few echoes so the first poses already have their full latency."""
@@ -187,15 +193,21 @@ class NatNetSource(ThreadedSource):
             return
         if self.config.body not in by_name:
             known = ", ".join(f"{n} ({i})" for n, i in by_name.items()) or "none"
-            raise UriError(f"natnet {self.config.server}: no rigid body named "
-                           f"{self.config.body!r}; the server defines: {known}")
+            raise UriError(
+                f"natnet {self.config.server}: no rigid body named "
+                f"{self.config.body!r}; the server defines: {known}"
+            )
         self._body_id = by_name[self.config.body]
 
     def _open_data_socket(self) -> socket.socket:
-        group = self.config.multicast_group or (self.info and self.info.multicast_group) \
+        group = (
+            self.config.multicast_group
+            or (self.info and self.info.multicast_group)
             or proto.DEFAULT_MULTICAST
-        port = self.config.data_port or (self.info and self.info.data_port) \
-            or proto.DEFAULT_DATA_PORT
+        )
+        port = (
+            self.config.data_port or (self.info and self.info.data_port) or proto.DEFAULT_DATA_PORT
+        )
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
@@ -250,26 +262,36 @@ class NatNetSource(ThreadedSource):
         self._want_models = False
         new_id = models.body_ids().get(self.config.body)
         if new_id is not None and new_id != self._body_id:
-            log.warning("natnet %s: rigid body %r is now id %d (was %s)", self.config.server,
-                        self.config.body, new_id, self._body_id)
+            log.warning(
+                "natnet %s: rigid body %r is now id %d (was %s)",
+                self.config.server,
+                self.config.body,
+                new_id,
+                self._body_id,
+            )
             self._body_id = new_id
 
     def _on_frame(self, frame: Frame, arrival: float) -> None:
         if frame.params & MODELS_CHANGED and not self.config.body.isdigit():
             self._want_models = True  # ids may have moved: no pose until the names are known
         if self._want_models:
-            self._stream.drop(Drop.NO_BODY, f"frame {frame.number}: awaiting the new model "
-                                            "definitions Motive announced")
+            self._stream.drop(
+                Drop.NO_BODY,
+                f"frame {frame.number}: awaiting the new model definitions Motive announced",
+            )
             return
         sample = next((b for b in frame.rigid_bodies if b.id == self._body_id), None)
         if sample is None:
-            self._stream.drop(Drop.NO_BODY, f"frame {frame.number} has no rigid body "
-                                            f"{self._body_id} ({self.body})")
+            self._stream.drop(
+                Drop.NO_BODY,
+                f"frame {frame.number} has no rigid body {self._body_id} ({self.body})",
+            )
             return
         latency = self._latency(frame.timing, arrival)
         p, q = to_world(sample.p, sample.q, self.config.up)
-        self._stream.offer(Pose(self.body, frame.number, arrival - latency, p, q,
-                                sample.tracking_valid, latency))
+        self._stream.offer(
+            Pose(self.body, frame.number, arrival - latency, p, q, sample.tracking_valid, latency)
+        )
 
     def _latency(self, timing: Timing, arrival: float) -> float:
         exposure, transmit = timing.camera_mid_exposure, timing.transmit
@@ -306,4 +328,3 @@ class NatNetSource(ThreadedSource):
     def _send(self, packet: bytes) -> None:
         if self._command is not None:
             self._command.sendto(packet, self._server)
-

@@ -115,6 +115,7 @@ class Frame:
 
 # ---------------------------------------------------------------- decoding
 
+
 def decode_frame(payload: bytes, version: Version) -> Frame:
     """Decode a frame payload (after the 4-byte header); MalformedPacket if it does not fit."""
     r = Reader(payload)
@@ -136,8 +137,19 @@ def decode_frame(payload: bytes, version: Version) -> Frame:
     timing, params = _read_suffix(r, version)
     if r.remaining():
         raise MalformedPacket(f"{r.remaining()} bytes left after the end-of-data tag")
-    return Frame(number, bodies, timing, marker_sets, other, skeletons, assets, labeled,
-                 plates, devices, params)
+    return Frame(
+        number,
+        bodies,
+        timing,
+        marker_sets,
+        other,
+        skeletons,
+        assets,
+        labeled,
+        plates,
+        devices,
+        params,
+    )
 
 
 def _section(r: Reader, version: Version, what: str, read_item) -> tuple:
@@ -162,8 +174,11 @@ def _read_marker_set(r: Reader) -> tuple[str, tuple[Vec3, ...]]:
 
 _BODY = struct.Struct("<i3f4f")  # id, position, quaternion
 _BODY_TAIL = struct.Struct("<fh")  # mean error, params (2.6+)
-_MARKERS = {(3, 0): struct.Struct("<i3ffhf"), (2, 6): struct.Struct("<i3ffh"),
-            (0, 0): struct.Struct("<i3ff")}  # id, position, size[, params[, residual]]
+_MARKERS = {
+    (3, 0): struct.Struct("<i3ffhf"),
+    (2, 6): struct.Struct("<i3ffh"),
+    (0, 0): struct.Struct("<i3ff"),
+}  # id, position, size[, params[, residual]]
 
 
 def _read_body(r: Reader, version: Version) -> RigidBodySample:
@@ -227,11 +242,13 @@ def _read_suffix(r: Reader, version: Version) -> tuple[Timing, int]:
     params = r.i16() if at_least(version, 2, 6) else 0
     if r.i32() != 0:
         raise MalformedPacket("end-of-data tag is not zero")
-    return Timing(timestamp, exposure, received, transmit, legacy_latency, timecode,
-                  timecode_sub, *precision), params
+    return Timing(
+        timestamp, exposure, received, transmit, legacy_latency, timecode, timecode_sub, *precision
+    ), params
 
 
 # ---------------------------------------------------------------- encoding
+
 
 def encode_frame(frame: Frame, version: Version) -> bytes:
     """The payload of a frame of data as a server of `version` sends it."""
@@ -245,8 +262,9 @@ def encode_frame(frame: Frame, version: Version) -> bytes:
     if has_section_sizes(version):
         _write_section(w, version, frame.assets, _write_asset)
     if at_least(version, 2, 3):
-        _write_section(w, version, frame.labeled_markers,
-                       lambda ww, m: _write_marker(ww, m, version))
+        _write_section(
+            w, version, frame.labeled_markers, lambda ww, m: _write_marker(ww, m, version)
+        )
     if at_least(version, 2, 9):
         _write_section(w, version, frame.force_plates, _write_device)
     if at_least(version, 2, 11):

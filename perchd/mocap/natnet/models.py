@@ -132,8 +132,12 @@ def _skip_asset(r: Reader, version: Version) -> str:
     return f"asset {name}"
 
 
-_SKIPPERS = {FORCE_PLATE: _skip_force_plate, DEVICE: _skip_device, CAMERA: _skip_camera,
-             ASSET: _skip_asset}
+_SKIPPERS = {
+    FORCE_PLATE: _skip_force_plate,
+    DEVICE: _skip_device,
+    CAMERA: _skip_camera,
+    ASSET: _skip_asset,
+}
 
 
 def encode_model_defs(defs: ModelDefs, version: Version) -> bytes:

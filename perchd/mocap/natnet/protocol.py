@@ -66,10 +66,11 @@ def unpack(datagram: bytes, strict: bool = True) -> tuple[int, bytes]:
         raise Truncated(f"header says {size} payload bytes, datagram has {len(datagram) - 4}")
     if len(datagram) - 4 > size and strict:
         raise Oversized(f"header says {size} payload bytes, datagram has {len(datagram) - 4}")
-    return message_id, datagram[4:4 + size]
+    return message_id, datagram[4 : 4 + size]
 
 
 # ---------------------------------------------------------------- server info
+
 
 @dataclass(frozen=True, slots=True)
 class ServerInfo:
@@ -103,7 +104,7 @@ def decode_server_info(payload: bytes) -> ServerInfo:
     r.skip(1)
     at = r.pos
     r.skip(4)
-    group = socket.inet_ntoa(bytes(payload[at:at + 4]))
+    group = socket.inet_ntoa(bytes(payload[at : at + 4]))
     return ServerInfo(name, app, natnet, clock_hz, data_port, multicast, group)
 
 
@@ -120,7 +121,7 @@ def encode_server_info(info: ServerInfo) -> bytes:
 def _four(r: Reader) -> tuple[int, int, int, int]:
     at = r.pos
     r.skip(4)
-    a, b, c, d = r.buf[at:at + 4]
+    a, b, c, d = r.buf[at : at + 4]
     return a, b, c, d
 
 
@@ -132,6 +133,7 @@ def _sender(name: str, app: tuple[int, ...], natnet: tuple[int, ...]) -> Writer:
 
 
 # ---------------------------------------------------------------- requests
+
 
 def connect_request(natnet: tuple[int, int, int, int] = (4, 1, 0, 0)) -> bytes:
     """What NatNetLib sends to connect: its sender block with the version it speaks."""

@@ -51,16 +51,29 @@ CLIENT_TIMEOUT_S = 10.0  # a unicast client silent this long is forgotten, as Mo
 class NatNetServer:
     """See the module docstring. Thread-safe: publish from any thread."""
 
-    def __init__(self, bodies: dict[str, int] | list[str], version: Version = (4, 1), *,
-                 host: str = "127.0.0.1", command_port: int = 0, data_port: int | None = None,
-                 multicast: bool = False,
-                 group: str = proto.DEFAULT_MULTICAST, rate_hz: float | None = None,
-                 up: str = "y", clock: Clock | None = None, clock_hz: int = 10_000_000,
-                 app: tuple[str, tuple[int, int, int, int]] = ("Motive", (3, 1, 0, 0))) -> None:
+    def __init__(
+        self,
+        bodies: dict[str, int] | list[str],
+        version: Version = (4, 1),
+        *,
+        host: str = "127.0.0.1",
+        command_port: int = 0,
+        data_port: int | None = None,
+        multicast: bool = False,
+        group: str = proto.DEFAULT_MULTICAST,
+        rate_hz: float | None = None,
+        up: str = "y",
+        clock: Clock | None = None,
+        clock_hz: int = 10_000_000,
+        app: tuple[str, tuple[int, int, int, int]] = ("Motive", (3, 1, 0, 0)),
+    ) -> None:
         if not proto.SUPPORTED[0] <= tuple(version) <= proto.SUPPORTED[1]:
             raise ValueError(f"NatNet version {version} outside 2.0..4.1")
-        self.bodies = dict(bodies) if isinstance(bodies, dict) else \
-            {name: i + 1 for i, name in enumerate(bodies)}
+        self.bodies = (
+            dict(bodies)
+            if isinstance(bodies, dict)
+            else {name: i + 1 for i, name in enumerate(bodies)}
+        )
         self.version: Version = (int(version[0]), int(version[1]))
         self.host, self.multicast, self.group = host, multicast, group
         self.rate_hz, self.clock_hz = rate_hz, clock_hz
@@ -79,8 +92,7 @@ class NatNetServer:
         self._data = self._bind(0)
         self._data_port = _advertised_data_port(data_port, command_port, host)
         if multicast:
-            self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
-                                  socket.inet_aton(host))
+            self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(host))
             self._data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
         self.frames_sent = 0
         self.keepalives = 0
@@ -109,7 +121,7 @@ class NatNetServer:
             return uri + f"&multicast={self.group}&data_port={self.data_port}"
         return uri + "&transport=unicast"
 
-    def start(self) -> "NatNetServer":
+    def start(self) -> NatNetServer:
         self._spawn(self._serve_commands, "natnet-server-cmd")
         if self.rate_hz:
             self._spawn(self._stream_frames, "natnet-server-frames")
@@ -157,7 +169,7 @@ class NatNetServer:
         self._command.close()
         self._data.close()
 
-    def __enter__(self) -> "NatNetServer":
+    def __enter__(self) -> NatNetServer:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -173,8 +185,15 @@ class NatNetServer:
             return list(self._clients)
 
     def server_info(self) -> proto.ServerInfo:
-        return proto.ServerInfo(self._app[0], self._app[1], (*self.version, 0, 0), self.clock_hz,
-                                self.data_port, self.multicast, self.group)
+        return proto.ServerInfo(
+            self._app[0],
+            self._app[1],
+            (*self.version, 0, 0),
+            self.clock_hz,
+            self.data_port,
+            self.multicast,
+            self.group,
+        )
 
     def model_defs(self) -> natdefs.ModelDefs:
         with self._lock:
@@ -211,8 +230,12 @@ class NatNetServer:
         bodies = tuple(sample for _, (sample, _, _) in latest)
         measured = max((t for _, (_, t, _) in latest), default=now)
         received = max((r for _, (_, _, r) in latest), default=now)
-        timing = Timing(timestamp=now - self._epoch, camera_mid_exposure=self.ticks(measured),
-                        data_received=self.ticks(received), transmit=self.ticks(now))
+        timing = Timing(
+            timestamp=now - self._epoch,
+            camera_mid_exposure=self.ticks(measured),
+            data_received=self.ticks(received),
+            transmit=self.ticks(now),
+        )
         if self.version < (3, 0):
             timing = replace(timing, camera_mid_exposure=None, data_received=None, transmit=None)
         return Frame(number, bodies, timing, marker_sets=(("all", ()),), params=params)
@@ -257,16 +280,18 @@ class NatNetServer:
         if reply is not None:
             self._command.sendto(reply, address)
 
-    def _reply(self, message_id: int, payload: bytes, address: tuple[str, int],
-               arrival_ticks: int) -> bytes | None:
+    def _reply(
+        self, message_id: int, payload: bytes, address: tuple[str, int], arrival_ticks: int
+    ) -> bytes | None:
         if message_id in (proto.NAT_CONNECT, proto.NAT_DISCOVERY):
             if message_id == proto.NAT_CONNECT:
                 self._remember(address)
             return proto.pack(proto.NAT_SERVERINFO, proto.encode_server_info(self.server_info()))
         self._touch(address)
         if message_id == proto.NAT_REQUEST_MODELDEF:
-            return proto.pack(proto.NAT_MODELDEF,
-                              natdefs.encode_model_defs(self.model_defs(), self.version))
+            return proto.pack(
+                proto.NAT_MODELDEF, natdefs.encode_model_defs(self.model_defs(), self.version)
+            )
         if message_id == proto.NAT_ECHOREQUEST:
             return proto.echo_response(payload, arrival_ticks)
         if message_id == proto.NAT_REQUEST_FRAMEOFDATA:
@@ -317,6 +342,16 @@ def _advertised_data_port(data_port: int | None, command_port: int, host: str) -
 
 
 # requests Motive answers with an integer 0 ("ok", or "0" for counts and modes)
-_ACKNOWLEDGED = {"CurrentMode", "AnalogSamplesPerMocapFrame", "LiveMode", "EditMode",
-                 "TimelinePlay", "TimelineStop", "StartRecording", "StopRecording",
-                 "SetPlaybackCurrentFrame", "SubscribeToData", "SubscribeByID"}
+_ACKNOWLEDGED = {
+    "CurrentMode",
+    "AnalogSamplesPerMocapFrame",
+    "LiveMode",
+    "EditMode",
+    "TimelinePlay",
+    "TimelineStop",
+    "StartRecording",
+    "StopRecording",
+    "SetPlaybackCurrentFrame",
+    "SubscribeToData",
+    "SubscribeByID",
+}

@@ -24,8 +24,15 @@ from perchd.mocap.natnet.protocol import DEFAULT_COMMAND_PORT
 from perchd.mocap.natnet.server import NatNetServer
 from perchd.mocap.stream import PoseLimits
 
-__all__ = ["NatNetConfig", "NatNetServer", "NatNetSource", "check_address", "config_from_uri",
-           "open_natnet", "port_param"]
+__all__ = [
+    "NatNetConfig",
+    "NatNetServer",
+    "NatNetSource",
+    "check_address",
+    "config_from_uri",
+    "open_natnet",
+    "port_param",
+]
 
 _PARAMS = ("body", "transport", "multicast", "data_port", "local", "up", "timeout", "max_age")
 
@@ -54,12 +61,17 @@ def config_from_uri(uri: Uri) -> NatNetConfig:
     local = uri.param("local", "0.0.0.0") or "0.0.0.0"
     check_address(local, "local", where)
     return NatNetConfig(
-        server=uri.host, body=body, command_port=uri.port or DEFAULT_COMMAND_PORT,
-        transport=transport, multicast_group=group,
+        server=uri.host,
+        body=body,
+        command_port=uri.port or DEFAULT_COMMAND_PORT,
+        transport=transport,
+        multicast_group=group,
         data_port=port_param(uri, "data_port"),
-        local=local, up=UpAxis.parse(uri.param("up", "y") or "y", where),
+        local=local,
+        up=UpAxis.parse(uri.param("up", "y") or "y", where),
         connect_timeout_s=float_param(uri, "timeout", 2.0, 0.05, 60.0, " s"),
-        limits=PoseLimits(max_age_s=float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")))
+        limits=PoseLimits(max_age_s=float_param(uri, "max_age", 0.5, 0.001, 10.0, " s")),
+    )
 
 
 def port_param(uri: Uri, key: str, lowest: int = 1) -> int | None:

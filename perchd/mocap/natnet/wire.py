@@ -98,13 +98,13 @@ class Reader:
         stop = self.buf.find(b"\0", self.pos, min(self.end, self.pos + MAX_NAME))
         if stop < 0:
             raise Truncated(f"unterminated name at offset {self.pos}")
-        text = bytes(self.buf[self.pos:stop]).decode("utf-8", "replace")
+        text = bytes(self.buf[self.pos : stop]).decode("utf-8", "replace")
         self.pos = stop + 1
         return text
 
     def fixed_string(self, size: int) -> str:
         at = self._take(size)
-        return bytes(self.buf[at:at + size]).split(b"\0", 1)[0].decode("utf-8", "replace")
+        return bytes(self.buf[at : at + size]).split(b"\0", 1)[0].decode("utf-8", "replace")
 
 
 class Writer:
@@ -143,10 +143,10 @@ class Writer:
         self.out += _QUAT.pack(*v)
 
     def cstring(self, text: str) -> None:
-        self.out += text.encode("utf-8")[:MAX_NAME - 1] + b"\0"
+        self.out += text.encode("utf-8")[: MAX_NAME - 1] + b"\0"
 
     def fixed_string(self, text: str, size: int) -> None:
-        raw = text.encode("utf-8")[:size - 1]
+        raw = text.encode("utf-8")[: size - 1]
         self.out += raw + bytes(size - len(raw))
 
     def reserve_i32(self) -> int:

@@ -23,9 +23,10 @@ import socket
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
@@ -66,16 +67,36 @@ PREARM_BIT = 0x10000000
 EKF_GPS_TEXT = "is using GPS"
 """STATUSTEXT once EKF3 fuses GPS (ArduCopter 4.8-dev): from then on it can arm."""
 FRAMES = ("nwu", "enu")
-COPTER_MODES = {0: "STABILIZE", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 5: "LOITER",
-                6: "RTL", 9: "LAND", 17: "BRAKE", 20: "GUIDED_NOGPS"}
-DEFAULT_PARAMS = (("GUID_OPTIONS", 8.0), ("GUID_TIMEOUT", 0.5), ("FS_GCS_ENABLE", 5.0),
-                  ("FS_GCS_TIMEOUT", 2.0), ("ATC_ANGLE_BOOST", 0.0))
+COPTER_MODES = {
+    0: "STABILIZE",
+    2: "ALT_HOLD",
+    3: "AUTO",
+    4: "GUIDED",
+    5: "LOITER",
+    6: "RTL",
+    9: "LAND",
+    17: "BRAKE",
+    20: "GUIDED_NOGPS",
+}
+DEFAULT_PARAMS = (
+    ("GUID_OPTIONS", 8.0),
+    ("GUID_TIMEOUT", 0.5),
+    ("FS_GCS_ENABLE", 5.0),
+    ("FS_GCS_TIMEOUT", 2.0),
+    ("ATC_ANGLE_BOOST", 0.0),
+)
 """What perchd's driver checks (drivers/mavlink/ardupilot.py): GUID_OPTIONS bit 3 (thrust is thrust,
 not a climb rate), the failsafe that levels and lands a dead agent's vehicle (docs/safety.md),
 no second tilt compensation. stock_params leaves all but GUID_OPTIONS at copter.parm's."""
-VISION_BOOT_PARAMS = (("VISO_TYPE", 1.0), ("GPS1_TYPE", 0.0), ("EK3_SRC1_POSXY", 6.0),
-                      ("EK3_SRC1_VELXY", 0.0), ("EK3_SRC1_POSZ", 6.0), ("EK3_SRC1_VELZ", 0.0),
-                      ("EK3_SRC1_YAW", 6.0))
+VISION_BOOT_PARAMS = (
+    ("VISO_TYPE", 1.0),
+    ("GPS1_TYPE", 0.0),
+    ("EK3_SRC1_POSXY", 6.0),
+    ("EK3_SRC1_VELXY", 0.0),
+    ("EK3_SRC1_POSZ", 6.0),
+    ("EK3_SRC1_VELZ", 0.0),
+    ("EK3_SRC1_YAW", 6.0),
+)
 """vision=True: no GPS, the EKF on perchd's mocap (drivers/mavlink/vision.py); in a defaults file
 read at boot, as VISO_TYPE takes effect only then."""
 
@@ -112,11 +133,17 @@ class SimState:
     gyro: Vec3
 
     @classmethod
-    def from_msg(cls, m: Any) -> "SimState":
+    def from_msg(cls, m: Any) -> SimState:
         lat = getattr(m, "lat_int", 0) or int(round(m.lat))  # MAVLink1 lacks the extension
         lon = getattr(m, "lon_int", 0) or int(round(m.lon))
-        return cls((m.q1, m.q2, m.q3, m.q4), int(lat), int(lon), float(m.alt),
-                   (m.vn, m.ve, m.vd), (m.xgyro, m.ygyro, m.zgyro))
+        return cls(
+            (m.q1, m.q2, m.q3, m.q4),
+            int(lat),
+            int(lon),
+            float(m.alt),
+            (m.vn, m.ve, m.vd),
+            (m.xgyro, m.ygyro, m.zgyro),
+        )
 
 
 class TruthFilter:
@@ -138,12 +165,16 @@ class TruthFilter:
         else:
             dt = t - self._t
             k = min(1.0, dt / self.tau_s)
-            self._p = [p + vi * dt + k * (m - p - vi * dt)
-                       for p, vi, m in zip(self._p, v, meas)]
+            self._p = [p + vi * dt + k * (m - p - vi * dt) for p, vi, m in zip(self._p, v, meas)]
         self._t = t
         gx, gy, gz = s.gyro
-        return Truth(t, tuple(self._p), v, world_quat(s.q, self.frame),  # type: ignore[arg-type]
-                     (gx, -gy, -gz))
+        return Truth(
+            t,
+            tuple(self._p),
+            v,
+            world_quat(s.q, self.frame),  # type: ignore[arg-type]
+            (gx, -gy, -gz),
+        )
 
 
 # -- options ---------------------------------------------------------------------------
@@ -209,8 +240,10 @@ def find_defaults(binary: str) -> Path:
         parm = root / "Tools" / "autotest" / "default_params" / "copter.parm"
         if parm.is_file():
             return parm
-    raise UriError(f"no Tools/autotest/default_params/copter.parm above {exe}: "
-                   f"give --defaults (docs/firmware.md)")
+    raise UriError(
+        f"no Tools/autotest/default_params/copter.parm above {exe}: "
+        f"give --defaults (docs/firmware.md)"
+    )
 
 
 def free_udp_port() -> int:
@@ -220,16 +253,30 @@ def free_udp_port() -> int:
         return s.getsockname()[1]
 
 
-def sitl_argv(p: ArduPilotParams, defaults: str, harness_port: int,
-              driver_port: int) -> list[str]:
+def sitl_argv(p: ArduPilotParams, defaults: str, harness_port: int, driver_port: int) -> list[str]:
     """SITL's command line: loopback UDP serials only (docs/firmware.md); defaults: one
     .parm file or several, comma-separated."""
-    return [p.binary, "--model", p.model, "--speedup", f"{p.boot_speedup:g}",
-            f"-I{p.instance}", "-w", "--defaults", defaults, "--home", p.home.arg(),
-            "--serial0", f"udpclient:127.0.0.1:{harness_port}",
-            "--serial1", f"udpclient:127.0.0.1:{driver_port}",
-            "--serial2", "none:",  # else SERIAL2 listens on TCP 0.0.0.0:5763
-            "--rc-in-port", str(free_udp_port())]  # not 5501: two harnesses can run
+    return [
+        p.binary,
+        "--model",
+        p.model,
+        "--speedup",
+        f"{p.boot_speedup:g}",
+        f"-I{p.instance}",
+        "-w",
+        "--defaults",
+        defaults,
+        "--home",
+        p.home.arg(),
+        "--serial0",
+        f"udpclient:127.0.0.1:{harness_port}",
+        "--serial1",
+        f"udpclient:127.0.0.1:{driver_port}",
+        "--serial2",
+        "none:",  # else SERIAL2 listens on TCP 0.0.0.0:5763
+        "--rc-in-port",
+        str(free_udp_port()),
+    ]  # not 5501: two harnesses can run
 
 
 def in_dir(workdir: Path, argv: list[str]) -> list[str]:
@@ -304,10 +351,13 @@ class ArduPilotVehicle(FirmwareVehicle):
 
     def _open_link(self) -> Connection:
         from perchd.core.extras import require
+
         require("pymavlink", "mavlink")
         from pymavlink import mavutil
-        conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=250,
-                                          source_component=190)
+
+        conn = mavutil.mavlink_connection(
+            "udpin:127.0.0.1:0", source_system=250, source_component=190
+        )
         self.harness_port = conn.port.getsockname()[1]
         return Connection(conn)
 
@@ -319,17 +369,32 @@ class ArduPilotVehicle(FirmwareVehicle):
         argv = sitl_argv(self.params, defaults, self.harness_port, self.driver_port)
         self.proc = procs.launch(in_dir(self.workdir, argv), self.log)
         deadline = time.monotonic() + self.params.ready_timeout_s
-        self._wait(("SIM_STATE",), lambda: self.state.sim_states > 0, "SIM_STATE", deadline,
-                   cancel, ask=self._ask_truth)
+        self._wait(
+            ("SIM_STATE",),
+            lambda: self.state.sim_states > 0,
+            "SIM_STATE",
+            deadline,
+            cancel,
+            ask=self._ask_truth,
+        )
         for name, value in self.params.params:
             self._set_param(name, value, deadline, cancel)
         if self.params.vision:  # no position before perchd's mocap: no pre-arm pass either
-            self._wait(("SYSTEM_TIME",), lambda: self.state.boot_s >= VISION_BOOT_S,
-                       f"{VISION_BOOT_S:g} s since boot", deadline, cancel)
+            self._wait(
+                ("SYSTEM_TIME",),
+                lambda: self.state.boot_s >= VISION_BOOT_S,
+                f"{VISION_BOOT_S:g} s since boot",
+                deadline,
+                cancel,
+            )
         else:
-            self._wait(("STATUSTEXT", "SYS_STATUS"),
-                       lambda: self.state.ekf_gps and self.state.prearm_ok,
-                       "the EKF to use GPS and the pre-arm checks to pass", deadline, cancel)
+            self._wait(
+                ("STATUSTEXT", "SYS_STATUS"),
+                lambda: self.state.ekf_gps and self.state.prearm_ok,
+                "the EKF to use GPS and the pre-arm checks to pass",
+                deadline,
+                cancel,
+            )
         self._set_param("SIM_SPEEDUP", 1.0, deadline, cancel)
         self._ask_truth()  # the rate is per wall second: ask again at speed-up 1
         self.state.sim_states, self.state.first_sim_t = 0, None  # the summary's rate: at 1x
@@ -346,16 +411,21 @@ class ArduPilotVehicle(FirmwareVehicle):
     def summary(self) -> dict[str, Any]:
         s = self.state
         span = (s.last_sim_t or 0.0) - (s.first_sim_t or 0.0)
-        return {"contact": contact_json(self._contact, self._t0),
-                "truth": {"sim_states": s.sim_states,
-                          "rate_hz": (s.sim_states - 1) / span if span > 0 else None},
-                "mode": COPTER_MODES.get(s.mode, str(s.mode)) if s.mode is not None else None,
-                "armed": s.armed,
-                "modes": [{"t": t - self._t0, "mode": m, "armed": a} for t, m, a in s.modes],
-                "texts": [{"t": t - self._t0, "text": x} for t, x in s.texts[-40:]],
-                "t0": self._t0,  # [s] the harness clock (monotonic) the t above count from
-                "workdir": str(self.workdir), "log": str(self.log),
-                "defaults": str(self.defaults)}
+        return {
+            "contact": contact_json(self._contact, self._t0),
+            "truth": {
+                "sim_states": s.sim_states,
+                "rate_hz": (s.sim_states - 1) / span if span > 0 else None,
+            },
+            "mode": COPTER_MODES.get(s.mode, str(s.mode)) if s.mode is not None else None,
+            "armed": s.armed,
+            "modes": [{"t": t - self._t0, "mode": m, "armed": a} for t, m, a in s.modes],
+            "texts": [{"t": t - self._t0, "text": x} for t, x in s.texts[-40:]],
+            "t0": self._t0,  # [s] the harness clock (monotonic) the t above count from
+            "workdir": str(self.workdir),
+            "log": str(self.log),
+            "defaults": str(self.defaults),
+        }
 
     def close(self) -> None:
         self._halt.set()
@@ -365,37 +435,71 @@ class ArduPilotVehicle(FirmwareVehicle):
             shutil.rmtree(self.workdir, ignore_errors=True)
 
     # -- start-up ------------------------------------------------------------------------
-    def _wait(self, types: tuple[str, ...], done: Callable[[], bool], what: str,
-              deadline: float, cancel: threading.Event,
-              ask: Callable[[], None] | None = None) -> None:
+    def _wait(
+        self,
+        types: tuple[str, ...],
+        done: Callable[[], bool],
+        what: str,
+        deadline: float,
+        cancel: threading.Event,
+        ask: Callable[[], None] | None = None,
+    ) -> None:
         """Until done(), checked on each message of `types`; ask() every ASK_S meanwhile;
         LinkError past `deadline` (time.monotonic()) or when arducopter exits."""
+
         def idle() -> None:
             if cancel.is_set():
                 raise Interrupted()
             if self.proc.poll() is not None:
-                raise LinkError(f"arducopter exited ({self.proc.returncode}) while waiting "
-                                f"for {what}; see {self.log}")
+                raise LinkError(
+                    f"arducopter exited ({self.proc.returncode}) while waiting "
+                    f"for {what}; see {self.log}"
+                )
+
         clock = MonotonicClock()
-        if not done() and wait_for(self._link, types, lambda _msg: done(),
-                                   deadline - clock.now(), clock, ask=ask, ask_every_s=ASK_S,
-                                   idle=idle) is None:
-            raise LinkError(f"arducopter: no {what} within {self.params.ready_timeout_s:g} s; "
-                            f"see {self.log}")
+        if (
+            not done()
+            and wait_for(
+                self._link,
+                types,
+                lambda _msg: done(),
+                deadline - clock.now(),
+                clock,
+                ask=ask,
+                ask_every_s=ASK_S,
+                idle=idle,
+            )
+            is None
+        ):
+            raise LinkError(
+                f"arducopter: no {what} within {self.params.ready_timeout_s:g} s; see {self.log}"
+            )
 
     def _ask_truth(self) -> None:
-        for msg_id, hz in ((SIM_STATE_ID, self.params.truth_hz), (SYS_STATUS_ID, STATUS_HZ),
-                           (SYSTEM_TIME_ID, STATUS_HZ)):
+        for msg_id, hz in (
+            (SIM_STATE_ID, self.params.truth_hz),
+            (SYS_STATUS_ID, STATUS_HZ),
+            (SYSTEM_TIME_ID, STATUS_HZ),
+        ):
             self._link.command(SITL_TARGET, CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
 
-    def _set_param(self, name: str, value: float, deadline: float,
-                   cancel: threading.Event) -> None:
+    def _set_param(self, name: str, value: float, deadline: float, cancel: threading.Event) -> None:
         def send() -> None:
-            self._link.send(self._link.mav.param_set_encode(*SITL_TARGET, name.encode(), value,
-                                                            MAV_PARAM_TYPE_REAL32))
+            self._link.send(
+                self._link.mav.param_set_encode(
+                    *SITL_TARGET, name.encode(), value, MAV_PARAM_TYPE_REAL32
+                )
+            )
+
         self.state.params.pop(name, None)
-        self._wait(("PARAM_VALUE",), lambda: self.state.params.get(name) == value,
-                   f"{name}={value:g}", deadline, cancel, ask=send)
+        self._wait(
+            ("PARAM_VALUE",),
+            lambda: self.state.params.get(name) == value,
+            f"{name}={value:g}",
+            deadline,
+            cancel,
+            ask=send,
+        )
 
     # -- receiving -----------------------------------------------------------------------
     def _receive_loop(self) -> None:
@@ -412,7 +516,9 @@ class ArduPilotVehicle(FirmwareVehicle):
         elif kind == "HEARTBEAT" and msg.autopilot == 3:
             armed = bool(msg.base_mode & 128)
             if (msg.custom_mode, armed) != (s.mode, s.armed):
-                s.modes.append((now, COPTER_MODES.get(msg.custom_mode, str(msg.custom_mode)), armed))
+                s.modes.append(
+                    (now, COPTER_MODES.get(msg.custom_mode, str(msg.custom_mode)), armed)
+                )
             s.mode, s.armed = msg.custom_mode, armed
         elif kind == "SYSTEM_TIME":
             s.boot_s = msg.time_boot_ms * 1e-3

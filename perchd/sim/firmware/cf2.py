@@ -159,8 +159,10 @@ class Cf2Vehicle(FirmwareVehicle):
 
     def __init__(self, params: Cf2Params, clock: Clock | None = None) -> None:
         if params.surface is not None and params.surface.gap(params.start) >= 0.0:
-            raise UriError(f"start {params.start} is on or past the surface (point "
-                           f"{params.surface.point}, normal {params.surface.normal})")
+            raise UriError(
+                f"start {params.start} is on or past the surface (point "
+                f"{params.surface.point}, normal {params.surface.normal})"
+            )
         self.params = params
         self.clock = clock or MonotonicClock()
         self.log = params.log or default_log("cf2")
@@ -196,7 +198,7 @@ class Cf2Vehicle(FirmwareVehicle):
     def start(self, procs: ProcessGroup, cancel: threading.Event) -> None:
         p = self.params
         argv = line_buffered([p.binary, str(self.fw_port), "127.0.0.1"])
-        for attempt in range(1, p.launches + 1):
+        for _ in range(p.launches):
             launch = _Launch()
             self._pwm = [0, 0, 0, 0]
             self._launch = launch  # the sim thread now answers this process's hello
@@ -206,8 +208,9 @@ class Cf2Vehicle(FirmwareVehicle):
             self.launches.append(record)
             try:
                 if not wait_or_cancel(launch.handshake, p.handshake_timeout_s, cancel):
-                    record["outcome"] = ("exited" if launch.proc.poll() is not None
-                                         else "no handshake")
+                    record["outcome"] = (
+                        "exited" if launch.proc.poll() is not None else "no handshake"
+                    )
                 elif not wait_or_cancel(launch.calibrated, p.calibration_timeout_s, cancel):
                     record["outcome"] = "calibration stalled"  # the start-up hang
                 else:
@@ -221,8 +224,10 @@ class Cf2Vehicle(FirmwareVehicle):
                 procs.stop(launch.proc)
                 raise
             procs.stop(launch.proc)
-        raise LinkError(f"cf2 ({p.binary}) was not ready after {p.launches} launches "
-                        f"({', '.join(r['outcome'] for r in self.launches)}); its log: {self.log}")
+        raise LinkError(
+            f"cf2 ({p.binary}) was not ready after {p.launches} launches "
+            f"({', '.join(r['outcome'] for r in self.launches)}); its log: {self.log}"
+        )
 
     def truth(self) -> Truth | None:
         return self._truth
@@ -239,15 +244,24 @@ class Cf2Vehicle(FirmwareVehicle):
         s = self.stats
         truth = self._truth
         return {
-            "firmware": "cf2", "binary": self.params.binary, "log": str(self.log),
+            "firmware": "cf2",
+            "binary": self.params.binary,
+            "log": str(self.log),
             "launches": self.launches,
-            "imu": {"sent": s.imu_sent, "rate_hz": s.imu_rate_hz(),
-                    "late_max_ms": 1e3 * s.late_max_s, "late_over_1ms": s.late_over_1ms,
-                    "skipped_late": s.late_skipped, "resyncs": s.resyncs,
-                    "step_cpu_mean_us": 1e6 * s.step_cpu_sum_s / max(s.steps, 1),
-                    "step_cpu_max_us": 1e6 * s.step_cpu_max_s},
-            "motor_packets": s.motor_packets, "ext_poses": s.extposes,
-            "to_firmware": s.to_firmware, "handshakes": s.handshakes,
+            "imu": {
+                "sent": s.imu_sent,
+                "rate_hz": s.imu_rate_hz(),
+                "late_max_ms": 1e3 * s.late_max_s,
+                "late_over_1ms": s.late_over_1ms,
+                "skipped_late": s.late_skipped,
+                "resyncs": s.resyncs,
+                "step_cpu_mean_us": 1e6 * s.step_cpu_sum_s / max(s.steps, 1),
+                "step_cpu_max_us": 1e6 * s.step_cpu_max_s,
+            },
+            "motor_packets": s.motor_packets,
+            "ext_poses": s.extposes,
+            "to_firmware": s.to_firmware,
+            "handshakes": s.handshakes,
             "client": vars(self.relay.counts).copy(),
             "contact": contact_json(self._contact, self._t0),
             "final": None if truth is None else {"p": list(truth.p), "v": list(truth.v)},
@@ -303,8 +317,9 @@ class Cf2Vehicle(FirmwareVehicle):
             return
         self._send_sensors(launch, k, t, pose_every, baro_every)
 
-    def _send_sensors(self, launch: _Launch, k: int, t: float, pose_every: int,
-                      baro_every: int) -> None:
+    def _send_sensors(
+        self, launch: _Launch, k: int, t: float, pose_every: int, baro_every: int
+    ) -> None:
         s, body, n = self.stats, self.body, self.params.noise
         acc, gyro = body.specific_force(), body.gyro()
         if n.acc_mps2 > 0:

@@ -60,25 +60,34 @@ _ACC_SCALE = 1.0 / (G_IMU * ACC_LSB_G)  # LSB per m/s^2
 _GYRO_SCALE = 180.0 / math.pi / GYRO_LSB_DPS  # LSB per rad/s
 
 
-def imu_packet(acc_mps2: tuple[float, float, float],
-               gyro_rads: tuple[float, float, float]) -> bytes:
+def imu_packet(
+    acc_mps2: tuple[float, float, float], gyro_rads: tuple[float, float, float]
+) -> bytes:
     """Specific force [m/s^2] and body rates [rad/s], body FLU; rounded and clipped to
     int16 (the plugin's cast wraps around; a clip saturates, as a sensor does). Sent 1000
     times a second, so written out rather than looped."""
     ax, ay, az = acc_mps2
     gx, gy, gz = gyro_rads
     a, g = _ACC_SCALE, _GYRO_SCALE
-    return _IMU.pack(SIM_HEADER, IMU_TYPE,
-                     max(-32768, min(32767, round(ax * a))), max(-32768, min(32767, round(ay * a))),
-                     max(-32768, min(32767, round(az * a))), max(-32768, min(32767, round(gx * g))),
-                     max(-32768, min(32767, round(gy * g))), max(-32768, min(32767, round(gz * g))))
+    return _IMU.pack(
+        SIM_HEADER,
+        IMU_TYPE,
+        max(-32768, min(32767, round(ax * a))),
+        max(-32768, min(32767, round(ay * a))),
+        max(-32768, min(32767, round(az * a))),
+        max(-32768, min(32767, round(gx * g))),
+        max(-32768, min(32767, round(gy * g))),
+        max(-32768, min(32767, round(gz * g))),
+    )
 
 
 def decode_imu(data: bytes) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Inverse of imu_packet (to the LSB): ([m/s^2] x3, [rad/s] x3)."""
     _, _, *raw = _IMU.unpack(data)
-    return (tuple(c * ACC_LSB_G * G_IMU for c in raw[:3]),  # type: ignore[return-value]
-            tuple(math.radians(c * GYRO_LSB_DPS) for c in raw[3:]))
+    return (
+        tuple(c * ACC_LSB_G * G_IMU for c in raw[:3]),  # type: ignore[return-value]
+        tuple(math.radians(c * GYRO_LSB_DPS) for c in raw[3:]),
+    )
 
 
 def baro_packet(pressure_mbar: float, temperature_c: float, altitude_m: float) -> bytes:

@@ -60,7 +60,7 @@ class FirmwareVehicle(Protocol):
 
     name: str
 
-    def start(self, procs: "ProcessGroup", cancel: threading.Event) -> None:
+    def start(self, procs: ProcessGroup, cancel: threading.Event) -> None:
         """Launch the firmware through `procs` and return once it is ready to fly.
         LinkError if it never gets there; Interrupted when `cancel` is set meanwhile."""
 
@@ -99,8 +99,13 @@ class ProcessGroup:
         """Start argv with stdout and stderr appended to `log`; LinkError if it cannot run."""
         out = open(log, "ab")
         try:
-            proc = subprocess.Popen(tied_to_parent(argv), stdin=subprocess.DEVNULL, stdout=out,
-                                    stderr=subprocess.STDOUT, start_new_session=True)
+            proc = subprocess.Popen(
+                tied_to_parent(argv),
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
         except OSError as err:
             out.close()
             raise LinkError(f"cannot start {argv[0]}: {err.strerror or err}") from None
@@ -134,7 +139,7 @@ class ProcessGroup:
         for out in logs:
             out.close()
 
-    def __enter__(self) -> "ProcessGroup":
+    def __enter__(self) -> ProcessGroup:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -203,8 +208,13 @@ def ready_line(mocap_uri: str, driver_uri: str) -> str:
 class TruthPublisher:
     """Publishes a vehicle's truth as mocap poses at a fixed rate, on the caller's thread."""
 
-    def __init__(self, vehicle: FirmwareVehicle, output: PoseOutput, params: MocapParams,
-                 clock: Clock | None = None) -> None:
+    def __init__(
+        self,
+        vehicle: FirmwareVehicle,
+        output: PoseOutput,
+        params: MocapParams,
+        clock: Clock | None = None,
+    ) -> None:
         self.vehicle, self.output, self.params = vehicle, output, params
         self.clock = clock or MonotonicClock()
         self.poses = 0

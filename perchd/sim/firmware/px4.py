@@ -21,9 +21,10 @@ import tempfile
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError, UriError
@@ -57,8 +58,14 @@ OFFBOARD_PORT, DISPLAY_PORT = 14540, 19410
 """PX4 sends to these + instance: the offboard API link, SIH's display link (truth)."""
 SAFE_PARAMS = {"COM_OF_LOSS_T": "0.3", "COM_OBL_RC_ACT": "4", "SDLOG_BACKEND": "0"}
 """Set at boot (PX4_PARAM_*): perchd's failsafe values (docs/safety.md), and no .ulg logs."""
-VISION_PARAMS = {"EKF2_EV_CTRL": "11", "EKF2_HGT_REF": "3", "EKF2_GPS_CTRL": "0",
-                 "EKF2_EVP_NOISE": "0.01", "EKF2_EVA_NOISE": "0.02", "EKF2_BARO_CTRL": "0"}
+VISION_PARAMS = {
+    "EKF2_EV_CTRL": "11",
+    "EKF2_HGT_REF": "3",
+    "EKF2_GPS_CTRL": "0",
+    "EKF2_EVP_NOISE": "0.01",
+    "EKF2_EVA_NOISE": "0.02",
+    "EKF2_BARO_CTRL": "0",
+}
 """vision: EKF2 on the mocap perchd's driver forwards (position and yaw, vision height),
 GPS off (drivers/mavlink/px4.py checks the first two); the noise floors down to the mocap's
 (drivers/mavlink/vision.py: EKF2 takes the larger of its floor, 0.1 m and 0.1 rad by default,
@@ -112,8 +119,9 @@ class Px4Params:
     sim_speed: float = 1.0
 
 
-def enu_from_geodetic(lat_deg: float, lon_deg: float, alt_m: float,
-                      origin: tuple[float, float, float]) -> Vec3:
+def enu_from_geodetic(
+    lat_deg: float, lon_deg: float, alt_m: float, origin: tuple[float, float, float]
+) -> Vec3:
     """[m] east, north, up of a point from the origin (lat [deg], lon [deg], alt [m]):
     equirectangular, exact to well under a millimetre over a room."""
     lat0, lon0, alt0 = origin
@@ -217,16 +225,25 @@ class Px4Vehicle(FirmwareVehicle):
     def start(self, procs: ProcessGroup, cancel: threading.Event) -> None:
         require("pymavlink", "mavlink")
         from pymavlink import mavutil
+
         self.workdir = Path(tempfile.mkdtemp(prefix="perchd-px4-"))
         port = DISPLAY_PORT + self.params.instance
-        self._link = Connection(mavutil.mavlink_connection(
-            f"udpin:127.0.0.1:{port}", source_system=246, source_component=190))
+        self._link = Connection(
+            mavutil.mavlink_connection(
+                f"udpin:127.0.0.1:{port}", source_system=246, source_component=190
+            )
+        )
         self._launch(procs)
         self._thread = threading.Thread(target=self._receive, name="px4-truth", daemon=True)
         self._thread.start()
-        self._wait(("HIL_STATE_QUATERNION", "COMMAND_ACK"),
-                   lambda: self._origin is not None and self._truth_acked, BOOT_TIMEOUT_S,
-                   cancel, "ground truth (HIL_STATE_QUATERNION) from PX4 SIH", self._ask_truth)
+        self._wait(
+            ("HIL_STATE_QUATERNION", "COMMAND_ACK"),
+            lambda: self._origin is not None and self._truth_acked,
+            BOOT_TIMEOUT_S,
+            cancel,
+            "ground truth (HIL_STATE_QUATERNION) from PX4 SIH",
+            self._ask_truth,
+        )
         if self.params.takeoff:
             self._take_off(cancel)
             if self.params.heading_deg is not None:
@@ -253,22 +270,30 @@ class Px4Vehicle(FirmwareVehicle):
         # yaw0=auto: SIH's EKF heading comes from its compass, degrees off the truth
         # vision: on the ground, nobody else arms it; else it flies on its GPS
         vision = "&arm=1" if self.params.vision else "&vision=0"
-        return (f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}"
-                f"&yaw0=auto{vision}")
+        return (
+            f"mavlink:udpin:127.0.0.1:{port}?mass={SIH_MASS_KG:g}&hover={SIH_HOVER:.4f}"
+            f"&yaw0=auto{vision}"
+        )
 
     def contact(self) -> Contact | None:
         return self._contact
 
     def summary(self) -> dict[str, Any]:
         s = self.surface
-        return {"firmware": "px4", "instance": self.params.instance, "log": str(self.log),
-                "workdir": str(self.workdir), "truth_samples": self._samples,
-                "start_heading_rad": self.start_heading, "modes": self._modes_seen,
-                "heading_estimate_error_deg": self._heading_span_deg(),
-                "sim_clock_rate": self.sim_clock_rate(),
-                "attitude_push_mps2": self.attitude_push(),
-                "surface": None if s is None else {"point": list(s.point), "normal": list(s.normal)},
-                "contact": contact_json(self._contact, 0.0)}
+        return {
+            "firmware": "px4",
+            "instance": self.params.instance,
+            "log": str(self.log),
+            "workdir": str(self.workdir),
+            "truth_samples": self._samples,
+            "start_heading_rad": self.start_heading,
+            "modes": self._modes_seen,
+            "heading_estimate_error_deg": self._heading_span_deg(),
+            "sim_clock_rate": self.sim_clock_rate(),
+            "attitude_push_mps2": self.attitude_push(),
+            "surface": None if s is None else {"point": list(s.point), "normal": list(s.normal)},
+            "contact": contact_json(self._contact, 0.0),
+        }
 
     def _heading_span_deg(self) -> list[float] | None:
         """[deg] PX4's heading estimate - true heading, smallest and largest since ready."""
@@ -291,13 +316,27 @@ class Px4Vehicle(FirmwareVehicle):
         params = {"SDLOG_BACKEND": "0"} if self.params.stock_params else dict(SAFE_PARAMS)
         params.update(VISION_PARAMS if self.params.vision else {})
         params.update(self.params.extra_params)
-        env = ["PX4_SIMULATOR=sihsim", "PX4_SIM_MODEL=sihsim_quadx",
-               f"PX4_SIM_SPEED_FACTOR={self.params.sim_speed:g}",
-               *(f"PX4_PARAM_{k}={v}" for k, v in params.items())]
+        env = [
+            "PX4_SIMULATOR=sihsim",
+            "PX4_SIM_MODEL=sihsim_quadx",
+            f"PX4_SIM_SPEED_FACTOR={self.params.sim_speed:g}",
+            *(f"PX4_PARAM_{k}={v}" for k, v in params.items()),
+        ]
         with fine_timer_slack():
-            self._proc = procs.launch(["env", *env, str(self.binary), "-d", "-i",
-                                       str(self.params.instance), "-w", str(self.workdir),
-                                       str(self.etc)], self.log)
+            self._proc = procs.launch(
+                [
+                    "env",
+                    *env,
+                    str(self.binary),
+                    "-d",
+                    "-i",
+                    str(self.params.instance),
+                    "-w",
+                    str(self.workdir),
+                    str(self.etc),
+                ],
+                self.log,
+            )
 
     def _ask_truth(self) -> None:
         """HIL_STATE_QUATERNION at 100 Hz (sim time), and the display link's
@@ -310,14 +349,22 @@ class Px4Vehicle(FirmwareVehicle):
     def _take_off(self, cancel: threading.Event) -> None:
         """NAV_TAKEOFF then ARM (PX4's own take-off to MIS_TAKEOFF_ALT); ready once PX4
         is back in Hold above 2 m: the flight starts in the air, as a take-over does."""
+
         def send() -> None:
             if not self._armed:  # arming is refused until PX4's health checks pass
                 nan = float("nan")
                 self._command(22, 0, 0, 0, nan, nan, nan, nan)
                 self._command(400, 1)
-        self._wait(("HIL_STATE_QUATERNION", "HEARTBEAT"),
-                   lambda: self._armed and self._mode == HOLD and self._truth.p[2] > 2.0,
-                   TAKEOFF_TIMEOUT_S, cancel, "PX4's take-off to Hold above 2 m", send, 2.0)
+
+        self._wait(
+            ("HIL_STATE_QUATERNION", "HEARTBEAT"),
+            lambda: self._armed and self._mode == HOLD and self._truth.p[2] > 2.0,
+            TAKEOFF_TIMEOUT_S,
+            cancel,
+            "PX4's take-off to Hold above 2 m",
+            send,
+            2.0,
+        )
 
     def _turn(self, heading: float, cancel: threading.Event) -> None:
         """DO_REPOSITION in Hold with only a yaw (radians on PX4; position and height
@@ -331,32 +378,63 @@ class Px4Vehicle(FirmwareVehicle):
             near = est is not None and abs(math.remainder(est - heading, math.tau)) < TURN_TOL_RAD
             since = (since or now) if near else None
             return since is not None and now - since >= TURN_STEADY_S
-        self._wait(("ATTITUDE",), steady, TURN_TIMEOUT_S, cancel,
-                   f"PX4's turn to heading {math.degrees(heading):.0f} deg in Hold",
-                   lambda: self._command(192, -1, 0, 0, heading, nan, nan, nan), 2.0)
+
+        self._wait(
+            ("ATTITUDE",),
+            steady,
+            TURN_TIMEOUT_S,
+            cancel,
+            f"PX4's turn to heading {math.degrees(heading):.0f} deg in Hold",
+            lambda: self._command(192, -1, 0, 0, heading, nan, nan, nan),
+            2.0,
+        )
 
     def _command(self, command: int, *params: float) -> None:
         self._link.command((self.params.instance + 1, 1), command, *params)
 
-    def _wait(self, types: tuple[str, ...], done: Callable[[], bool], timeout_s: float,
-              cancel: threading.Event, what: str, poke: Callable[[], None] | None = None,
-              every_s: float = 0.5) -> None:
+    def _wait(
+        self,
+        types: tuple[str, ...],
+        done: Callable[[], bool],
+        timeout_s: float,
+        cancel: threading.Event,
+        what: str,
+        poke: Callable[[], None] | None = None,
+        every_s: float = 0.5,
+    ) -> None:
         """Until done(), checked on each message of `types`; poke() every every_s [s]
         meanwhile; LinkError after timeout_s [s] or when px4 exits."""
+
         def idle() -> None:
             if cancel.is_set():
                 raise Interrupted()
             if self._proc is not None and self._proc.poll() is not None:
                 # e.g. another px4 holds this instance's lock: its ports would answer for it
-                raise LinkError(f"PX4 instance {self.params.instance} exited "
-                                f"({self._proc.returncode}) while waiting for {what} (is "
-                                f"another px4 running as instance {self.params.instance}? "
-                                f"log: {self.log})")
-        if not done() and wait_for(self._link, types, lambda _msg: done(), timeout_s,
-                                   MonotonicClock(), ask=poke, ask_every_s=every_s,
-                                   idle=idle) is None:
-            raise LinkError(f"PX4 instance {self.params.instance}: no {what} within "
-                            f"{timeout_s:g} s (log: {self.log})")
+                raise LinkError(
+                    f"PX4 instance {self.params.instance} exited "
+                    f"({self._proc.returncode}) while waiting for {what} (is "
+                    f"another px4 running as instance {self.params.instance}? "
+                    f"log: {self.log})"
+                )
+
+        if (
+            not done()
+            and wait_for(
+                self._link,
+                types,
+                lambda _msg: done(),
+                timeout_s,
+                MonotonicClock(),
+                ask=poke,
+                ask_every_s=every_s,
+                idle=idle,
+            )
+            is None
+        ):
+            raise LinkError(
+                f"PX4 instance {self.params.instance}: no {what} within "
+                f"{timeout_s:g} s (log: {self.log})"
+            )
 
     # -- truth -------------------------------------------------------------------------
     def _receive(self) -> None:
@@ -374,8 +452,11 @@ class Px4Vehicle(FirmwareVehicle):
             self._on_attitude(msg)
         elif kind == "COMMAND_ACK" and msg.command == 511 and msg.result == 0:
             self._truth_acked = True
-        elif kind == "HEARTBEAT" and msg.get_srcSystem() == self.params.instance + 1 \
-                and msg.get_srcComponent() == 1:
+        elif (
+            kind == "HEARTBEAT"
+            and msg.get_srcSystem() == self.params.instance + 1
+            and msg.get_srcComponent() == 1
+        ):
             self._on_heartbeat(msg)
 
     def _on_truth(self, msg: Any) -> None:
@@ -415,8 +496,11 @@ class Px4Vehicle(FirmwareVehicle):
         """[m/s^2] the mean push (_push) over the PUSH_WINDOW_S before contact; None without
         a contact or ATTITUDE then."""
         c = self._contact
-        pushes = [] if c is None else [
-            p for t, p in list(self._pushes) if c.t - PUSH_WINDOW_S <= t <= c.t]
+        pushes = (
+            []
+            if c is None
+            else [p for t, p in list(self._pushes) if c.t - PUSH_WINDOW_S <= t <= c.t]
+        )
         return sum(pushes) / len(pushes) if pushes else None
 
     def sim_clock_rate(self) -> float | None:
@@ -444,5 +528,10 @@ class Px4Vehicle(FirmwareVehicle):
 
 
 def mode_name(mode: tuple[int, int]) -> str:
-    return {HOLD: "AUTO.LOITER", (4, 5): "AUTO.RTL", (4, 6): "AUTO.LAND", (4, 2): "AUTO.TAKEOFF",
-            OFFBOARD: "OFFBOARD"}.get(mode, f"{mode[0]}.{mode[1]}")
+    return {
+        HOLD: "AUTO.LOITER",
+        (4, 5): "AUTO.RTL",
+        (4, 6): "AUTO.LAND",
+        (4, 2): "AUTO.TAKEOFF",
+        OFFBOARD: "OFFBOARD",
+    }.get(mode, f"{mode[0]}.{mode[1]}")

@@ -33,8 +33,12 @@ class QuadModel:
 
     mass_kg: float = 0.0282
     inertia_kgm2: Vec3 = (1.6572e-5, 1.6656e-5, 2.9262e-5)
-    rotor_xy_m: tuple[tuple[float, float], ...] = ((0.031, -0.031), (-0.031, -0.031),
-                                                  (-0.031, 0.031), (0.031, 0.031))
+    rotor_xy_m: tuple[tuple[float, float], ...] = (
+        (0.031, -0.031),
+        (-0.031, -0.031),
+        (-0.031, 0.031),
+        (0.031, 0.031),
+    )
     turning: tuple[int, int, int, int] = (1, -1, 1, -1)
     k_f: float = 1.7965e-8
     k_m: float = 0.005964552
@@ -81,7 +85,9 @@ class BodyState:
 class Quadrotor:
     """Integrates with semi-implicit Euler; the floor is z = floor_z (it starts there)."""
 
-    def __init__(self, model: QuadModel, start: Vec3, yaw: float = 0.0, floor_z: float = 0.0) -> None:
+    def __init__(
+        self, model: QuadModel, start: Vec3, yaw: float = 0.0, floor_z: float = 0.0
+    ) -> None:
         self.m = model
         self.floor_z = floor_z
         self.p = list(start)
@@ -99,9 +105,17 @@ class Quadrotor:
     def rotation(self) -> tuple[float, ...]:
         """Body -> world rotation matrix, row-major (9 floats)."""
         x, y, z, w = self.q
-        return (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-                2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-                2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y))
+        return (
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
+        )
 
     def step(self, dt: float, pwm: tuple[int, int, int, int] | list[int]) -> None:
         """Advance dt [s] with the motors commanded to `pwm` (m1..m4)."""
@@ -132,7 +146,11 @@ class Quadrotor:
             return
         self.grounded = False
         self.v = [vx + ax * dt, vy + ay * dt, vz + az * dt]
-        self.p = [self.p[0] + self.v[0] * dt, self.p[1] + self.v[1] * dt, self.p[2] + self.v[2] * dt]
+        self.p = [
+            self.p[0] + self.v[0] * dt,
+            self.p[1] + self.v[1] * dt,
+            self.p[2] + self.v[2] * dt,
+        ]
         self._f_body = (fx * inv_m, fy * inv_m, fz * inv_m)
         if self.p[2] <= self.floor_z:  # touchdown: the floor stops it dead, level as it was
             self.p[2] = self.floor_z
@@ -151,9 +169,11 @@ class Quadrotor:
         jx, jy, jz = m.inertia_kgm2
         wx, wy, wz = self.w
         # Euler's equations, diagonal inertia: J dw/dt = M - w x (J w)
-        wx, wy, wz = (wx + (mx - wy * wz * (jz - jy)) / jx * dt,
-                      wy + (my - wz * wx * (jx - jz)) / jy * dt,
-                      wz + (mz - wx * wy * (jy - jx)) / jz * dt)
+        wx, wy, wz = (
+            wx + (mx - wy * wz * (jz - jy)) / jx * dt,
+            wy + (my - wz * wx * (jx - jz)) / jy * dt,
+            wz + (mz - wx * wy * (jy - jx)) / jz * dt,
+        )
         self.w = [wx, wy, wz]
         self._rotate(wx * dt, wy * dt, wz * dt)
 
@@ -185,5 +205,12 @@ class Quadrotor:
         return (self.w[0], self.w[1], self.w[2])
 
     def state(self) -> BodyState:
-        return BodyState(tuple(self.p), tuple(self.v), tuple(self.q), tuple(self.w),  # type: ignore[arg-type]
-                         tuple(self.rotor), self.grounded, self.perched)  # type: ignore[arg-type]
+        return BodyState(
+            tuple(self.p),
+            tuple(self.v),
+            tuple(self.q),
+            tuple(self.w),  # type: ignore[arg-type]
+            tuple(self.rotor),
+            self.grounded,
+            self.perched,
+        )  # type: ignore[arg-type]
