@@ -230,11 +230,12 @@ def test_the_speed_perchd_measures_from_sih_truth_is_steady(tmp_path):
     from perchd.flight.config import EstimatorConfig
     from perchd.flight.estimator import Estimator
     from perchd.flight.frame import PerchFrame
-    from perchd.sim.firmware.harness import MocapParams, TruthPublisher
+    from perchd.sim.firmware.harness import TruthPublisher
+    from perchd.sim.world import MocapParams
 
     clock, out, rng = ManualClock(100.0), Poses(), random.Random(3)
     vehicle = Px4Vehicle(Px4Params(fake_build(tmp_path)), clock)
-    publisher = TruthPublisher(vehicle, out, MocapParams(), clock)
+    publisher = TruthPublisher(vehicle, out, MocapParams(rate_hz=100.0, latency_s=0.0), clock)
     est = Estimator(EstimatorConfig(), PerchFrame.from_surface((10.0, 0.0, 0.0), (1.0, 0.0, 0.0)))
     speed, sim_t, arrivals = 1.5, 0.0, []
     for k in range(300):  # 3 s of SIH truth: (arrival [s], message)

@@ -41,12 +41,12 @@ from perchd.sim.firmware.ardupilot import (
 from perchd.sim.firmware.cf2 import Cf2Params, Cf2Vehicle, SensorNoise, Surface
 from perchd.sim.firmware.harness import (
     Interrupted,
-    MocapParams,
     ProcessGroup,
     TruthPublisher,
     ready_line,
 )
 from perchd.sim.firmware.px4 import Px4Params, Px4Vehicle
+from perchd.sim.world import MocapParams
 
 
 def register_under(sim_parser: argparse.ArgumentParser) -> None:
@@ -223,7 +223,7 @@ def params_from(args: argparse.Namespace) -> tuple[Cf2Params, MocapParams]:
         surface=Surface(tuple(args.surface), tuple(args.normal)),
         log=Path(args.fw_log) if args.fw_log else None,
     )
-    return cf2, MocapParams(rate_hz=args.mocap_rate, noise_m=args.noise, body=args.body)
+    return cf2, MocapParams(rate_hz=args.mocap_rate, latency_s=0.0, noise_m=args.noise)
 
 
 GIL_SWITCH_S = 0.0005
@@ -294,7 +294,7 @@ def run(args: argparse.Namespace) -> int:
     if args.cf2:
         _, mocap = params_from(args)
     else:
-        mocap = MocapParams(rate_hz=args.mocap_rate, noise_m=args.noise, body=args.body)
+        mocap = MocapParams(rate_hz=args.mocap_rate, latency_s=0.0, noise_m=args.noise)
     sys.setswitchinterval(GIL_SWITCH_S)
     clock = MonotonicClock()
     done = threading.Event()
@@ -303,9 +303,11 @@ def run(args: argparse.Namespace) -> int:
             with ProcessGroup() as procs:
                 vehicle = open_vehicle(args, clock)
                 try:
-                    output = open_pose_output(args.pose_out, [mocap.body], clock)
+                    output = open_pose_output(args.pose_out, [args.body], clock)
                     try:
-                        result = serve(vehicle, procs, output, mocap, done, args.duration)
+                        result = serve(
+                            vehicle, procs, output, mocap, args.body, done, args.duration
+                        )
                     finally:
                         output.close()
                 finally:
@@ -327,15 +329,16 @@ def serve(
     procs: ProcessGroup,
     output: Any,
     mocap: MocapParams,
+    body: str,
     done: threading.Event,
     duration: float | None,
 ) -> dict[str, Any]:
     vehicle.start(procs, done)
     if (line := surface_line(vehicle)) is not None:
         print(line, file=sys.stderr, flush=True)
-    mocap_uri, driver_uri = output.uri(mocap.body), vehicle.driver_uri()
+    mocap_uri, driver_uri = output.uri(body), vehicle.driver_uri()
     print(ready_line(mocap_uri, driver_uri), file=sys.stderr, flush=True)
-    publisher = TruthPublisher(vehicle, output, mocap, vehicle.clock)
+    publisher = TruthPublisher(vehicle, output, mocap, vehicle.clock, body)
     until = None if duration is None else time.monotonic() + duration
     publisher.run(done, until)
     out = vehicle.summary()

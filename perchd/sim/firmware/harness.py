@@ -33,7 +33,7 @@ from perchd.core.clock import Clock, MonotonicClock
 from perchd.core.errors import LinkError
 from perchd.core.types import Pose, Quat, Vec3
 from perchd.mocap.outputs import PoseOutput
-from perchd.sim.world import Contact
+from perchd.sim.world import Contact, MocapParams
 
 STOP_GRACE_S = 2.0
 """[s] a process asked to stop (SIGTERM) gets this long before SIGKILL."""
@@ -189,17 +189,6 @@ def default_log(name: str) -> Path:
     return Path(os.environ.get("TMPDIR", "/tmp")) / f"perchd-{name}-{os.getpid()}.log"
 
 
-@dataclass(frozen=True, slots=True)
-class MocapParams:
-    """rate_hz [Hz] poses published; noise_m [m] Gaussian std per axis on the position;
-    body: the rigid body name; seed of the noise."""
-
-    rate_hz: float = 100.0
-    noise_m: float = 0.0
-    body: str = "cf1"
-    seed: int = 0
-
-
 def ready_line(mocap_uri: str, driver_uri: str) -> str:
     """The one line on stderr that says where to connect (as `perchd sim` prints it)."""
     return f"perchd sim: ready: mocap {mocap_uri} driver {driver_uri}"
@@ -214,18 +203,22 @@ class TruthPublisher:
         output: PoseOutput,
         params: MocapParams,
         clock: Clock | None = None,
+        body: str = "cf1",
+        seed: int = 0,
     ) -> None:
-        self.vehicle, self.output, self.params = vehicle, output, params
+        """params: the simulated mocap's rate and noise (its latency is the publishing's own:
+        a truth goes out when it is sampled); body: the rigid body's name; seed of the noise."""
+        self.vehicle, self.output, self.params, self.body = vehicle, output, params, body
         self.clock = clock or MonotonicClock()
         self.poses = 0
         self.yaw_range: tuple[float, float] | None = None  # [rad] of the true poses published
-        self._rng = random.Random(params.seed)
+        self._rng = random.Random(seed)
         self._sent_t: float | None = None  # [s] stamp of the last truth published
 
     def pose(self, truth: Truth) -> Pose:
         n = self.params.noise_m
         p = truth.p if n <= 0 else tuple(c + self._rng.gauss(0.0, n) for c in truth.p)
-        return Pose(self.params.body, self.poses + 1, truth.t, p, truth.q)  # type: ignore[arg-type]
+        return Pose(self.body, self.poses + 1, truth.t, p, truth.q)  # type: ignore[arg-type]
 
     def step(self) -> None:
         """Publish the vehicle's newest truth, unless it was published already: the same
