@@ -44,10 +44,11 @@ from perchd.core.types import LinkHealth, Phase, Pose, Setpoint
 from perchd.drivers.base import open_driver
 from perchd.drivers.zmq import parse_setpoint_message
 from perchd.flight.config import FlightConfig, VehicleConfig
+from perchd.flight.endrules import Conditions
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
 from perchd.flight.loop import NO_SEQ, FixedRateLoop, LoopStats, spread
-from perchd.flight.supervisor import Conditions, Supervisor
+from perchd.flight.supervisor import Supervisor
 from perchd.mocap.base import open_source
 from perchd.mocap.zmq import ZmqPosePublisher
 from perchd.sim.receiver import bind_setpoint_socket

@@ -23,6 +23,7 @@ from perchd.core.ports import Driver, PoseSource
 from perchd.core.realtime import below_loop
 from perchd.core.types import EndReason, Phase, State
 from perchd.flight.config import FlightConfig, TriggerPolicy
+from perchd.flight.endrules import Conditions
 from perchd.flight.estimator import Estimator
 from perchd.flight.frame import PerchFrame
 from perchd.flight.lagid import LagModel
@@ -30,7 +31,6 @@ from perchd.flight.loop import LoopSummary, make_loop
 from perchd.flight.planguard import check_flight_plan
 from perchd.flight.planner_worker import Planner, WorkerPlanner
 from perchd.flight.supervisor import (
-    Conditions,
     FlightAbort,
     Supervisor,
     TickReport,

@@ -1,4 +1,4 @@
-"""Flight phases and every end rule: one `tick` per control period, no I/O of its own.
+"""The flight's phases: one `tick` per control period, no I/O of its own.
 
 Phases: TAKEOFF (only when the flight starts below the take-off height) -> HOLD at the start
 point, at least hold_s and until the hover thrust has been learned (flight/hover.py;
@@ -7,41 +7,33 @@ x0) -> trigger -> STAGE1 (tau_ref indexed by time since the trigger) -> STAGE2 w
 *measured* tau reaches tau_s (docs/errata.md §9; tau_ref = tau_s + time since that switch) ->
 CONTACT (the post-contact action for post_contact_s) -> DONE.
 
-End rules, checked in this order on every tick: operator abort, signal, stale mocap, lost
-link, geofence, tilt, speed limit, tau divergence, deadline overrun streak, timeout, contact,
-plan complete. The trigger itself may end the flight (TRIGGER_REFUSED): what it flies or
-refuses is flight/trigger.py's decision; what the flight knows of the vehicle's response
-and feeds forward is flight/response.py's.
+Every tick first asks the end rules (flight/endrules.py); the references each phase aims at
+are flight/references.py's. The trigger itself may end the flight (TRIGGER_REFUSED): what it
+flies or refuses is flight/trigger.py's decision; what the flight knows of the vehicle's
+response and feeds forward is flight/response.py's.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import threading
 from dataclasses import dataclass
-from typing import Any
 
 from perchd.core.envelope import MARGIN_M
-from perchd.core.types import EndReason, LinkHealth, Phase, Setpoint, State
+from perchd.core.types import EndReason, Phase, Setpoint, State
 from perchd.flight.config import FlightConfig, PostContact
 from perchd.flight.control import AxisController, Controller, FeedForward
+from perchd.flight.endrules import Conditions, ContactEstimate, EndRules, Progress
 from perchd.flight.frame import PerchFrame
 from perchd.flight.hover import HoverLearner
 from perchd.flight.planner_worker import Planner
-from perchd.flight.planrefs import PlanPoint, PlanSampler
+from perchd.flight.references import NO_REFS, References, Refs
 from perchd.flight.response import VehicleResponse, feed_forward
 from perchd.flight.takeoff import TakeoffProfile
 from perchd.flight.trigger import TriggerDesk
 from perchd.logs.flightlog import LogEvent
 from perchd.tau.plan import Plan
 
-FROZEN_MAX_S = 0.3
-"""[s] once the approach has begun, poses with a bit-identical position for longer than this
-are a stuck tracker re-sending its last position with fresh stamps, not a vehicle (noise
-alone moves a real measurement; a commanded vehicle moves a noiseless simulated one within
-its command latency and attitude response, well under this)."""
-_MOVING = (Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
 _OBSERVED = (Phase.HOLD, Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
 """The phases whose ticks the lag identification records (flight/lagid.py)."""
 
@@ -65,17 +57,6 @@ class FlightAbort:
             return self._reason
 
 
-@dataclass(frozen=True, slots=True)
-class Refs:
-    """Plan references at a tick: tau_ref [s], x/v/a [m, m/s, m/s^2]; None outside stages."""
-
-    tau_ref: float | None = None
-    x: float | None = None
-    v: float | None = None
-    a: float | None = None
-
-
-NO_REFS = Refs()
 NO_U = (0.0, 0.0, 0.0)
 
 
@@ -107,31 +88,6 @@ class Trigger:
     action: str
 
 
-@dataclass(frozen=True, slots=True)
-class ContactEstimate:
-    """t [s] estimated time at X = 0; speed [m/s] estimated Xdot then."""
-
-    t: float
-    speed: float
-
-
-@dataclass(frozen=True, slots=True)
-class Conditions:
-    """What the supervisor checks besides the state, sampled once per tick.
-
-    health: the driver's link.  overrun_streak: deadlines missed in a row by the loop.
-    abort: an external request (operator, signal), None when there is none.
-    mocap_period_s: [s] the measured pose period, None until known.
-    arrival_age_s: [s] since the newest pose used arrived, None before the first.
-    """
-
-    health: LinkHealth
-    overrun_streak: int = 0
-    abort: EndReason | None = None
-    mocap_period_s: float | None = None
-    arrival_age_s: float | None = None
-
-
 class Supervisor:
     """planner: where the trigger's ROBUST and REPLAN get their plans (TriggerDesk); None:
     solved in the tick. The caller owns it (starts and closes it)."""
@@ -139,7 +95,6 @@ class Supervisor:
     def __init__(
         self, plan: Plan, cfg: FlightConfig, frame: PerchFrame, planner: Planner | None = None
     ) -> None:
-        self.plan = plan
         self.cfg = cfg
         self.frame = frame
         self.ctl = Controller(cfg, frame)
@@ -150,20 +105,14 @@ class Supervisor:
         self.trigger: Trigger | None = None
         self.contact: ContactEstimate | None = None
         self.t_start: float | None = None
-        self.t_stage2: float | None = None
         self._t_prev: float | None = None
         self._t_phase = 0.0
         self._t_end: float | None = None
-        self._t_bad_tau: float | None = None
         self._hold: tuple[float, float, float] | None = None
         self._hold_x: AxisController | None = None  # the X position loop of the hold
         self._t_moving = 0.0  # [s] when the approach began moving the vehicle
         self._z_ref = 0.0
         self._takeoff: TakeoffProfile | None = None  # the TAKEOFF phase's height reference
-        self._a_app = 0.0
-        self._x: float | None = None  # [m] measured X of the tick in hand
-        self._sampler = PlanSampler(plan)
-        self._refs_memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
         self.desk = TriggerDesk(plan, cfg, planner, self.events)
         self.hover = HoverLearner(cfg.hover, cfg.vehicle.hover_guess_n, cfg.vehicle.g)
         self.hover_learned_n: float | None = None  # [N] once the hold's estimate settled
@@ -171,6 +120,13 @@ class Supervisor:
         self._v_int = 0.0  # [m/s] integral of the approach's speed error
         self.response = VehicleResponse(cfg.tau_gains, cfg.lag_id, self.events)
         self._t_refit = -math.inf  # [s] the approach's last refit
+        self.refs = References(plan, cfg, self.desk, self.response)
+        self.rules = EndRules(cfg, frame)
+
+    @property
+    def plan(self) -> Plan:
+        """The plan flown: the one given until the trigger, then the trigger's choice."""
+        return self.refs.plan
 
     # --- helpers ----------------------------------------------------------------------------
     def _enter(self, phase: Phase, t: float, detail: str = "", **values: float) -> None:
@@ -191,115 +147,34 @@ class Supervisor:
         self._t_prev = t
         if self.t_start is None:
             self.t_start = t
-        self._x = None if state is None else state.x
         if self.end is None:
-            reason, detail = self._check(t, state, cond)
-            if reason is not None:
-                self._finish(reason, t, detail)
+            self._check(t, state, cond)
         if self.end is not None:
             return self._ended(t, state)
         if state is None:  # waiting for the first pose (bounded by the stale-mocap rule)
             return TickReport(self.phase, None, None, False, NO_REFS, NO_U, None)
         return self._fly(t, dt, state)
 
-    def _check(
-        self, t: float, state: State | None, cond: Conditions
-    ) -> tuple[EndReason | None, str]:
-        s, health, arrival_age = self.cfg.safety, cond.health, cond.arrival_age_s
-        if cond.abort is not None:
-            return cond.abort, ""
-        limit = s.stale_timeout_s or s.stale_periods * (cond.mocap_period_s or 0.01)
-        if state is None:
-            if t - self.t_start > max(limit, 0.5):
-                return EndReason.STALE_MOCAP, f"no pose in {t - self.t_start:.3f} s"
-        elif arrival_age is not None and arrival_age > limit:
-            return EndReason.STALE_MOCAP, f"newest pose arrived {arrival_age * 1000:.0f} ms ago"
-        elif self.phase in _MOVING and min(state.frozen_s, t - self._t_moving) > FROZEN_MAX_S:
-            return EndReason.STALE_MOCAP, (
-                f"mocap frozen: the same position for {state.frozen_s * 1000:.0f} ms while flying"
-            )
-        if not health.ok:
-            return EndReason.LOST_LINK, health.detail
-        if health.rtt_s is not None and health.rtt_s > s.link_rtt_max_s:
-            return EndReason.LOST_LINK, (
-                f"link too slow: round trip {health.rtt_s * 1000:.0f} ms"
-                f" > {s.link_rtt_max_s * 1000:.0f} ms"
-            )
-        if state is not None:
-            why = self._limits(state)
-            if why is not None:
-                return why
-            why = self._tau_watch(t, state)
-            if why is not None:
-                return why
-        if cond.overrun_streak >= s.overrun_streak:
-            return EndReason.DEADLINE_OVERRUN, f"{cond.overrun_streak} deadlines missed in a row"
-        if t - self.t_start > s.timeout_s:
-            return EndReason.TIMEOUT, (
-                f"flying {t - self.t_start:.3f} s, longer than "
-                f"[safety] timeout_s = {s.timeout_s:g} s"
-            )
-        if state is not None and self._contact(t, state):
-            return EndReason.CONTACT, f"at {self.contact.speed:.3f} m/s"
-        since = None if self.trigger is None else t - self.trigger.t
-        if since is not None and since > self.plan.duration + s.plan_grace_s:
-            return EndReason.PLAN_COMPLETE, f"{since:.2f} s after the trigger, X = {state.x:.3f} m"
-        return None, ""
-
-    def _limits(self, st: State):
-        s = self.cfg.safety
-        airborne = self.phase not in (Phase.IDLE, Phase.TAKEOFF)
-        height = self.frame.point[2] + self.frame.rotate_out((st.x, st.y, st.z))[2]
-        if not s.x_min_m <= st.x <= s.x_max_m:
-            return EndReason.GEOFENCE, f"X = {st.x:.3f} m outside {s.x_min_m:g}..{s.x_max_m:g} m"
-        if self._hold is not None:
-            dy, dz = st.y - self._hold[1], st.z - self._z_ref
-            if airborne and max(abs(dy), abs(dz)) > s.lateral_max_m:
-                return EndReason.GEOFENCE, (
-                    f"{math.hypot(dy, dz):.2f} m off the approach line "
-                    f"(limit {s.lateral_max_m:g} m)"
-                )
-        if airborne and height < s.floor_m:
-            return (
-                EndReason.GEOFENCE,
-                f"height {height:.3f} m below the floor limit {s.floor_m:g} m",
-            )
-        if height > s.ceiling_m:
-            return EndReason.GEOFENCE, f"height {height:.3f} m above the ceiling {s.ceiling_m:g} m"
-        if st.tilt > s.tilt_max_rad:
-            return EndReason.TILT_LIMIT, (
-                f"tilt {math.degrees(st.tilt):.1f} deg > {math.degrees(s.tilt_max_rad):.1f} deg"
-            )
-        speed = math.sqrt(st.xdot**2 + st.ydot**2 + st.zdot**2)
-        if speed > s.speed_max_mps:
-            return EndReason.SPEED_LIMIT, f"{speed:.2f} m/s > {s.speed_max_mps:g} m/s"
-        return None
-
-    def _tau_watch(self, t: float, st: State):
-        if self.phase not in (Phase.STAGE1, Phase.STAGE2):
-            return None
-        s = self.cfg.safety
-        ref = self._refs(t).tau_ref
-        bad = st.tau is None or abs(st.tau - ref) > max(s.tau_error_max, s.tau_error_rel * abs(ref))
-        if not bad:
-            self._t_bad_tau = None
-            return None
-        self._t_bad_tau = self._t_bad_tau if self._t_bad_tau is not None else t
-        if t - self._t_bad_tau >= s.tau_error_s:
-            got = "undefined" if st.tau is None else f"{st.tau:.3f} s"
-            return EndReason.TAU_DIVERGENCE, f"tau {got} vs tau_ref {ref:.3f} s"
-        return None
-
-    def _contact(self, t: float, st: State) -> bool:
-        if self.phase not in (Phase.APPROACH, Phase.STAGE1, Phase.STAGE2):
-            return False
-        reach = max(st.xdot, 0.0) / self.cfg.rate_hz + self.cfg.safety.contact_margin_m
-        if st.x + reach < 0.0:
-            return False
-        lead = -st.x / st.xdot if st.xdot > 0 and st.x < 0 else 0.0
-        self.contact = ContactEstimate(t + lead, st.xdot)
-        self._enter(Phase.CONTACT, t, "contact", speed=st.xdot, x=st.x)
-        return True
+    def _check(self, t: float, state: State | None, cond: Conditions) -> None:
+        """Ends the flight if an end rule says so (flight/endrules.py)."""
+        line = None if self._hold is None else (self._hold[1], self._z_ref)
+        x = None if state is None else state.x
+        progress = Progress(
+            self.phase,
+            t if self.t_start is None else self.t_start,
+            self._t_moving,
+            line,
+            None if self.trigger is None else self.trigger.t,
+            self.plan.duration,
+            lambda: self._refs(t, x).tau_ref,
+        )
+        ending = self.rules.check(t, state, cond, progress)
+        if ending is None:
+            return
+        if ending.contact is not None and state is not None:
+            self.contact = ending.contact
+            self._enter(Phase.CONTACT, t, "contact", speed=state.xdot, x=state.x)
+        self._finish(ending.reason, t, ending.detail)
 
     # --- ends -------------------------------------------------------------------------------
     def _ended(self, t: float, state: State | None) -> TickReport:
@@ -346,7 +221,7 @@ class Supervisor:
             self._switch(t, st)
         refs, ux, e, vz_ref = NO_REFS, 0.0, None, 0.0
         if self.phase in (Phase.STAGE1, Phase.STAGE2):
-            refs = self._refs(t)
+            refs = self._refs(t, st.x)
             g = self.cfg.tau_gains
             if (
                 self.phase is Phase.STAGE2
@@ -356,10 +231,10 @@ class Supervisor:
                 ux = 0.0  # terminal: constant speed (see TauGains.terminal_s)
             else:
                 hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
-                seen, aim = self._lag_view(t, st, refs)
+                seen, aim = self.refs.lag_view(t, st, refs)
                 tau_aim = aim.tau_ref
                 if self.phase is Phase.STAGE1:
-                    tau_aim, aim = self._stage1_aim(t, seen, aim)
+                    tau_aim, aim = self.refs.stage1_aim(t, seen, aim)
                 ux = self.ctl.tau.step(
                     seen, tau_aim, aim.a, dt, self.ctl.saturated, schedule=not hold
                 )
@@ -385,16 +260,17 @@ class Supervisor:
         with TauGains.switch_predicted and a lag identified beyond ff_lead_s, the tau the
         tau PID acts on, predicted over that excess: the switch is decided on the state
         the controller flies, not a horizon after it has passed stage 1's end."""
-        if self._tau_s is None:
+        tau_s = self.refs.tau_s
+        if tau_s is None:
             return
         tau, horizon = st.tau, 0.0
         if self.cfg.tau_gains.switch_predicted:
             x, v, horizon = self.response.predicted(t, st.x, st.xdot)
             if horizon > 0.0:
                 tau = x / v if v > self.cfg.estimator.min_speed_mps else None
-        if tau is None or tau < self._tau_s:
+        if tau is None or tau < tau_s:
             return
-        self.t_stage2 = t
+        self.refs.t_stage2 = t
         self._enter(
             Phase.STAGE2,
             t,
@@ -404,17 +280,6 @@ class Supervisor:
             since_trigger=t - self.trigger.t,
         )
         self._refit_stage2(t)
-
-    @property
-    def v_hold(self) -> float:
-        """[m/s] the stage-2 speed held: V_c, kept v_contact_margin_mps inside the window."""
-        v, m = float(self.plan.v_contact), self.cfg.tau_gains.v_contact_margin_mps
-        lo, hi = self.plan.limits.v_contact
-        return min(max(v, lo + m), hi - m) if hi - lo > 2 * m else v
-
-    @property
-    def _tau_s(self) -> float | None:
-        return getattr(self.plan, "tau_s", None)
 
     def _start(self, t: float, st: State) -> None:
         self._hold = (st.x, st.y, st.z)
@@ -452,7 +317,7 @@ class Supervisor:
                 f"{self.cfg.approach.accel_max_mps2:g} m/s^2",
             )
             return
-        self._a_app, self._t_moving, self._v_int = need, t, 0.0
+        self.refs.a_app, self._t_moving, self._v_int = need, t, 0.0
         self._enter(Phase.APPROACH, t, "", accel=need)
 
     def _approach_accel(self, t: float, st: State, dt: float) -> float:
@@ -461,50 +326,12 @@ class Supervisor:
         the mapping saturates."""
         a = self.cfg.approach
         x, v, horizon = self.response.predicted(t, st.x, st.xdot)
-        v_ref, a_ff = self._approach_ref(x, self.response.ff.lead_s - horizon)
+        v_ref, a_ff = self.refs.approach(x, self.response.ff.lead_s - horizon)
         err = v_ref - v
         if not self.ctl.saturated and a.ki_v > 0.0:
             bound = a.i_limit_mps2 / a.ki_v
             self._v_int = min(max(self._v_int + err * dt, -bound), bound)
         return a_ff + a.kv * err + a.ki_v * self._v_int
-
-    def _approach_ref(self, x: float, lead_s: float) -> tuple[float, float]:
-        """(v_ref [m/s] at X = x [m], the feed-forward [m/s^2] for where the vehicle will be
-        lead_s [s] later). Past x0 the references are the plan's own: the vehicle answers
-        a lag late, so the approach's last commands already fly the start of the plan
-        (ApproachConfig.lead_into_plan, docs/errata.md §10)."""
-        ff, wait = self.response.ff, self.desk.wait
-        if wait is not None:
-            return wait.v, ff.accel(0.0, wait.v)
-        leads, x0 = self.cfg.approach.lead_into_plan, self.plan.x0
-        v_ref = self._plan_at(x).v if leads and x >= x0 else self._v_ref(x)
-        ahead = x + v_ref * max(lead_s, 0.0)
-        if not leads or ahead < x0:
-            return v_ref, ff.accel(self._a_app, v_ref)
-        p = self._plan_at(ahead)
-        return v_ref, ff.accel(p.a if p.stage == 1 else 0.0, p.v)
-
-    def _plan_at(self, x: float) -> PlanPoint:
-        """The plan's point where its X is x [m] (>= x0)."""
-        return self._sampler.at(self._plan_time(x, (x - self.plan.x0) / self.plan.v0))
-
-    def _plan_time(self, x: float, guess_s: float) -> float:
-        """[s] the plan's time where its X is x [m] (>= x0), by Newton's method from
-        guess_s [s] (X is monotone in the plan's time)."""
-        plan, at, s = self.plan, self._sampler.at, guess_s
-        for _ in range(3):
-            s = min(max(s, 0.0), plan.duration)
-            p = at(s)
-            s -= (p.x - x) / max(p.v, 1e-3)
-        return min(max(s, 0.0), plan.duration)
-
-    def _v_ref(self, x: float) -> float:
-        """[m/s] the approach's speed reference at X = x: the profile to (x0, v0), or, while a
-        replan is awaited past x0, the speed measured at the trigger (held constant)."""
-        if self.desk.wait is not None:
-            return self.desk.wait.v
-        v0 = self.plan.v0
-        return math.sqrt(max(0.0, v0 * v0 - 2.0 * self._a_app * (self.plan.x0 - x)))
 
     # --- the hover thrust (flight/hover.py) -------------------------------------------------
     def _learn_hover(self, t: float, dt: float, st: State) -> None:
@@ -587,7 +414,7 @@ class Supervisor:
     # --- the trigger (flight/trigger.py) ---------------------------------------------------
     def _approach_plans(self, t: float, dt: float, st: State) -> None:
         """Per approach tick: what the trigger desk decided, flown or refused."""
-        d = self.desk.approach_tick(t, dt, st, self._v_ref(st.x))
+        d = self.desk.approach_tick(t, dt, st, self.refs.v_ref(st.x))
         if d is None:
             return
         if d.plan is None:
@@ -602,27 +429,19 @@ class Supervisor:
         The plan's clock starts when X crossed its x0, at most a tick before t_meas."""
         late = (x - plan.x0) / v if v > 0 else 0.0
         t0 = t_meas - min(max(late, 0.0), 1.0 / self.cfg.rate_hz)
-        self.plan = plan
-        if plan is not self._sampler.plan:
-            self._sampler = PlanSampler(plan)
+        self.refs.start(plan, t0)
         self.trigger = Trigger(t0, x, v, plan.x0, plan.v0, action)
         # What the approach's integral took up, a push the feed-forward misses, does not end
         # at x0: stage 1's integral starts with it (docs/errata.md §10).
         self.ctl.tau.reset(self.cfg.approach.ki_v * self._v_int)
         self._enter(Phase.STAGE1, t, action, x=x, v=v, plan_x0=plan.x0, plan_v0=plan.v0)
 
-    def _refs(self, t: float) -> Refs:
-        """The references at tick time t; computed once per tick (the tau watch and the
-        controller both ask), again only if the stage or the plan changed in between."""
-        key = (t, self.t_stage2, self.trigger, self._x)
-        if self._refs_memo[0] != key:
-            self._refs_memo = (key, self._compute_refs(t))
-        return self._refs_memo[1]
-
-    def _compute_refs(self, t: float) -> Refs:
+    def _refs(self, t: float, x: float | None) -> Refs:
+        """The references at tick time t [s] for the vehicle at X = x [m]; the first, at the
+        trigger, waits for the trigger's fit (VehicleResponse.identify)."""
         if self.response.identified is None and self.cfg.tau_gains.identify:
             self._identify(t)
-        return self._refs_at(t, self._x, self.response.ff.lead_s)
+        return self.refs.for_tick(t, x)
 
     def _identify(self, t: float) -> None:
         """The trigger's fit (VehicleResponse.identify). The integral handed over at the
@@ -630,80 +449,9 @@ class Supervisor:
         refit."""
         before = self.response.ff
         self.response.identify(t)
-        p = self._sampler.at(min(max(t - self.trigger.t, 0.0), self.plan.duration))
+        p = self.refs.now(t)
         a = p.a if p.stage == 1 else 0.0
         self.ctl.tau.give_back(self.response.ff.step_from(before, a, p.v))
-
-    def _refs_at(self, t: float, x: float | None, lead_s: float) -> Refs:
-        """The references at time t [s] for the vehicle at X = x [m], with the feed-forward
-        taken lead_s [s] ahead."""
-        plan, ff = self.plan, self.response.ff
-        s = min(max(t - self.trigger.t, 0.0), plan.duration)
-        here, a = self._plan_ahead(s, lead_s)
-        if self.t_stage2 is None:
-            tau_ref = here.tau_ref
-        elif self.cfg.tau_gains.stage2_hold_speed and x is not None:
-            tau_ref = min(x, 0.0) / self.v_hold
-            a = ff.accel(0.0, self.v_hold)
-        else:
-            tau_ref = self._tau_s + (t - self.t_stage2)
-            a = ff.accel(0.0, float(plan.v_contact))
-        return Refs(tau_ref, here.x, here.v, a)
-
-    def _lag_view(self, t: float, st: State, refs: Refs) -> tuple[State, Refs]:
-        """The state and references the tau controller acts on: predicted over the lag
-        beyond what the gains were made for (VehicleResponse.predicted, docs/errata.md
-        §10)."""
-        x, v, horizon = self.response.predicted(t, st.x, st.xdot)
-        if horizon == 0.0:
-            return st, refs
-        # Predicted at or past the surface: tau = X/Xdot from just before it, so that the
-        # stage-2 error stays 1 - Xdot/V_c instead of tau's sign flipping.
-        x = min(x, -1e-3)
-        tau = x / v if v > self.cfg.estimator.min_speed_mps else None
-        seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
-        return seen, self._refs_at(t + horizon, x, self.response.ff.lead_s - horizon)
-
-    def _plan_ahead(self, s: float, lead_s: float) -> tuple[PlanPoint, float]:
-        """The plan's point at its time s [s], and the feed-forward [m/s^2] for its point
-        lead_s [s] later (its acceleration there while in stage 1, the drag at its speed)."""
-        here = self._sampler.at(s)
-        ahead = self._sampler.at(min(s + lead_s, self.plan.duration)) if lead_s else here
-        return here, self.response.ff.accel(ahead.a if ahead.stage == 1 else 0.0, ahead.v)
-
-    def _stage1_aim(self, t: float, seen: State, aim: Refs) -> tuple[float, Refs]:
-        """Stage 1's tau reference and feed-forward for the state seen. Early, the clock's,
-        scale-corrected; from three lags before the plan's switch to two, handed over to
-        the plan's point where the vehicle is (TauGains.end_by_position): a vehicle still
-        behind the plan in X then reaches the switch point nearer the plan's speed, and
-        the braking ends where the plan's does, not when (docs/errata.md §10)."""
-        lag = self.response.ff.lead_s
-        left = self.plan.t_switch - (t - self.trigger.t)
-        end = 1.0 - min(max((left - 2.0 * lag) / lag, 0.0), 1.0) if lag > 0.0 else 0.0
-        tau_ref = self._scale_corrected(seen, aim, 1.0 - end)
-        if end == 0.0 or not self.cfg.tau_gains.end_by_position or seen.x >= 0.0:
-            return tau_ref, aim
-        horizon = self.response.horizon_s
-        s = self._plan_time(seen.x, t + horizon - self.trigger.t)
-        here, a = self._plan_ahead(s, lag - horizon)
-        return (
-            (1.0 - end) * tau_ref + end * here.tau_ref,
-            dataclasses.replace(aim, a=(1.0 - end) * aim.a + end * a),
-        )
-
-    def _scale_corrected(self, seen: State, aim: Refs, weight: float) -> float:
-        """The tau reference corrected for the scale error c = X / X_plan: tau = X/Xdot is
-        blind to it (c times the plan's X and Xdot keep the plan's tau), yet it reaches the
-        stage-2 switch as c times the plan's speed there. Aiming at tau_ref c^-gamma brings
-        c back to 1 with time constant |tau| / gamma, never faster than twice the lag;
-        gamma is scaled by weight (stage 1's end fades it out: a catch-up that late would
-        reach the switch as speed; TauGains.scale_gain, docs/errata.md §10)."""
-        gamma, lag = self.cfg.tau_gains.scale_gain, self.response.ff.lead_s
-        if gamma <= 0.0 or lag <= 0.0 or aim.x is None or aim.x >= 0.0 or seen.x >= 0.0:
-            return aim.tau_ref
-        gamma = weight * min(gamma, -aim.tau_ref / (2.0 * lag))
-        c = min(max(seen.x / aim.x, 0.5), 2.0)
-        return aim.tau_ref * c**-gamma
 
     def _observe_response(self, t: float, st: State) -> None:
         """Record the ticks for the lag identification (the stages' commands feed its
@@ -727,12 +475,12 @@ class Supervisor:
         a = self.cfg.approach
         if a.ki_v <= 0.0:
             return
-        v_ref = self._v_ref(st.x)
-        step = ff.step_from(self.response.ff, self._a_app, v_ref)
+        v_ref = self.refs.v_ref(st.x)
+        step = ff.step_from(self.response.ff, self.refs.a_app, v_ref)
         bound = a.i_limit_mps2 / a.ki_v
         self._v_int = min(max(self._v_int - step / a.ki_v, -bound), bound)
 
     def _refit_stage2(self, t: float) -> None:
         """Stage 2 flies the drag refitted from stage 1 (VehicleResponse.refit_stage2); what
         that adds, the tau PID's integral gives back as far as it holds it."""
-        self.ctl.tau.give_back(self.response.refit_stage2(t, self.trigger.t, self.v_hold))
+        self.ctl.tau.give_back(self.response.refit_stage2(t, self.trigger.t, self.refs.v_hold))

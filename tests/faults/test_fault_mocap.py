@@ -149,7 +149,7 @@ def test_a_frozen_tracker_with_fresh_stamps_is_stale_while_the_vehicle_moves(tmp
 def test_a_tracker_frozen_while_hovering_is_stale_once_the_approach_should_move_it(tmp_path):
     """Frozen during the hold the frames are believable (a hovering body), until the
     approach has commanded motion for FROZEN_MAX_S without the position changing a bit."""
-    from perchd.flight.supervisor import FROZEN_MAX_S
+    from perchd.flight.endrules import FROZEN_MAX_S
 
     f = fly(tmp_path, Freeze(ONSETS["hold"], restamp=True))
     assert_failsafe_and_closed_log(f.sim, f.res, EndReason.STALE_MOCAP)

@@ -13,7 +13,8 @@ from perchd.core.types import EndReason, State
 from perchd.flight.config import FlightConfig
 from perchd.flight.control import FeedForward
 from perchd.flight.frame import PerchFrame
-from perchd.flight.supervisor import Refs, Supervisor, Trigger
+from perchd.flight.references import Refs
+from perchd.flight.supervisor import Supervisor
 from perchd.logs.flightlog import read_log
 
 LATE = "sim://?latency=0.1&attitude_tau=0.15&drag=0.3"
@@ -79,7 +80,7 @@ def aimer(end_by_position: bool) -> Supervisor:
         c, tau_gains=dataclasses.replace(c.tau_gains, end_by_position=end_by_position)
     )
     sup = Supervisor(plan, cfg, PerchFrame.from_surface((0, 0, 0), (1, 0, 0)))
-    sup.trigger = Trigger(0.0, plan.x0, plan.v0, plan.x0, plan.v0, "flown as made")
+    sup.refs.start(plan, 0.0)
     sup.response.ff = FeedForward(0.2)
     return sup
 
@@ -88,7 +89,7 @@ def scale_aim(t: float, c: float, tau_ref: float, x_plan: float = -1.0) -> float
     """The tau stage 1 aims at, t [s] after the trigger, for a vehicle at c times the
     plan's X, with a 0.2 s lag (the scale correction alone)."""
     seen = State(t, c * x_plan, 1.0, 0, 0, 1, 0, 0, None, 0, 0, 0, 1)
-    return aimer(False)._stage1_aim(t, seen, Refs(tau_ref, x_plan, 1.0, 0.0))[0]
+    return aimer(False).refs.stage1_aim(t, seen, Refs(tau_ref, x_plan, 1.0, 0.0))[0]
 
 
 def test_the_scale_correction_is_tau_ref_over_c_to_the_gamma_capped_and_faded():
@@ -124,7 +125,7 @@ def test_stage_1_ends_aiming_at_the_plans_point_where_the_vehicle_is(x):
     t = plan.t_switch - 0.3
     clock = Refs(float(plan.tau_ref(t)), float(plan.x(t)), float(plan.v(t)), -1.0)
     seen = State(t, x, 1.2, 0, 0, 1, 0, 0, x / 1.2, 0, 0, 0, 1)
-    tau, aim = sup._stage1_aim(t, seen, clock)
+    tau, aim = sup.refs.stage1_aim(t, seen, clock)
     s = plan_time_at(plan, x)
     assert tau == pytest.approx(float(plan.tau_ref(s)), rel=1e-6)
     assert aim.a == pytest.approx(feed_forward_at(sup, s), rel=1e-6)
@@ -139,7 +140,7 @@ def test_the_braking_ends_where_the_plans_does_not_when():
     x = float(plan.x(t)) - 0.2
     seen = State(t, x, 1.2, 0, 0, 1, 0, 0, x / 1.2, 0, 0, 0, 1)
     by_clock, by_place = (
-        sup._stage1_aim(t, seen, sup._refs_at(t, x, 0.2))[1].a
+        sup.refs.stage1_aim(t, seen, sup.refs.at(t, x, 0.2))[1].a
         for sup in (aimer(False), aimer(True))
     )
     assert by_clock == 0.0
@@ -154,7 +155,7 @@ def test_the_hand_over_blends_the_clocks_aim_into_the_places():
     x_plan, tau_plan = float(plan.x(t)), float(plan.tau_ref(t))
     x = 1.05 * x_plan
     seen = State(t, x, 1.4, 0, 0, 1, 0, 0, x / 1.4, 0, 0, 0, 1)
-    tau, aim = sup._stage1_aim(t, seen, Refs(tau_plan, x_plan, float(plan.v(t)), -0.8))
+    tau, aim = sup.refs.stage1_aim(t, seen, Refs(tau_plan, x_plan, float(plan.v(t)), -0.8))
     gamma = 0.5 * min(3.0, -tau_plan / 0.4)
     s = plan_time_at(plan, x)
     assert tau == pytest.approx(
@@ -203,6 +204,6 @@ def test_what_the_triggers_fit_feeds_forward_the_handed_over_integral_gives_back
         sup.response.ff = FeedForward(0.1, drag_per_s=0.2)
 
     sup.response.identify = identify
-    sup._compute_refs(0.0)
+    sup._refs(0.0, None)
     held = sup.cfg.tau_gains.ki * sup.ctl.tau.pid.integral
     assert held == pytest.approx(0.4 - 0.2 * plan.v0, abs=1e-9)

@@ -7,8 +7,9 @@ from simflight import case1
 
 from perchd.core.types import EndReason, LinkHealth, State
 from perchd.flight.config import FlightConfig
+from perchd.flight.endrules import Conditions
 from perchd.flight.frame import PerchFrame
-from perchd.flight.supervisor import Conditions, Supervisor
+from perchd.flight.supervisor import Supervisor
 
 CFG = FlightConfig()
 FRAME = PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))

@@ -1,0 +1,209 @@
+"""What the flight aims at, tick by tick: the approach's speed reference to the plan's trigger
+state, and the stages' references from the plan flown, by time and by place, with the lead,
+lag and scale corrections (docs/errata.md §9, §10). No control and no identification of its
+own: the vehicle's response (flight/response.py) is read, never fitted, here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from perchd.core.types import State
+from perchd.flight.config import FlightConfig
+from perchd.flight.planrefs import PlanPoint, PlanSampler
+from perchd.flight.response import VehicleResponse
+from perchd.flight.trigger import TriggerDesk
+from perchd.tau.plan import Plan
+
+
+@dataclass(frozen=True, slots=True)
+class Refs:
+    """Plan references at a tick: tau_ref [s], x/v/a [m, m/s, m/s^2]; None outside stages."""
+
+    tau_ref: float | None = None
+    x: float | None = None
+    v: float | None = None
+    a: float | None = None
+
+
+NO_REFS = Refs()
+
+
+class References:
+    """The plan flown and what the references need of the flight: t0 [s] the plan's t = 0
+    on the clock (None before the trigger), t_stage2 [s] the stage-2 switch (None before),
+    a_app [m/s^2] the approach's acceleration to the trigger state. desk: the trigger's (a
+    replan awaited holds the approach's speed); response: the vehicle's, as fitted so far."""
+
+    def __init__(
+        self, plan: Plan, cfg: FlightConfig, desk: TriggerDesk, response: VehicleResponse
+    ) -> None:
+        self.plan = plan
+        self.cfg = cfg
+        self.desk = desk
+        self.response = response
+        self.t0: float | None = None
+        self.t_stage2: float | None = None
+        self.a_app = 0.0
+        self._sampler = PlanSampler(plan)
+        self._memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
+
+    def start(self, plan: Plan, t0: float) -> None:
+        """Fly `plan` from t0 [s] on the clock."""
+        self.plan, self.t0 = plan, t0
+        if plan is not self._sampler.plan:
+            self._sampler = PlanSampler(plan)
+
+    @property
+    def v_hold(self) -> float:
+        """[m/s] the stage-2 speed held: V_c, kept v_contact_margin_mps inside the window."""
+        v, m = float(self.plan.v_contact), self.cfg.tau_gains.v_contact_margin_mps
+        lo, hi = self.plan.limits.v_contact
+        return min(max(v, lo + m), hi - m) if hi - lo > 2 * m else v
+
+    @property
+    def tau_s(self) -> float | None:
+        tau_s: float | None = getattr(self.plan, "tau_s", None)  # a test's plan may lack one
+        return tau_s
+
+    # --- the approach -----------------------------------------------------------------------
+    def v_ref(self, x: float) -> float:
+        """[m/s] the approach's speed reference at X = x: the profile to (x0, v0), or, while a
+        replan is awaited past x0, the speed measured at the trigger (held constant)."""
+        if self.desk.wait is not None:
+            return self.desk.wait.v
+        v0 = self.plan.v0
+        return math.sqrt(max(0.0, v0 * v0 - 2.0 * self.a_app * (self.plan.x0 - x)))
+
+    def approach(self, x: float, lead_s: float) -> tuple[float, float]:
+        """(v_ref [m/s] at X = x [m], the feed-forward [m/s^2] for where the vehicle will be
+        lead_s [s] later). Past x0 the references are the plan's own: the vehicle answers
+        a lag late, so the approach's last commands already fly the start of the plan
+        (ApproachConfig.lead_into_plan, docs/errata.md §10)."""
+        ff, wait = self.response.ff, self.desk.wait
+        if wait is not None:
+            return wait.v, ff.accel(0.0, wait.v)
+        leads, x0 = self.cfg.approach.lead_into_plan, self.plan.x0
+        v_ref = self._plan_at(x).v if leads and x >= x0 else self.v_ref(x)
+        ahead = x + v_ref * max(lead_s, 0.0)
+        if not leads or ahead < x0:
+            return v_ref, ff.accel(self.a_app, v_ref)
+        p = self._plan_at(ahead)
+        return v_ref, ff.accel(p.a if p.stage == 1 else 0.0, p.v)
+
+    # --- the plan by time and by place ------------------------------------------------------
+    def now(self, t: float) -> PlanPoint:
+        """The plan's point at tick time t [s] (its time held within 0..duration)."""
+        return self._sampler.at(self._plan_s(t))
+
+    def _plan_s(self, t: float) -> float:
+        """[s] the plan's time at tick time t [s], held within 0..duration."""
+        return min(max(t - self._trigger_t(), 0.0), self.plan.duration)
+
+    def _trigger_t(self) -> float:
+        """[s] the plan's t = 0 on the clock."""
+        if self.t0 is None:
+            raise RuntimeError("the plan's references are asked before the trigger")
+        return self.t0
+
+    def _plan_at(self, x: float) -> PlanPoint:
+        """The plan's point where its X is x [m] (>= x0)."""
+        return self._sampler.at(self._plan_time(x, (x - self.plan.x0) / self.plan.v0))
+
+    def _plan_time(self, x: float, guess_s: float) -> float:
+        """[s] the plan's time where its X is x [m] (>= x0), by Newton's method from
+        guess_s [s] (X is monotone in the plan's time)."""
+        plan, at, s = self.plan, self._sampler.at, guess_s
+        for _ in range(3):
+            s = min(max(s, 0.0), plan.duration)
+            p = at(s)
+            s -= (p.x - x) / max(p.v, 1e-3)
+        return min(max(s, 0.0), plan.duration)
+
+    def _plan_ahead(self, s: float, lead_s: float) -> tuple[PlanPoint, float]:
+        """The plan's point at its time s [s], and the feed-forward [m/s^2] for its point
+        lead_s [s] later (its acceleration there while in stage 1, the drag at its speed)."""
+        here = self._sampler.at(s)
+        ahead = self._sampler.at(min(s + lead_s, self.plan.duration)) if lead_s else here
+        return here, self.response.ff.accel(ahead.a if ahead.stage == 1 else 0.0, ahead.v)
+
+    # --- the stages -------------------------------------------------------------------------
+    def for_tick(self, t: float, x: float | None) -> Refs:
+        """The references at tick time t for the vehicle at X = x; computed once per tick
+        (the tau watch and the controller both ask), again only if the stage or the plan
+        changed in between."""
+        key = (t, self.t_stage2, self.t0, x)
+        if self._memo[0] != key:
+            self._memo = (key, self.at(t, x, self.response.ff.lead_s))
+        return self._memo[1]
+
+    def at(self, t: float, x: float | None, lead_s: float) -> Refs:
+        """The references at time t [s] for the vehicle at X = x [m], with the feed-forward
+        taken lead_s [s] ahead."""
+        plan, ff = self.plan, self.response.ff
+        here, a = self._plan_ahead(self._plan_s(t), lead_s)
+        if self.t_stage2 is None:
+            tau_ref = here.tau_ref
+        elif self.cfg.tau_gains.stage2_hold_speed and x is not None:
+            tau_ref = min(x, 0.0) / self.v_hold
+            a = ff.accel(0.0, self.v_hold)
+        else:
+            tau_s = self.tau_s
+            assert tau_s is not None  # stage 2 is entered only at a plan's tau_s
+            tau_ref = tau_s + (t - self.t_stage2)
+            a = ff.accel(0.0, float(plan.v_contact))
+        return Refs(tau_ref, here.x, here.v, a)
+
+    def lag_view(self, t: float, st: State, refs: Refs) -> tuple[State, Refs]:
+        """The state and references the tau controller acts on: predicted over the lag
+        beyond what the gains were made for (VehicleResponse.predicted, docs/errata.md
+        §10)."""
+        x, v, horizon = self.response.predicted(t, st.x, st.xdot)
+        if horizon == 0.0:
+            return st, refs
+        # Predicted at or past the surface: tau = X/Xdot from just before it, so that the
+        # stage-2 error stays 1 - Xdot/V_c instead of tau's sign flipping.
+        x = min(x, -1e-3)
+        tau = x / v if v > self.cfg.estimator.min_speed_mps else None
+        seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
+        return seen, self.at(t + horizon, x, self.response.ff.lead_s - horizon)
+
+    def stage1_aim(self, t: float, seen: State, aim: Refs) -> tuple[float, Refs]:
+        """Stage 1's tau reference and feed-forward for the state seen. Early, the clock's,
+        scale-corrected; from three lags before the plan's switch to two, handed over to
+        the plan's point where the vehicle is (TauGains.end_by_position): a vehicle still
+        behind the plan in X then reaches the switch point nearer the plan's speed, and
+        the braking ends where the plan's does, not when (docs/errata.md §10)."""
+        assert aim.a is not None  # the stages' references are all set
+        lag, t0 = self.response.ff.lead_s, self._trigger_t()
+        left = self.plan.t_switch - (t - t0)
+        end = 1.0 - min(max((left - 2.0 * lag) / lag, 0.0), 1.0) if lag > 0.0 else 0.0
+        tau_ref = self._scale_corrected(seen, aim, 1.0 - end)
+        if end == 0.0 or not self.cfg.tau_gains.end_by_position or seen.x >= 0.0:
+            return tau_ref, aim
+        horizon = self.response.horizon_s
+        s = self._plan_time(seen.x, t + horizon - t0)
+        here, a = self._plan_ahead(s, lag - horizon)
+        return (
+            (1.0 - end) * tau_ref + end * here.tau_ref,
+            dataclasses.replace(aim, a=(1.0 - end) * aim.a + end * a),
+        )
+
+    def _scale_corrected(self, seen: State, aim: Refs, weight: float) -> float:
+        """The tau reference corrected for the scale error c = X / X_plan: tau = X/Xdot is
+        blind to it (c times the plan's X and Xdot keep the plan's tau), yet it reaches the
+        stage-2 switch as c times the plan's speed there. Aiming at tau_ref c^-gamma brings
+        c back to 1 with time constant |tau| / gamma, never faster than twice the lag;
+        gamma is scaled by weight (stage 1's end fades it out: a catch-up that late would
+        reach the switch as speed; TauGains.scale_gain, docs/errata.md §10)."""
+        assert aim.tau_ref is not None  # the stages' references are all set
+        gamma, lag = self.cfg.tau_gains.scale_gain, self.response.ff.lead_s
+        if gamma <= 0.0 or lag <= 0.0 or aim.x is None or aim.x >= 0.0 or seen.x >= 0.0:
+            return aim.tau_ref
+        gamma = weight * min(gamma, -aim.tau_ref / (2.0 * lag))
+        c = min(max(seen.x / aim.x, 0.5), 2.0)
+        scale: float = c**-gamma  # float ** float is typed Any
+        return aim.tau_ref * scale
