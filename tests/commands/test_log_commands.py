@@ -14,8 +14,10 @@ from svc import PLAN, perchd
 def flown(tmp_path_factory):
     """One simulated perch (20 ms latency, 1 mm noise): its log and `fly --json` object."""
     log = tmp_path_factory.mktemp("log") / "f.jsonl"
-    uri = "sim://?latency=0.02&noise=0.001"
-    done = perchd("fly", str(PLAN), "--driver", uri, "--mocap", uri, "--log", str(log), "--json")
+    driver, mocap = "sim://?latency=0.02", "sim://?noise=0.001"
+    done = perchd(
+        "fly", str(PLAN), "--driver", driver, "--mocap", mocap, "--log", str(log), "--json"
+    )
     return log, json.loads(done.stdout)
 
 

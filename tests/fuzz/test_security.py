@@ -330,6 +330,7 @@ def test_a_plan_outside_the_plan_directory_is_refused(service):
     outside = service.tmp / "outside.json"
     assert fly(service, str(outside)) == {
         "ok": False,
+        "refused": "plan",
         "error": f"plan {outside}: outside the plan "
         f"directory {service.plans} (plan_dir in [service])",
     }
@@ -361,7 +362,11 @@ def test_a_symlink_escaping_the_plan_directory_is_refused(service):
     ],
 )
 def test_a_fifo_a_directory_an_oversized_or_missing_plan_is_one_refusal(service, name, why):
-    assert fly(service, name) == {"ok": False, "error": f"plan {service.plans / name}: {why}"}
+    assert fly(service, name) == {
+        "ok": False,
+        "refused": "plan",
+        "error": f"plan {service.plans / name}: {why}",
+    }
     assert service.talk(b'{"cmd": "status"}\n', 1)[0]["state"] == "idle"  # the FIFO did not hang it
 
 
@@ -374,7 +379,8 @@ def test_a_plan_inside_the_directory_flies_by_name_absolute_path_or_inner_symlin
             pass
 
 
-def test_ctl_fly_outside_the_plan_directory_prints_one_refusal_and_exits_1(service):
+def test_ctl_fly_outside_the_plan_directory_prints_one_refusal_and_exits_2(service):
+    """A refused plan is the caller's input, so exit 2 (docs/contracts.md §6)."""
     argv = [
         sys.executable,
         "-m",
@@ -386,12 +392,12 @@ def test_ctl_fly_outside_the_plan_directory_prints_one_refusal_and_exits_1(servi
         str(service.tmp / "outside.json"),
     ]
     done = subprocess.run(argv + ["--json"], capture_output=True, text=True, timeout=30)
-    assert done.returncode == 1 and done.stderr == ""
+    assert done.returncode == 2 and done.stderr == ""
     assert json.loads(done.stdout)["error"].endswith(
         f"outside the plan directory {service.plans} (plan_dir in [service])"
     )
     done = subprocess.run(argv, capture_output=True, text=True, timeout=30)  # readable: on stderr
-    assert done.returncode == 1 and done.stdout == ""
+    assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.startswith("perchd ctl: ") and done.stderr.count("\n") == 1
     assert done.stderr.strip().endswith("(plan_dir in [service])")
 

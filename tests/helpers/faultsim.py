@@ -92,7 +92,10 @@ def fly(
     if setup is not None:
         setup(sim)
     res = sim.fly(
-        case1(strategy), tmp_path / f"{name}.jsonl", cfg, on_tick=on_tick(sim) if on_tick else None
+        case1(strategy),
+        tmp_path / f"{name}-{FLIGHTS['simulated']}.jsonl",
+        cfg,
+        on_tick=on_tick(sim) if on_tick else None,
     )
     return Flown(sim, res, read_log(res.log), arrivals)
 
