@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import fcntl
+import os
 import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -20,3 +24,20 @@ def _vehicle_state_in_a_temporary_folder(tmp_path_factory, monkeypatch):
     under XDG_STATE_HOME: each test (and the processes it starts) keeps its own, out of the
     user's home and of the other tests' flights."""
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path_factory.mktemp("xdg-state")))
+
+
+SOLO_LOCK = Path(tempfile.gettempdir()) / f"perchd-tests-solo-{os.getuid()}.lock"
+
+
+@pytest.fixture(autouse=True)
+def _solo_tests_run_alone(request) -> Iterator[None]:
+    """Every test holds a shared lock and a `solo` one an exclusive lock, so across the xdist
+    workers a test with a real-time bound runs with the CPU to itself: on two loaded cores
+    a kill-to-LAND of 0.1 s measured the neighbours' load, not the sentinel."""
+    mode = fcntl.LOCK_EX if request.node.get_closest_marker("solo") else fcntl.LOCK_SH
+    with open(SOLO_LOCK, "a") as f:
+        fcntl.flock(f, mode)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)

@@ -19,6 +19,9 @@ from perchd.bench.cpuload import cpu_hogs
 ROOT = Path(__file__).resolve().parents[2]
 
 
+pytestmark = pytest.mark.solo  # real-time bounds: see tests/conftest.py
+
+
 def children(pid: int) -> set[int]:
     """Child pids of `pid` (every thread's children, /proc/PID/task/TID/children)."""
     out: set[int] = set()

@@ -92,6 +92,7 @@ def test_leaving_the_context_stops_a_flying_vehicle_and_closing_twice_is_harmles
     assert not d.health().ok
 
 
+@pytest.mark.solo
 def test_a_vehicle_end_that_dies_is_reported_within_3_ticks_at_100_hz(rig, driver):
     lost_after = ticks_until_lost(driver, 100.0, level(WEIGHT), rig.kill)
     assert lost_after is not None and lost_after <= 3

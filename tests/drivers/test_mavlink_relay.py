@@ -28,6 +28,9 @@ OFFBOARD = 6 << 16  # PX4 OFFBOARD: a new agent takes it
 LAND_PX4 = (4 << 16) | (6 << 24)  # PX4 AUTO.LAND
 
 
+pytestmark = pytest.mark.solo  # real-time bounds: see tests/conftest.py
+
+
 def agent(
     vehicle_uri: str,
     mocap_uri: str,

@@ -42,6 +42,9 @@ from perchd.drivers.mavlink.sentinel import (
 LAND = {ARDUPILOT: 9, PX4: (4 << 16) | (6 << 24)}  # the double's custom_mode for LAND
 
 
+pytestmark = pytest.mark.solo  # real-time bounds: see tests/conftest.py
+
+
 @pytest.fixture
 def airborne():
     """make(autopilot) -> an airborne VehicleDouble, closed after the test."""

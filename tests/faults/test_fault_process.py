@@ -31,6 +31,9 @@ FALL_S = 0.7
 """[s] a vehicle at 1 m with its motors cut is on the floor within this (0.45 s free fall)."""
 
 
+pytestmark = pytest.mark.solo  # real-time bounds: see tests/conftest.py
+
+
 @pytest.fixture
 def sim():
     s = SimProcess()

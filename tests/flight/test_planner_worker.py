@@ -125,6 +125,7 @@ def test_a_replan_slower_than_its_deadline_takes_the_fallback_without_missing_a_
     assert not alive(slow.pid)
 
 
+@pytest.mark.solo
 def test_the_plan_made_ahead_is_flown_at_the_trigger_with_no_wait(tmp_path):
     """An ordinary replan in real time: drag leaves the approach short of v0 by more than
     ahead_v_tol_mps (as on PX4 SIH), the worker planned for the predicted trigger speed

@@ -19,6 +19,9 @@ from perchd.core.types import EndReason
 pytest.importorskip("motioncapture")
 
 
+pytestmark = pytest.mark.solo  # real-time bounds: see tests/conftest.py
+
+
 @pytest.mark.slow
 def test_the_agent_perches_on_perchd_sim_read_through_libmotioncapture(tmp_path):
     plan = case1_ipts()

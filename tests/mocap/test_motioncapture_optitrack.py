@@ -28,6 +28,9 @@ RATE_HZ = 100.0
 YAW_30 = (0.0, 0.0, math.sin(math.radians(15)), math.cos(math.radians(15)))  # world, Z up
 
 
+pytestmark = pytest.mark.solo  # real-time bounds: see tests/conftest.py
+
+
 def reader(command_port: int, **extra: str):
     query = "&".join(
         f"{k}={v}"

@@ -25,6 +25,9 @@ from perchd.mocap.natnet.uris import NatNetServer
 natnetsdk = pytest.importorskip("natnetsdk.NatNetClient")
 
 
+pytestmark = pytest.mark.solo  # real-time bounds: see tests/conftest.py
+
+
 def stop(client) -> None:
     """Its receive threads block in recvfrom; wake them before its shutdown joins them."""
     client.stop_threads = True

@@ -12,6 +12,8 @@ from svc import Serve, ctl
 from perchd.core.errors import ConfigError
 from perchd.service.activation import activated_socket
 
+pytestmark = pytest.mark.solo  # real-time bounds: see tests/conftest.py
+
 
 def listening_unix(path) -> socket.socket:
     """What a .socket unit with ListenStream=PATH and SocketMode=0660 holds."""
