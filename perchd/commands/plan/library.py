@@ -12,6 +12,7 @@ import json
 import time
 from pathlib import Path
 
+from perchd.commands.plan import flags
 from perchd.console.argcheck import numbers_as_values
 from perchd.console.progress import Progress
 from perchd.core.safefile import check_output, write_text
@@ -50,15 +51,7 @@ def register(plan_sub) -> None:
         metavar=("NX", "NV"),
         help="grid nodes along x0 and v0 (default 11 13)",
     )
-    p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument(
-        "--v-contact",
-        type=float,
-        nargs=2,
-        required=True,
-        metavar=("LO", "HI"),
-        help="contact speeds allowed [m/s], 0 < LO <= HI",
-    )
+    flags.stage_two(p)
     p.add_argument(
         "--v-max",
         type=float,
@@ -70,9 +63,7 @@ def register(plan_sub) -> None:
         help="peak |acceleration| limit [m/s^2] (default: none, searched as 1000 m/s^2)",
     )
     p.add_argument("--order", type=int, default=3, help="polynomial order 1..9 (default: 3)")
-    p.add_argument("--out", required=True, help="library file to write; its directory must exist")
-    p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    flags.written_file(p, "library")
     p.set_defaults(run=run)
 
 

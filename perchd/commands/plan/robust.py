@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from perchd.commands.plan import flags
 from perchd.console.argcheck import numbers_as_values
 from perchd.console.progress import Progress
 from perchd.core.errors import PlanError
@@ -37,15 +38,7 @@ def register(plan_sub) -> None:
     )
     p.add_argument("--x0", type=float, nargs="+", metavar="X", help="box LO HI, or nominal [m]")
     p.add_argument("--v0", type=float, nargs="+", metavar="V", help="box LO HI, or nominal [m/s]")
-    p.add_argument("--tau-s", type=float, required=True, help="stage switch tau [s] < 0")
-    p.add_argument(
-        "--v-contact",
-        type=float,
-        nargs=2,
-        required=True,
-        metavar=("LO", "HI"),
-        help="contact speeds allowed [m/s], 0 < LO <= HI",
-    )
+    flags.stage_two(p)
     p.add_argument("--v-max", type=float, required=True, help="peak closing speed limit [m/s]")
     p.add_argument("--a-max", type=float, required=True, help="peak |acceleration| limit [m/s^2]")
     p.add_argument("--order", type=int, default=3, help="polynomial order (default: 3)")
@@ -72,9 +65,7 @@ def register(plan_sub) -> None:
     p.add_argument(
         "--start", metavar="PLAN", help="a lower-order robust plan whose k seeds the search"
     )
-    p.add_argument("--out", required=True, help="plan file to write; its directory must exist")
-    p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    flags.written_file(p, "plan")
     p.set_defaults(run=run)
 
 
