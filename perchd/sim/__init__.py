@@ -1,1 +1,1 @@
-"""The simulated vehicle: plant, world, faults, and the session builder every simulated flight uses."""
+"""The simulated vehicle: plant, world, faults, the sim:// driver, the vehicle family and real firmware in the loop."""
