@@ -8,6 +8,14 @@ from pathlib import Path
 from perchd.logs.flightlog import FlightLogWriter, LogEvent, LogRow
 
 
+def log_row(k: int, x: float = -1.0, end: str | None = None) -> LogRow:
+    """Tick k of a steady stage-1 approach at distance x [m] (every other field fixed)."""
+    return LogRow(
+        k * 0.01, k, "stage1", x, 1.0, -1.0, -1.0, -1.0, 1.0, -0.5, 0.0, 1.0, 0.0, 0.1, 0.0,
+        0.3, -0.5, 0.0, 0.0, 0.01, 0.004, k, 0.0, 1e-4, end,
+    )  # fmt: skip
+
+
 def log_seed(path: Path) -> bytes:
     """The log's bytes, written at `path` (a new file)."""
     w = FlightLogWriter(
@@ -18,35 +26,7 @@ def log_seed(path: Path) -> bytes:
         },
     )
     for k in range(4):
-        w.row(
-            LogRow(
-                k * 0.01,
-                k,
-                "stage1",
-                -1.0,
-                1.0,
-                -1.0,
-                -1.0,
-                -1.0,
-                1.0,
-                -0.5,
-                0.0,
-                1.0,
-                0.0,
-                0.1,
-                0.0,
-                0.3,
-                -0.5,
-                0.0,
-                0.0,
-                0.01,
-                0.004,
-                k,
-                0.0,
-                1e-4,
-                None,
-            )
-        )
+        w.row(log_row(k))
     w.event(LogEvent(0.02, "contact", "touched", {"speed": 0.8, "flag": True}))
     w.close({"outcome": "CONTACT", "detail": "", "summary": {"contact_speed": 0.8}})
     return path.read_bytes()

@@ -7,40 +7,15 @@ import math
 import os
 
 import pytest
+from logseed import log_row
 
 from perchd.core.errors import PerchdError
 from perchd.flight.config import FlightConfig
-from perchd.logs.flightlog import SCHEMA, FlightLogWriter, LogEvent, LogRow, read_log
+from perchd.logs.flightlog import SCHEMA, FlightLogWriter, LogEvent, read_log
 
 
 def row(k, end=None):
-    return LogRow(
-        k * 0.01,
-        k,
-        "stage1",
-        -1.0 + k * 0.01,
-        1.0,
-        -1.0,
-        -1.0,
-        -1.0,
-        1.0,
-        -0.5,
-        0.0,
-        1.0,
-        0.0,
-        0.1,
-        0.0,
-        0.3,
-        -0.5,
-        0.0,
-        0.0,
-        0.01,
-        0.004,
-        k,
-        0.0,
-        1e-4,
-        end,
-    )
+    return log_row(k, -1.0 + k * 0.01, end)
 
 
 def test_every_row_is_on_disk_as_soon_as_it_is_written(tmp_path):
