@@ -46,3 +46,23 @@ def check_geometry(
         raise ConfigError(
             f"{normal_flag} {' '.join(f'{c:g}' for c in normal)}: must be a non-zero direction"
         )
+
+
+def surface_args(p: argparse.ArgumentParser) -> None:
+    """--surface and --normal of a simulated world (defaults: the origin, approach along +X)."""
+    p.add_argument(
+        "--surface",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        default=(0.0, 0.0, 0.0),
+        help="[m] a point on the surface (default 0 0 0)",
+    )
+    p.add_argument(
+        "--normal",
+        nargs=3,
+        type=float,
+        metavar=("NX", "NY", "NZ"),
+        default=(1.0, 0.0, 0.0),
+        help="approach direction (default 1 0 0)",
+    )

@@ -40,7 +40,7 @@ from perchd.commands.sim import firmware as sim_firmware
 from perchd.commands.sim import report as sim_report
 from perchd.commands.sim.campaign import add_arguments
 from perchd.console.argcheck import numbers_as_values, within
-from perchd.console.flightargs import check_geometry
+from perchd.console.flightargs import check_geometry, surface_args
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import LinkError, UriError
 from perchd.core.interrupts import catching
@@ -88,22 +88,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--latency", type=float, default=0.0, help="[s] setpoint-to-vehicle delay")
     p.add_argument("--noise", type=float, default=0.0, help="[m] mocap noise std per axis")
-    p.add_argument(
-        "--surface",
-        nargs=3,
-        type=float,
-        metavar=("X", "Y", "Z"),
-        default=(0.0, 0.0, 0.0),
-        help="[m] a point on the surface (default 0 0 0)",
-    )
-    p.add_argument(
-        "--normal",
-        nargs=3,
-        type=float,
-        metavar=("NX", "NY", "NZ"),
-        default=(1.0, 0.0, 0.0),
-        help="approach direction (default 1 0 0)",
-    )
+    surface_args(p)
     p.add_argument(
         "--watchdog",
         nargs=2,

@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from perchd.console.flightargs import surface_args
 from perchd.core.clock import MonotonicClock
 from perchd.core.errors import UriError
 from perchd.core.interrupts import catching
@@ -172,22 +173,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=(-4.5, 0.0, 0.0),
         help="[m] start, on the floor at Z = 0 (default -4.5 0 0: 4.5 m before the surface)",
     )
-    p.add_argument(
-        "--surface",
-        nargs=3,
-        type=float,
-        metavar=("X", "Y", "Z"),
-        default=(0.0, 0.0, 0.0),
-        help="[m] a point on the surface (default 0 0 0)",
-    )
-    p.add_argument(
-        "--normal",
-        nargs=3,
-        type=float,
-        metavar=("NX", "NY", "NZ"),
-        default=(1.0, 0.0, 0.0),
-        help="approach direction (default 1 0 0)",
-    )
+    surface_args(p)
     p.add_argument("--noise", type=float, default=0.0, help="[m] mocap noise std per axis")
     p.add_argument(
         "--imu-noise",
