@@ -87,7 +87,8 @@ def test_libmotioncaptures_optitrack_backend_reads_the_emulator(version):
         closing = closing_time(src)
         server.close()
     assert src.stats().dropped == 0  # the body was in every frame
-    assert [p.seq for p in poses] == list(range(poses[0].seq, poses[-1].seq + 1))
+    seqs = [p.seq for p in poses]  # wait() gives the newest: a late reader may skip, never repeat
+    assert seqs == sorted(set(seqs))
     assert 0.5 * RATE_HZ <= len(poses) <= 1.5 * RATE_HZ  # the emulator's rate, loosely
     for pose in poses:
         assert pose.p == pytest.approx((0.5, -1.0, 1.5), abs=1e-6)  # Y up streamed, Z up read

@@ -41,10 +41,10 @@ def stop(client) -> None:
 @pytest.mark.parametrize("version", [(3, 0), (4, 1)], ids=["3.0", "4.1"])
 def test_optitracks_client_reads_the_emulator(version, multicast, capsys):
     clock = MonotonicClock()
-    server = NatNetServer(
-        {"cf1": 1, "wand": 2}, version, rate_hz=100.0, multicast=multicast
-    ).start()
+    server = NatNetServer({"cf1": 1, "wand": 2}, version, rate_hz=100.0, multicast=multicast)
+    # the pose first: a multicast client hears frames from the start, none may come bodiless
     server.publish(Pose("cf1", 0, clock.now(), (0.5, 1.0, 1.5), (0.0, 0.0, 0.0, 1.0)))
+    server.start()
     bodies, frames, printed = [], [], []
     client = natnetsdk.NatNetClient()
     client.set_client_address("0.0.0.0" if multicast else "127.0.0.1")
