@@ -45,7 +45,7 @@ from perchd.drivers.base import open_driver
 from perchd.drivers.zmq import parse_setpoint_message
 from perchd.flight.config import FlightConfig, VehicleConfig
 from perchd.flight.endrules import Conditions
-from perchd.flight.estimator import Estimator
+from perchd.flight.estimator import Estimator, EstimatorConfig
 from perchd.flight.frame import PerchFrame
 from perchd.flight.loop import NO_SEQ, FixedRateLoop, LoopStats, spread
 from perchd.flight.supervisor import Supervisor
@@ -88,7 +88,7 @@ class SyntheticAgent:
         self._restart()
 
     def _restart(self) -> None:
-        self.est = Estimator(self.cfg.estimator, self.frame)
+        self.est = Estimator(EstimatorConfig(), self.frame)
         self.sup = Supervisor(self.plan, self.cfg, self.frame)
         self.k = 0
 

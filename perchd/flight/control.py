@@ -16,6 +16,16 @@ from perchd.core.types import Phase, Setpoint, State, Vec3
 from perchd.flight.config import AxisGains, FlightConfig, TauGains
 from perchd.flight.frame import PerchFrame, body_z
 
+TAU_I_LIMIT_MPS2 = 1.0
+"""[m/s^2] the tau PID's integral contribution is clamped to this."""
+TAU_D_FILTER_S = 0.03
+"""[s] time constant of the low-pass on the tau error's derivative."""
+TAU_ERROR_RANGE = (-1.5, 1.0)
+"""The tau error is clamped to this range (it grows without bound as tau -> 0 at contact)."""
+AXIS_I_LIMIT_MPS2 = 1.0
+"""[m/s^2] a lateral axis PID's integral contribution is clamped to this (its derivative,
+of the estimated velocity, is unfiltered: that is already smooth)."""
+
 
 @dataclass(frozen=True, slots=True)
 class Attitude:
@@ -31,17 +41,19 @@ class Attitude:
 @dataclass(frozen=True, slots=True)
 class FeedForward:
     """What the tau controller feeds forward besides its PID: the plan's acceleration lead_s
-    [s] early (the vehicle answers that late), plus drag_per_s [1/s] times the plan's speed
-    then (the drag the vehicle will meet), minus bias_mps2 [m/s^2] (a constant push along
-    X). flight/lagid.py identifies all three in flight."""
+    [s] early (the vehicle answers that late), plus the drag at the plan's speed then,
+    drag_per_s [1/s] x v + qdrag_per_m [1/m] x v |v| (the drag the vehicle will meet), minus
+    bias_mps2 [m/s^2] (a constant push along X). flight/lagid.py identifies them in flight."""
 
     lead_s: float
     drag_per_s: float = 0.0
     bias_mps2: float = 0.0
+    qdrag_per_m: float = 0.0
 
     def accel(self, a_plan: float, v_plan: float) -> float:
         """[m/s^2] the feed-forward for the plan's a_plan [m/s^2], v_plan [m/s] lead_s ahead."""
-        return a_plan + self.drag_per_s * v_plan - self.bias_mps2
+        drag = self.drag_per_s * v_plan + self.qdrag_per_m * v_plan * abs(v_plan)
+        return a_plan + drag - self.bias_mps2
 
     def step_from(self, old: FeedForward, a_plan: float, v_plan: float) -> float:
         """[m/s^2] what this feed-forward adds over `old` at the plan's a_plan, v_plan: the
@@ -91,16 +103,16 @@ class TauController:
 
     def __init__(self, gains: TauGains) -> None:
         self.gains = gains
-        self.pid = Pid(gains.ki, gains.kd, gains.i_limit, gains.d_filter_s)
+        self.pid = Pid(gains.ki, gains.kd, TAU_I_LIMIT_MPS2, TAU_D_FILTER_S)
         self.last_error = 0.0
         self.last_kp = gains.kp_slow
 
     def reset(self, held: float = 0.0) -> None:
-        """Start afresh, the integral supplying held [m/s^2] (within i_limit)."""
+        """Start afresh, the integral supplying held [m/s^2] (within TAU_I_LIMIT_MPS2)."""
         self.pid.reset()
         if self.gains.ki > 0.0:
             self.pid.integral = (
-                min(max(held, -self.gains.i_limit), self.gains.i_limit) / self.gains.ki
+                min(max(held, -TAU_I_LIMIT_MPS2), TAU_I_LIMIT_MPS2) / self.gains.ki
             )
 
     def give_back(self, step: float) -> None:
@@ -125,7 +137,7 @@ class TauController:
         """schedule=False uses kp_slow both ways (eq. 20's argument, a shrinking |X| under
         a tau reference, does not hold when the reference is a speed)."""
         g = self.gains
-        e = min(max(tau_error(tau_ref, state.tau), g.error_min), g.error_max)
+        e = min(max(tau_error(tau_ref, state.tau), TAU_ERROR_RANGE[0]), TAU_ERROR_RANGE[1])
         kp = g.kp_fast if e < 0.0 and schedule else g.kp_slow  # eq. 20: tau_ref/tau > 1 <=> e < 0
         self.last_error, self.last_kp = e, kp
         u = self.pid.step(kp, e, dt, freeze=saturated)
@@ -137,7 +149,7 @@ class AxisController:
 
     def __init__(self, gains: AxisGains) -> None:
         self.gains = gains
-        self.pid = Pid(gains.ki, gains.kd, gains.i_limit, gains.d_filter_s)
+        self.pid = Pid(gains.ki, gains.kd, AXIS_I_LIMIT_MPS2, 0.0)
 
     def step(
         self,

@@ -15,6 +15,23 @@ from perchd.core.types import EndReason, LinkHealth, Phase, State
 from perchd.flight.config import FlightConfig
 from perchd.flight.frame import PerchFrame
 
+STALE_PERIODS = 3.0
+"""Mocap is stale after this many mocap periods without a valid pose (unless
+[safety] stale_timeout_s says how long)."""
+OVERRUN_STREAK = 10
+"""Consecutive missed loop deadlines that end the flight DEADLINE_OVERRUN."""
+TAU_ERROR_MAX_S = 0.5
+"""[s] |tau - tau_ref| beyond max(this, TAU_ERROR_REL x |tau_ref|) for TAU_ERROR_HOLD_S
+(or tau undefined that long) ends the flight TAU_DIVERGENCE."""
+TAU_ERROR_REL = 0.5
+"""See TAU_ERROR_MAX_S."""
+TAU_ERROR_HOLD_S = 0.3
+"""[s] see TAU_ERROR_MAX_S."""
+PLAN_GRACE_S = 1.0
+"""[s] past the plan's duration without contact ends the flight PLAN_COMPLETE."""
+CONTACT_MARGIN_M = 0.005
+"""[m] contact is declared within one tick of travel plus this of X = 0."""
+
 FROZEN_MAX_S = 0.3
 """[s] once the approach has begun, poses with a bit-identical position for longer than this
 are a stuck tracker re-sending its last position with fresh stamps, not a vehicle (noise
@@ -93,7 +110,7 @@ class EndRules:
             why = self._limits(state, p) or self._tau_watch(t, state, p)
         if why is not None:
             return why
-        if cond.overrun_streak >= s.overrun_streak:
+        if cond.overrun_streak >= OVERRUN_STREAK:
             return Ending(
                 EndReason.DEADLINE_OVERRUN, f"{cond.overrun_streak} deadlines missed in a row"
             )
@@ -108,7 +125,7 @@ class EndRules:
 
     def _stale(self, t: float, state: State | None, cond: Conditions, p: Progress) -> Ending | None:
         s, arrival_age = self.cfg.safety, cond.arrival_age_s
-        limit = s.stale_timeout_s or s.stale_periods * (cond.mocap_period_s or 0.01)
+        limit = s.stale_timeout_s or STALE_PERIODS * (cond.mocap_period_s or 0.01)
         if state is None:
             if t - p.t_start > max(limit, 0.5):
                 return Ending(EndReason.STALE_MOCAP, f"no pose in {t - p.t_start:.3f} s")
@@ -163,14 +180,14 @@ class EndRules:
         safety.tau_error_s."""
         if p.phase not in _STAGES:
             return None
-        s, ref = self.cfg.safety, p.tau_ref()
+        ref = p.tau_ref()
         assert ref is not None  # the stages' references are all set
-        bad = st.tau is None or abs(st.tau - ref) > max(s.tau_error_max, s.tau_error_rel * abs(ref))
+        bad = st.tau is None or abs(st.tau - ref) > max(TAU_ERROR_MAX_S, TAU_ERROR_REL * abs(ref))
         if not bad:
             self._t_bad_tau = None
             return None
         self._t_bad_tau = self._t_bad_tau if self._t_bad_tau is not None else t
-        if t - self._t_bad_tau >= s.tau_error_s:
+        if t - self._t_bad_tau >= TAU_ERROR_HOLD_S:
             got = "undefined" if st.tau is None else f"{st.tau:.3f} s"
             return Ending(EndReason.TAU_DIVERGENCE, f"tau {got} vs tau_ref {ref:.3f} s")
         return None
@@ -179,7 +196,7 @@ class EndRules:
         """CONTACT once the vehicle is within a tick's travel and the margin of X = 0."""
         if p.phase not in _MOVING:
             return None
-        reach = max(st.xdot, 0.0) / self.cfg.rate_hz + self.cfg.safety.contact_margin_m
+        reach = max(st.xdot, 0.0) / self.cfg.rate_hz + CONTACT_MARGIN_M
         if st.x + reach < 0.0:
             return None
         lead = -st.x / st.xdot if st.xdot > 0 and st.x < 0 else 0.0
@@ -190,7 +207,7 @@ class EndRules:
         if p.t_trigger is None:
             return None
         since = t - p.t_trigger
-        if since > p.plan_s + self.cfg.safety.plan_grace_s:
+        if since > p.plan_s + PLAN_GRACE_S:
             return Ending(
                 EndReason.PLAN_COMPLETE, f"{since:.2f} s after the trigger, X = {st.x:.3f} m"
             )

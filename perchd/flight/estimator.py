@@ -21,10 +21,29 @@ was measured. tau is None when Xdot <= `min_speed_mps` (no division near zero sp
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from perchd.core.types import Pose, State
-from perchd.flight.config import EstimatorConfig
 from perchd.flight.frame import PerchFrame
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """The filter's constants (fixed by design, not flight settings; tests vary them).
+
+    jerk_psd: [m^2/s^5] white-jerk spectral density of the constant-acceleration model.
+    meas_std_m: [m] mocap position noise (a motion-capture system's: about 1 mm).
+    outlier_speed_mps: [m/s] a jump implying more than this speed is rejected.
+    outlier_max_rejects: consecutive rejections after which the filter re-initialises.
+    min_speed_mps: [m/s] tau is undefined (None) when Xdot is at or below this.
+    """
+
+    jerk_psd: float = 2.0
+    meas_std_m: float = 0.001
+    outlier_speed_mps: float = 10.0
+    outlier_max_rejects: int = 5
+    min_speed_mps: float = 0.05
+
 
 Cov = tuple[float, float, float, float, float, float, float, float, float]
 """A 3x3 covariance, row major (p, v, a)."""

@@ -17,6 +17,21 @@ from dataclasses import dataclass
 
 from perchd.flight.config import HoverConfig
 
+TAU_S = 0.25
+"""[s] time constant of the low-pass on the measured hover thrust."""
+SETTLE_S = 0.4
+"""[s] the estimate has settled once it stayed within REL_TOL of itself this long, the
+height within Z_TOL_M of its reference and |zdot| below VZ_TOL_MPS."""
+REL_TOL = 0.01
+"""Relative spread of the estimate over SETTLE_S that counts as settled."""
+Z_TOL_M = 0.15
+"""[m] see SETTLE_S."""
+VZ_TOL_MPS = 0.15
+"""[m/s] see SETTLE_S."""
+RATIO = (0.6, 1.6)
+"""A learned hover outside this multiple of mass_kg * g is refused: a wrong mass or
+calibration by that much is not flown on."""
+
 
 @dataclass(frozen=True, slots=True)
 class HoverStatus:
@@ -41,16 +56,15 @@ class HoverLearner:
         if dt <= 0.0:
             return
         sample = thrust_z_n * self.g / max(self.g + zddot, 0.2 * self.g)
-        self.estimate_n += dt / (self.cfg.tau_s + dt) * (sample - self.estimate_n)
+        self.estimate_n += dt / (TAU_S + dt) * (sample - self.estimate_n)
         self._window.append((t, self.estimate_n))
-        while self._window and self._window[0][0] < t - self.cfg.settle_s:
+        while self._window and self._window[0][0] < t - SETTLE_S:
             self._window.popleft()
 
     def status(self, t: float, z_err_m: float, zdot: float) -> HoverStatus:
         """The estimate and how settled it is; a height or climb out of tolerance restarts
         the window (the vehicle is not holding, so its thrust says nothing settled)."""
-        c = self.cfg
-        if abs(z_err_m) > c.z_tol_m or abs(zdot) > c.vz_tol_mps:
+        if abs(z_err_m) > Z_TOL_M or abs(zdot) > VZ_TOL_MPS:
             self._window.clear()
         if not self._window:
             return HoverStatus(self.estimate_n, float("inf"), 0.0)
@@ -59,5 +73,5 @@ class HoverLearner:
         return HoverStatus(self.estimate_n, spread, t - self._window[0][0])
 
     def settled(self, st: HoverStatus) -> bool:
-        # The window holds settle_s of ticks, its first a tick inside it: allow 5 % short.
-        return st.steady_s >= 0.95 * self.cfg.settle_s and st.spread <= self.cfg.rel_tol
+        # The window holds SETTLE_S of ticks, its first a tick inside it: allow 5 % short.
+        return st.steady_s >= 0.95 * SETTLE_S and st.spread <= REL_TOL

@@ -10,10 +10,11 @@ modelled as
 
 u [m/s^2] the acceleration the setpoint commanded (after the saturations), a the
 acceleration the vehicle reaches, a delay [s] (the link, the shaping) and a first-order lag
-T [s] (an attitude loop) behind it; drag [1/s] linear drag per unit mass, bias [m/s^2] a
-constant push (a trim error, a draught). The gain is 1: the hold has calibrated the thrust
+T [s] (an attitude loop) behind it; drag [1/s] linear and qdrag [1/m] quadratic drag per
+unit mass (the drag at speed v is drag v + qdrag v |v|), bias [m/s^2] a constant push (a
+trim error, a draught). The gain is 1: the hold has calibrated the thrust
 (flight/hover.py). The lead flown is lag = delay + T. Fitted to the positions, T is by
-default none (one pure delay for the whole chain, LagIdGains.time_constant_max_s 0); fitted
+none (one pure delay for the whole chain, TIME_CONSTANT_MAX_S); fitted
 to the attitude (below) it is always tried. Fitted to a first-order response,
 a pure delay finds about delay + T but pays for its sharper answer in drag and bias (0.353
 /s and +0.016 m/s^2 for 0.3 and 0 behind 0.1 + 0.2 s, tests/flight/test_lagid.py); the
@@ -59,10 +60,28 @@ from scipy.signal import lfilter
 from perchd.core.vehicle import G_M_S2
 from perchd.flight.config import LagIdGains
 
+WINDOW_S = 8.0
+"""[s] the last this many seconds of the hold and the approach are fitted."""
+LAG_MAX_S = 0.5
+"""[s] the longest lag (delay + T) tried; a best lag at this bound is refused (the vehicle
+is slower than any tried)."""
+LAG_STEP_S = 0.02
+"""[s] the positions' fit's delay grid (refined between points)."""
+TIME_CONSTANT_MAX_S = 0.0
+"""[s] the first-order lags the positions' fit tries behind its delay: none (one pure
+delay; the attitude's fit tells T from the delay, the positions' cannot)."""
+DRAG_MAX_PER_S = 2.0
+"""[1/s] an identified linear drag above this is refused."""
+SPEED_SPAN_MIN_MPS = 0.5
+"""[m/s] the fitted ticks must cover this speed range (the approach's)."""
+RMS_MAX_MPS = 0.1
+"""[m/s] a fit whose predicted speed strays further from the measured one is refused."""
+FREE: tuple[None, None] = (None, None)
+"""Both drags fitted (neither held)."""
+QDRAG_MAX_PER_M = 1.0
+"""[1/m] the largest quadratic drag a fit accepts (the family's plants: up to 0.4)."""
 FIT_POINTS = 200
 """Ticks the regression samples at most (evenly spread over the window)."""
-FINE_S = 0.001
-"""[s] the grid the prediction filters the commands on."""
 LEAN_COARSE_S = (0.02, 0.04)
 """[s] the attitude fit's first grid: its delay step and its time-constant step."""
 LEAN_FINE_S = (0.005, 0.01)
@@ -91,7 +110,8 @@ class LagModel:
     time_constant_s [s] T, the part of the lag that is a first-order lag; from_attitude:
     delay and T were fitted to the attitude the mocap measured (LagIdentifier.lean_response),
     not to the positions; drag_from_attitude: the drag to the acceleration that attitude
-    makes (LagIdentifier.lean_drag), not to the commands'."""
+    makes (LagIdentifier.lean_drag), not to the commands'; qdrag_per_m [1/m] the quadratic
+    drag (the push is bias - drag Xdot - qdrag Xdot |Xdot|)."""
 
     lag_s: float
     drag_per_s: float
@@ -102,6 +122,11 @@ class LagModel:
     time_constant_s: float = 0.0
     from_attitude: bool = False
     drag_from_attitude: bool = False
+    qdrag_per_m: float = 0.0
+
+    def drag_at(self, xdot: float) -> float:
+        """[m/s^2] the drag at the speed xdot [m/s]."""
+        return self.drag_per_s * xdot + self.qdrag_per_m * xdot * abs(xdot)
 
     @property
     def delay_s(self) -> float:
@@ -128,7 +153,7 @@ class LagIdentifier:
     def record(self, t: float, u_x: float, x: float, xdot: float) -> None:
         """One tick: t [s], u_x [m/s^2] commanded at t, x [m] and xdot [m/s] measured at t."""
         self._rows.append((t, u_x, x, xdot))
-        _keep_window(self._rows, t - self.cfg.window_s)
+        _keep_window(self._rows, t - WINDOW_S)
 
     def record_lean(self, t: float, sent: float, t_measured: float, measured: float) -> None:
         """One tick's lean (the body z axis's X component): the setpoint's, sent at t [s],
@@ -136,7 +161,7 @@ class LagIdentifier:
         if not all(map(math.isfinite, (t, sent, t_measured, measured))):
             return
         self._lean.append((t, sent, t_measured, measured))
-        _keep_window(self._lean, t - self.cfg.window_s)
+        _keep_window(self._lean, t - WINDOW_S)
 
     def lean_response(self, since_t: float = -np.inf) -> tuple[float, float] | None:
         """(delay [s], T [s]) of the attitude's answer to the setpoints' lean, fitted to
@@ -153,7 +178,7 @@ class LagIdentifier:
         sweep = float(np.ptp(sent[t >= since_t])) if (t >= since_t).any() else 0.0
         if sweep < LEAN_SPAN_MIN:
             return None
-        bounds = (self.cfg.lag_max_s, LEAN_TC_MAX_S)
+        bounds = (LAG_MAX_S, LEAN_TC_MAX_S)
         axes = [np.arange(0.0, top + 1e-9, step) for top, step in zip(bounds, LEAN_COARSE_S)]
         mse, gain, j, i = _lean_best(data, axes, LEAN_POINTS[0], since_t)
         if i == len(axes[0]) - 1 or j == len(axes[1]) - 1 or not np.isfinite(mse[j, i]):
@@ -180,36 +205,37 @@ class LagIdentifier:
             return LagFit(None, f"{len(self._rows)} ticks recorded, too few to fit")
         t, u, x, v = (np.array(col) for col in zip(*self._rows))
         span = float(v.max() - v.min())
-        if span < c.speed_span_min_mps:
+        if span < SPEED_SPAN_MIN_MPS:
             return LagFit(
                 None,
                 f"the approach changed speed by {span:.2f} m/s, less than "
-                f"the {c.speed_span_min_mps:g} m/s needed to fit the lag",
+                f"the {SPEED_SPAN_MIN_MPS:g} m/s needed to fit the lag",
             )
         lean = self.lean_response() if c.from_attitude else None
         if lean is not None:
-            drag = self.lean_drag(t, x) if c.drag_from_attitude else None
+            drag = self.lean_drag(t, x, v)
             m = replace(
-                _model_at(t, u, x, v, *lean, span, c, drag),
+                _model_at(t, u, x, v, *lean, span, drag or FREE),
                 from_attitude=True,
                 drag_from_attitude=drag is not None,
             )
-            fit = _checked(m, c)
+            fit = _checked(m)
             if fit.model is not None:
                 return fit  # refused at the attitude's lag: the positions' own may serve
-        delays = np.arange(0.0, c.lag_max_s + 1e-9, c.lag_step_s)
-        taus = np.arange(0.0, c.time_constant_max_s + 1e-9, c.lag_step_s)
-        mse = _solve(t, _first_order(t, u, taus), x, delays)[0]
+        delays = np.arange(0.0, LAG_MAX_S + 1e-9, LAG_STEP_S)
+        taus = np.arange(0.0, TIME_CONSTANT_MAX_S + 1e-9, LAG_STEP_S)
+        mse = _solve(t, _first_order(t, u, taus), x, v, delays)[0]
         j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
         if i == len(delays) - 1:
-            return LagFit(None, f"the best lag is at the bound {c.lag_max_s:g} s or beyond")
+            return LagFit(None, f"the best lag is at the bound {LAG_MAX_S:g} s or beyond")
         delay = _refine(delays, mse[j], int(i))
-        return _checked(_model_at(t, u, x, v, delay, float(taus[j]), span, c), c)
+        return _checked(_model_at(t, u, x, v, delay, float(taus[j]), span))
 
-    def lean_drag(self, t: np.ndarray, x: np.ndarray) -> float | None:
-        """[1/s] the drag fitted to the positions x [m] at the ticks t [s] against the
-        acceleration the lean the mocap measured makes (g tan of it, the height held), a
-        constant push beside it; None without leans or outside 0..drag_max_per_s. An
+    def lean_drag(self, t: np.ndarray, x: np.ndarray, v: np.ndarray) -> tuple[float, float] | None:
+        """(drag [1/s], qdrag [1/m]) fitted to the positions x [m] (speeds v [m/s]) at the
+        ticks t [s] against the acceleration the lean the mocap measured makes (g tan of
+        it, the height held), a constant push beside it; None without leans or outside
+        the bounds (_drags). An
         autopilot flies its own attitude estimate, and PX4 SIH's leaned further than sent
         the faster it flew: fitted to the commands, that reads as less drag (0.88-0.98 /s
         where SIH's is 1.0) and stage 2, slower than stage 1, meets less push than stage
@@ -222,8 +248,9 @@ class LagIdentifier:
         mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
         s = np.clip(np.interp(mid, tm, lean), -0.9, 0.9)
         a = G_M_S2 * s / np.sqrt(1.0 - s * s)
-        drag = float(_solve(t, a[None, :], x, np.zeros(1))[1][0, 0, 0])
-        return drag if 0.0 <= drag <= self.cfg.drag_max_per_s else None
+        drag, qdrag = _drags(t, a[None, :], x, v, np.zeros(1), FREE)
+        ok = 0.0 <= drag <= DRAG_MAX_PER_S and 0.0 <= qdrag <= QDRAG_MAX_PER_M
+        return (drag, qdrag) if ok else None
 
     def refit_bias(self, base: LagModel, since_t: float) -> LagFit:
         """The bias again, base's lag and drag kept, from the ticks since since_t [s]: what
@@ -242,71 +269,18 @@ class LagIdentifier:
         # The ticks before since_t stay in: the commands still in flight at since_t.
         span = float(v[first:].max() - v[first:].min())
         m = _model_at(
-            t, u, x, v, base.delay_s, base.time_constant_s, span, self.cfg, base.drag_per_s, first
+            t,
+            u,
+            x,
+            v,
+            base.delay_s,
+            base.time_constant_s,
+            span,
+            (base.drag_per_s, base.qdrag_per_m),
+            first,
         )
         return _checked(
-            replace(
-                m, from_attitude=base.from_attitude, drag_from_attitude=base.drag_from_attitude
-            ),
-            self.cfg,
-        )
-
-    def predict(
-        self, t: float, x: float, xdot: float, model: LagModel, horizon_s: float
-    ) -> tuple[float, float]:
-        """(X [m], Xdot [m/s]) horizon_s (<= the lag) after t, from the state measured at t
-        and the commands recorded that the vehicle answers within the horizon: those sent
-        between lag and lag - horizon_s ago (a Smith predictor). A model with a first-order
-        part answers each command spread over its time constant instead, and a horizon
-        beyond its delay reaches past t: the last command is taken as held."""
-        tc = model.time_constant_s
-        if tc > 0.0:
-            dv, dx = self._landing(t, model.delay_s, tc, horizon_s)
-        else:
-            dv, dx = self._landing_delayed(t, model.lag_s, horizon_s)
-        push = model.bias_mps2 - model.drag_per_s * xdot
-        return (x + xdot * horizon_s + dx + 0.5 * push * horizon_s**2, xdot + dv + push * horizon_s)
-
-    def _landing_delayed(self, t: float, lag: float, horizon_s: float) -> tuple[float, float]:
-        """(speed [m/s], distance [m]) the commands in flight add over the horizon, each
-        answered whole `lag` [s] after it was sent."""
-        dv = dx = 0.0
-        rows = self._rows
-        for i in range(len(rows) - 1, -1, -1):
-            t_k, u_k = rows[i][0], rows[i][1]
-            if t_k < t - lag:
-                break
-            if t_k >= t - lag + horizon_s:
-                continue
-            held = min(rows[i + 1][0] if i + 1 < len(rows) else t, t - lag + horizon_s) - t_k
-            dv += u_k * held
-            dx += u_k * held * (t + horizon_s - (t_k + lag + 0.5 * held))
-        return dv, dx
-
-    def _landing(self, t: float, delay: float, tc: float, horizon_s: float) -> tuple[float, float]:
-        """(speed [m/s], distance [m]) over the horizon from the acceleration the vehicle
-        reaches through the first-order lag tc [s], `delay` [s] behind the commands: the
-        commands held between ticks (the last one beyond t), filtered on a 1 ms grid from
-        six time constants back."""
-        lo, hi = t - delay, t - delay + horizon_s
-        tail = []
-        for row in reversed(self._rows):
-            tail.append(row[:2])
-            if row[0] <= lo - 6.0 * tc:
-                break
-        if not tail:
-            return 0.0, 0.0
-        t_k, u_k = np.array(tail[::-1]).T
-        grid = np.arange(t_k[0], hi, FINE_S)
-        if len(grid) == 0:
-            return 0.0, 0.0
-        u = u_k[np.clip(np.searchsorted(t_k, grid, side="right") - 1, 0, None)]
-        inside = grid >= lo
-        a = _first_order(grid, u, np.array([tc]), FINE_S)[0][inside]
-        # Each fine step's mean acceleration, at its midpoint for the distance.
-        return (
-            float(a.sum() * FINE_S),
-            float((a * (hi - grid[inside] - 0.5 * FINE_S)).sum() * FINE_S),
+            replace(m, from_attitude=base.from_attitude, drag_from_attitude=base.drag_from_attitude)
         )
 
 
@@ -324,33 +298,64 @@ def _model_at(
     delay_s: float,
     tc_s: float,
     span: float,
-    c: LagIdGains,
-    drag: float | None = None,
+    drag: tuple[float | None, float | None] = (None, None),
     start: int = 0,
 ) -> LagModel:
-    """Drag (unless given) and bias at delay_s [s] and time constant tc_s [s], integrated
-    from tick start; rms_mps is how far the speed they predict from the fitted Xdot(s)
-    strays from the speed measured. A slightly negative drag (noise about none; down to a
-    tenth of drag_max_per_s, below is refused) is solved again as none: clipping it alone
-    would keep the bias fitted beside it, and the push the two predict together
-    (bias - drag Xdot) would be off by the clipped drag times the speed."""
+    """Drag, quadratic drag (each unless given) and bias at delay_s [s] and time constant
+    tc_s [s], integrated from tick start; rms_mps is how far the speed they predict from the
+    fitted Xdot(s) strays from the speed measured (_drags has the signs' rule)."""
     a, delay = _first_order(t, u, np.array([tc_s])), np.array([delay_s])
-    sol = _solve(t, a, x, delay, drag, start)[1][0, :, 0]
-    if drag is None and -0.1 * c.drag_max_per_s <= sol[0] < 0.0:
-        sol = _solve(t, a, x, delay, 0.0, start)[1][0, :, 0]
-    m = LagModel(delay_s + tc_s, float(sol[0]), float(sol[1]), 0.0, len(t) - start, span, tc_s)
-    err = _speed_errors(t, u, x, v, m, start, float(sol[2]))
+    sol = _fixed_drags(t, a, x, v, delay, drag, start)
+    m = LagModel(
+        delay_s + tc_s,
+        float(sol[0]),
+        float(sol[2]),
+        0.0,
+        len(t) - start,
+        span,
+        tc_s,
+        qdrag_per_m=float(sol[1]),
+    )
+    err = _speed_errors(t, u, x, v, m, start, float(sol[3]))
     return replace(m, rms_mps=float(np.sqrt(np.mean(err * err))))
 
 
-def _checked(m: LagModel, c: LagIdGains) -> LagFit:
+def _drags(t, a, x, v, lags, drag, start: int = 0) -> tuple[float, float]:
+    """(drag [1/s], qdrag [1/m]) of the fit at the first input and lag, signs settled."""
+    sol = _fixed_drags(t, a, x, v, lags, drag, start)
+    return float(sol[0]), float(sol[1])
+
+
+def _fixed_drags(t, a, x, v, lags, drag, start: int) -> np.ndarray:
+    """(drag, qdrag, bias, Xdot(s), offset) of the fit at the first input and lag. The two
+    drags trade over an approach's speeds, so a negative one is noise about none: a
+    negative quadratic drag is solved again as none, then a slightly negative linear one
+    (down to a tenth of DRAG_MAX_PER_S; below, _checked refuses it). Clipping one alone
+    would keep the others fitted beside it, off by the clipped term's push."""
+    sol = _solve(t, a, x, v, lags, drag, start)[1][0, :, 0]
+    if drag[1] is None and sol[1] < 0.0:
+        drag = (drag[0], 0.0)
+        sol = _solve(t, a, x, v, lags, drag, start)[1][0, :, 0]
+    if drag[0] is None and -0.1 * DRAG_MAX_PER_S <= sol[0] < 0.0:
+        sol = _solve(t, a, x, v, lags, (0.0, drag[1]), start)[1][0, :, 0]
+        if drag[1] is None and sol[1] < 0.0:
+            sol = _solve(t, a, x, v, lags, (0.0, 0.0), start)[1][0, :, 0]
+    return sol
+
+
+def _checked(m: LagModel) -> LagFit:
     """The fit, refused when its drag is out of bounds or its residual large."""
-    if not 0.0 <= m.drag_per_s <= c.drag_max_per_s:
+    if not 0.0 <= m.drag_per_s <= DRAG_MAX_PER_S:
         return LagFit(
-            None, f"identified drag {m.drag_per_s:.3f} 1/s outside 0..{c.drag_max_per_s:g} 1/s"
+            None, f"identified drag {m.drag_per_s:.3f} 1/s outside 0..{DRAG_MAX_PER_S:g} 1/s"
         )
-    if m.rms_mps > c.rms_max_mps:
-        return LagFit(None, f"the fit's residual {m.rms_mps:.3f} m/s exceeds {c.rms_max_mps:g} m/s")
+    if not 0.0 <= m.qdrag_per_m <= QDRAG_MAX_PER_M:
+        return LagFit(
+            None,
+            f"identified quadratic drag {m.qdrag_per_m:.3f} 1/m outside 0..{QDRAG_MAX_PER_M:g} 1/m",
+        )
+    if m.rms_mps > RMS_MAX_MPS:
+        return LagFit(None, f"the fit's residual {m.rms_mps:.3f} m/s exceeds {RMS_MAX_MPS:g} m/s")
     return LagFit(m)
 
 
@@ -359,12 +364,24 @@ def _speed_errors(t, u, x, v, m: LagModel, k: int, v_k: float) -> np.ndarray:
     at tick k."""
     a = _first_order(t, u, np.array([m.time_constant_s]))
     big_a = _delayed(t, _integrals(t, a)[0], t[None, k:] - m.delay_s, a, 1)[0, 0]
+    q1 = _quadratic_integrals(t, v)[0]
     return (
         (v[k:] - v_k)
         - (big_a - big_a[0])
         + m.drag_per_s * (x[k:] - x[k])
+        + m.qdrag_per_m * (q1[k:] - q1[k])
         - m.bias_mps2 * (t[k:] - t[k])
     )
+
+
+def _quadratic_integrals(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Q1, Q2) at the ticks: the integral from t[0] of Xdot |Xdot| (trapezoids), and of Q1:
+    what the quadratic drag takes from the speed and from the position."""
+    dt = np.diff(t)
+    vq = v * np.abs(v)
+    q1 = np.concatenate(([0.0], np.cumsum(0.5 * (vq[1:] + vq[:-1]) * dt)))
+    q2 = np.concatenate(([0.0], np.cumsum(0.5 * (q1[1:] + q1[:-1]) * dt)))
+    return q1, q2
 
 
 def _first_order(
@@ -416,14 +433,21 @@ def _delayed(
 
 
 def _solve(
-    t, a, x, lags: np.ndarray, drag: float | None = None, start: int = 0
+    t,
+    a,
+    x,
+    v,
+    lags: np.ndarray,
+    drag: tuple[float | None, float | None] = (None, None),
+    start: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """For each row of a (inputs, ticks) and each lag (its delay): the mean squared
-    residual [m^2], shaped (inputs, lags), and the least-squares (drag, bias, Xdot(s),
-    offset), shaped (inputs, 4, lags), integrated from tick s = `start` (a given drag
-    [1/s] is held; the ticks before start only supply the commands in flight). The
-    regressors depend on neither, so one pseudo-inverse serves all; the integrals take
-    every tick, the regression at most FIT_POINTS of them (a fit stays a few ms)."""
+    residual [m^2], shaped (inputs, lags), and the least-squares (drag, qdrag, bias,
+    Xdot(s), offset), shaped (inputs, 5, lags), integrated from tick s = `start` (a drag
+    given in `drag` = (linear [1/s], quadratic [1/m]) is held; the ticks before start only
+    supply the commands in flight). The regressors depend on neither, so one
+    pseudo-inverse serves all; the integrals take every tick, the regression at most
+    FIT_POINTS of them (a fit stays a few ms)."""
     at = np.unique(np.linspace(start, len(t) - 1, min(len(t) - start, FIT_POINTS)).astype(int))
     big_a, big_w = _integrals(t, a)
     times = t[at][None, :] - lags[:, None]
@@ -432,17 +456,24 @@ def _solve(
     x_s = x[at[0]]
     area = np.concatenate(([0.0], np.cumsum(0.5 * (x[1:] + x[:-1] - 2.0 * x_s) * np.diff(t))))
     area = area[at] - area[at[0]]
+    q1, q2 = _quadratic_integrals(t, v)
+    quad = q2[at] - q2[at[0]] - q1[at[0]] * s
     y = (x[at] - x_s) - (w - w[..., :1] - a_s * s)
     # The speed column takes Xdot(s); the ones column the noise of X(s) itself.
-    cols = np.column_stack((-area, 0.5 * s * s, s, np.ones_like(s)))
-    if drag is not None:
-        y, cols = y + drag * area, cols[:, 1:]
-    q, r = np.linalg.qr(cols)
+    cols = np.column_stack((-area, -quad, 0.5 * s * s, s, np.ones_like(s)))
+    free = [k for k in (0, 1) if drag[k] is None] + [2, 3, 4]
+    for k, held in ((0, area), (1, quad)):
+        if drag[k] is not None:
+            y = y + drag[k] * held
+    q, r = np.linalg.qr(cols[:, free])
     proj = y @ q  # the residual is what the columns' span leaves of y
     mse = (np.einsum("...p,...p->...", y, y) - np.einsum("...k,...k->...", proj, proj)) / len(s)
-    sol = np.linalg.solve(r, np.moveaxis(proj, -1, -2))
-    if drag is not None:
-        sol = np.concatenate((np.full_like(sol[:, :1], drag), sol), axis=1)
+    fitted = np.linalg.solve(r, np.moveaxis(proj, -1, -2))
+    sol = np.zeros(fitted.shape[:1] + (5,) + fitted.shape[2:])
+    sol[:, free] = fitted
+    for k in (0, 1):
+        if drag[k] is not None:
+            sol[:, k] = drag[k]
     return np.maximum(mse, 0.0), sol
 
 

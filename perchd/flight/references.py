@@ -6,7 +6,6 @@ own: the vehicle's response (flight/response.py) is read, never fitted, here.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -30,6 +29,16 @@ class Refs:
 
 
 NO_REFS = Refs()
+
+
+def hold_speed(plan: Plan, margin_mps: float) -> float:
+    """[m/s] the speed stage 2 holds: the plan's V_c moved at least margin_mps [m/s] inside
+    its contact window (its middle when the window is narrower than twice the margin)."""
+    v = float(plan.v_contact)
+    lo, hi = plan.limits.v_contact
+    if hi - lo <= 2.0 * margin_mps:
+        return 0.5 * (lo + hi)
+    return min(max(v, lo + margin_mps), hi - margin_mps)
 
 
 class References:
@@ -59,10 +68,8 @@ class References:
 
     @property
     def v_hold(self) -> float:
-        """[m/s] the stage-2 speed held: V_c, kept v_contact_margin_mps inside the window."""
-        v, m = float(self.plan.v_contact), self.cfg.tau_gains.v_contact_margin_mps
-        lo, hi = self.plan.limits.v_contact
-        return min(max(v, lo + m), hi - m) if hi - lo > 2 * m else v
+        """[m/s] the stage-2 speed held (hold_speed)."""
+        return hold_speed(self.plan, self.cfg.tau_gains.v_contact_margin_mps)
 
     @property
     def tau_s(self) -> float | None:
@@ -82,14 +89,14 @@ class References:
         """(v_ref [m/s] at X = x [m], the feed-forward [m/s^2] for where the vehicle will be
         lead_s [s] later). Past x0 the references are the plan's own: the vehicle answers
         a lag late, so the approach's last commands already fly the start of the plan
-        (ApproachConfig.lead_into_plan, docs/errata.md §10)."""
+        (docs/errata.md §10)."""
         ff, wait = self.response.ff, self.desk.wait
         if wait is not None:
             return wait.v, ff.accel(0.0, wait.v)
-        leads, x0 = self.cfg.approach.lead_into_plan, self.plan.x0
-        v_ref = self._plan_at(x).v if leads and x >= x0 else self.v_ref(x)
+        x0 = self.plan.x0
+        v_ref = self._plan_at(x).v if x >= x0 else self.v_ref(x)
         ahead = x + v_ref * max(lead_s, 0.0)
-        if not leads or ahead < x0:
+        if ahead < x0:
             return v_ref, ff.accel(self.a_app, v_ref)
         p = self._plan_at(ahead)
         return v_ref, ff.accel(p.a if p.stage == 1 else 0.0, p.v)
@@ -143,54 +150,20 @@ class References:
     def at(self, t: float, x: float | None, lead_s: float) -> Refs:
         """The references at time t [s] for the vehicle at X = x [m], with the feed-forward
         taken lead_s [s] ahead."""
-        plan, ff = self.plan, self.response.ff
+        ff = self.response.ff
         here, a = self._plan_ahead(self._plan_s(t), lead_s)
-        if self.t_stage2 is None:
-            tau_ref = here.tau_ref
-        elif self.cfg.tau_gains.stage2_hold_speed and x is not None:
-            tau_ref = min(x, 0.0) / self.v_hold
-            a = ff.accel(0.0, self.v_hold)
-        else:
-            tau_s = self.tau_s
-            assert tau_s is not None  # stage 2 is entered only at a plan's tau_s
-            tau_ref = tau_s + (t - self.t_stage2)
-            a = ff.accel(0.0, float(plan.v_contact))
-        return Refs(tau_ref, here.x, here.v, a)
+        if self.t_stage2 is None or x is None:
+            return Refs(here.tau_ref, here.x, here.v, a)
+        # Stage 2 holds V_hold: tau_ref = X / V_hold makes e = 1 - Xdot/V_hold (docs/errata.md §9).
+        return Refs(min(x, 0.0) / self.v_hold, here.x, here.v, ff.accel(0.0, self.v_hold))
 
-    def lag_view(self, t: float, st: State, refs: Refs) -> tuple[State, Refs]:
-        """The state and references the tau controller acts on: predicted over the lag
-        beyond what the gains were made for (VehicleResponse.predicted, docs/errata.md
-        §10)."""
-        x, v, horizon = self.response.predicted(t, st.x, st.xdot)
-        if horizon == 0.0:
-            return st, refs
-        # Predicted at or past the surface: tau = X/Xdot from just before it, so that the
-        # stage-2 error stays 1 - Xdot/V_c instead of tau's sign flipping.
-        x = min(x, -1e-3)
-        tau = x / v if v > self.cfg.estimator.min_speed_mps else None
-        seen = dataclasses.replace(st, x=x, xdot=v, tau=tau)
-        return seen, self.at(t + horizon, x, self.response.ff.lead_s - horizon)
-
-    def stage1_aim(self, t: float, seen: State, aim: Refs) -> tuple[float, Refs]:
-        """Stage 1's tau reference and feed-forward for the state seen. Early, the clock's,
-        scale-corrected; from three lags before the plan's switch to two, handed over to
-        the plan's point where the vehicle is (TauGains.end_by_position): a vehicle still
-        behind the plan in X then reaches the switch point nearer the plan's speed, and
-        the braking ends where the plan's does, not when (docs/errata.md §10)."""
-        assert aim.a is not None  # the stages' references are all set
-        lag, t0 = self.response.ff.lead_s, self._trigger_t()
-        left = self.plan.t_switch - (t - t0)
-        end = 1.0 - min(max((left - 2.0 * lag) / lag, 0.0), 1.0) if lag > 0.0 else 0.0
-        tau_ref = self._scale_corrected(seen, aim, 1.0 - end)
-        if end == 0.0 or not self.cfg.tau_gains.end_by_position or seen.x >= 0.0:
-            return tau_ref, aim
-        horizon = self.response.horizon_s
-        s = self._plan_time(seen.x, t + horizon - t0)
-        here, a = self._plan_ahead(s, lag - horizon)
-        return (
-            (1.0 - end) * tau_ref + end * here.tau_ref,
-            dataclasses.replace(aim, a=(1.0 - end) * aim.a + end * a),
-        )
+    def scale_corrected(self, t: float, st: State, aim: Refs) -> float:
+        """Stage 1's tau reference for the vehicle at st: the clock's, scale-corrected
+        (_scale_corrected), the correction faded out from three lags before the plan's
+        switch to two (a catch-up that late would reach the switch as speed)."""
+        lag, left = self.response.ff.lead_s, self.plan.t_switch - (t - self._trigger_t())
+        weight = min(max((left - 2.0 * lag) / lag, 0.0), 1.0) if lag > 0.0 else 1.0
+        return self._scale_corrected(st, aim, weight)
 
     def _scale_corrected(self, seen: State, aim: Refs, weight: float) -> float:
         """The tau reference corrected for the scale error c = X / X_plan: tau = X/Xdot is

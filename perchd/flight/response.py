@@ -2,8 +2,7 @@
 
 One object holds the identification (flight/lagid.py) through a flight: it records the
 ticks, refits during the approach, identifies at the trigger, takes the lag again from
-stage 1's attitude and refits the bias at the stage-2 switch, and predicts the state the
-commands still in flight will bring; it logs each fit. The supervisor decides when each
+stage 1's attitude and refits the bias at the stage-2 switch; it logs each fit. The supervisor decides when each
 happens and hands the feed-forward's steps over to its integrals (docs/errata.md §10).
 """
 
@@ -23,7 +22,7 @@ RELAG_MAX = 0.25
 
 def feed_forward(m: LagModel) -> FeedForward:
     """The feed-forward of an identified response."""
-    return FeedForward(m.lag_s, m.drag_per_s, m.bias_mps2)
+    return FeedForward(m.lag_s, m.drag_per_s, m.bias_mps2, m.qdrag_per_m)
 
 
 class VehicleResponse:
@@ -40,7 +39,6 @@ class VehicleResponse:
         self.identified: LagFit | None = None
         self.departure_mps2: float | None = None  # stage 1's bias less the approach's
         self._events = events
-        self._prediction: tuple[tuple, tuple[float, float, float]] | None = None
 
     def record(self, t: float, u_x: float, x: float, xdot: float) -> None:
         """One tick: t [s], u_x [m/s^2] the command sent, x [m], xdot [m/s] measured."""
@@ -85,6 +83,7 @@ class VehicleResponse:
                 (
                     f"lag {m.lag_s:.3f} s ({m.time_constant_s:.3f} s of it first-order) from the "
                     f"{'attitude' if m.from_attitude else 'positions'}, drag {m.drag_per_s:.3f} 1/s "
+                    f"+ {m.qdrag_per_m:.3f} 1/m x v|v| "
                     f"from the {'lean measured' if m.drag_from_attitude else 'commands'}"
                 ),
                 {
@@ -93,6 +92,7 @@ class VehicleResponse:
                     "from_attitude": m.from_attitude,
                     "drag_from_attitude": m.drag_from_attitude,
                     "drag_per_s": m.drag_per_s,
+                    "qdrag_per_m": m.qdrag_per_m,
                     "bias_mps2": m.bias_mps2,
                     "rms_mps": m.rms_mps,
                     "samples": m.samples,
@@ -103,8 +103,7 @@ class VehicleResponse:
 
     def refit_stage2(self, t: float, since_t: float, v_hold: float) -> float:
         """At the stage-2 switch: the bias again from stage 1 (since since_t [s]), lag and
-        drag kept. Its departure from the approach's, scaled by stage2_refit_share, is
-        flown from here on (LagIdentifier.refit_bias). Returns the step [m/s^2] this adds
+        drag kept, is flown from here on (LagIdentifier.refit_bias). Returns the step [m/s^2] this adds
         at the held speed v_hold [m/s] (0 when refused, logged, or nothing was identified)."""
         if self.model is None or not self.cfg.stage2_refit:
             return 0.0
@@ -121,8 +120,7 @@ class VehicleResponse:
             return 0.0
         fitted, approach = fit.model.bias_mps2, self.model.bias_mps2
         self.departure_mps2 = fitted - approach
-        share = self.cfg.stage2_refit_share
-        m = replace(fit.model, bias_mps2=approach + share * self.departure_mps2)
+        m = fit.model
         ff = feed_forward(m)
         step = ff.step_from(self.ff, 0.0, v_hold)
         self.ff, self.model = ff, m
@@ -139,7 +137,7 @@ class VehicleResponse:
                 "bias-refit",
                 (
                     f"stage 2: bias {m.bias_mps2:.3f} m/s^2 = the approach's {approach:.3f} + "
-                    f"{self.cfg.stage2_refit_share:g} x stage 1's {own:+.3f}"
+                    f"stage 1's {own:+.3f}"
                 ),
                 {
                     "bias_mps2": m.bias_mps2,
@@ -176,29 +174,3 @@ class VehicleResponse:
                 {"lag_s": self.model.lag_s, "time_constant_s": lean[1], "was_lag_s": m.lag_s},
             )
         )
-
-    @property
-    def horizon_s(self) -> float:
-        """[s] how far ahead the controllers see (predicted): the lag identified beyond
-        ff_lead_s; 0 without a model or with TauGains.predict off."""
-        m = self.model
-        if m is None or not self.gains.predict:
-            return 0.0
-        return max(m.lag_s - self.gains.ff_lead_s, 0.0)
-
-    def predicted(self, t: float, x: float, xdot: float) -> tuple[float, float, float]:
-        """(X [m], Xdot [m/s], horizon [s]): the controllers' gains are made for a vehicle
-        that answers within the configured ff_lead_s (the paper's Crazyflie); of a lag
-        identified beyond that, they see the state predicted that much ahead from the
-        commands still in flight (LagIdentifier.predict), so the feedback, like the
-        feed-forward, acts where its command lands. Horizon 0: the measured state.
-        Asked twice in a tick (the stage-2 switch, then the tau PID), it is computed once
-        unless the model changed in between."""
-        horizon = self.horizon_s
-        if horizon == 0.0:
-            return x, xdot, 0.0
-        key = (t, x, xdot, self.model, horizon)
-        if self._prediction is None or self._prediction[0] != key:
-            px, pv = self.lagid.predict(t, x, xdot, self.model, horizon)
-            self._prediction = (key, (px, pv, horizon))
-        return self._prediction[1]

@@ -24,7 +24,7 @@ from perchd.core.realtime import below_loop
 from perchd.core.types import EndReason, Phase, State
 from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.flight.endrules import Conditions
-from perchd.flight.estimator import Estimator
+from perchd.flight.estimator import Estimator, EstimatorConfig
 from perchd.flight.frame import PerchFrame
 from perchd.flight.lagid import LagModel
 from perchd.flight.loop import LoopSummary, make_loop
@@ -154,7 +154,7 @@ class _Run:
         planner: Planner | None = None,
     ) -> None:
         self.frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
-        self.est = Estimator(cfg.estimator, self.frame)
+        self.est = Estimator(EstimatorConfig(), self.frame)
         self.sup = Supervisor(plan, cfg, self.frame, planner)
         self.loop = make_loop(cfg.sync.value, clock, cfg.rate_hz, source)
         self.clock = clock

@@ -5,7 +5,7 @@ point, at least hold_s and until the hover thrust has been learned (flight/hover
 HOVER_UNLEARNED after hover.timeout_s) -> APPROACH (accelerate along X so that the plan's trigger state (x0, v0) is reached at
 x0) -> trigger -> STAGE1 (tau_ref indexed by time since the trigger) -> STAGE2 when the
 *measured* tau reaches tau_s (docs/errata.md §9; tau_ref = tau_s + time since that switch) ->
-CONTACT (the post-contact action for post_contact_s) -> DONE.
+CONTACT (the post-contact action for POST_CONTACT_S) -> DONE.
 
 Every tick first asks the end rules (flight/endrules.py); the references each phase aims at
 are flight/references.py's. The trigger itself may end the flight (TRIGGER_REFUSED): what it
@@ -25,7 +25,7 @@ from perchd.flight.config import FlightConfig, PostContact
 from perchd.flight.control import AxisController, Controller, FeedForward
 from perchd.flight.endrules import Conditions, ContactEstimate, EndRules, Progress
 from perchd.flight.frame import PerchFrame
-from perchd.flight.hover import HoverLearner
+from perchd.flight.hover import RATIO, REL_TOL, SETTLE_S, Z_TOL_M, HoverLearner
 from perchd.flight.planner_worker import Planner
 from perchd.flight.references import NO_REFS, References, Refs
 from perchd.flight.response import VehicleResponse, feed_forward
@@ -33,6 +33,20 @@ from perchd.flight.takeoff import TakeoffProfile
 from perchd.flight.trigger import TriggerDesk
 from perchd.logs.flightlog import LogEvent
 from perchd.tau.plan import Plan
+
+APPROACH_KV = 3.0
+"""[1/s] the approach's speed-tracking gain along X."""
+APPROACH_KI_V = 8.0
+"""[1/s^2] its integral gain: drag and the attitude lag otherwise leave the speed at the
+trigger short of v0 (~0.09 m/s on the Crazyflie firmware); the trigger hands the integral
+to the tau PID's."""
+APPROACH_I_LIMIT_MPS2 = 1.0
+"""[m/s^2] the clamp of that integral's contribution (frozen while the mapping saturates)."""
+REFIT_S = 0.25
+"""[s] period of the identification's refits during the approach (its own feed-forward
+meets the drag found so far); the fit at the trigger is the one logged and flown."""
+POST_CONTACT_S = 0.2
+"""[s] the post-contact action (FlightConfig.post_contact) is held this long."""
 
 _OBSERVED = (Phase.HOLD, Phase.APPROACH, Phase.STAGE1, Phase.STAGE2)
 """The phases whose ticks the lag identification records (flight/lagid.py)."""
@@ -183,7 +197,7 @@ class Supervisor:
             if self.phase is not Phase.ABORT:
                 self._enter(Phase.ABORT, t, self.end.value)
             return TickReport(Phase.ABORT, None, self.end, True, NO_REFS, NO_U, None)
-        done = t - self._t_end >= self.cfg.post_contact_s
+        done = t - self._t_end >= POST_CONTACT_S
         yaw = self.frame.yaw_facing
         if self.cfg.post_contact is PostContact.IDLE:
             thrust = self.cfg.idle_thrust_n
@@ -222,22 +236,11 @@ class Supervisor:
         refs, ux, e, vz_ref = NO_REFS, 0.0, None, 0.0
         if self.phase in (Phase.STAGE1, Phase.STAGE2):
             refs = self._refs(t, st.x)
-            g = self.cfg.tau_gains
-            if (
-                self.phase is Phase.STAGE2
-                and not g.stage2_hold_speed
-                and refs.tau_ref > -g.terminal_s
-            ):
-                ux = 0.0  # terminal: constant speed (see TauGains.terminal_s)
-            else:
-                hold = self.phase is Phase.STAGE2 and g.stage2_hold_speed
-                seen, aim = self.refs.lag_view(t, st, refs)
-                tau_aim = aim.tau_ref
-                if self.phase is Phase.STAGE1:
-                    tau_aim, aim = self.refs.stage1_aim(t, seen, aim)
-                ux = self.ctl.tau.step(
-                    seen, tau_aim, aim.a, dt, self.ctl.saturated, schedule=not hold
-                )
+            tau_aim = refs.tau_ref
+            if self.phase is Phase.STAGE1:
+                tau_aim = self.refs.scale_corrected(t, st, refs)
+            hold = self.phase is Phase.STAGE2  # a speed reference: eq. 20 does not apply
+            ux = self.ctl.tau.step(st, tau_aim, refs.a, dt, self.ctl.saturated, schedule=not hold)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
             ux = self._approach_accel(t, st, dt)
@@ -256,27 +259,16 @@ class Supervisor:
         return TickReport(self.phase, sp, None, False, refs, u, e)
 
     def _switch(self, t: float, st: State) -> None:
-        """Stage 2 from the tick tau reaches tau_s (docs/errata.md §9): the measured tau, or
-        with TauGains.switch_predicted and a lag identified beyond ff_lead_s, the tau the
-        tau PID acts on, predicted over that excess: the switch is decided on the state
-        the controller flies, not a horizon after it has passed stage 1's end."""
-        tau_s = self.refs.tau_s
-        if tau_s is None:
-            return
-        tau, horizon = st.tau, 0.0
-        if self.cfg.tau_gains.switch_predicted:
-            x, v, horizon = self.response.predicted(t, st.x, st.xdot)
-            if horizon > 0.0:
-                tau = x / v if v > self.cfg.estimator.min_speed_mps else None
-        if tau is None or tau < tau_s:
+        """Stage 2 from the tick the measured tau reaches tau_s (docs/errata.md §9)."""
+        tau_s, tau = self.refs.tau_s, st.tau
+        if tau_s is None or tau is None or tau < tau_s:
             return
         self.refs.t_stage2 = t
         self._enter(
             Phase.STAGE2,
             t,
-            "predicted tau reached tau_s" if horizon > 0.0 else "measured tau reached tau_s",
+            "measured tau reached tau_s",
             tau=tau,
-            horizon_s=horizon,
             since_trigger=t - self.trigger.t,
         )
         self._refit_stage2(t)
@@ -322,16 +314,14 @@ class Supervisor:
 
     def _approach_accel(self, t: float, st: State, dt: float) -> float:
         """Feed-forward (with the drag identified so far) + PI on the speed reference; the
-        integral takes up what the feed-forward misses (ApproachConfig.ki_v), frozen while
+        integral takes up what the feed-forward misses (APPROACH_KI_V), frozen while
         the mapping saturates."""
-        a = self.cfg.approach
-        x, v, horizon = self.response.predicted(t, st.x, st.xdot)
-        v_ref, a_ff = self.refs.approach(x, self.response.ff.lead_s - horizon)
-        err = v_ref - v
-        if not self.ctl.saturated and a.ki_v > 0.0:
-            bound = a.i_limit_mps2 / a.ki_v
+        v_ref, a_ff = self.refs.approach(st.x, self.response.ff.lead_s)
+        err = v_ref - st.xdot
+        if not self.ctl.saturated:
+            bound = APPROACH_I_LIMIT_MPS2 / APPROACH_KI_V
             self._v_int = min(max(self._v_int + err * dt, -bound), bound)
-        return a_ff + a.kv * err + a.ki_v * self._v_int
+        return a_ff + APPROACH_KV * err + APPROACH_KI_V * self._v_int
 
     # --- the hover thrust (flight/hover.py) -------------------------------------------------
     def _learn_hover(self, t: float, dt: float, st: State) -> None:
@@ -350,12 +340,15 @@ class Supervisor:
         self.ctl.z.pid.integral = 0.0
 
     def _hover_ready(self, t: float, st: State) -> bool:
-        """True once the hover thrust is known; says in the log what the hold waits for, and
-        ends the flight HOVER_UNLEARNED after hover.timeout_s in HOLD."""
+        """True once the hover thrust is known; says in the log what the hold waits for.
+        After hover.timeout_s in HOLD unsettled (an autopilot's height loop keeps the thrust
+        moving by a few percent), a vehicle holding its height flies on the estimate it has;
+        one that does not hold it ends HOVER_UNLEARNED."""
         h, v = self.cfg.hover, self.cfg.vehicle
         if not h.learn or self.hover_learned_n is not None:
             return True
-        status = self.hover.status(t, st.z - self._z_ref, st.zdot)
+        z_err = st.z - self._z_ref
+        status = self.hover.status(t, z_err, st.zdot)
         ratio = status.estimate_n / (v.mass_kg * v.g)
         if self.hover.settled(status):
             return self._hover_settled(t, status.estimate_n, ratio)
@@ -369,28 +362,33 @@ class Supervisor:
                     {"estimate_n": status.estimate_n, "spread": status.spread},
                 )
             )
-        if t - self._t_phase > h.timeout_s:
+        if t - self._t_phase <= h.timeout_s:
+            return False
+        unsettled = (
+            f"hover thrust unsettled after {t - self._t_phase:.1f} s in hold: estimate "
+            f"{status.estimate_n:.4f} N ({ratio:.3f} x the weight of {v.mass_kg:g} kg), spread "
+            f"{status.spread:.1%} over {status.steady_s:.2f} s steady (settled: {REL_TOL:.1%} "
+            f"over {SETTLE_S:g} s)"
+        )
+        if abs(z_err) > Z_TOL_M:
             self._finish(
                 EndReason.HOVER_UNLEARNED,
                 t,
-                (
-                    f"hover thrust unsettled after {t - self._t_phase:.1f} s in hold: estimate "
-                    f"{status.estimate_n:.4f} N ({ratio:.3f} x the weight of "
-                    f"{v.mass_kg:g} kg), spread {status.spread:.1%} over "
-                    f"{status.steady_s:.2f} s steady (need {h.rel_tol:.1%} over {h.settle_s:g} s)"
-                ),
+                f"{unsettled}, and the vehicle is {z_err:+.2f} m off its hold height",
             )
-        return False
+            return False
+        self.events.append(LogEvent(t, "hover-unsettled", f"{unsettled}: flying the estimate"))
+        return self._hover_settled(t, status.estimate_n, ratio)
 
     def _hover_settled(self, t: float, hover_n: float, ratio: float) -> bool:
-        h, v = self.cfg.hover, self.cfg.vehicle
-        if not h.ratio_min <= ratio <= h.ratio_max:
+        v = self.cfg.vehicle
+        if not RATIO[0] <= ratio <= RATIO[1]:
             self._finish(
                 EndReason.HOVER_UNLEARNED,
                 t,
                 (
                     f"learned hover thrust {hover_n:.4f} N is {ratio:.3f} x the weight of "
-                    f"vehicle.mass_kg = {v.mass_kg:g} kg, outside {h.ratio_min:g}..{h.ratio_max:g}:"
+                    f"vehicle.mass_kg = {v.mass_kg:g} kg, outside {RATIO[0]:g}..{RATIO[1]:g}:"
                     f" check the mass and the driver's thrust calibration"
                 ),
             )
@@ -433,7 +431,7 @@ class Supervisor:
         self.trigger = Trigger(t0, x, v, plan.x0, plan.v0, action)
         # What the approach's integral took up, a push the feed-forward misses, does not end
         # at x0: stage 1's integral starts with it (docs/errata.md §10).
-        self.ctl.tau.reset(self.cfg.approach.ki_v * self._v_int)
+        self.ctl.tau.reset(APPROACH_KI_V * self._v_int)
         self._enter(Phase.STAGE1, t, action, x=x, v=v, plan_x0=plan.x0, plan_v0=plan.v0)
 
     def _refs(self, t: float, x: float | None) -> Refs:
@@ -455,13 +453,13 @@ class Supervisor:
 
     def _observe_response(self, t: float, st: State) -> None:
         """Record the ticks for the lag identification (the stages' commands feed its
-        prediction), and refit every LagIdGains.refit_s of the approach so the approach's
+        prediction), and refit every REFIT_S of the approach so the approach's
         own feed-forward meets the drag."""
         if not self.cfg.tau_gains.identify or self.phase not in _OBSERVED:
             return
         self.response.record(t, self.ctl.last_ux_sent, st.x, st.xdot)
         self.response.record_lean(t, self.ctl.last_lean_sent, t - st.age, st.lean_x)
-        if self.phase is not Phase.APPROACH or t - self._t_refit < self.cfg.lag_id.refit_s:
+        if self.phase is not Phase.APPROACH or t - self._t_refit < REFIT_S:
             return
         self._t_refit = t
         model = self.response.refit()
@@ -472,13 +470,10 @@ class Supervisor:
     def _hand_over_integral(self, st: State, ff: FeedForward) -> None:
         """What a new feed-forward adds (the drag), the approach's integral, which was
         taking it up, gives back: the command does not step and nothing counts twice."""
-        a = self.cfg.approach
-        if a.ki_v <= 0.0:
-            return
         v_ref = self.refs.v_ref(st.x)
         step = ff.step_from(self.response.ff, self.refs.a_app, v_ref)
-        bound = a.i_limit_mps2 / a.ki_v
-        self._v_int = min(max(self._v_int - step / a.ki_v, -bound), bound)
+        bound = APPROACH_I_LIMIT_MPS2 / APPROACH_KI_V
+        self._v_int = min(max(self._v_int - step / APPROACH_KI_V, -bound), bound)
 
     def _refit_stage2(self, t: float) -> None:
         """Stage 2 flies the drag refitted from stage 1 (VehicleResponse.refit_stage2); what

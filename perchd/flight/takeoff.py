@@ -36,7 +36,7 @@ LEAD_GROWTH_MPS = 0.1
 second, so a vehicle that then leaves carries little more than it needed."""
 LEAD_MAX_M = 0.6
 """[m] the most lead: kp x 0.6 m is a third of g above the guess; a vehicle that needs more
-is beyond what the hover learner accepts anyway (HoverConfig.ratio_max)."""
+is beyond what the hover learner accepts anyway (flight/hover.py's RATIO)."""
 ACCEL_MPS2 = 0.5
 """[m/s^2] the profile's acceleration and deceleration: with its feed-forward the loop
 follows it; the deceleration ends the climb at the hold height at rest."""

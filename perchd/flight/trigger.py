@@ -14,7 +14,7 @@ from typing import Any
 
 from perchd.core.errors import ConfigError
 from perchd.core.types import State
-from perchd.flight.config import FlightConfig, TriggerFallback, TriggerPolicy
+from perchd.flight.config import AHEAD_V_TOL_MPS, FlightConfig, TriggerFallback, TriggerPolicy
 from perchd.flight.planner_worker import InlinePlanner, Planner, PlanReply
 from perchd.logs.flightlog import LogEvent
 from perchd.tau.library import load_library
@@ -127,7 +127,7 @@ class TriggerDesk:
     def _plan_ahead(self, t: float, dt: float, st: State, v_ref: float) -> None:
         """Keep a plan ready for the predicted trigger state (x0, v0 + the approach's speed
         error, low-passed): asked again only when the prediction drifts by more than half
-        ahead_v_tol_mps from the last one asked for. Needs a planner that takes time."""
+        AHEAD_V_TOL_MPS from the last one asked for. Needs a planner that takes time."""
         if self.planner is None or self.planner.instant:
             return
         reply = self.planner.poll()
@@ -138,9 +138,7 @@ class TriggerDesk:
         asked = self._ahead_asked_v
         # Re-asked at half the tolerance the trigger accepts: the other half is for the
         # drift between the newest plan and the trigger.
-        if not self.planner.busy and (
-            asked is None or abs(v_pred - asked) > 0.5 * self.cfg.trigger.ahead_v_tol_mps
-        ):
+        if not self.planner.busy and (asked is None or abs(v_pred - asked) > 0.5 * AHEAD_V_TOL_MPS):
             self._ahead_asked_v = v_pred
             self.planner.request(self.plan.x0, v_pred)
 
@@ -163,7 +161,7 @@ class TriggerDesk:
             self.planner.request(st.x, st.xdot)
             return self._take_reply(t, ReplanWait(0, t, st.x, st.xdot, t), self.planner.poll())
         ahead = self._ahead
-        if ahead is not None and abs(st.xdot - ahead.v0) <= tr.ahead_v_tol_mps:
+        if ahead is not None and abs(st.xdot - ahead.v0) <= AHEAD_V_TOL_MPS:
             return Decision(
                 ahead,
                 t,

@@ -170,8 +170,7 @@ def test_the_stale_limit_counts_mocap_frames_not_the_loop_s_polls():
     """At 120 Hz mocap a 100 Hz loop sees 5 frames in 6; the frame period the stale rule
     multiplies by 3 is still 1/120 s (from the frames' seq numbers), not ~1/100 s."""
     from perchd.core.types import Pose
-    from perchd.flight.config import EstimatorConfig
-    from perchd.flight.estimator import Estimator
+    from perchd.flight.estimator import Estimator, EstimatorConfig
     from perchd.flight.frame import PerchFrame
 
     est = Estimator(EstimatorConfig(), PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)))

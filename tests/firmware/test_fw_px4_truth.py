@@ -227,8 +227,7 @@ def test_the_speed_perchd_measures_from_sih_truth_is_steady(tmp_path):
     (stamped at publication, on the raw 1e-7 deg lat/lon, it swung by +-0.1 m/s and more;
     refined at a 0.05 gain, by 0.018)."""
     from perchd.core.clock import ManualClock
-    from perchd.flight.config import EstimatorConfig
-    from perchd.flight.estimator import Estimator
+    from perchd.flight.estimator import Estimator, EstimatorConfig
     from perchd.flight.frame import PerchFrame
     from perchd.sim.firmware.harness import TruthPublisher
     from perchd.sim.world import MocapParams

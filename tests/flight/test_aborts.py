@@ -17,6 +17,7 @@ from perchd.flight.config import (
     TriggerConfig,
     TriggerPolicy,
 )
+from perchd.flight.endrules import OVERRUN_STREAK
 from perchd.flight.run import FlightAbort
 from perchd.logs.flightlog import read_log
 
@@ -127,7 +128,7 @@ def test_a_loop_that_keeps_missing_its_deadlines_ends_the_flight(tmp_path):
 
     sim, res = fly(tmp_path, on_tick=on_tick)
     assert_failsafe_and_closed_log(sim, res, EndReason.DEADLINE_OVERRUN)
-    assert res.loop.max_streak >= FlightConfig().safety.overrun_streak
+    assert res.loop.max_streak >= OVERRUN_STREAK
 
 
 def test_a_flight_that_takes_too_long_times_out(tmp_path):

@@ -8,8 +8,7 @@ import random
 import pytest
 
 from perchd.core.types import Pose
-from perchd.flight.config import EstimatorConfig
-from perchd.flight.estimator import Estimator
+from perchd.flight.estimator import Estimator, EstimatorConfig
 from perchd.flight.frame import PerchFrame
 
 WALL_X = PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))

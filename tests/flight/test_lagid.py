@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from perchd.core.types import Pose
-from perchd.flight.config import EstimatorConfig, LagIdGains
-from perchd.flight.estimator import Estimator
+from perchd.flight.config import LagIdGains
+from perchd.flight.estimator import Estimator, EstimatorConfig
 from perchd.flight.frame import PerchFrame
 from perchd.flight.lagid import LagIdentifier, LagModel, _solve
 

@@ -11,8 +11,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from perchd.core.types import Pose
-from perchd.flight.config import EstimatorConfig, LagIdGains, TauGains
-from perchd.flight.estimator import Estimator
+from perchd.flight.config import LagIdGains, TauGains
+from perchd.flight.estimator import Estimator, EstimatorConfig
 from perchd.flight.frame import PerchFrame, body_z
 from perchd.flight.lagid import LagIdentifier
 from perchd.flight.response import VehicleResponse
