@@ -7,7 +7,8 @@ Flies the same N members of the vehicle family (perchd/sim/family.py, each on it
 flight, perchd/campaign/familyrun.py: fly_member) with the baseline config (benchmarks/family.py:
 base_config, the defaults with the trigger replanning) and with each variant of VARIANTS:
 one layer turned off by its config switches, or a group of them. A variant changes the
-FlightConfig only (dataclasses.replace), never the code. Prints one table, a row a variant:
+FlightConfig (dataclasses.replace) and, for a layer with no setting, a module constant
+(Variant.patches, set in the worker for its flights). Prints one table, a row a variant:
 
     in-window  CONTACT inside the plan's window (the simulator's contact speed) [%]
     err mean   mean contact speed less the plan's V_c over the contacts [m/s]
@@ -29,6 +30,7 @@ variants flown (besides the baseline); --json OUT: the summary and every row.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import importlib.util
 import json
@@ -65,7 +67,8 @@ def _family_bench() -> Any:
 
 
 Change = tuple[str, str, Any]
-"""(section, key, value): FlightConfig.<section>.<key> = value, as `[section] key = value`."""
+"""(section, key, value): FlightConfig.<section>.<key> = value, as `[section] key = value`;
+as a patch, (module, constant, value): a module constant the variant flies with."""
 
 
 @dataclass(frozen=True)
@@ -74,7 +77,8 @@ class Variant:
 
     name: str
     what: str
-    changes: tuple[Change, ...]
+    changes: tuple[Change, ...] = ()
+    patches: tuple[Change, ...] = ()
 
     def apply(self, cfg: FlightConfig) -> FlightConfig:
         """cfg with the changes (each section replaced once, so validation sees them all)."""
@@ -86,7 +90,24 @@ class Variant:
         )
 
     def toml(self) -> str:
-        return "; ".join(f"[{s}] {k} = {_toml(v)}" for s, k, v in self.changes)
+        return "; ".join(
+            [f"[{s}] {k} = {_toml(v)}" for s, k, v in self.changes]
+            + [f"{m}.{k} = {_toml(v)}" for m, k, v in self.patches]
+        )
+
+    @contextlib.contextmanager
+    def patched(self) -> Iterator[None]:
+        """The module constants of `patches` set while inside (restored after)."""
+        saved = []
+        try:
+            for module, key, value in self.patches:
+                mod = importlib.import_module(module)
+                saved.append((mod, key, getattr(mod, key)))
+                setattr(mod, key, value)
+            yield
+        finally:
+            for mod, key, value in reversed(saved):
+                setattr(mod, key, value)
 
 
 def _toml(v: Any) -> str:
@@ -102,53 +123,48 @@ LAYERS: tuple[Variant, ...] = (
     ),
     Variant(
         "ff-lead",
-        "the configured lead (0: the predictor's horizon is the whole lag)",
+        "the configured lead (0: no lead without an identified lag)",
         (("tau_gains", "ff_lead_s", 0.0),),
     ),
     Variant(
         "identify",
-        "lag/drag/bias identification (and all that uses it)",
+        "the response's identification (and all that uses it)",
         (("tau_gains", "identify", False),),
     ),
     Variant(
-        "refits", "the approach's refits (one fit at the trigger)", (("lag_id", "refit_s", 3600.0),)
+        "qdrag",
+        "the quadratic drag in the model (one linear drag)",
+        patches=(("perchd.flight.lagid", "QUADRATIC_DRAG", False),),
+    ),
+    Variant(
+        "refits",
+        "the approach's refits (one fit at the trigger)",
+        patches=(("perchd.flight.supervisor", "REFIT_S", 3600.0),),
     ),
     Variant(
         "lag-attitude", "the lag from the measured attitude", (("lag_id", "from_attitude", False),)
     ),
-    Variant(
-        "drag-lean", "the drag from the measured lean", (("lag_id", "drag_from_attitude", False),)
-    ),
-    Variant("smith", "the Smith predictor", (("tau_gains", "predict", False),)),
-    Variant(
-        "switch-pred",
-        "the stage-2 switch on the predicted tau",
-        (("tau_gains", "switch_predicted", False),),
-    ),
-    Variant(
-        "approach-pi",
-        "the approach's speed integral (and its hand-over)",
-        (("approach", "ki_v", 0.0),),
-    ),
-    Variant(
-        "lead-plan", "the approach's lead into the plan", (("approach", "lead_into_plan", False),)
-    ),
     Variant("scale", "stage 1's scale correction", (("tau_gains", "scale_gain", 0.0),)),
-    Variant("end-place", "stage 1 ended by place", (("tau_gains", "end_by_position", False),)),
     Variant(
-        "s2-hold",
-        "the stage-2 speed hold (the paper's clock-indexed tau_ref)",
-        (("tau_gains", "stage2_hold_speed", False),),
+        "margin",
+        "the stage-2 margin inside the window (V_c held as planned)",
+        (("tau_gains", "v_contact_margin_mps", 0.0),),
     ),
     Variant("s2-refit", "the stage-2 bias (and lag) refit", (("lag_id", "stage2_refit", False),)),
 )
-"""One layer off each: the switches that turn it off."""
+"""One layer off each: the switches (config changes, module constants) that turn it off."""
 
 _BY_NAME = {v.name: v for v in LAYERS}
 
 
 def _group(name: str, what: str, *layers: str) -> Variant:
-    return Variant(name, what, tuple(c for n in layers for c in _BY_NAME[n].changes))
+    picked = [_BY_NAME[n] for n in layers]
+    return Variant(
+        name,
+        what,
+        tuple(c for v in picked for c in v.changes),
+        tuple(p for v in picked for p in v.patches),
+    )
 
 
 GROUPS: tuple[Variant, ...] = (
@@ -156,16 +172,15 @@ GROUPS: tuple[Variant, ...] = (
         "no-ident",
         "all identification",
         "identify",
+        "qdrag",
         "refits",
         "lag-attitude",
-        "drag-lean",
         "s2-refit",
     ),
-    _group("no-predict", "all prediction", "smith", "switch-pred", "lead-plan"),
     _group(
         "paper-only",
         "every layer: the paper's tau PID with the plan's acceleration fed "
-        "forward at once, its Y/Z PID, the approach a P speed loop",
+        "forward at once, its Y/Z PID, stage 2 holding the plan's V_c",
         *(v.name for v in LAYERS if v.name != "feedforward"),
     ),
 )
@@ -184,9 +199,12 @@ def pick(names: list[str] | None) -> list[Variant]:
     return [BASELINE] + [v for v in VARIANTS if names is None or v.name in names]
 
 
-def _fly(job: tuple[Plan, FlightConfig, FamilyVehicle, str, int]) -> tuple[int, FamilyRow]:
-    plan, base, member, log_dir, k = job
-    return k, fly_member(plan, member, base, Path(log_dir) / f"v{k}-m{member.index:05d}.jsonl")
+def _fly(
+    job: tuple[Plan, FlightConfig, tuple[Change, ...], FamilyVehicle, str, int],
+) -> tuple[int, FamilyRow]:
+    plan, base, patches, member, log_dir, k = job
+    with Variant("", "", patches=patches).patched():
+        return k, fly_member(plan, member, base, Path(log_dir) / f"v{k}-m{member.index:05d}.jsonl")
 
 
 def fly_variants(
@@ -195,7 +213,11 @@ def fly_variants(
     """(variant index, row) for every variant and member, member-major (each member flown
     by every variant before the next), in `jobs` processes."""
     with tempfile.TemporaryDirectory(prefix="perchd-ablation-") as logs:
-        work = [(plan, v.apply(base), m, logs, k) for m in members for k, v in enumerate(variants)]
+        work = [
+            (plan, v.apply(base), v.patches, m, logs, k)
+            for m in members
+            for k, v in enumerate(variants)
+        ]
         if jobs == 1:
             yield from map(_fly, work)
             return
@@ -203,11 +225,13 @@ def fly_variants(
             yield from pool.map(_fly, work, chunksize=max(1, len(work) // (jobs * 32)))
 
 
-def fly_default(plan: Plan, cfg: FlightConfig) -> dict[str, float | str | None]:
-    """The README's sim:// perch with cfg: outcome, true contact speed [m/s], perch time
-    error [% of the plan's duration]."""
-    with tempfile.TemporaryDirectory(prefix="perchd-ablation-") as d:
-        res = open_session("sim://").fly(plan, Path(d) / "flight.jsonl", cfg)
+def fly_default(plan: Plan, variant: Variant) -> dict[str, float | str | None]:
+    """The README's sim:// perch with the variant: outcome, true contact speed [m/s], perch
+    time error [% of the plan's duration]."""
+    with tempfile.TemporaryDirectory(prefix="perchd-ablation-") as d, variant.patched():
+        res = open_session("sim://").fly(
+            plan, Path(d) / "flight.jsonl", variant.apply(FlightConfig())
+        )
     err = (
         None
         if res.true_perch_time is None
@@ -342,7 +366,7 @@ def main(argv: list[str] | None = None) -> int:
             )
     flown: list[list[FamilyRow]] = [[r for r in rs if r is not None] for rs in rows]
     summaries = [summarize(rs, flown[0]) for rs in flown]
-    defaults = [fly_default(plan, v.apply(FlightConfig())) for v in variants]
+    defaults = [fly_default(plan, v) for v in variants]
     wall = time.perf_counter() - t0
     print(
         f"{args.n} members (seed {args.seed}) x {len(variants)} variants, {wall:.0f} s; "

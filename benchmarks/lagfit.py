@@ -17,7 +17,7 @@ import statistics
 import time
 
 from perchd.flight.config import LagIdGains
-from perchd.flight.lagid import LagIdentifier
+from perchd.flight.lagid import WINDOW_S, LagIdentifier
 
 DT, G = 0.01, 9.81
 
@@ -30,7 +30,7 @@ def recorded(
     x, v, lean, sent = -6.0, 0.0, 0.0, []
     step = DT / 10  # the vehicle integrated in 1 ms steps, each command held for its tick
     keep = math.exp(-step / tc_s) if tc_s > 0.0 else 0.0
-    for k in range(int(cfg.window_s / DT)):
+    for k in range(int(WINDOW_S / DT)):
         t = k * DT
         sent.append(0.0 if t < 2.0 else (0.06 if t < 6.0 else -0.08))
         ident.record(t, G * sent[-1], x, v)

@@ -81,9 +81,10 @@ class HoverConfig:
     the estimate has settled and which hover thrusts are believed).
 
     learn: refine the hover thrust in HOLD and start the approach once it settled.
-    timeout_s: [s] in HOLD without the estimate settling: the approach starts on the
-        estimate it has when that is within 5 % of the weight (a vehicle that holds its
-        height on it is flyable), else the flight ends HOVER_UNLEARNED.
+    timeout_s: [s] in HOLD without the estimate settling: a vehicle holding its height
+        (within flight/hover.py's Z_TOL_M) flies on the estimate it has, an autopilot's
+        height loop keeping its thrust moving by a few percent; one that does not hold its
+        height, or whose estimate is outside RATIO x its weight, ends HOVER_UNLEARNED.
     """
 
     learn: bool = True

@@ -111,9 +111,7 @@ class TauController:
         """Start afresh, the integral supplying held [m/s^2] (within TAU_I_LIMIT_MPS2)."""
         self.pid.reset()
         if self.gains.ki > 0.0:
-            self.pid.integral = (
-                min(max(held, -TAU_I_LIMIT_MPS2), TAU_I_LIMIT_MPS2) / self.gains.ki
-            )
+            self.pid.integral = min(max(held, -TAU_I_LIMIT_MPS2), TAU_I_LIMIT_MPS2) / self.gains.ki
 
     def give_back(self, step: float) -> None:
         """A feed-forward grows by step [m/s^2]: the integral gives back what it holds of

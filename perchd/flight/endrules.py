@@ -177,7 +177,7 @@ class EndRules:
 
     def _tau_watch(self, t: float, st: State, p: Progress) -> Ending | None:
         """TAU_DIVERGENCE once tau has been off its reference (or undefined) for
-        safety.tau_error_s."""
+        TAU_ERROR_HOLD_S."""
         if p.phase not in _STAGES:
             return None
         ref = p.tau_ref()

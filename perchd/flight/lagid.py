@@ -78,6 +78,9 @@ RMS_MAX_MPS = 0.1
 """[m/s] a fit whose predicted speed strays further from the measured one is refused."""
 FREE: tuple[None, None] = (None, None)
 """Both drags fitted (neither held)."""
+QUADRATIC_DRAG = True
+"""Fit the quadratic drag beside the linear one (benchmarks/ablation.py turns it off to
+measure what it earns)."""
 QDRAG_MAX_PER_M = 1.0
 """[1/m] the largest quadratic drag a fit accepts (the family's plants: up to 0.4)."""
 FIT_POINTS = 200
@@ -259,8 +262,8 @@ class LagIdentifier:
         narrow speed range (the approach's 0-to-v0 tells the drag). Refused on too few
         ticks or a large residual. No hold-out test: judged on stage 1's last 40 %, it
         refused ArduCopter's refit in 5 flights of 36, which touched at 0.957-0.983 m/s
-        where the 31 refitted touched at 0.983-1.000 (docs/firmware.md, "The switch on
-        the predicted tau")."""
+        where the 31 refitted touched at 0.983-1.000 (docs/firmware.md, "The stage-2
+        refit")."""
         t, u, x, v = (np.array(col) for col in zip(*self._rows)) if self._rows else ([],) * 4
         first = int(np.searchsorted(t, since_t))
         n = len(t) - first
@@ -332,6 +335,8 @@ def _fixed_drags(t, a, x, v, lags, drag, start: int) -> np.ndarray:
     negative quadratic drag is solved again as none, then a slightly negative linear one
     (down to a tenth of DRAG_MAX_PER_S; below, _checked refuses it). Clipping one alone
     would keep the others fitted beside it, off by the clipped term's push."""
+    if not QUADRATIC_DRAG and drag[1] is None:
+        drag = (drag[0], 0.0)
     sol = _solve(t, a, x, v, lags, drag, start)[1][0, :, 0]
     if drag[1] is None and sol[1] < 0.0:
         drag = (drag[0], 0.0)

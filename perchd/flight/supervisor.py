@@ -1,10 +1,11 @@
 """The flight's phases: one `tick` per control period, no I/O of its own.
 
 Phases: TAKEOFF (only when the flight starts below the take-off height) -> HOLD at the start
-point, at least hold_s and until the hover thrust has been learned (flight/hover.py;
-HOVER_UNLEARNED after hover.timeout_s) -> APPROACH (accelerate along X so that the plan's trigger state (x0, v0) is reached at
-x0) -> trigger -> STAGE1 (tau_ref indexed by time since the trigger) -> STAGE2 when the
-*measured* tau reaches tau_s (docs/errata.md §9; tau_ref = tau_s + time since that switch) ->
+point, at least hold_s and until the hover thrust has been learned (flight/hover.py; after
+hover.timeout_s a vehicle holding its height flies its estimate) -> APPROACH (accelerate
+along X so that the plan's trigger state (x0, v0) is reached at x0) -> trigger -> STAGE1
+(tau_ref indexed by time since the trigger) -> STAGE2 when the measured tau reaches tau_s
+(docs/errata.md §9; tau_ref = X / V_hold: the speed held inside the window) ->
 CONTACT (the post-contact action for POST_CONTACT_S) -> DONE.
 
 Every tick first asks the end rules (flight/endrules.py); the references each phase aims at
