@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import random
 
+import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
@@ -14,7 +15,7 @@ from perchd.core.types import Pose
 from perchd.flight.config import LagIdGains, TauGains
 from perchd.flight.estimator import Estimator, EstimatorConfig
 from perchd.flight.frame import PerchFrame, body_z
-from perchd.flight.lagid import LagIdentifier
+from perchd.flight.lagid import LagIdentifier, _model_at
 from perchd.flight.response import VehicleResponse
 
 DT, G = 0.01, 9.81
@@ -188,25 +189,21 @@ def test_the_fit_flies_the_attitudes_lag_and_fits_drag_to_the_positions():
     assert fit.model.drag_per_s == pytest.approx(0.25, abs=0.01)
 
 
-@pytest.mark.parametrize("from_lean", [True, False])
-def test_the_drag_is_fitted_to_the_lean_held_not_the_one_sent(from_lean):
+def test_the_drag_is_fitted_to_the_lean_held_not_the_one_sent():
     """A vehicle that leans 0.003 more per m/s than it is sent meets the drag 0.25 /s
     with up to g x 0.003 = 0.029 /s less net of that lean: fitted to the commands, the
     drag reads low (0.230; stage 2, slower than stage 1, then meets less push than the
     refit carries); fitted to the lean measured, it is the drag."""
-    fit = fly(
-        0.11,
-        0.24,
-        lean_per_mps=0.003,
-        noise=math.radians(0.1),
-        cfg=LagIdGains(drag_from_attitude=from_lean),
-    ).fit()
+    ident = fly(0.11, 0.24, lean_per_mps=0.003, noise=math.radians(0.1))
+    fit = ident.fit()
     assert fit.model is not None and fit.model.from_attitude, fit.why
-    assert fit.model.drag_from_attitude is from_lean
-    if from_lean:
-        assert fit.model.drag_per_s == pytest.approx(0.25, abs=0.005)
-    else:
-        assert fit.model.drag_per_s < 0.25 - 0.5 * G * 0.003
+    assert fit.model.drag_from_attitude
+    assert fit.model.drag_per_s == pytest.approx(0.25, abs=0.005)
+    t, u, x, v = (np.array(c) for c in zip(*ident._rows))
+    lean = ident.lean_response()
+    assert lean is not None
+    commands = _model_at(t, u, x, v, *lean, fit.model.speed_span_mps, (None, 0.0))
+    assert commands.drag_per_s < 0.25 - 0.5 * G * 0.003
 
 
 def test_the_positions_lag_is_fitted_when_the_attitude_is_not_used():
