@@ -8,7 +8,11 @@ from simflight import NOISY, PLANS, Sim, case1
 
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, LoopSync, TauGains
+from perchd.flight.references import hold_speed
 from perchd.logs.flightlog import read_log
+
+MARGIN = TauGains().v_contact_margin_mps
+"""[m/s] how far inside the contact window stage 2 holds the plan's V_c (hold_speed)."""
 
 LINKS = {"nominal": "sim://", "latency+noise": NOISY, "latency+noise seed 1": NOISY + "&seed=1"}
 
@@ -30,7 +34,7 @@ def test_the_perch_ends_in_contact_inside_the_speed_window(flown):
     lo, hi = plan.limits.v_contact
     assert res.outcome is EndReason.CONTACT
     assert lo <= res.true_contact_speed <= hi
-    assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.05)
+    assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.05)
 
 
 def test_the_perch_takes_the_planned_time_within_5_percent(flown):
@@ -88,27 +92,18 @@ def test_stage_two_starts_when_the_measured_tau_reaches_tau_s(flown):
     assert before.tau < plan.tau_s
 
 
-def test_the_papers_clock_indexed_stage_two_also_perches(tmp_path):
-    """tau_ref = tau_s + (t - t_s) (eq. 6) instead of holding V_c: contact, nearer the edge."""
-    plan = case1("ipts")
-    cfg = FlightConfig(tau_gains=TauGains(stage2_hold_speed=False))
-    res = Sim().fly(plan, tmp_path / "f.jsonl", cfg)
-    assert res.outcome is EndReason.CONTACT
-    assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.05)
-    assert res.true_perch_time == pytest.approx(plan.duration, rel=0.05)
-
-
 @pytest.mark.parametrize("action,thrust", [("cut", 0.0), ("idle", 0.08)])
 def test_after_contact_the_motors_are_cut_or_idled_as_configured(action, thrust, tmp_path):
     from perchd.core.types import Phase
     from perchd.flight.config import PostContact
+    from perchd.flight.supervisor import POST_CONTACT_S
 
     sim = Sim()
     cfg = FlightConfig(post_contact=PostContact(action), sync=LoopSync.FIXED)  # counts ticks
     res = sim.fly(case1("ctdts"), tmp_path / "f.jsonl", cfg)
     after = [sp for sp in sim.world.sent if sp.phase is Phase.CONTACT]
     assert res.outcome is EndReason.CONTACT and not res.failsafe_sent
-    assert len(after) == pytest.approx(cfg.post_contact_s * cfg.rate_hz, abs=1)
+    assert len(after) == pytest.approx(POST_CONTACT_S * cfg.rate_hz, abs=1)
     assert {sp.thrust for sp in after} == {thrust}
     assert read_log(res.log).rows[-1].phase == "done"
 
@@ -120,7 +115,7 @@ def test_the_loop_perches_as_well_at_50_and_500_hz(rate_hz, tmp_path):
         plan, tmp_path / "f.jsonl", FlightConfig(rate_hz=rate_hz, sync=LoopSync.FIXED)
     )
     assert res.outcome is EndReason.CONTACT
-    assert res.true_contact_speed == pytest.approx(plan.v_contact, abs=0.05)
+    assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.05)
     assert res.loop.ticks == pytest.approx(rate_hz * read_log(res.log).rows[-1].t, rel=0.01)
 
 
@@ -144,7 +139,7 @@ def test_the_replan_policy_flies_a_plan_made_for_the_measured_trigger_state(stra
     assert (res.trigger.plan_x0, res.trigger.plan_v0) == (res.trigger.x, res.trigger.v)
     assert res.trigger.action.startswith("replan")
     assert res.true_perch_time == pytest.approx(res.plan_duration, rel=0.05)
-    assert res.true_contact_speed == pytest.approx(res.v_contact_plan, abs=0.05)
+    assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.05)
 
 
 def test_a_vehicle_on_the_ground_takes_off_holds_and_then_perches(tmp_path):
