@@ -180,12 +180,14 @@ def test_an_exception_in_the_loop_still_sends_the_failsafe_and_closes_the_log(tm
     assert log.complete and log.end["outcome"] == "SOFTWARE_ERROR"
 
 
-def test_a_wall_nearer_than_configured_stops_the_vehicle_short_and_the_plan_completes(tmp_path):
+def test_a_wall_nearer_than_configured_stops_the_vehicle_short_and_the_plan_completes(
+    tmp_path, monkeypatch
+):
+    from perchd.flight import endrules
     from perchd.flight.config import SurfaceConfig
 
-    cfg = dataclasses.replace(
-        safety(tau_error_s=100.0), surface=SurfaceConfig(point=(0.5, 0.0, 0.0))
-    )
+    monkeypatch.setattr(endrules, "TAU_ERROR_HOLD_S", 100.0)
+    cfg = dataclasses.replace(FlightConfig(), surface=SurfaceConfig(point=(0.5, 0.0, 0.0)))
 
     def noisy(sim):  # real mocap sees a perched body jitter; bit-still reads as a frozen tracker
         wp = sim.world.params

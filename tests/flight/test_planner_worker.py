@@ -23,7 +23,10 @@ from ticks import wait_for
 
 from perchd.core.clock import MonotonicClock
 from perchd.core.types import EndReason, Phase, Setpoint
+from perchd.flight import trigger
 from perchd.flight.config import (
+    AHEAD_V_TOL_MPS,
+    SOLVE_MAX_S,
     FlightConfig,
     TauGains,
     TriggerConfig,
@@ -101,12 +104,11 @@ def assert_no_tick_held_up(log, t0: float, t1: float, period: float) -> None:
     ],
 )
 def test_a_replan_slower_than_its_deadline_takes_the_fallback_without_missing_a_tick(
-    tmp_path, fallback, outcome
+    tmp_path, monkeypatch, fallback, outcome
 ):
-    # ahead_v_tol_mps 0: no plan made ahead fits the measured speed, the trigger must ask.
-    cfg = FlightConfig(
-        trigger=TriggerConfig(TriggerPolicy.REPLAN, fallback=fallback, ahead_v_tol_mps=0.0)
-    )
+    # AHEAD_V_TOL_MPS 0: no plan made ahead fits the measured speed, the trigger must ask.
+    monkeypatch.setattr(trigger, "AHEAD_V_TOL_MPS", 0.0)
+    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN, fallback=fallback))
     slow = WorkerPlanner(PLAN, delay_s=SLOW_S)
     _, res = real_time_flight(tmp_path, cfg, slow)
     log = read_log(res.log)
@@ -128,7 +130,7 @@ def test_a_replan_slower_than_its_deadline_takes_the_fallback_without_missing_a_
 @pytest.mark.solo
 def test_the_plan_made_ahead_is_flown_at_the_trigger_with_no_wait(tmp_path):
     """An ordinary replan in real time: drag leaves the approach short of v0 by more than
-    ahead_v_tol_mps (as on PX4 SIH), the worker planned for the predicted trigger speed
+    AHEAD_V_TOL_MPS (as on PX4 SIH), the worker planned for the predicted trigger speed
     during the approach, the trigger takes that plan in its own tick, and it perches."""
     # Without the lag and drag identification, whose drag feed-forward brings the approach
     # to v0 (docs/errata.md §10): this flight needs a trigger speed off the plan's.
@@ -139,7 +141,7 @@ def test_the_plan_made_ahead_is_flown_at_the_trigger_with_no_wait(tmp_path):
     assert res.outcome is EndReason.CONTACT
     assert "plan-ahead" in kinds and "trigger-wait" not in kinds
     assert "planned ahead" in res.trigger.action
-    assert abs(res.trigger.v - PLAN.v0) > REPLAN.trigger.ahead_v_tol_mps
+    assert abs(res.trigger.v - PLAN.v0) > AHEAD_V_TOL_MPS
     lo, hi = PLAN.limits.v_contact
     assert lo <= session.world.contact.speed <= hi
 
@@ -366,7 +368,7 @@ class MavlinkBridge:
         self.session.close()
 
 
-def test_over_mavlink_a_px4_like_vehicle_misses_no_tick_at_the_replan(tmp_path):
+def test_over_mavlink_a_px4_like_vehicle_misses_no_tick_at_the_replan(tmp_path, monkeypatch):
     """`perchd fly --driver mavlink:...` with policy replan and a solve that cannot be in
     by the deadline: the loop keeps its ticks at the trigger, over real MAVLink."""
     from perchd.drivers.base import open_driver
@@ -374,7 +376,8 @@ def test_over_mavlink_a_px4_like_vehicle_misses_no_tick_at_the_replan(tmp_path):
     from perchd.flight.run import fly
     from perchd.mocap.base import open_source
 
-    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN, ahead_v_tol_mps=0.0))
+    monkeypatch.setattr(trigger, "AHEAD_V_TOL_MPS", 0.0)
+    cfg = FlightConfig(trigger=TriggerConfig(TriggerPolicy.REPLAN))
     frame = PerchFrame.from_surface(cfg.surface.point, cfg.surface.normal)
     rig = MavlinkBridge(frame.yaw_facing)
     try:
@@ -409,18 +412,20 @@ def test_the_trigger_keys_are_read_from_the_config_file_and_bad_ones_named():
         "trigger": {
             "policy": "replan",
             "fallback": "refuse",
-            "solve_max_s": 0.05,
-            "ahead_v_tol_mps": 0.03,
+            "v_tol_mps": 1.5,
+            "x_tol_m": 0.9,
         },
     }
     tr = config_from_dict(doc).flight.trigger
-    assert (tr.fallback, tr.solve_max_s, tr.ahead_v_tol_mps) == (TriggerFallback.REFUSE, 0.05, 0.03)
+    assert (tr.fallback, tr.v_tol_mps, tr.x_tol_m) == (TriggerFallback.REFUSE, 1.5, 0.9)
     a = PLAN.peaks.a
-    assert tr.deadline_s(a) == 0.05  # the cap, under v_tol_mps / a
+    assert tr.deadline_s(a) == SOLVE_MAX_S  # the cap, under v_tol_mps / a
     assert TriggerConfig().deadline_s(a) == pytest.approx(min(0.10 / a, (2 * 0.05 / a) ** 0.5))
     with pytest.raises(ConfigError, match=r"\[trigger\] fallback: expected 'plan' or 'refuse'"):
         config_from_dict({"version": 1, "trigger": {"fallback": "fly"}})
     with pytest.raises(
-        ConfigError, match=r"\[trigger\] solve_max_s = -1 s: outside its range 0..5 s"
+        ConfigError, match=r"\[trigger\] v_tol_mps = -1 m/s: outside its range 0..2 m/s"
     ):
-        config_from_dict({"version": 1, "trigger": {"solve_max_s": -1}})
+        config_from_dict({"version": 1, "trigger": {"v_tol_mps": -1}})
+    with pytest.raises(ConfigError, match=r"\[trigger\] solve_max_s: unknown key"):
+        config_from_dict({"version": 1, "trigger": {"solve_max_s": 0.05}})
