@@ -13,6 +13,7 @@ from faultsim import PERIOD, TICK, fly, injected, report
 
 from perchd.core.types import EndReason, Phase
 from perchd.flight.config import FlightConfig
+from perchd.flight.endrules import OVERRUN_STREAK
 
 LATENCY = 0.004
 """[s] the simulated mocap's latency."""
@@ -135,14 +136,14 @@ def stall_ticks(n: int, each_s: float = 0.015):
 
 
 def test_an_overrun_streak_one_short_of_the_limit_is_flown_through(tmp_path):
-    streak = FlightConfig().safety.overrun_streak
+    streak = OVERRUN_STREAK
     f = fly(tmp_path, on_tick=stall_ticks(streak - 1))
     injected("overrun streak")
     assert f.res.outcome is EndReason.CONTACT and f.res.loop.max_streak == streak - 1
 
 
 def test_the_overrun_streak_aborts_on_its_tenth_missed_deadline(tmp_path):
-    streak = FlightConfig().safety.overrun_streak
+    streak = OVERRUN_STREAK
     hook = stall_ticks(10 * streak)
     f = fly(tmp_path, on_tick=hook)
     injected("overrun streak")
