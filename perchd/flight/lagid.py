@@ -227,7 +227,8 @@ class LagIdentifier:
                 return fit  # refused at the attitude's lag: the positions' own may serve
         delays = np.arange(0.0, LAG_MAX_S + 1e-9, LAG_STEP_S)
         taus = np.arange(0.0, TIME_CONSTANT_MAX_S + 1e-9, LAG_STEP_S)
-        mse = _solve(t, _first_order(t, u, taus), x, v, delays)[0]
+        # The delay is chosen on one linear drag: a free quadratic one trades with it.
+        mse = _solve(t, _first_order(t, u, taus), x, v, delays, (None, 0.0))[0]
         j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
         if i == len(delays) - 1:
             return LagFit(None, f"the best lag is at the bound {LAG_MAX_S:g} s or beyond")
@@ -331,9 +332,10 @@ def _drags(t, a, x, v, lags, drag, start: int = 0) -> tuple[float, float]:
 
 def _fixed_drags(t, a, x, v, lags, drag, start: int) -> np.ndarray:
     """(drag, qdrag, bias, Xdot(s), offset) of the fit at the first input and lag. The two
-    drags trade over an approach's speeds, so a negative one is noise about none: a
-    negative quadratic drag is solved again as none, then a slightly negative linear one
-    (down to a tenth of DRAG_MAX_PER_S; below, _checked refuses it). Clipping one alone
+    drags trade over an approach's speeds, so a negative one is noise about none, or the
+    other's trade: a negative quadratic drag is solved again as none; then a negative linear
+    one beside a positive quadratic one, or slightly negative alone (down to a tenth of
+    DRAG_MAX_PER_S; below, _checked refuses it), is solved again as none. Clipping one alone
     would keep the others fitted beside it, off by the clipped term's push."""
     if not QUADRATIC_DRAG and drag[1] is None:
         drag = (drag[0], 0.0)
@@ -341,8 +343,9 @@ def _fixed_drags(t, a, x, v, lags, drag, start: int) -> np.ndarray:
     if drag[1] is None and sol[1] < 0.0:
         drag = (drag[0], 0.0)
         sol = _solve(t, a, x, v, lags, drag, start)[1][0, :, 0]
-    if drag[0] is None and -0.1 * DRAG_MAX_PER_S <= sol[0] < 0.0:
-        sol = _solve(t, a, x, v, lags, (0.0, drag[1]), start)[1][0, :, 0]
+    if drag[0] is None and sol[0] < 0.0 and (sol[1] > 0.0 or sol[0] >= -0.1 * DRAG_MAX_PER_S):
+        drag = (0.0, drag[1])
+        sol = _solve(t, a, x, v, lags, drag, start)[1][0, :, 0]
         if drag[1] is None and sol[1] < 0.0:
             sol = _solve(t, a, x, v, lags, (0.0, 0.0), start)[1][0, :, 0]
     return sol
