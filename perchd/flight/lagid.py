@@ -476,7 +476,10 @@ def _solve(
     q, r = np.linalg.qr(cols[:, free])
     proj = y @ q  # the residual is what the columns' span leaves of y
     mse = (np.einsum("...p,...p->...", y, y) - np.einsum("...k,...k->...", proj, proj)) / len(s)
-    fitted = np.linalg.solve(r, np.moveaxis(proj, -1, -2))
+    try:
+        fitted = np.linalg.solve(r, np.moveaxis(proj, -1, -2))
+    except np.linalg.LinAlgError:  # columns that are not independent (a speed held constant)
+        fitted = np.linalg.pinv(r) @ np.moveaxis(proj, -1, -2)
     sol = np.zeros(fitted.shape[:1] + (5,) + fitted.shape[2:])
     sol[:, free] = fitted
     for k in (0, 1):

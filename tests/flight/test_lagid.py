@@ -226,3 +226,37 @@ def test_the_refit_counts_the_commands_in_flight_when_it_begins():
     since = ident.refit_bias(base, since_t=3.0).model
     assert since is not None
     assert -0.15 <= since.bias_mps2 <= -0.15 * 1.5 / 1.8
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_any_window_fits_or_refuses_never_raises(seed):
+    """Windows of held speeds, steps and clock jumps (a loop descheduled for a second): the
+    drags' columns may then be one with the bias's (v s, v^2 s^2 / 2, s^2 / 2 alike over a
+    held speed). The fit answers either way."""
+    rng = random.Random(seed)
+    ident = LagIdentifier(LagIdGains())
+    t, x, v = 0.0, -4.0, 0.0
+    for _ in range(rng.randrange(30, 900)):
+        dt = 0.01 + (rng.choice([0.0, 0.3, 1.0, 2.5]) if rng.random() < 0.01 else 0.0)
+        if rng.random() < 0.02:
+            v = rng.choice([0.0, 0.4, 1.0, 1.5, 2.0])
+        t, x = t + dt, x + v * dt
+        ident.record(t, rng.choice([0.0, 0.5, v]), x, v)
+    fit = ident.fit()
+    assert fit.model is not None or fit.why
+    if fit.model is not None:
+        m = fit.model
+        assert np.isfinite([m.lag_s, m.drag_per_s, m.qdrag_per_m, m.bias_mps2]).all()
+
+
+def test_a_hold_then_one_tick_after_a_clock_jump_fits_or_refuses():
+    """At rest for 0.5 s, then one tick a second later already moving: every column but the
+    bias's and the speed's is zero until that tick (the singular case a descheduled loop
+    met at the approach's start)."""
+    ident = LagIdentifier(LagIdGains())
+    for k in range(1, 51):
+        ident.record(0.01 * k, 0.0, -4.5, 0.0)
+    ident.record(0.51, 0.75, -4.5, 0.0)
+    ident.record(1.51, 0.19, -4.17, 0.75)
+    fit = ident.fit()
+    assert fit.model is not None or fit.why

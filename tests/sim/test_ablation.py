@@ -1,5 +1,6 @@
 """benchmarks/ablation.py: each variant differs from the baseline config in exactly the
-fields it names (compared field by field), and a 3-member run prints a well-formed table.
+fields it names (compared field by field), its module constants are set while it flies and
+restored after, and a 3-member run prints a well-formed table.
 No assertion on any rate: the benchmark measures them."""
 
 from __future__ import annotations
@@ -58,28 +59,44 @@ def test_each_variant_changes_exactly_the_fields_it_names(variant):
         assert changed == claimed, variant.name
 
 
+def _switches(v) -> set[tuple[str, str]]:
+    return {(s, k) for s, k, _ in v.changes + v.patches}
+
+
 def test_every_single_layer_is_its_own_and_the_groups_are_unions_of_them():
-    singles = {(s, k) for v in ablation.LAYERS for s, k, _ in v.changes}
-    assert len(singles) == sum(len(v.changes) for v in ablation.LAYERS)
+    singles = set().union(*map(_switches, ablation.LAYERS))
+    assert len(singles) == sum(len(v.changes) + len(v.patches) for v in ablation.LAYERS)
     paper = {v.name: v for v in ablation.GROUPS}["paper-only"]
     # the paper feeds the plan's acceleration forward (docs/errata.md §10): kept, lead 0
-    assert {(s, k) for s, k, _ in paper.changes} == singles - {("tau_gains", "feedforward")}
+    assert _switches(paper) == singles - {("tau_gains", "feedforward")}
     for group in ablation.GROUPS:
-        assert {(s, k) for s, k, _ in group.changes} <= singles
+        assert _switches(group) <= singles
     assert len({v.name for v in ablation.VARIANTS}) == len(ablation.VARIANTS)
+
+
+@pytest.mark.parametrize(
+    "variant", [v for v in ablation.VARIANTS if v.patches], ids=lambda v: v.name
+)
+def test_a_variants_constants_are_set_while_it_flies_and_restored_after(variant):
+    slots = [(importlib.import_module(m), k, value) for m, k, value in variant.patches]
+    before = [getattr(mod, k) for mod, k, _ in slots]
+    assert all(value != was for (_, _, value), was in zip(slots, before)), "a patch changes"
+    with variant.patched():
+        assert [getattr(mod, k) for mod, k, _ in slots] == [value for _, _, value in slots]
+    assert [getattr(mod, k) for mod, k, _ in slots] == before
 
 
 def test_unknown_layers_are_refused():
     with pytest.raises(SystemExit, match="nope"):
-        ablation.pick(["smith", "nope"])
-    assert [v.name for v in ablation.pick(["smith"])] == ["baseline", "smith"]
+        ablation.pick(["qdrag", "nope"])
+    assert [v.name for v in ablation.pick(["qdrag"])] == ["baseline", "qdrag"]
 
 
 def test_a_three_member_run_prints_a_well_formed_table(tmp_path, capsys):
     out = tmp_path / "a.json"
     assert (
         ablation.main(
-            ["--n", "3", "--jobs", "1", "--layers", "smith", "paper-only", "--json", str(out)]
+            ["--n", "3", "--jobs", "1", "--layers", "qdrag", "paper-only", "--json", str(out)]
         )
         == 0
     )
@@ -89,7 +106,7 @@ def test_a_three_member_run_prints_a_well_formed_table(tmp_path, capsys):
     columns = ablation.HEAD.count(" | ") + 1
     assert [row.split(" | ")[0].lstrip("| ") for row in table[2:]] == [
         "baseline",
-        "smith",
+        "qdrag",
         "paper-only",
     ]
     for row in table:
@@ -97,7 +114,7 @@ def test_a_three_member_run_prints_a_well_formed_table(tmp_path, capsys):
     doc = json.loads(out.read_text())
     assert doc["n"] == 3 and [v["name"] for v in doc["variants"]] == [
         "baseline",
-        "smith",
+        "qdrag",
         "paper-only",
     ]
     for v in doc["variants"]:
