@@ -324,13 +324,27 @@ def _model_at(
     return replace(m, rms_mps=float(np.sqrt(np.mean(err * err))))
 
 
-def _drags(t, a, x, v, lags, drag, start: int = 0) -> tuple[float, float]:
+Drags = tuple[float | None, float | None]
+"""(linear [1/s], quadratic [1/m]) drag: a number is held, None is fitted."""
+
+
+def _drags(
+    t: np.ndarray, a: np.ndarray, x: np.ndarray, v: np.ndarray, lags: np.ndarray, drag: Drags
+) -> tuple[float, float]:
     """(drag [1/s], qdrag [1/m]) of the fit at the first input and lag, signs settled."""
-    sol = _fixed_drags(t, a, x, v, lags, drag, start)
+    sol = _fixed_drags(t, a, x, v, lags, drag, 0)
     return float(sol[0]), float(sol[1])
 
 
-def _fixed_drags(t, a, x, v, lags, drag, start: int) -> np.ndarray:
+def _fixed_drags(
+    t: np.ndarray,
+    a: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    lags: np.ndarray,
+    drag: Drags,
+    start: int,
+) -> np.ndarray:
     """(drag, qdrag, bias, Xdot(s), offset) of the fit at the first input and lag. The two
     drags trade over an approach's speeds, so a negative one is noise about none, or the
     other's trade: a negative quadratic drag is solved again as none; then a negative linear
