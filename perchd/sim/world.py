@@ -111,7 +111,7 @@ class SimWorld:
         self._descending = False  # the failsafe descends before it cuts (failsafe)
         n = params.surface_normal
         norm = math.sqrt(sum(c * c for c in n))
-        self._n = tuple(c / norm for c in n)
+        self._n: Vec3 = (n[0] / norm, n[1] / norm, n[2] / norm)
         self._rng = random.Random(params.seed)
         self._lock = threading.RLock()
         period = 1.0 / params.mocap.rate_hz
