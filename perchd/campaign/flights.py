@@ -12,14 +12,13 @@ as in this one, with the same figures.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 import signal
 import statistics
 import tempfile
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from perchd.campaign.tableformats import CsvTable
 from perchd.core.errors import ConfigError, PlanError
 from perchd.core.types import EndReason, Phase, Vec3
 from perchd.flight.config import FlightConfig, TriggerPolicy
@@ -145,6 +145,31 @@ class FlightRow:
 
 
 COLUMNS = tuple(f.name for f in dataclasses.fields(FlightRow))
+
+
+@dataclass(frozen=True, slots=True)
+class Brief:
+    """What a campaign keeps of a row once the row is on disk: its key (index, seed) and
+    the figures `summarize` takes, in FlightRow's units."""
+
+    index: int
+    seed: int
+    outcome: str
+    in_window: bool
+    x0_aim: float
+    v0_aim: float
+    trigger_x: float | None
+    trigger_v: float | None
+    contact_speed: float | None
+    plan_v_contact: float
+    perch_error_s: float | None
+    plan_duration: float
+
+    @classmethod
+    def of(cls, row: FlightRow) -> Brief:
+        return cls(*(getattr(row, name) for name in cls.__slots__))
+
+
 TIMING_COLUMNS = ("agent_median_ms", "agent_max_ms", "cpu_s")
 """Columns that measure the machine, not the flight: the same seed gives the same table
 but for these (rows compare equal without them)."""
@@ -379,42 +404,12 @@ def _leave_signals() -> None:
 
 # --- the table and its summary -------------------------------------------------------------
 def write_table(rows: list[FlightRow], path: str | Path) -> None:
-    """CSV, one row per flight, COLUMNS as the header; floats to 7 significant digits,
-    None as an empty cell. Makes no directory (the caller's choice, docs/contracts.md §2)."""
-    with TableWriter(path, overwrite=True) as table:
-        for row in rows:
-            table.write(row)
-
-
-class TableWriter:
-    """The CSV table written a row at a time as flights finish, each row flushed, so an
-    interrupted campaign keeps every flight that ended. Created exclusively unless `overwrite`."""
-
-    def __init__(self, path: str | Path, overwrite: bool = False) -> None:
-        self.path = Path(path)
-        self._f = open(self.path, "w" if overwrite else "x", newline="")
-        self._csv = csv.writer(self._f)
-        self._csv.writerow(COLUMNS)
-        self._f.flush()
-
-    def write(self, row: FlightRow) -> None:
-        self._csv.writerow([_cell(v) for v in dataclasses.astuple(row)])
-        self._f.flush()
-
-    def close(self) -> None:
-        self._f.close()
-
-    def __enter__(self) -> TableWriter:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-def _cell(value: Any) -> Any:
-    if value is None:
-        return ""
-    return format(value, ".7g") if isinstance(value, float) else value
+    """CSV, one row per flight in the order given, COLUMNS as the header; floats to 7
+    significant digits, None as an empty cell; replaced whole (core/safefile.py write_atomic).
+    Makes no directory (the caller's choice, docs/contracts.md §2)."""
+    table = CsvTable(Path(path), FlightRow)
+    table.write(rows)
+    table.finish()
 
 
 @dataclass(frozen=True)
@@ -449,7 +444,7 @@ class Summary:
     trigger_dv_mps: Stat
 
 
-def summarize(rows: list[FlightRow]) -> Summary:
+def summarize(rows: Sequence[FlightRow] | Sequence[Brief]) -> Summary:
     hits = [r for r in rows if r.contact_speed is not None]
     trig = [r for r in rows if r.trigger_x is not None]
     return Summary(

@@ -10,14 +10,13 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from perchd.campaign.flights import COLUMNS, FlightRow, FlightSpec, summarize
+from perchd.campaign.flights import COLUMNS, Brief, FlightRow, FlightSpec, summarize
 from perchd.campaign.tableformats import TableFormat, table_format
-from perchd.core.safefile import OutputError
+from perchd.core.safefile import OutputError, write_text
 
 
 def digest(obj: Any) -> str:
@@ -30,14 +29,17 @@ def summary_path(table: Path) -> Path:
     return table.with_name(table.stem + ".summary.json")
 
 
-def key(item: FlightRow | FlightSpec) -> tuple[int, int]:
+def key(item: FlightRow | FlightSpec | Brief) -> tuple[int, int]:
     """A flight's key in the table: its index and its noise seed (drawn from the campaign's)."""
     return item.index, item.seed
 
 
 class CampaignTable:
-    """The rows so far (`rows`: this table's earlier ones first); `begin`, then `append` as
-    flights end; `finish` writes the table whole, sorted by index, and the summary."""
+    """`begin`, then `append` rows as flights end, then `finish`. Rows go to the table's log
+    as they arrive and into the new table in flight order as soon as every earlier flight
+    is in (tableformats.py), so the rows held are those that came early, not the whole
+    campaign; `rows` keeps each row's Brief (its key and summary figures), earlier ones
+    first."""
 
     def __init__(self, path: Path, identity: dict[str, Any], force: bool) -> None:
         self.path, self.identity = path, json.loads(json.dumps(identity))
@@ -46,8 +48,12 @@ class CampaignTable:
         except ImportError as err:
             raise OutputError(f"--table {path}: {err}") from None
         self.force, self.begun = force, False
-        self.rows: list[FlightRow] = [] if force else self._resume()
+        earlier = [] if force else self._resume()
+        self.rows: list[Brief] = [Brief.of(r) for r in earlier]
         self.resumed = len(self.rows)
+        self._early: dict[int, FlightRow] = {r.index: r for r in earlier}  # not written yet
+        self._order: list[int] = []  # the campaign's flight indices, ascending
+        self._next = 0  # _order[:_next] are in the new table
 
     def begin(self) -> None:
         """Claim the table for this campaign (a forced one starts empty) before any flight,
@@ -79,20 +85,37 @@ class CampaignTable:
             raise OutputError(f"--table {self.path}: cannot resume it ({err})") from None
 
     def missing(self, specs: Iterable[FlightSpec]) -> list[FlightSpec]:
+        """The specs not in the table yet; all of them are the campaign (its table's order)."""
+        specs = list(specs)
+        self._order = sorted({s.index for s in specs})
         done = {key(r) for r in self.rows}
         return [s for s in specs if key(s) not in done]
 
     def append(self, rows: list[FlightRow]) -> None:
         self.store.append(rows)
-        self.rows.extend(rows)
+        self.rows.extend(Brief.of(r) for r in rows)
+        self._early.update((r.index, r) for r in rows)
+        ready = []
+        while self._next < len(self._order) and self._order[self._next] in self._early:
+            ready.append(self._early.pop(self._order[self._next]))
+            self._next += 1
+        if ready:
+            self.store.write(ready)
 
-    def finish(self, planned: int, extra: dict[str, Any]) -> list[FlightRow]:
-        """The table sorted by index, then the summary: complete when every planned flight
-        is in it (nothing written before `begin`). The sorted rows."""
+    def finish(self, planned: int, extra: dict[str, Any]) -> list[Brief]:
+        """The table in place, sorted by index (the rows of flights that did not end after
+        a gap, at an interruption), then the summary: complete when every planned flight is
+        in it (nothing written before `begin`). The Briefs, sorted."""
         self.rows.sort(key=lambda r: r.index)
         if not self.begun:
             return self.rows
-        self.store.finish(self.rows)
+        if self._early:
+            self.store.write([self._early.pop(i) for i in sorted(self._early)])
+        try:
+            self.store.finish()
+        except BaseException:
+            self.store.abandon()
+            raise
         self._write_summary(complete=len(self.rows) == planned, planned=planned, **extra)
         return self.rows
 
@@ -106,7 +129,4 @@ class CampaignTable:
             **extra,
             "summary": dataclasses.asdict(summarize(self.rows)),
         }
-        out = summary_path(self.path)
-        tmp = out.with_name(f".{out.name}.tmp")
-        tmp.write_text(json.dumps(doc, indent=1) + "\n")
-        os.replace(tmp, out)
+        write_text(summary_path(self.path), json.dumps(doc, indent=1) + "\n", "--table", True)

@@ -1,23 +1,36 @@
-"""A table of frozen-dataclass rows on disk, one row per line as rows arrive, and whole and
-sorted at the end: CSV, or Parquet (pyarrow).
+"""A table of frozen-dataclass rows on disk, CSV or Parquet (pyarrow), written as rows arrive.
 
-CSV is appended to in place. A Parquet file is written whole (its footer comes last), so
-rows arriving go to a JSON-lines journal beside it (`OUT.parquet.journal`) and the Parquet
-file is rewritten from the table and the journal at `finish`. Either way a process killed
-mid-campaign leaves every row that had arrived readable; a torn last line is dropped."""
+Two files take the rows. The *log* takes each row the moment it arrives, in arrival order,
+appended and flushed, so a process killed mid-campaign leaves every row that had arrived
+readable (a torn last line is dropped): a CSV table is its own log, a Parquet one has a
+JSON-lines journal beside it (`OUT.parquet.journal`). The *table* takes the rows in the
+caller's order (`write`) as that order becomes known: into a temporary file beside it, a
+row group at a time (core/safefile.py write_atomic, run by a thread of its own so the rows
+can keep coming), which `finish` flushes, fsyncs and renames onto it. So no row waits in
+memory for the end, and a failure at any point, a kill included, leaves the old table as
+it was; the journal goes once the new table is in place."""
 
 from __future__ import annotations
 
 import csv
 import dataclasses
 import importlib.util
+import io
 import json
 import os
+import queue
+import threading
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import IO, Any, Protocol
+
+from perchd.core.safefile import NEW_FILE, OutputError, write_atomic
 
 PARQUET_EXTRA = "perchd[cluster]"
+ROW_GROUP_ROWS = 4096
+"""Rows of a Parquet row group: a few MB of rows held at most, and a footer of a few
+hundred row groups for 10^6 flights."""
+FLAG = "--table"
 
 
 def have_pyarrow() -> bool:
@@ -30,7 +43,8 @@ def _types(row_type: type) -> dict[str, str]:
 
 
 class TableFormat(Protocol):
-    """Rows of one dataclass type at `path`."""
+    """Rows of one dataclass type at `path`: `append` to the log as rows arrive, `write`
+    them in the table's order, then `finish` (or `abandon`: the old table stays)."""
 
     path: Path
 
@@ -40,7 +54,11 @@ class TableFormat(Protocol):
 
     def append(self, rows: Iterable[Any]) -> None: ...
 
-    def finish(self, rows: list[Any]) -> None: ...
+    def write(self, rows: Iterable[Any]) -> None: ...
+
+    def finish(self) -> None: ...
+
+    def abandon(self) -> None: ...
 
     def remove(self) -> None: ...
 
@@ -57,20 +75,21 @@ def table_format(path: Path, row_type: type) -> TableFormat:
     return CsvTable(path, row_type)
 
 
-def _replace(path: Path, write: Callable[[Path], None]) -> None:
-    """Write beside `path`, then rename over it: a reader sees the old table or the new."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    write(tmp)
-    os.replace(tmp, path)
-
-
 def open_appending(path: Path) -> Any:
-    """`path` opened to append lines; a last line torn by a kill is ended first, so the
-    next row starts a line of its own (readers drop the torn one)."""
-    f = open(path, "a", newline="")
-    if _torn(path):
-        f.write("\n")
-    return f
+    """`path` opened to append lines; a new file is created exclusively (core/safefile.py
+    NEW_FILE: nothing at the name is followed or truncated); a last line torn by a kill is
+    ended first, so the next row starts a line of its own (readers drop the torn one)."""
+    try:
+        fd = os.open(path, NEW_FILE, 0o666)
+    except FileExistsError:
+        f = open(path, "a", newline="")
+        if _torn(path):
+            f.write("\n")
+        return f
+    except (OSError, ValueError) as err:
+        raise OutputError(f"{FLAG} {path}: cannot write ({err})") from None
+    os.set_blocking(fd, True)
+    return open(fd, "w", newline="")
 
 
 def _torn(path: Path) -> bool:
@@ -79,6 +98,122 @@ def _torn(path: Path) -> bool:
     with open(path, "rb") as f:
         f.seek(-1, os.SEEK_END)
         return f.read(1) != b"\n"
+
+
+class _Sink(Protocol):
+    """Rows into the replacement's file object: `close` completes it, `discard` lets go
+    of it (write_atomic removes the file)."""
+
+    def write(self, rows: list[Any]) -> None: ...
+
+    def close(self) -> None: ...
+
+    def discard(self) -> None: ...
+
+
+_DONE, _DROP = object(), object()
+
+
+class _Dropped(Exception):
+    """The replacement abandoned: write_atomic removes its temporary file."""
+
+
+class Replacement:
+    """A file's new content streamed through write_atomic in a thread: `write(rows)` hands
+    rows to the sink `make(f)` opened on the temporary file; `finish` puts the file in place
+    (or raises, the old one left); `abandon` drops it."""
+
+    def __init__(self, path: Path, make: Callable[[IO[bytes]], _Sink]) -> None:
+        self.path, self._make = path, make
+        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="perchd-table", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            write_atomic(self.path, self._consume, FLAG, force=True)
+        except _Dropped:
+            pass
+        except BaseException as err:  # raised in the caller's thread, at its next call
+            self._error = err
+
+    def _consume(self, f: IO[bytes]) -> None:
+        sink = self._make(f)
+        try:
+            while (item := self._queue.get()) is not _DONE:
+                if item is _DROP:
+                    raise _Dropped
+                sink.write(item)
+            sink.close()
+        except BaseException:
+            sink.discard()
+            raise
+
+    def write(self, rows: list[Any]) -> None:
+        self._check()
+        self._queue.put(rows)
+
+    def finish(self) -> None:
+        self._queue.put(_DONE)
+        self._thread.join()
+        self._check()
+
+    def abandon(self) -> None:
+        self._queue.put(_DROP)
+        self._thread.join()
+
+    def _check(self) -> None:
+        if self._error is not None:
+            raise self._error
+
+
+class _Table:
+    """What both formats share: the log rows are appended to (opened at the first), the
+    table's replacement (opened at the first `write`), and the files a table is."""
+
+    path: Path
+    _f: Any = None
+    _new: Replacement | None = None
+
+    def files(self) -> tuple[Path, ...]:
+        return (self.path,)
+
+    def _sink(self, f: IO[bytes]) -> _Sink:
+        raise NotImplementedError
+
+    def write(self, rows: Iterable[Any]) -> None:
+        """Rows in the table's order, after those written before."""
+        if self._new is None:
+            self._new = Replacement(self.path, self._sink)
+        self._new.write(list(rows))
+
+    def finish(self) -> None:
+        """The rows written are the table now: renamed into place (the old one left as it
+        was if that fails)."""
+        self.close()
+        if self._new is None:
+            self.write(())
+        assert self._new is not None
+        new, self._new = self._new, None
+        new.finish()
+
+    def abandon(self) -> None:
+        """The replacement dropped; the old table and the log stay as they are."""
+        self.close()
+        if self._new is not None:
+            new, self._new = self._new, None
+            new.abandon()
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+
+    def remove(self) -> None:
+        self.abandon()
+        for f in self.files():
+            f.unlink(missing_ok=True)
 
 
 # --- CSV -----------------------------------------------------------------------------------
@@ -98,28 +233,9 @@ def _parse(text: str, kind: str) -> Any:
     return _PARSE[kind](text)
 
 
-class _Appending:
-    """The file rows are appended to (opened at the first), and the files a table is."""
-
-    path: Path
-    _f: Any = None
-
-    def files(self) -> tuple[Path, ...]:
-        return (self.path,)
-
-    def close(self) -> None:
-        if self._f is not None:
-            self._f.close()
-            self._f = None
-
-    def remove(self) -> None:
-        self.close()
-        for f in self.files():
-            f.unlink(missing_ok=True)
-
-
-class CsvTable(_Appending):
-    """COLUMNS as the header; each row written and flushed as it arrives."""
+class CsvTable(_Table):
+    """COLUMNS as the header; each row appended and flushed as it arrives (the table is
+    its own log) until the table in order is renamed onto it at `finish`."""
 
     def __init__(self, path: Path, row_type: type) -> None:
         self.path, self.row_type, self.types = path, row_type, _types(row_type)
@@ -145,32 +261,40 @@ class CsvTable(_Appending):
 
     def append(self, rows: Iterable[Any]) -> None:
         if self._f is None:
-            fresh = not self.path.exists() or self.path.stat().st_size == 0
             self._f = open_appending(self.path)
             self._csv = csv.writer(self._f)
-            if fresh:
+            if self._f.tell() == 0:
                 self._csv.writerow(self.types)
         for row in rows:
             self._csv.writerow([cell(v) for v in dataclasses.astuple(row)])
         self._f.flush()
 
-    def finish(self, rows: list[Any]) -> None:
-        self.close()
-        _replace(self.path, lambda tmp: _write_csv(tmp, self.types, rows))
+    def _sink(self, f: IO[bytes]) -> _Sink:
+        return _CsvSink(f, self.types)
 
 
-def _write_csv(path: Path, columns: Iterable[str], rows: list[Any]) -> None:
-    with open(path, "w", newline="") as f:
-        out = csv.writer(f)
-        out.writerow(columns)
-        out.writerows([cell(v) for v in dataclasses.astuple(r)] for r in rows)
+class _CsvSink:
+    def __init__(self, f: IO[bytes], columns: Iterable[str]) -> None:
+        self._text = io.TextIOWrapper(f, newline="", encoding="utf-8")
+        self._csv = csv.writer(self._text)
+        self._csv.writerow(columns)
+
+    def write(self, rows: list[Any]) -> None:
+        self._csv.writerows([cell(v) for v in dataclasses.astuple(r)] for r in rows)
+
+    def close(self) -> None:
+        self._text.flush()
+        self._text.detach()  # the file stays open for write_atomic to fsync
+
+    def discard(self) -> None:
+        self._text.detach()
 
 
 # --- Parquet -------------------------------------------------------------------------------
 _ARROW = {"int": "int64", "float": "float64", "str": "string", "bool": "bool_"}
 
 
-class ParquetTable(_Appending):
+class ParquetTable(_Table):
     """The Parquet file plus its journal of rows not yet in it."""
 
     def __init__(self, path: Path, row_type: type) -> None:
@@ -219,11 +343,41 @@ class ParquetTable(_Appending):
         self._f.write("".join(json.dumps(dataclasses.asdict(r)) + "\n" for r in rows))
         self._f.flush()
 
-    def finish(self, rows: list[Any]) -> None:
-        import pyarrow as pa
+    def _sink(self, f: IO[bytes]) -> _Sink:
+        return _ParquetSink(f, self.schema())
+
+    def finish(self) -> None:
+        super().finish()
+        self.journal.unlink(missing_ok=True)
+
+
+class _ParquetSink:
+    """Row groups of ROW_GROUP_ROWS rows (the last one shorter)."""
+
+    def __init__(self, f: IO[bytes], schema: Any) -> None:
         import pyarrow.parquet as pq
 
-        self.close()
-        table = pa.Table.from_pylist([dataclasses.asdict(r) for r in rows], schema=self.schema())
-        _replace(self.path, lambda tmp: pq.write_table(table, tmp))
-        self.journal.unlink(missing_ok=True)
+        self._schema, self._rows = schema, list[dict[str, Any]]()
+        self._out = pq.ParquetWriter(f, schema)
+
+    def write(self, rows: list[Any]) -> None:
+        self._rows.extend(dataclasses.asdict(r) for r in rows)
+        while len(self._rows) >= ROW_GROUP_ROWS:
+            self._group(self._rows[:ROW_GROUP_ROWS])
+            del self._rows[:ROW_GROUP_ROWS]
+
+    def _group(self, rows: list[dict[str, Any]]) -> None:
+        import pyarrow as pa
+
+        self._out.write_table(pa.Table.from_pylist(rows, schema=self._schema))
+
+    def close(self) -> None:
+        if self._rows:
+            self._group(self._rows)
+        self._out.close()  # the footer; the file stays open for write_atomic to fsync
+
+    def discard(self) -> None:
+        try:
+            self._out.close()
+        except (OSError, ValueError):
+            pass  # what failed to be written is what is dropped

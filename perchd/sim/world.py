@@ -33,7 +33,7 @@ from perchd.core.types import EndReason, Phase, Pose, Setpoint, Vec3
 from perchd.core.uri import Uri
 from perchd.core.uriparams import SIM, check_known, check_params, float_param, names_of
 from perchd.sim.faults import MocapFault, shape
-from perchd.sim.plant import Plant, PlantParams, PlantState, quaternion
+from perchd.sim.plant import Plant, PlantParams, PlantState, Touch, quaternion
 from perchd.sim.stall import Stall, stall_from_uri
 
 DESCENT_GAIN_PER_S = 3.0
@@ -111,7 +111,7 @@ class SimWorld:
         self._descending = False  # the failsafe descends before it cuts (failsafe)
         n = params.surface_normal
         norm = math.sqrt(sum(c * c for c in n))
-        self._n = tuple(c / norm for c in n)
+        self._n: Vec3 = (n[0] / norm, n[1] / norm, n[2] / norm)
         self._rng = random.Random(params.seed)
         self._lock = threading.RLock()
         period = 1.0 / params.mocap.rate_hz
@@ -121,6 +121,7 @@ class SimWorld:
         self._sent = 0  # tie-break of the heap
         self._latest: Pose | None = None
         self._seq = 0
+        self._advanced_to: float | None = None  # [s] the last advance's time
 
     @property
     def pristine(self) -> bool:
@@ -132,18 +133,26 @@ class SimWorld:
         """Integrate up to `t` (default clock.now()), measuring mocap frames on the way."""
         t = self.clock.now() if t is None else t
         with self._lock:
+            if t == self._advanced_to:  # nothing to integrate, measure or deliver
+                if self.faults.at:
+                    self._disturb(t)
+                return
+            plant = self.plant
             while True:
                 t_frame = self.t0 + self._next_frame * self._period
                 if t_frame > t:
                     break
-                self.plant.step_to(t_frame, self._check_contact)
+                plant.step_to(t_frame, self._touch())
                 self._measure(t_frame)
                 self._next_frame += 1
                 if self._descending:  # the failsafe's descent, at the mocap's rate
                     self._descend(t_frame)
-            self.plant.step_to(t, self._check_contact)
-            self._deliver(t)
-            self._disturb(t)
+            plant.step_to(t, self._touch())
+            if self._in_flight:
+                self._deliver(t)
+            if self.faults.at:
+                self._disturb(t)
+            self._advanced_to = t
 
     def _disturb(self, t: float) -> None:
         due = [item for item in self.faults.at if item[0] <= t]
@@ -160,6 +169,12 @@ class SimWorld:
         """[m] signed distance along the normal: < 0 before the surface."""
         sp = self.params.surface_point
         return sum((p[i] - sp[i]) * self._n[i] for i in range(3))
+
+    def _touch(self) -> Touch | None:
+        """What the plant's steps report reaching: the surface, until contact."""
+        if self.contact is not None:
+            return None
+        return self.params.surface_point, self._n, self._check_contact
 
     def _check_contact(self, t_prev: float, p_prev: Vec3, t: float) -> None:
         if self.contact is not None:
@@ -223,14 +238,26 @@ class SimWorld:
 
     # --- the mocap side ---------------------------------------------------------------------
     def _measure(self, t: float) -> None:
-        if any(a <= t < b for a, b in self.faults.mocap_outages):
+        faults = self.faults
+        if faults.mocap_outages and any(a <= t < b for a, b in faults.mocap_outages):
             return
-        noise = self.params.mocap.noise_m
-        p = tuple(c + (self._rng.gauss(0.0, noise) if noise > 0 else 0.0) for c in self.plant.p)
-        q = quaternion(*self.plant.att)
+        mocap, (x, y, z) = self.params.mocap, self.plant.p
+        noise = mocap.noise_m
+        if noise > 0:
+            gauss = self._rng.gauss
+            p = (x + gauss(0.0, noise), y + gauss(0.0, noise), z + gauss(0.0, noise))
+        else:
+            p = (x + 0.0, y + 0.0, z + 0.0)
         self._seq += 1
-        pose = Pose(self.params.body, self._seq, t, p, q, True, self.params.mocap.latency_s)
-        for arrive, out in shape(self.faults.mocap, t + pose.latency, pose):
+        pose = Pose(
+            self.params.body, self._seq, t, p, quaternion(*self.plant.att), True, mocap.latency_s
+        )
+        arrivals = (
+            shape(faults.mocap, t + pose.latency, pose)
+            if faults.mocap
+            else ((t + pose.latency, pose),)
+        )
+        for arrive, out in arrivals:
             self._sent += 1
             heapq.heappush(self._in_flight, (arrive, self._sent, out))
 
