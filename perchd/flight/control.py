@@ -130,13 +130,17 @@ class TauController:
         a_plan: float,
         dt: float,
         saturated: bool = False,
-        schedule: bool = True,
+        kp_max: float | None = None,
     ) -> float:
-        """schedule=False uses kp_slow both ways (eq. 20's argument, a shrinking |X| under
-        a tau reference, does not hold when the reference is a speed)."""
+        """kp_max [m/s^2]: a speed reference's gain (stage 2): kp_slow both ways, at most
+        kp_max (eq. 20's argument, a shrinking |X| under a tau reference, does not hold
+        when the reference is a speed). None: eq. 20's schedule."""
         g = self.gains
         e = min(max(tau_error(tau_ref, state.tau), TAU_ERROR_RANGE[0]), TAU_ERROR_RANGE[1])
-        kp = g.kp_fast if e < 0.0 and schedule else g.kp_slow  # eq. 20: tau_ref/tau > 1 <=> e < 0
+        if kp_max is not None:
+            kp = min(g.kp_slow, kp_max)
+        else:  # eq. 20: tau_ref/tau > 1 <=> e < 0
+            kp = g.kp_fast if e < 0.0 else g.kp_slow
         self.last_error, self.last_kp = e, kp
         u = self.pid.step(kp, e, dt, freeze=saturated)
         return u + (a_plan if g.feedforward else 0.0)

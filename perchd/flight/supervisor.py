@@ -46,6 +46,8 @@ APPROACH_I_LIMIT_MPS2 = 1.0
 REFIT_S = 0.25
 """[s] period of the identification's refits during the approach (its own feed-forward
 meets the drag found so far); the fit at the trigger is the one logged and flown."""
+HOLD_RATE = 1.0
+"""Stage 2's speed loop answers at most this many times per lag (Supervisor._hold_gain)."""
 POST_CONTACT_S = 0.2
 """[s] the post-contact action (FlightConfig.post_contact) is held this long."""
 
@@ -240,8 +242,8 @@ class Supervisor:
             tau_aim = refs.tau_ref
             if self.phase is Phase.STAGE1:
                 tau_aim = self.refs.scale_corrected(t, st, refs)
-            hold = self.phase is Phase.STAGE2  # a speed reference: eq. 20 does not apply
-            ux = self.ctl.tau.step(st, tau_aim, refs.a, dt, self.ctl.saturated, schedule=not hold)
+            kp_max = self._hold_gain() if self.phase is Phase.STAGE2 else None
+            ux = self.ctl.tau.step(st, tau_aim, refs.a, dt, self.ctl.saturated, kp_max)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
             ux = self._approach_accel(t, st, dt)
@@ -258,6 +260,14 @@ class Supervisor:
         sp = self.ctl.setpoint(u, t, st.pose_seq, self.phase)
         self._observe_response(t, st)
         return TickReport(self.phase, sp, None, False, refs, u, e)
+
+    def _hold_gain(self) -> float:
+        """[m/s^2] the most gain stage 2's speed loop may have: e = 1 - Xdot/V_hold, so kp
+        is a speed gain of kp / V_hold [1/s], and a loop faster than HOLD_RATE / lag
+        overshoots what the vehicle does a lag later (ArduCopter's 0.34 s lag met
+        kp_slow's 4.4 /s braking from the switch and touched at 0.80-0.83 m/s)."""
+        lag = self.response.ff.lead_s
+        return math.inf if lag <= 0.0 else HOLD_RATE * self.refs.v_hold / lag
 
     def _switch(self, t: float, st: State) -> None:
         """Stage 2 from the tick the measured tau reaches tau_s (docs/errata.md §9)."""
