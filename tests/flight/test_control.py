@@ -113,3 +113,18 @@ def test_a_reset_starts_the_integral_supplying_what_it_is_handed(held, starts):
     ctl.reset(held)
     assert TauGains().ki * ctl.pid.integral == pytest.approx(starts, abs=1e-12)
     assert ctl.pid._prev is None
+
+
+@pytest.mark.parametrize("tau", [-0.4, -0.6])
+@pytest.mark.parametrize("kp_max", [0.5, 2.0, 100.0])
+def test_a_speed_references_gain_is_kp_slow_both_ways_capped_by_kp_max(tau, kp_max):
+    """Stage 2 (kp_max given): no schedule, kp_slow at most kp_max, on either side of the
+    reference; without kp_max, eq. 20's schedule."""
+    g = TauGains(ki=0.0, kd=0.0, feedforward=False)
+    held, sched = TauController(g), TauController(g)
+    e = tau_error(-0.5, tau)
+    assert held.step(state(tau), -0.5, 0.0, 0.01, kp_max=kp_max) == pytest.approx(
+        min(g.kp_slow, kp_max) * e
+    )
+    kp = g.kp_fast if e < 0.0 else g.kp_slow
+    assert sched.step(state(tau), -0.5, 0.0, 0.01) == pytest.approx(kp * e)
