@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import signal
 import sys
 import time
@@ -56,10 +57,20 @@ CAMPAIGN_DEFAULTS = {
     "config": None,
     "table": None,
     "logs": None,
-    "jobs": 1,
+    "jobs": None,
     "force": False,
     "cluster": None,
 }
+
+
+FLIGHTS_PER_WORKER = 200
+"""A worker process costs about a second to start (20 flights' worth): the local default
+starts one per core only for a campaign with this many flights per core."""
+
+
+def default_jobs(flights: int) -> int:
+    """Worker processes for `flights` when --jobs is not given: the cores the campaign fills."""
+    return max(1, min(os.cpu_count() or 1, flights // FLIGHTS_PER_WORKER))
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -132,7 +143,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--jobs",
         type=int,
         default=CAMPAIGN_DEFAULTS["jobs"],
-        help="worker processes on this machine (default 1: this process)",
+        help="worker processes on this machine (default: one per core once the "
+        f"campaign has {FLIGHTS_PER_WORKER} flights per core to fly, else this process)",
     )
     g.add_argument(
         "--cluster",
@@ -192,7 +204,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, list[Any]]:
     """(plan, flight config, spread, specs) from the options; errors name the option."""
 
     plan = load_plan(args.campaign)
-    if args.jobs < 1:  # before the table is made
+    if args.jobs is not None and args.jobs < 1:  # before the table is made
         raise ConfigError(f"--jobs {args.jobs}: at least 1")
     xr, vr = cp.default_ranges(plan)
     if not 0.0 <= args.latency <= 1.0:
@@ -278,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
 
     with on_signals():
         try:
-            engine = open_engine(cluster, args.jobs)
+            engine = open_engine(cluster, args.jobs or default_jobs(len(todo)))
             results.begin()
             fly_campaign(CampaignJob(plan, cfg, spread, args.logs), todo, engine, finished)
         except Stopped as stop:
