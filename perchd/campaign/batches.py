@@ -43,12 +43,14 @@ def unit_size(flights: int, workers: int, most: int) -> int:
 
 def units(specs: Sequence[FlightSpec], workers: int, most: int) -> list[tuple[FlightSpec, ...]]:
     """The specs in order, in units of unit_size, the first ones ramping up from one flight
-    (1, 2, 4, ... a round of `workers` units each): the first rows come at once."""
+    (1, 2, 4, ... a round of `workers` units each): the first rows come at once; and the
+    last ones down, none over the flights left / (2 workers): the workers end together."""
     size = unit_size(len(specs), workers, most)
     out: list[tuple[FlightSpec, ...]] = []
     i, step = 0, 1
     while i < len(specs):
-        out.append(tuple(specs[i : i + min(step, size)]))
+        tail = math.ceil((len(specs) - i) / (2 * workers))
+        out.append(tuple(specs[i : i + min(step, size, tail)]))
         i += len(out[-1])
         step *= 2 if len(out) % workers == 0 else 1
     return out

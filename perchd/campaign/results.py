@@ -62,6 +62,7 @@ class CampaignTable:
             self.store.remove()
         self.begun = True
         self._write_summary(complete=False)
+        self.store.start()
 
     def _resume(self) -> list[FlightRow]:
         """The rows of the same campaign's table; nothing for a new table."""
@@ -80,9 +81,10 @@ class CampaignTable:
                 f"{', '.join(differ)} differ); name another table or pass --force"
             )
         try:
-            return self.store.load() if self.store.exists() else []
+            rows = self.store.load() if self.store.exists() else []
         except (OSError, ValueError) as err:
             raise OutputError(f"--table {self.path}: cannot resume it ({err})") from None
+        return list({key(r): r for r in rows}.values())  # a kept journal repeats the table
 
     def missing(self, specs: Iterable[FlightSpec]) -> list[FlightSpec]:
         """The specs not in the table yet; all of them are the campaign (its table's order)."""
@@ -111,8 +113,9 @@ class CampaignTable:
             return self.rows
         if self._early:
             self.store.write([self._early.pop(i) for i in sorted(self._early)])
+        whole = self.store.written == self.resumed + self.store.logged
         try:
-            self.store.finish()
+            self.store.finish(keep_log=not whole)
         except BaseException:
             self.store.abandon()
             raise

@@ -43,10 +43,13 @@ def _types(row_type: type) -> dict[str, str]:
 
 
 class TableFormat(Protocol):
-    """Rows of one dataclass type at `path`: `append` to the log as rows arrive, `write`
-    them in the table's order, then `finish` (or `abandon`: the old table stays)."""
+    """Rows of one dataclass type at `path`: `append` to the log as rows arrive (`logged`
+    counts them), `write` them in the table's order (`written`), then `finish` (or
+    `abandon`: the old table stays)."""
 
     path: Path
+    logged: int
+    written: int
 
     def exists(self) -> bool: ...
 
@@ -54,9 +57,11 @@ class TableFormat(Protocol):
 
     def append(self, rows: Iterable[Any]) -> None: ...
 
+    def start(self) -> None: ...
+
     def write(self, rows: Iterable[Any]) -> None: ...
 
-    def finish(self) -> None: ...
+    def finish(self, keep_log: bool = False) -> None: ...
 
     def abandon(self) -> None: ...
 
@@ -170,9 +175,10 @@ class Replacement:
 
 class _Table:
     """What both formats share: the log rows are appended to (opened at the first), the
-    table's replacement (opened at the first `write`), and the files a table is."""
+    table's replacement (`start`ed before any row comes), and the files a table is."""
 
     path: Path
+    logged = written = 0
     _f: Any = None
     _new: Replacement | None = None
 
@@ -182,18 +188,26 @@ class _Table:
     def _sink(self, f: IO[bytes]) -> _Sink:
         raise NotImplementedError
 
-    def write(self, rows: Iterable[Any]) -> None:
-        """Rows in the table's order, after those written before."""
+    def start(self) -> None:
+        """The replacement's thread and file, made before the rows come (a signal while a
+        thread starts must not fall between a row and the table)."""
         if self._new is None:
             self._new = Replacement(self.path, self._sink)
-        self._new.write(list(rows))
 
-    def finish(self) -> None:
+    def write(self, rows: Iterable[Any]) -> None:
+        """Rows in the table's order, after those written before."""
+        self.start()
+        assert self._new is not None
+        batch = list(rows)
+        self._new.write(batch)
+        self.written += len(batch)
+
+    def finish(self, keep_log: bool = False) -> None:
         """The rows written are the table now: renamed into place (the old one left as it
-        was if that fails)."""
+        was if that fails). keep_log: some row logged may be missing from them (a signal
+        fell between), so the log stays for a resume to read."""
         self.close()
-        if self._new is None:
-            self.write(())
+        self.start()
         assert self._new is not None
         new, self._new = self._new, None
         new.finish()
@@ -265,12 +279,21 @@ class CsvTable(_Table):
             self._csv = csv.writer(self._f)
             if self._f.tell() == 0:
                 self._csv.writerow(self.types)
-        for row in rows:
+        batch = list(rows)
+        for row in batch:
             self._csv.writerow([cell(v) for v in dataclasses.astuple(row)])
         self._f.flush()
+        self.logged += len(batch)
 
     def _sink(self, f: IO[bytes]) -> _Sink:
         return _CsvSink(f, self.types)
+
+    def finish(self, keep_log: bool = False) -> None:
+        """keep_log: the table stays the log (every row, in arrival order)."""
+        if keep_log:
+            self.abandon()
+        else:
+            super().finish()
 
 
 class _CsvSink:
@@ -340,15 +363,18 @@ class ParquetTable(_Table):
     def append(self, rows: Iterable[Any]) -> None:
         if self._f is None:
             self._f = open_appending(self.journal)
-        self._f.write("".join(json.dumps(dataclasses.asdict(r)) + "\n" for r in rows))
+        batch = list(rows)
+        self._f.write("".join(json.dumps(dataclasses.asdict(r)) + "\n" for r in batch))
         self._f.flush()
+        self.logged += len(batch)
 
     def _sink(self, f: IO[bytes]) -> _Sink:
         return _ParquetSink(f, self.schema())
 
-    def finish(self) -> None:
+    def finish(self, keep_log: bool = False) -> None:
         super().finish()
-        self.journal.unlink(missing_ok=True)
+        if not keep_log:
+            self.journal.unlink(missing_ok=True)
 
 
 class _ParquetSink:

@@ -12,10 +12,13 @@ import os
 import random
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from perchd.bench import loop as loopbench
 from perchd.bench.cpuload import MAX_HOGS, cpu_hogs
+from perchd.console.stopping import interruptible
 from perchd.core import realtime
 from perchd.core.errors import ConfigError
 from perchd.flight.loop import spread
@@ -44,7 +47,7 @@ def register(sub) -> None:
     )
     p.add_argument("--json", action="store_true", help="print one JSON list")
     add_load(p, "the solves (as a flight's planner worker runs under fly --realtime)")
-    p.set_defaults(run=run_planner)
+    p.set_defaults(run=measuring(run_planner))
     lp = bench_sub.add_parser(
         "loop",
         help="control loop: 500 Hz jitter, overruns per minute "
@@ -60,7 +63,20 @@ def register(sub) -> None:
     )
     lp.add_argument("--json", action="store_true", help="print one JSON object")
     add_load(lp, "the loops, the rig and the agent (perchd fly --realtime)")
-    lp.set_defaults(run=run_loop)
+    lp.set_defaults(run=measuring(run_loop))
+
+
+def measuring(work: Callable[[Any], int]) -> Callable[[Any], int]:
+    """`work(args)` ended by SIGINT or SIGTERM as on Ctrl-C (perchd.console.stopping): its
+    load processes and its agent stopped, one line, exit 130 or 143."""
+
+    def run(args: Any) -> int:
+        with interruptible() as caught:
+            return work(args)
+        caught.say("bench", "nothing measured is printed")
+        return caught.exit_code(130)
+
+    return run
 
 
 def add_load(parser, what: str) -> None:

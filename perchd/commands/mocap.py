@@ -1,12 +1,16 @@
 """`perchd mocap URI [--count N] [--json]`: print poses as they arrive, to check the mocap
-before flying. With --json, one object per line: body, seq, t, p, q, valid, latency."""
+before flying. With --json, one object per line: body, seq, t, p, q, valid, latency. No pose
+for --timeout is one line and exit 1; SIGINT or SIGTERM end it with the counts in one line,
+exit 130 or 143 (docs/contracts.md §6)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+from typing import Any
 
+from perchd.console.stopping import interruptible
 from perchd.core.errors import LinkError
 from perchd.core.runtime import Runtime
 from perchd.core.types import Pose
@@ -85,24 +89,35 @@ def with_timeout(uri: str, timeout: float) -> str:
 
 def run(args: argparse.Namespace) -> int:
 
-    source = open_source(with_timeout(args.uri, args.timeout), Runtime.real())
-    source.start()
+    source = None
+    with interruptible() as caught:
+        try:
+            source = open_source(with_timeout(args.uri, args.timeout), Runtime.real())
+            source.start()
+            show(source, args)
+            print(f"perchd mocap: {_summary(source)}", file=sys.stderr)
+        finally:
+            if source is not None:
+                source.close()
+        return 0
+    caught.say("mocap", _summary(source) if source is not None else "nothing received")
+    return caught.exit_code(130)
+
+
+def show(source: Any, args: argparse.Namespace) -> None:
+    """Print poses until --count; LinkError (its one line holds the counts) after
+    --timeout without one."""
     shown, seq = 0, -(2**63)
-    try:
-        while args.count is None or shown < args.count:
-            pose = source.wait(seq, args.timeout)
-            if pose is None:
-                raise LinkError(
-                    f"no pose from {args.uri} within {args.timeout:g} s ({_summary(source)})"
-                )
-            if pose.seq < seq:  # the sender restarted its numbering
-                seq = pose.seq
-            print(pose_json(pose) if args.json else pose_line(pose), flush=True)
-            shown, seq = shown + 1, pose.seq
-    finally:
-        print(f"perchd mocap: {_summary(source)}", file=sys.stderr)
-        source.close()
-    return 0
+    while args.count is None or shown < args.count:
+        pose = source.wait(seq, args.timeout)
+        if pose is None:
+            raise LinkError(
+                f"no pose from {args.uri} within {args.timeout:g} s ({_summary(source)})"
+            )
+        if pose.seq < seq:  # the sender restarted its numbering
+            seq = pose.seq
+        print(pose_json(pose) if args.json else pose_line(pose), flush=True)
+        shown, seq = shown + 1, pose.seq
 
 
 def _summary(source) -> str:

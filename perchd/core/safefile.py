@@ -62,7 +62,7 @@ def read_regular(
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise error(f"{what}: not a regular file ({_kind(st.st_mode)})")
+            raise error(f"{what}: not a regular file ({kind(st.st_mode)})")
         if st.st_size > max_bytes:
             raise error(
                 f"{what}: {st.st_size} bytes, over the {max_bytes} byte limit "
@@ -80,6 +80,24 @@ def read_regular(
         raise error(f"{what}: not UTF-8 text (byte {err.start})") from None
 
 
+def regular_file(
+    path: str | os.PathLike[str], what: str, error: type[PerchdError], executable: bool = False
+) -> Path:
+    """`path` if it names a regular file (symlinks followed), executable by us when
+    `executable`: for a file another program opens (a firmware binary, its parameters),
+    so that a FIFO, device or directory is refused at once, not met by it. Else `error`,
+    "WHAT PATH: why"."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError) as err:
+        raise error(f"{what} {path}: cannot read ({_why(err)})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise error(f"{what} {path}: not a regular file ({kind(st.st_mode)})")
+    if executable and not os.access(path, os.X_OK):
+        raise error(f"{what} {path}: not executable (chmod +x)")
+    return Path(path)
+
+
 def _why(err: OSError | ValueError) -> str:
     """An OS error's own words; a NUL byte in a path (ValueError) named as such."""
     if isinstance(err, OSError):
@@ -87,7 +105,8 @@ def _why(err: OSError | ValueError) -> str:
     return "a path with a NUL byte" if "null" in str(err) else str(err)
 
 
-def _kind(mode: int) -> str:
+def kind(mode: int) -> str:
+    """What a file of stat mode `mode` is, in words ("a FIFO", "a directory", ...)."""
     for test, name in (
         (stat.S_ISDIR, "a directory"),
         (stat.S_ISFIFO, "a FIFO"),
@@ -138,7 +157,7 @@ def check_output(
         return out
     if not stat.S_ISREG(st.st_mode):
         raise OutputError(
-            f"{flag} {out}: not a regular file ({_kind(st.st_mode)}); "
+            f"{flag} {out}: not a regular file ({kind(st.st_mode)}); "
             "perchd writes only regular files"
         )
     for given in inputs:

@@ -43,7 +43,7 @@ from perchd.core.errors import ConfigError, LinkError, PerchdError, PlanError
 from perchd.core.interrupts import exit_code
 from perchd.core.ports import Driver, PoseSource
 from perchd.core.runtime import Runtime
-from perchd.core.safefile import confine, read_regular
+from perchd.core.safefile import confine, kind, read_regular
 from perchd.core.types import EndReason
 from perchd.flight.config import SurfaceConfig
 from perchd.flight.planguard import check_flight_plan
@@ -546,6 +546,10 @@ def check_dirs(svc: ServiceConfig) -> None:
         path = Path(getattr(svc, key))
         try:
             path.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:
+            raise ConfigError(
+                f"[service] {key} = {str(path)!r}: not a directory ({kind(path.stat().st_mode)})"
+            ) from None
         except OSError as err:
             raise ConfigError(
                 f"[service] {key} = {str(path)!r}: cannot create it "

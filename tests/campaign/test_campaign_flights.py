@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from simflight import Sim  # the closed-loop tests' own simulated flight
 
+from perchd.campaign.batches import units
 from perchd.campaign.flights import (
     COLUMNS,
     FlightSpec,
@@ -218,3 +219,12 @@ def test_the_table_and_the_summary_agree_with_the_rows(tmp_path):
         if t["perch_error_s"]
     )
     assert s.perch_error_pct.max == pytest.approx(pct[-1], abs=1e-4)
+
+
+def test_units_ramp_up_and_down_so_rows_come_at_once_and_the_workers_end_together():
+    flights = list(range(100))  # units slice whatever they are given, in order
+    cut = units(flights, 2, 25)
+    assert [f for unit in cut for f in unit] == flights
+    sizes = [len(unit) for unit in cut]
+    assert sizes[:8] == [1, 1, 2, 2, 4, 4, 8, 8] and max(sizes) == 13  # 100 / (4 x 2)
+    assert sizes[-4:] == [1, 1, 1, 1]  # none longer than what is left / (2 workers)

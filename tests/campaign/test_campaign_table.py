@@ -130,4 +130,19 @@ def test_a_kill_leaves_the_old_table_and_the_journal_readable(tmp_path):
     assert path.read_bytes() == before
     third, todo = opened(path)
     assert third.resumed == 4 and [s.index for s in todo] == [3, 5, 6, 7]
-    again.store.abandon()
+    again.store.abandon(), third.store.abandon()
+
+
+@pytest.mark.parametrize("name", ["t.parquet", "t.csv"])
+def test_a_row_logged_but_not_in_the_new_table_keeps_the_log(tmp_path, name):
+    """A signal between a row's log line and the table: the log stays for the resume."""
+    path = tmp_path / name
+    table, _ = opened(path)
+    table.append([row(0), row(1)])
+    table.store.append([row(2)])  # interrupted before the row went further
+    table.finish(8, {})
+    again, todo = opened(path)  # the table and its log: 0, 1 and 2, each once
+    assert again.resumed == 3 and [s.index for s in todo] == [3, 4, 5, 6, 7]
+    again.append([row(i) for i in (3, 4, 5, 6, 7)])
+    again.finish(8, {})
+    assert [r.index for r in again.store.load()] == list(range(8))

@@ -31,8 +31,9 @@ from typing import Any
 
 from perchd.console.flightargs import surface_args
 from perchd.core.clock import MonotonicClock
-from perchd.core.errors import UriError
+from perchd.core.errors import ConfigError, UriError
 from perchd.core.interrupts import catching
+from perchd.core.safefile import check_output, regular_file
 from perchd.mocap.outputs import open_pose_output
 from perchd.sim.firmware.ardupilot import (
     DEFAULT_PARAMS,
@@ -276,7 +277,21 @@ def open_vehicle(args: argparse.Namespace, clock: MonotonicClock) -> Any:
     return Cf2Vehicle(params_from(args)[0], clock)
 
 
+def check_files(args: argparse.Namespace) -> None:
+    """The files the command line names, checked before any firmware starts: a binary that
+    is not an executable regular file would be launched and waited for in vain, and a FIFO
+    as --fw-log would block its opening."""
+    for flag, binary in (("--cf2", args.cf2), ("--arducopter", args.arducopter)):
+        if binary:
+            regular_file(binary, flag, ConfigError, executable=True)
+    if args.defaults:
+        regular_file(args.defaults, "--defaults", ConfigError)
+    if args.fw_log:
+        check_output(args.fw_log, "--fw-log", force=True)
+
+
 def run(args: argparse.Namespace) -> int:
+    check_files(args)
     if args.cf2:
         _, mocap = params_from(args)
     else:

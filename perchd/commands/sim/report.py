@@ -16,7 +16,7 @@ from perchd.campaign.plot import WORST_COLUMNS, plot_campaign, text, worst
 from perchd.campaign.results import summary_path
 from perchd.campaign.tableformats import table_format
 from perchd.commands.sim.campaign import summary_text
-from perchd.core.safefile import OutputError
+from perchd.core.safefile import OutputError, read_regular, regular_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,8 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def load_rows(path: Path) -> list[FlightRow]:
-    if not path.is_file():
-        raise OutputError(f"{path}: no such table")
+    regular_file(path, "table", OutputError)
     try:
         return sorted(table_format(path, FlightRow).load(), key=lambda r: r.index)
     except (ImportError, OSError, ValueError, TypeError) as err:
@@ -51,7 +50,13 @@ def load_rows(path: Path) -> list[FlightRow]:
 def made(path: Path) -> dict[str, Any]:
     """The campaign's own summary beside the table ({} without one)."""
     beside = summary_path(path)
-    return json.loads(beside.read_text()) if beside.is_file() else {}
+    if not beside.is_file():
+        return {}
+    try:
+        doc = json.loads(read_regular(beside, "", OutputError))
+    except ValueError as err:
+        raise OutputError(f"{beside}: not a campaign summary ({err})") from None
+    return doc if isinstance(doc, dict) else {}
 
 
 def run(args: argparse.Namespace) -> int:
