@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 from collections.abc import Sequence
 
@@ -37,17 +38,31 @@ def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM before a command installs its own handling: ends it as Ctrl-C would."""
+
+
+def _terminate(_signum: int, _frame: object) -> None:
+    raise Terminated
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser(argv).parse_args(argv)
+    name = next((a for a in argv if not a.startswith("-")), "")
+    # From the first line on, SIGTERM ends the command in one line as SIGINT does, even
+    # while it is still importing numpy and scipy (a command may install its own after).
+    signal.signal(signal.SIGTERM, _terminate)
     try:
+        args = build_parser(argv).parse_args(argv)
+        name = args.command
         return int(args.run(args) or 0)
     except PerchdError as err:
-        print(f"perchd {args.command}: {err}", file=sys.stderr)
+        print(f"perchd {name}: {err}", file=sys.stderr)
         return err.exit_code
-    except KeyboardInterrupt:
-        print(f"perchd {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as stop:
+        term = isinstance(stop, Terminated)
+        print(f"perchd {name}: interrupted{' by SIGTERM' if term else ''}", file=sys.stderr)
+        return 143 if term else 130
     except BrokenPipeError:
         return 0
 
