@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from fwharness import ENV, PLAN, lag_event, start_harness, stop_harness
+from fwharness import ENV, PLAN, held_speed, lag_event, start_harness, stop_harness
 from fwharness import log_rows as rows
 
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
@@ -213,11 +213,11 @@ def assert_perched(fly: dict, sim: dict) -> None:
     lo, hi = plan["limits"]["v_contact"]
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
-    # measured over 10 flights (docs/firmware.md, "Lag and drag"): contact 0.947-1.007 m/s,
-    # perch time within 0.65 % but for one flight triggered 0.16 m/s fast (+4.7 %), the
-    # ~0.3 s lag identified; +4.9-6.6 % and 0.88-0.97 m/s without
-    assert lo <= sim["contact"]["speed"] <= hi + 0.03
-    assert sim["contact"]["speed"] == pytest.approx(plan["v_contact"], abs=0.06)
+    # measured over 10 flights (docs/controller.md, "On the firmwares"): contact
+    # 0.849-0.937 m/s, under the held 0.95 by the slow vehicle's braking still in flight at
+    # the stage-2 switch (a 0.34 s lag), perch time -0.93 % median, 2.25 % at most
+    assert lo <= sim["contact"]["speed"] <= hi
+    assert sim["contact"]["speed"] == pytest.approx(held_speed(), abs=0.12)
     assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.05)
 
 

@@ -18,6 +18,17 @@ from announced import start_announced
 ROOT = Path(__file__).parents[2]
 """The repository: a firmware test's perchd processes run from it."""
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
+
+
+def held_speed() -> float:
+    """[m/s] the speed stage 2 holds on PLAN with the default config (docs/controller.md)."""
+    from perchd.flight.config import TauGains
+    from perchd.flight.references import hold_speed
+    from perchd.tau import load_plan
+
+    return hold_speed(load_plan(PLAN), TauGains().v_contact_margin_mps)
+
+
 """The plan every firmware flight perches on (paper case 1, IPTS order 3)."""
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 """The environment of those processes."""
