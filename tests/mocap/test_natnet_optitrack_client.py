@@ -74,7 +74,9 @@ def test_optitracks_client_reads_the_emulator(version, multicast, capsys):
     assert client.get_nat_net_version_server()[:2] == list(version)
     assert bodies[-1] == (1, pytest.approx((0.5, 1.5, -1.0)), (0.0, 0.0, 0.0, 1.0))  # Y up
     numbers = [f["frame_number"] for f in frames]
-    assert numbers == sorted(set(numbers)) and all(f["rigid_body_count"] == 1 for f in frames)
+    # Multicast on loopback may hand the client one datagram twice; frames never go back.
+    heard = [n for i, n in enumerate(numbers) if i == 0 or n != numbers[i - 1]]
+    assert heard == sorted(set(numbers)) and all(f["rigid_body_count"] == 1 for f in frames)
     assert "wand" in "".join(printed)
     assert (server.keepalives > 0) is not multicast  # keep-alives are a unicast client's
 
