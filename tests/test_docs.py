@@ -1,6 +1,7 @@
 """The docs hold: every repository path a Markdown file names exists, every `perchd ...`
 command it quotes parses with perchd's own argparse parser, and no tracked file speaks of
-work sessions, tracker issues, reviews, briefs or dates.
+where a change came from (the work that made it, its tracker, its dates): files say what is
+true and what they prove.
 
 Each test collects every failure and reports them all at once.
 """
@@ -322,7 +323,7 @@ def _tracked_files() -> list[str]:
     return [p for p in out.decode().split("\0") if p]
 
 
-def test_no_tracked_file_speaks_of_sessions_issues_reviews_briefs_or_dates():
+def test_no_tracked_file_speaks_of_where_a_change_came_from():
     hits = []
     for rel in _tracked_files():
         if rel in FORBIDDEN_ALLOWED:
@@ -339,6 +340,5 @@ def test_no_tracked_file_speaks_of_sessions_issues_reviews_briefs_or_dates():
             if m:
                 hits.append(f"{rel}:{n}: {m.group(0)!r}: {line.strip()[:120]}")
     assert not hits, (
-        "tracked files that speak of sessions, issues, reviews, briefs or "
-        "dates:\n  " + "\n  ".join(hits)
+        "tracked files that speak of where a change came from (FORBIDDEN):\n  " + "\n  ".join(hits)
     )
