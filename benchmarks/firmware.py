@@ -268,19 +268,13 @@ def fly_sim(noise: float, seed: int, tmp: Path) -> dict:
     }
 
 
-def held_speed() -> float:
-    """[m/s] the speed stage 2 holds on PLAN with the default config."""
-    from perchd.flight.config import TauGains
-    from perchd.flight.references import hold_speed
-    from perchd.tau.planfile import load_plan
-
-    return hold_speed(load_plan(PLAN), TauGains().v_contact_margin_mps)
-
-
 def summary(flights: list[dict], plan: dict) -> dict:
     ok = [f for f in flights if f["outcome"] == "CONTACT" and f["contact_speed"] is not None]
     lo, hi = plan["limits"]["v_contact"]
-    held = held_speed()
+    from perchd.flight.references import hold_speed
+    from perchd.tau.planfile import load_plan
+
+    held = hold_speed(load_plan(PLAN))
     speeds = [f["contact_speed"] for f in ok]
     times = [f["perch_time"] for f in ok if f["perch_time"] is not None]
     trig = [f["trigger_v"] - plan["v0"] for f in flights if f["trigger_v"] is not None]

@@ -252,7 +252,8 @@ class LagIdentifier:
         mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
         s = np.clip(np.interp(mid, tm, lean), -0.9, 0.9)
         a = G_M_S2 * s / np.sqrt(1.0 - s * s)
-        drag, qdrag = _drags(t, a[None, :], x, v, np.zeros(1), FREE)
+        sol = _fixed_drags(t, a[None, :], x, v, np.zeros(1), FREE, 0)
+        drag, qdrag = float(sol[0]), float(sol[1])
         ok = 0.0 <= drag <= DRAG_MAX_PER_S and 0.0 <= qdrag <= QDRAG_MAX_PER_M
         return (drag, qdrag) if ok else None
 
@@ -326,14 +327,6 @@ def _model_at(
 
 Drags = tuple[float | None, float | None]
 """(linear [1/s], quadratic [1/m]) drag: a number is held, None is fitted."""
-
-
-def _drags(
-    t: np.ndarray, a: np.ndarray, x: np.ndarray, v: np.ndarray, lags: np.ndarray, drag: Drags
-) -> tuple[float, float]:
-    """(drag [1/s], qdrag [1/m]) of the fit at the first input and lag, signs settled."""
-    sol = _fixed_drags(t, a, x, v, lags, drag, 0)
-    return float(sol[0]), float(sol[1])
 
 
 def _fixed_drags(

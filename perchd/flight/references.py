@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from perchd.core.types import State
-from perchd.flight.config import FlightConfig
+from perchd.flight.config import FlightConfig, TauGains
 from perchd.flight.planrefs import PlanPoint, PlanSampler
 from perchd.flight.response import VehicleResponse
 from perchd.flight.trigger import TriggerDesk
@@ -31,9 +31,10 @@ class Refs:
 NO_REFS = Refs()
 
 
-def hold_speed(plan: Plan, margin_mps: float) -> float:
-    """[m/s] the speed stage 2 holds: the plan's V_c moved at least margin_mps [m/s] inside
-    its contact window (its middle when the window is narrower than twice the margin)."""
+def hold_speed(plan: Plan, margin_mps: float = TauGains.v_contact_margin_mps) -> float:
+    """[m/s] the speed stage 2 holds: the plan's V_c moved at least margin_mps [m/s] (by
+    default the default config's) inside its contact window (its middle when the window is
+    narrower than twice the margin)."""
     v = float(plan.v_contact)
     lo, hi = plan.limits.v_contact
     if hi - lo <= 2.0 * margin_mps:

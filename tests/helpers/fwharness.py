@@ -20,15 +20,6 @@ ROOT = Path(__file__).parents[2]
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
 
 
-def held_speed() -> float:
-    """[m/s] the speed stage 2 holds on PLAN with the default config (docs/controller.md)."""
-    from perchd.flight.config import TauGains
-    from perchd.flight.references import hold_speed
-    from perchd.tau import load_plan
-
-    return hold_speed(load_plan(PLAN), TauGains().v_contact_margin_mps)
-
-
 """The plan every firmware flight perches on (paper case 1, IPTS order 3)."""
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 """The environment of those processes."""
