@@ -76,7 +76,12 @@ def test_optitracks_client_reads_the_emulator(version, multicast, capsys):
     numbers = [f["frame_number"] for f in frames]
     # Multicast on loopback may hand the client one datagram twice; frames never go back.
     heard = [n for i, n in enumerate(numbers) if i == 0 or n != numbers[i - 1]]
-    assert heard == sorted(set(numbers)) and all(f["rigid_body_count"] == 1 for f in frames)
+    counts = [f["rigid_body_count"] for f in frames]
+    # Under load the server's first frame can go out before the pose published ahead of its
+    # start is in it (seen 2 in 3 full runs); from the first frame with the body on, every
+    # frame carries exactly it.
+    carried = counts[counts.index(1) :] if 1 in counts else counts
+    assert heard == sorted(set(numbers)) and set(carried) == {1}, counts
     assert "wand" in "".join(printed)
     assert (server.keepalives > 0) is not multicast  # keep-alives are a unicast client's
 
