@@ -296,15 +296,21 @@ def fastest_k(
     *,
     seed: int = 0,
     maxiter: int = 60,
+    start: tuple[float, ...] | None = None,
     progress: Progress | None = None,
 ) -> RobustResult:
     """k_1..k_n certified over `box` with the least worst-case duration: first the k with the
     widest sampled margin over the box (differential evolution), then the worst duration
     t_s(k_max) + |tau_s| minimised under a sampled margin (COBYLA), then certified.
+    `start` (k_1..k_m of order m <= n, e.g. a lower-order result) seeds the first search,
+    padded with zeros and clipped into its bounds; that search keeps its best member, so the
+    margin it ends with is never below the seed's.
     progress(generation, maxiter) is called after each generation of the first search."""
 
     if order < 1:
         raise PlanError(f"order must be >= 1, got {order}")
+    if start is not None and not 1 <= len(start) <= order:
+        raise PlanError(f"a start k of order {len(start)} cannot seed an order-{order} search")
     ratio, k0 = contact_ratio(box)
     if ratio > lim.v_contact[1] / lim.v_contact[0]:
         raise PlanError(
@@ -315,6 +321,10 @@ def fastest_k(
         )
     k_max = box.k0_range[1]
     bounds = [(-3.0, 1.0)] + [(-2.0, 2.0)] * (order - 1)
+    guess = None
+    if start is not None:
+        lo, hi = np.array(bounds).T
+        guess = np.clip(np.pad(np.asarray(start, dtype=float), (0, order - len(start))), lo, hi)
     de = differential_evolution(
         lambda k: -box_margin(k, box, lim),
         bounds,
@@ -323,6 +333,7 @@ def fastest_k(
         popsize=12,
         tol=1e-8,
         polish=False,
+        x0=guess,
         callback=_generations(progress, maxiter),
     )
     if -de.fun < SEARCH_MARGIN:

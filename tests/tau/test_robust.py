@@ -12,7 +12,7 @@ from robust_brute import fly, worst_over_box
 
 from perchd.cli import main as perchd
 from perchd.core.errors import PlanError
-from perchd.tau import Limits
+from perchd.tau import Limits, robust
 from perchd.tau.certify import Box
 from perchd.tau.planfile import load_plan, plan_from_json
 from perchd.tau.robust import (
@@ -138,6 +138,31 @@ def test_plan_robust_writes_a_plan_file_plan_check_recertifies(tmp_path, capsys)
     assert plan.v_contact == pytest.approx(f.v_contact, rel=1e-5)
     assert perchd(["plan", "check", str(out), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["feasible"] is True
+
+
+def test_a_given_box_takes_the_start_plans_k_as_its_seed(tmp_path, capsys, monkeypatch):
+    """--start with a box (LO HI): the start plan's k, padded to --order, seeds the search."""
+    seeds = []
+    real = robust.differential_evolution
+
+    def spy(*args, **kwargs):
+        seeds.append(kwargs.get("x0"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(robust, "differential_evolution", spy)
+    start = Path(__file__).parents[2] / "plans" / "robust-n3-contracts-example.json"
+    box = ["--x0", "-3.9", "-3.7", "--v0", "1.8", "2.0", "--maxiter", "1"]
+    out = tmp_path / "P.json"
+    argv = ARGS + box + ["--order", "4", "--start", str(start), "--out", str(out)]
+    assert perchd(argv) == 0
+    assert seeds and seeds[0] is not None
+    assert tuple(seeds[0]) == pytest.approx((*load_plan(start).k[1:], 0.0))
+    assert check_plan(load_plan(out)).certified
+    capsys.readouterr()
+    argv = ARGS + box + ["--order", "2", "--start", str(start), "--out", str(out), "--force"]
+    assert perchd(argv) == 2
+    err = capsys.readouterr().err
+    assert "order-3 plan cannot seed --order 2" in err and err.count("\n") == 1
 
 
 def test_plan_check_refuses_a_plan_whose_box_was_grown_naming_limit_and_state(tmp_path, capsys):

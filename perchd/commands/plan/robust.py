@@ -63,7 +63,9 @@ def register(plan_sub) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="search random seed (default: 0)")
     p.add_argument(
-        "--start", metavar="PLAN", help="a lower-order robust plan whose k seeds the search"
+        "--start",
+        metavar="PLAN",
+        help="a robust plan of order <= --order whose k seeds the search (every mode)",
     )
     flags.written_file(p, "plan")
     p.set_defaults(run=run)
@@ -108,6 +110,7 @@ def run(args) -> int:
         raise PlanError("--x0 and --v0 go together: both boxes (LO HI) or both nominal values")
     v_search = tuple(args.search_v0) if args.search_v0 else (0.2, args.v_max)
     s_search = tuple(sorted(-x for x in args.search_x0))
+    start = _start(args.start, args.order)
     progress = Progress(args.maxiter, "generations", "plan robust", lines=False)
     try:
         if x0 is not None and len(x0) == 2:
@@ -118,6 +121,7 @@ def run(args) -> int:
                     lim,
                     seed=args.seed,
                     maxiter=args.maxiter,
+                    start=None if start is None else start.k,
                     progress=progress.at,
                 ),
                 None,
@@ -132,7 +136,7 @@ def run(args) -> int:
                 dom,
                 seed=args.seed,
                 maxiter=args.maxiter,
-                start=_start(args.start, lim),
+                start=start,
                 progress=progress.at,
             )
             mode = "grow" if nominal else "largest"
@@ -155,14 +159,20 @@ def run(args) -> int:
     return 0
 
 
-def _start(path, lim):
-    """A RobustResult from a robust plan file, to seed a higher-order search."""
+def _start(path, order: int):
+    """A RobustResult from a robust plan file of order `order` at most, to seed the search.
+    Every mode takes it: its k (padded with zeros) seeds the k search, and where boxes are
+    searched (no box given) its box is one candidate too."""
 
     if path is None:
         return None
     plan = load_plan(path)
     if plan.robust is None:
         raise PlanError(f"--start {path}: not a robust plan (no robust box)")
+    if len(plan.k) - 1 > order:
+        raise PlanError(
+            f"--start {path}: an order-{len(plan.k) - 1} plan cannot seed --order {order}"
+        )
     return RobustResult(tuple(plan.k[1:]), Box(*plan.robust), check_plan(plan))
 
 
