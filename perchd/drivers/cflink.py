@@ -9,7 +9,9 @@ at once (during its first |v| / a, at most LEAN_MAX_S, leaning against the veloc
 driver last measured: the brake the driver keeps renewing, drivers/mavlink/brake.py), at a
 sink speed held on the flight's own mocap, opened here at the death (drivers/cfsink.py
 ClosedSink), or open loop about the hover thrust while the mocap is not there (OpenSink);
-then the stop setpoint, then it closes the link and exits.
+then the stop setpoint, then it closes the link and exits. A keeper whose link never
+reached the vehicle (never heard it, never sent a thrust above zero: the agent's connect
+failed) has nothing to land and exits at once, saying nothing.
 
 Wire (a SOCK_SEQPACKET pair, one message per packet, little-endian):
   driver -> keeper: b"S" <fffHH> roll deg, pitch deg, yaw rate deg/s (cflib conventions),
@@ -174,6 +176,7 @@ class Keeper:
         self.mocap_seq = -1
         self.error = ""
         self.heard: float | None = None  # time.monotonic() the vehicle was last heard
+        self.thrust_sent = False  # a setpoint with thrust above zero went out
         self.rtts: deque[float] = deque(maxlen=RTT_SAMPLES)
         self.last_cmd = (0.0, 0.0, 0.0, 0)
         self.hold_units = 0
@@ -235,6 +238,7 @@ class Keeper:
     # -- setpoints ---------------------------------------------------------------------
     def send_cmd(self, cmd: tuple[float, float, float, int]) -> None:
         self.last_cmd = cmd
+        self.thrust_sent = self.thrust_sent or cmd[3] > 0
         self.last_sent = time.monotonic()
         self.commander.send_setpoint(*cmd)
 
@@ -277,10 +281,21 @@ class Keeper:
             self.hover_n = hover_mean(self.hover_n, newtons, dt)
             self.hold_at = now
 
+    def reached_vehicle(self) -> bool:
+        """A vehicle that may be flying: heard on the link, or sent a thrust above zero. A
+        link that never reached one (the driver's connect failed: no echo) has only sent
+        the zero-thrust keep-alives."""
+        return self.heard is not None or self.thrust_sent
+
     def agent_lost(self, now: float) -> None:
         """EOF or silence: brake and descend unless already stopped (then only the repeats
-        remain). A brake older than WILL_MAX_AGE_S is not flown: the mocap had stopped."""
+        remain). A brake older than WILL_MAX_AGE_S is not flown: the mocap had stopped.
+        Without a vehicle ever reached there is nothing to land: it exits at once, silent
+        (the agent's connect said why in its one line)."""
         self.agent_gone = True
+        if not self.reached_vehicle():
+            self.running = False
+            return
         if self.stop_until is None and self.descent is None:
             fresh = time.monotonic() - self.lean.t_s <= WILL_MAX_AGE_S
             hover = Hover(self.model, self.hover_n)

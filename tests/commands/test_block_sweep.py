@@ -400,21 +400,8 @@ def _names() -> list[str]:
     return sorted(socket_cases(Dry(Path("."))))
 
 
-KEEPER_SPEAKS = pytest.mark.xfail(
-    strict=True,
-    reason="the Crazyflie link keeper (perchd/drivers/cflink.py) adds a second line, "
-    "'descent over (its bound): motors stopped', after a connect that never reached the vehicle",
-)
-
-
 @pytest.mark.solo  # real-time bounds: see tests/conftest.py
-@pytest.mark.parametrize(
-    "case",
-    [
-        pytest.param(n, marks=KEEPER_SPEAKS) if "cflib) nobody" in n and n.startswith("fly") else n
-        for n in _names()
-    ],
-)
+@pytest.mark.parametrize("case", _names())
 def test_a_uri_nobody_answers_is_one_line_within_its_timeout(case, listeners, tmp_path):
     argv, timeout_s = socket_cases(listeners)[case]
     bound = timeout_s + START_S

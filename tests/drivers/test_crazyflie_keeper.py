@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import os
 import signal
+import socket
 import statistics
 import subprocess
 import sys
@@ -22,6 +23,7 @@ from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
 from perchd.drivers import cflink, cfsink
 from perchd.drivers.base import open_driver
+from perchd.drivers.crazyflie import KEEPER_START_S
 from perchd.drivers.mavlink.brake import BRAKE_ACCEL_MPS2
 from perchd.drivers.thrust import CrazyflieThrust
 
@@ -185,6 +187,97 @@ def test_a_dead_keeper_is_a_named_lost_link(responder):
         os.kill(cf._keeper.pid, signal.SIGKILL)
         assert responder.wait_for(lambda: not cf.health().ok)
         assert "link keeper exited" in cf.health().detail
+
+
+CONNECT_THEN_DIE = textwrap.dedent(f"""
+    import os, sys, time
+    from perchd.core import childproc
+    from perchd.core.errors import LinkError
+    from perchd.core.runtime import Runtime
+    from perchd.core.types import Phase, Setpoint
+    from perchd.drivers.base import open_driver
+
+    start = childproc.start
+    def start_and_tell(*args):  # the keeper's pid, which a failed connect forgets
+        proc = start(*args)
+        print(proc.pid, flush=True)
+        return proc
+    childproc.start = start_and_tell
+    cf = open_driver(sys.argv[1], Runtime.real())
+    try:
+        cf.connect()
+    except LinkError:
+        sys.exit(3)  # as `perchd fly` after its one line
+    for k in range(int(sys.argv[2])):  # 100 Hz of level hover thrust
+        cf.send(Setpoint(k * 0.01, 0.0, 0.0, 0.0, {HOVER_N}, k, Phase.STAGE1))
+        time.sleep(0.01)
+    os._exit(0)  # dies holding the link, as a killed agent does
+""")
+KEEPER_EXIT_S = 1.0
+"""[s] a keeper with nothing to land is gone this soon after its agent (its open-loop
+descent alone lasts KICK_S + OPEN_UNKNOWN_S)."""
+
+
+def connect_then_die(uri: str, ticks: int = 0) -> tuple[subprocess.Popen, int]:
+    """An agent that connects to `uri`, sends `ticks` level hover setpoints and dies
+    without a close; its keeper's pid. stdout and stderr are pipes the keeper shares."""
+    agent = subprocess.Popen(
+        [sys.executable, "-c", CONNECT_THEN_DIE, uri, str(ticks)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    return agent, int(agent.stdout.readline())
+
+
+def wait_gone(pid: int, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not gone(pid) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    return gone(pid)
+
+
+@pytest.mark.solo  # a real-time bound: see tests/conftest.py
+@pytest.mark.parametrize("peer", ["refused", "silent"])
+def test_a_keeper_whose_link_never_reached_a_vehicle_exits_silently(peer, responder):
+    """The connect's echo never came back (a UDP port nobody bound: refused; a vehicle
+    that never answers: silent): the agent's connect fails, and its keeper, which only ever
+    sent zero-thrust keep-alives, has nothing to land. It says nothing (a user error is
+    the agent's one line) and exits at once: no descent, no stop."""
+    if peer == "refused":
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", 0))
+            uri = f"udp://127.0.0.1:{s.getsockname()[1]}?wait=0.3"
+    else:
+        responder.mute()
+        uri = f"{responder.uri}?wait=0.3"
+    agent, keeper_pid = connect_then_die(uri)
+    assert agent.wait(timeout=KEEPER_START_S + 5) == 3  # the connect failed
+    assert wait_gone(keeper_pid, KEEPER_EXIT_S)
+    _, err = agent.communicate(timeout=5)
+    assert err == ""
+    assert not responder.stops()
+    assert all(s.thrust == 0 for s in responder.setpoints())
+
+
+@pytest.mark.parametrize("ticks", [0, 30])
+def test_a_keeper_that_reached_the_vehicle_still_lands_it_when_the_agent_dies(ticks, responder):
+    """The echo came back, so the vehicle is there: at the agent's death the keeper flies
+    its descent and stops the motors, and says so. Connected only (zero thrust so far):
+    at once; after 0.3 s of hover thrust: the open-loop sink to its bound."""
+    agent, keeper_pid = connect_then_die(responder.uri, ticks)
+    assert agent.wait(timeout=KEEPER_START_S + 5) == 0  # connected, then died
+    t_dead = time.monotonic()
+    bound = 0.0 if ticks == 0 else cfsink.KICK_S + cfsink.OPEN_UNKNOWN_S
+    assert responder.wait_for(lambda: responder.stops(), timeout=bound + 1.5)
+    assert responder.stops()[0].t - t_dead >= bound - 0.1
+    if ticks:
+        descent = [s for s in responder.setpoints() if t_dead < s.t < responder.stops()[0].t]
+        assert descent and all(s.thrust > 0 for s in descent)
+    assert wait_gone(keeper_pid, 2.0)
+    _, err = agent.communicate(timeout=5)
+    assert err.splitlines() == ["perchd cflink: descent over (open loop): motors stopped"]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGABRT])
