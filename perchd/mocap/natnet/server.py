@@ -10,8 +10,10 @@ It answers connect and discovery with server info, model-definition requests, ec
 string requests (FrameRate, UnitsToMillimeters, CurrentMode, Bitstream, ...), and streams
 frames of data by multicast (group 239.255.42.99 on the data port, out of `host`'s
 interface) or by unicast to every client that connected (to the socket it connected from, as
-Motive does). With `rate_hz` it sends a frame at that rate carrying each body's newest pose;
-without, every `publish` sends one frame at once.
+Motive does, once it has sent it the server info, which tells the client how to read frames).
+With `rate_hz` it sends a frame at that rate carrying each body's newest pose; without, every
+`publish` sends one frame at once. Every frame carries every pose published before it was
+built: a pose published before `start` is in the first frame.
 
 The data port is, as in Motive, a port the server advertises and sends to but does not hold:
 clients (OptiTrack's samples, libmotioncapture) bind it themselves, so a server holding it
@@ -279,13 +281,15 @@ class NatNetServer:
         reply = self._reply(message_id, payload, address, arrival_ticks)
         if reply is not None:
             self._command.sendto(reply, address)
+        if message_id == proto.NAT_CONNECT:
+            # Frames only after the server info: a client learns from it the NatNet version
+            # to read frames with, and OptiTrack's reads one that comes first as version 0.0.
+            self._remember(address)
 
     def _reply(
         self, message_id: int, payload: bytes, address: tuple[str, int], arrival_ticks: int
     ) -> bytes | None:
         if message_id in (proto.NAT_CONNECT, proto.NAT_DISCOVERY):
-            if message_id == proto.NAT_CONNECT:
-                self._remember(address)
             return proto.pack(proto.NAT_SERVERINFO, proto.encode_server_info(self.server_info()))
         self._touch(address)
         if message_id == proto.NAT_REQUEST_MODELDEF:
