@@ -239,6 +239,13 @@ def shrink_until_certified(
     return RobustResult(tuple(map(float, k)), best[0], best[1])
 
 
+def _inside(k: np.ndarray, bounds: list[tuple[float, float]]) -> np.ndarray:
+    """k clipped into the search's bounds: differential evolution refuses a seed outside
+    them (a start whose k a polish carried beyond them still seeds the search)."""
+    lo, hi = np.array(bounds).T
+    return np.clip(k, lo, hi)
+
+
 def largest_box(
     order: int,
     lim: RobustLimits,
@@ -270,7 +277,7 @@ def largest_box(
         popsize=popsize,
         tol=1e-8,
         polish=False,
-        x0=guess,
+        x0=None if guess is None else _inside(guess, bounds),
         callback=_generations(progress, maxiter),
     )
     candidates = [(de.x, grid_box(de.x, lim, dom))]
@@ -323,8 +330,7 @@ def fastest_k(
     bounds = [(-3.0, 1.0)] + [(-2.0, 2.0)] * (order - 1)
     guess = None
     if start is not None:
-        lo, hi = np.array(bounds).T
-        guess = np.clip(np.pad(np.asarray(start, dtype=float), (0, order - len(start))), lo, hi)
+        guess = _inside(np.pad(np.asarray(start, dtype=float), (0, order - len(start))), bounds)
     de = differential_evolution(
         lambda k: -box_margin(k, box, lim),
         bounds,

@@ -240,3 +240,22 @@ def test_the_box_search_seeded_with_a_certified_box_returns_a_certified_larger_o
     w = worst_over_box(r.k, r.box.x0, r.box.v0, -0.5, n=4)
     assert w["reaches"] and w["v_peak"] <= 2.5 and w["a_peak"] <= 1.4 + 1e-4
     assert 0.7 <= w["vc_lo"] and w["vc_hi"] <= 1.0
+
+
+def test_a_start_whose_k_lies_outside_the_search_bounds_still_seeds_it():
+    """A start k beyond the bounds (a polish may carry it there) seeds the search clipped
+    into them, and still competes as it is: no error, never a smaller box than the start's."""
+    from perchd.tau.robust import RobustResult, largest_box
+
+    seed_box = Box((-3.65, -2.94), (0.67, 2.49))
+    k_bound = 0.5 * max(abs(k) for k in K3[1:])
+    r = largest_box(
+        3,
+        LIM,
+        maxiter=1,
+        popsize=3,
+        k_bound=k_bound,
+        polish_evals=50,
+        start=RobustResult(K3, seed_box, LIM.certify(K3, seed_box)),
+    )
+    assert r.certificate.certified and r.box.area >= seed_box.area
