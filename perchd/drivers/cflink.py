@@ -20,7 +20,8 @@ Wire (a SOCK_SEQPACKET pair, one message per packet, little-endian):
                     b"P" <7f> extpose (x, y, z, qx, qy, qz, qw); b"B" <ffffd> the brake:
                     roll deg, pitch deg (cflib conventions), duration s, the thrust
                     units' factor that holds height at that tilt, time.monotonic() when
-                    measured; b"Z" <fd> height m, time.monotonic() when measured;
+                    measured; b"Z" <ffd> height m, vertical speed m/s (up), time.monotonic()
+                    when measured;
                     b"A" alive; b"X" stop;
                     b"U" leave the stop (the next flight's take-over; ignored once the
                     agent is gone); b"C" close (the keeper exits).
@@ -58,7 +59,7 @@ CMD = struct.Struct("<fffHH")
 POSE = struct.Struct("<7f")
 BRAKE = struct.Struct("<ffffd")
 STATUS = struct.Struct("<dd")
-HEIGHT = struct.Struct("<fd")
+HEIGHT = struct.Struct("<ffd")
 
 PING_S = 0.02
 """[s] period of CRTP link-echo pings and of status reports to the driver."""
@@ -69,7 +70,8 @@ SILENT_S = 0.25
 LEAN_MAX_S = 0.5
 """[s] the longest brake: at the 1.5 m/s of a perch's approach, all of it."""
 HEIGHT_MAX_AGE_S = 1.0
-"""[s] an older height from the driver is not known (the open loop's bound without one)."""
+"""[s] an older height (and vertical speed) from the driver is not known (the open loop's
+bound without one)."""
 DESCENT_MAX_S = cfsink.DESCENT_MAX_S
 """[s] the keeper's longest descent: then the stop."""
 HOVER_BAND = (0.5, 1.5)
@@ -171,7 +173,7 @@ class Keeper:
         self.model = model or CrazyflieThrust()
         self.hover_n = self.model.newtons(self.model.hover_units)  # the hold thrusts' mean
         self.hold_at: float | None = None  # time.monotonic() of the last hold thrust
-        self.height: tuple[float, float] | None = None  # [m], time.monotonic() measured
+        self.height: tuple[float, float, float] | None = None  # [m], [m/s] up, measured at
         self.mocap = mocap  # the flight's mocap, opened, started at the death
         self.mocap_seq = -1
         self.error = ""
@@ -302,16 +304,17 @@ class Keeper:
             opened = self.start_mocap()
             self.descent = Descent(
                 now,
-                OpenSink(now, self.hold_units, hover, self.known_height(now)),
+                OpenSink(now, self.hold_units, hover, *self.known_motion(now)),
                 ClosedSink(now, hover) if opened else None,
                 self.lean if fresh else NO_LEAN,
             )
 
-    def known_height(self, now: float) -> float | None:
-        """[m] above the floor, from the driver's last height if recent."""
-        if self.height is None or now - self.height[1] > HEIGHT_MAX_AGE_S:
-            return None
-        return self.height[0] - cfsink.FLOOR_Z_M
+    def known_motion(self, now: float) -> tuple[float | None, float]:
+        """[m] above the floor (None: unknown) and [m/s] sink (> 0 down; a climb below zero,
+        for the open loop's brake), from the driver's last height if recent."""
+        if self.height is None or now - self.height[2] > HEIGHT_MAX_AGE_S:
+            return None, 0.0
+        return self.height[0] - cfsink.FLOOR_Z_M, -self.height[1]
 
     def start_mocap(self) -> bool:
         """The flight's mocap, its sockets opened now (never beside the agent's own)."""

@@ -6,8 +6,9 @@ Two ways, one interface (`level_units(now)`, None: cut):
 - `ClosedSink`, on the mocap: a PI on the vertical speed to SINK_MPS (SINK_LOW_MPS within
   LOW_M of the floor), the thrust through the thrust model about the hover estimate; the
   motors are cut once the vehicle rests (touchdown) or after a bound.
-- `OpenSink`, without it: a short push below hover starts the descent, then hover less
-  SINK_MARGIN holds a slow sink, until a bound from the last height known.
+- `OpenSink`, without it: a climb or a fall met at the death is braked first (BRAKE_MPS2),
+  then a short push below hover starts the descent, then hover less SINK_MARGIN holds a slow
+  sink, until a bound from the last height known and the climb's stopping distance.
 """
 
 from __future__ import annotations
@@ -47,12 +48,16 @@ DESCENT_MAX_S = 12.0
 MOCAP_LOST_S = 0.15
 """[s] no new pose this long: the mocap is lost, the open-loop sink takes over."""
 KICK_FRACTION = 0.85
-"""the open loop's push: this fraction of the hold thrust ..."""
+"""the open loop's push: this fraction of the hover thrust ..."""
 KICK_S = 0.35
 """[s] ... for this long from the death (~0.4 m/s of sink), ramping RAMP_S each way."""
 RAMP_S = 0.2
 SINK_MARGIN = 0.03
 """then hover less this fraction of the weight: 0.3 m/s^2, from 1 m ~0.8 m/s at the floor."""
+BRAKE_MPS2 = ACCEL_MAX_MPS2
+"""[m/s^2] the open loop's brake on a climb (a kill in take-off) or a fall met at the
+death: the closed loop's own bound, so a climb stops within climb^2 / 2 BRAKE_MPS2 and the
+motors' lag, never by a free fall."""
 OPEN_SINK_MPS = 0.6
 """[m/s] the open loop's mean sink, for its bound: the height known / this + OPEN_SPARE_S."""
 OPEN_SPARE_S = 0.5
@@ -74,9 +79,15 @@ class Hover:
 
 
 class OpenSink:
-    """The open-loop descent: from `hold_units` at t0_s down to KICK_FRACTION of it, then
-    up to hover less SINK_MARGIN, until the bound from `height_m` [m] above the floor
-    (None: unknown) at `sink_mps` [m/s] already reached (a kick is then not flown)."""
+    """The open-loop descent from t0_s, the vehicle sinking at `sink_mps` [m/s] (> 0 down)
+    at the death. First a brake of BRAKE_MPS2 about the hover brings that sink into
+    0..SINK_MPS: a climb stops (a kill in take-off), a fall slows (never faster toward the
+    floor than it was going). From rest, a kick: from `hold_units` (the last command's level
+    thrust, never above the hover: nothing after the death climbs) down to KICK_FRACTION of
+    the hover; a vehicle already sinking at SINK_LOW_MPS needs none. Then hover less
+    SINK_MARGIN until the bound from `height_m` [m] above the floor (None: unknown) and the
+    climb's stopping distance. Every thrust is the hover's, never the last command's: a
+    death mid-brake (a command below hover) kicks no harder."""
 
     def __init__(
         self,
@@ -88,23 +99,34 @@ class OpenSink:
     ) -> None:
         self.t0_s = t0_s
         self.hold_units = hold_units
-        self.kick_s = 0.0 if sink_mps >= SINK_LOW_MPS else KICK_S
-        self.low_units = int(KICK_FRACTION * hold_units)
+        goal = min(max(sink_mps, 0.0), SINK_MPS)
+        excess = sink_mps - goal  # > 0: falling too fast; < 0: climbing
+        self.brake_s = abs(excess) / BRAKE_MPS2
+        self.brake_units = hover.units(math.copysign(BRAKE_MPS2, excess))
+        self.kick_s = 0.0 if goal >= SINK_LOW_MPS else KICK_S
+        self.low_units = hover.units((KICK_FRACTION - 1.0) * G)
         self.sink_units = hover.units(-SINK_MARGIN * G)
+        self.top_units = (
+            min(hold_units, hover.units(0.0)) if self.brake_s == 0.0 else self.low_units
+        )
+        rise_m = max(0.0, -excess) * self.brake_s / 2.0
         sink_s = (
             OPEN_UNKNOWN_S
             if height_m is None
-            else max(0.0, height_m) / OPEN_SINK_MPS + OPEN_SPARE_S
+            else (max(0.0, height_m) + rise_m) / OPEN_SINK_MPS + OPEN_SPARE_S
         )
-        self.end_s = t0_s + min(self.kick_s + sink_s, DESCENT_MAX_S)
+        self.end_s = t0_s + min(self.brake_s + self.kick_s + sink_s, DESCENT_MAX_S)
 
     def level_units(self, now: float) -> int | None:
         t = now - self.t0_s
         if now >= self.end_s or self.hold_units <= 0:
             return None
+        if t < self.brake_s:
+            return self.brake_units
+        t -= self.brake_s
         if t < self.kick_s:
-            return _ramp(self.hold_units, self.low_units, t / RAMP_S)
-        start = self.low_units if self.kick_s else self.hold_units
+            return _ramp(self.top_units, self.low_units, t / RAMP_S)
+        start = self.low_units if self.kick_s else self.top_units
         return _ramp(start, self.sink_units, (t - self.kick_s) / RAMP_S)
 
 
