@@ -21,12 +21,14 @@ import pytest
 from cf2rig import CF2, needs_cf2
 from fwharness import ENV, PLAN, start_harness, stop_harness
 
-from perchd.drivers import cflink
+from perchd.drivers import cflink, cfsink
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
 pytest.importorskip("cflib")
 
 RISE_MAX_M = 0.1
+REACTION_S = 0.08
+"""[s] the keeper's tick, the firmware's commander and the motors' lag, before its brake bites."""
 TOUCHDOWN_MAX_MPS = 1.0
 FLOOR_M = 0.002
 """[m] the harness's floor is z = 0: at or below this the vehicle is down."""
@@ -66,6 +68,13 @@ def touchdown(after: list[tuple[float, float, bool]], t_kill: float) -> dict:
     }
 
 
+def climb_at(track: list[list], t_kill: float, window_s: float = 0.05) -> float:
+    """[m/s] the vertical speed over the window_s before the kill, by the truth track."""
+    before = [(t, z) for t, z, _ in track if t_kill - window_s <= t <= t_kill]
+    (t0, z0), (t1, z1) = before[0], before[-1]
+    return (z1 - z0) / (t1 - t0) if t1 > t0 else 0.0
+
+
 def after_kill(track: list[list], t_kill: float) -> dict:
     """Rise, touchdown and motor stop from the truth track ([monotonic s, z m, motors on])."""
     before = [z for t, z, _ in track if t <= t_kill]
@@ -73,6 +82,7 @@ def after_kill(track: list[list], t_kill: float) -> dict:
     on_after = [t for t, _, on in after if on]
     return {
         "z_at_kill": before[-1],
+        "vz_at_kill": round(climb_at(track, t_kill), 3),
         "rise_m": round(max(z for _, z, _ in after) - before[-1], 4),
         **touchdown(after, t_kill),
         "motors_stop_s": round(on_after[-1] - t_kill + 0.01, 3) if on_after else 0.0,
@@ -139,6 +149,10 @@ def test_sigkill_gets_a_held_sink_a_soft_touchdown_and_a_stop(tmp_path, phase):
         with open(os.environ["PERCHD_FW_REPORT"], "a") as f:
             f.write(json.dumps({"test": "sigkill", **figures}) + "\n")
     assert figures["rise_m"] <= RISE_MAX_M
+    # no climb of the keeper's own: at most the climb's stopping distance at the open
+    # loop's brake, plus the climb over its reaction (the keeper's tick, the motors' lag)
+    climb = max(0.0, figures["vz_at_kill"])
+    assert figures["rise_m"] <= climb**2 / (2 * cfsink.BRAKE_MPS2) + climb * REACTION_S + 0.005
     assert figures["touchdown_mps"] is not None  # came down to the floor
     assert figures["touchdown_mps"] <= TOUCHDOWN_MAX_MPS
     assert figures["motors_stop_s"] <= MOTORS_STOP_S
