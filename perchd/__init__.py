@@ -3,6 +3,37 @@
 import os
 import sys
 
+
+def _is_the_command() -> bool:
+    """This process runs `perchd` itself: its console script, or `python -m perchd` (while
+    the package is imported for that, sys.argv[0] is "-m" and sys.orig_argv names it)."""
+    argv = sys.argv
+    if not argv:
+        return False
+    if argv[0] == "-m":
+        module = sys.orig_argv[-len(argv)] if len(sys.orig_argv) >= len(argv) else ""
+        return module == "perchd" or (module.startswith("-") and module.endswith("mperchd"))
+    return os.path.basename(argv[0]) == "perchd"
+
+
+# The command takes SIGINT and SIGTERM from here to its exit (perchd/core/command_signals.py);
+# nothing here runs code that looks at signals before the `try`.
+_command = None
+try:
+    _command = _is_the_command()
+    if _command:
+        from perchd.core import command_signals
+
+        command_signals.take()
+except KeyboardInterrupt:  # a Ctrl-C that came before the handler was in place
+    if _command is None:
+        _command = _is_the_command()
+    if not _command:
+        raise
+    _name = next((f" {a}" for a in sys.argv[1:] if not a.startswith("-")), "")
+    os.write(2, f"perchd{_name}: interrupted\n".encode(errors="backslashreplace"))
+    os._exit(130)
+
 # One BLAS/OpenMP thread per process unless the user asks for more: the planner's small
 # dense solves gain nothing from a pool, and on a busy flight PC the pool's threads fight
 # other programs for cores and slow every solve several-fold. Set before numpy loads, and

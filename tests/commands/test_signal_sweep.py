@@ -487,8 +487,7 @@ def test_a_signal_while_a_command_is_still_starting_is_one_line(args, sig, procs
     if ended.code == 0:  # it finished before the signal came: nothing to judge
         pytest.skip("the command ended before the signal")
     assert "Traceback" not in ended.stderr, ended.stderr
-    # A SIGINT met in interpreter code outside main may end it by the signal (-2): the
-    # shell's 130 all the same.
-    assert ended.code in (STOPS[sig], -int(sig)), ended.stderr[-2000:]
-    if ended.stderr.strip():
-        assert ended.stderr.strip().splitlines()[-1].startswith(f"perchd {args[0]}: interrupted")
+    # 0.15 s in, perchd's first lines have run: they hold both signals to the exit
+    # (perchd/core/command_signals.py; tests/commands/test_signal_any_moment.py)
+    assert ended.code == STOPS[sig], ended.stderr[-2000:]
+    assert ended.stderr.strip().splitlines()[-1].startswith(f"perchd {args[0]}: interrupted")
