@@ -305,7 +305,7 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
     )
     # the sentinel's brake, then Land: 0.22-0.46 m over twelve kills at 0.46-0.51 m/s
     # (docs/safety.md, "The brake"); Land alone had gone 0.36-0.63 m
-    assert figures["further_toward_wall_m"] <= 0.5
+    assert figures["further_toward_wall_m"] <= LAND_DRIFT_M[boot]
     assert "OFFBOARD" in modes
     # What PX4 did when the agent died follows its take-over. Landed and disarmed, PX4 may
     # report the mode last chosen, OFFBOARD, again (seen once in the vision boot's blind land).
@@ -314,6 +314,17 @@ def test_a_killed_agent_leaves_px4_holding_or_landing_never_returning(tmp_path, 
     assert "AUTO.RTL" not in modes
 
 
+LAND_DRIFT_M = {
+    "safe-params": 0.75,
+    "stock-params+configure": 0.75,
+    "vision": 0.5,
+    "vision+drag": 0.5,
+}
+"""[m] the most the vehicle goes on toward the wall after the kill. On the mocap (vision)
+PX4's Land holds the mocap's position: 0.5 m. On SIH's GPS it holds its GPS estimate, which
+after the brake wanders on: stopped 0.27-0.31 m on at 1 s, then 0.07-0.25 m further toward
+the wall before it came back (0.37-0.56 m in all over three kills at 0.48 m/s).
+"""
 KILL_SPEED_MPS = 0.5
 """[m/s] mid-approach: killed once the flight log shows this speed toward the wall."""
 
