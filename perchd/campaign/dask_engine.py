@@ -7,8 +7,11 @@ when Dask is installed (pip install 'perchd[cluster]')."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import os
+import signal
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
@@ -23,6 +26,8 @@ R = TypeVar("R")
 
 CONNECT_TIMEOUT_S = 10.0
 """[s] to reach a scheduler named by --cluster tcp://."""
+JOIN_TIMEOUT_S = 0.5
+"""[s] for a Nanny to see its killed worker exit (it is SIGKILLed again after 80 % of it)."""
 WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
 """A local worker's Dask settings over the defaults (each Nanny hands its worker the
 configuration it was made under): no statistical profiler, a thread sampling the stack every
@@ -83,3 +88,29 @@ class DaskEngine:
         finally:
             if self.cluster is not None:
                 self.cluster.close()
+
+    def kill(self) -> None:
+        """As close, but the local workers killed mid-unit: a stopped campaign drops their
+        units, and a Nanny closed with the cluster waits for its worker's running unit. The
+        workers of a remote scheduler are not this engine's: its units are only cancelled."""
+        try:
+            if self.cluster is not None:
+                # The scheduler's comms to them end in tracebacks Dask logs at INFO, some
+                # after the cluster closed and gave back the log level it held at ERROR.
+                logging.getLogger("distributed").setLevel(logging.ERROR)
+                self.cluster.sync(kill_workers, self.cluster)  # type: ignore[no-untyped-call]
+        finally:
+            self.close()
+
+
+async def kill_workers(cluster: LocalCluster) -> None:
+    """Every worker process of `cluster` killed, then its Nanny closed. Not asked to close: a
+    worker finishes its running unit first, and one closing logs the heartbeat its own close
+    cut short. The Nanny, closing, does not start its worker again."""
+    nannies = list(cluster.workers.values())
+    for nanny in nannies:
+        nanny.close_gracefully(reason="campaign-stopped")
+        if nanny.pid is not None:
+            with contextlib.suppress(ProcessLookupError):  # it exited meanwhile
+                os.kill(nanny.pid, signal.SIGKILL)
+    await asyncio.gather(*(n.close(timeout=JOIN_TIMEOUT_S) for n in nannies))

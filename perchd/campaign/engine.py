@@ -37,7 +37,11 @@ class Engine(Protocol):
 
     def map_unordered(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[R]: ...
 
-    def close(self) -> None: ...
+    def close(self) -> None:
+        """After the last unit: everything closed, no process left."""
+
+    def kill(self) -> None:
+        """On a stop (a signal, an error): as close, without waiting for the running units."""
 
 
 @dataclass(frozen=True)
@@ -97,6 +101,9 @@ class InProcess:
     def close(self) -> None:
         pass
 
+    def kill(self) -> None:
+        pass
+
 
 class ProcessPool:
     """The standard library's pool of local processes; a worker that dies breaks the run
@@ -115,6 +122,10 @@ class ProcessPool:
     def close(self) -> None:
         """Queued units dropped, running ones let end: no process outlives the campaign."""
         self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def kill(self) -> None:
+        """As close: the standard library's pool has no way to end a running unit."""
+        self.close()
 
 
 def leave_signals() -> None:

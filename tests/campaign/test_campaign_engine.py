@@ -194,3 +194,71 @@ def test_without_dask_a_scheduler_address_names_the_extra(monkeypatch):
     finally:
         pool.close()
     assert os.getpid()  # this process is left as it was
+
+
+KILL_BOUND_S = 2.0
+"""[s] what kill may take on a loaded machine (~0.1 s idle), against the 4 s close waits."""
+
+
+def executing(engine) -> int:
+    """Units running on the engine's workers now (a worker answers while its thread flies)."""
+    counts = engine.client.run(lambda dask_worker: len(dask_worker.state.executing))
+    return sum(counts.values())
+
+
+def wait_until_executing(engine, units: int) -> None:
+    deadline = time.monotonic() + WAIT_S
+    while executing(engine) < units:
+        assert time.monotonic() < deadline, "the units never started"
+        time.sleep(0.05)
+
+
+def spawned() -> list:
+    """This process's Dask worker processes."""
+    return [
+        p
+        for p in psutil.Process().children(recursive=True)
+        if "spawn_main" in " ".join(p.cmdline())
+    ]
+
+
+@pytest.mark.solo  # times the kill (tests/conftest.py)
+def test_a_stopped_engine_kills_its_busy_workers_rather_than_wait_for_their_units():
+    """close lets a Nanny ask its busy worker to leave, and kill it 4 s later; kill does not
+    wait (docs/contracts.md §6: a campaign ends within 1 s of a signal)."""
+    from perchd.campaign.dask_engine import DaskEngine
+
+    engine = DaskEngine.start(None, 2)
+    workers = spawned()
+    try:
+        assert len(workers) == 2, [p.cmdline() for p in workers]
+        for _ in range(2):
+            engine.client.submit(time.sleep, WAIT_S, pure=False)
+        wait_until_executing(engine, 2)
+        t0 = time.monotonic()
+        engine.kill()
+        took = time.monotonic() - t0
+    finally:
+        engine.close()
+    assert took < KILL_BOUND_S, f"{took:.1f} s: kill waited for the workers to leave"
+    assert not [p for p in workers if p.is_running()], "a worker outlived kill"
+    assert spawned() == [], "a Nanny started its killed worker again"
+
+
+def test_a_stopped_engine_leaves_a_remote_schedulers_workers_running():
+    from distributed import LocalCluster
+
+    from perchd.campaign.dask_engine import DaskEngine
+
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+    ) as remote:
+        workers = spawned()
+        engine = DaskEngine.start(remote.scheduler_address, 1)
+        assert engine.cluster is None
+        engine.client.submit(time.sleep, 1.0, pure=False)
+        wait_until_executing(engine, 1)
+        engine.kill()
+        assert engine.client.status == "closed"
+        assert len(workers) == 1 and all(p.is_running() for p in workers)
+        assert len(remote.scheduler_info["workers"]) == 1

@@ -30,7 +30,7 @@ from typing import Any
 
 from perchd.campaign import flights as cp
 from perchd.campaign.batches import CampaignJob, fly_campaign
-from perchd.campaign.engine import open_engine, parse_cluster
+from perchd.campaign.engine import Engine, open_engine, parse_cluster
 from perchd.campaign.results import CampaignTable, digest, summary_path
 from perchd.campaign.tableformats import have_pyarrow
 from perchd.console.flightargs import load_config
@@ -281,7 +281,7 @@ def run(args: argparse.Namespace) -> int:
     make_default_dir(table)
     progress = Progress(len(specs), "flights", "sim", rates=True, done=results.resumed)
     t0 = time.monotonic()
-    stopped, engine = None, None
+    stopped, engine, flown = None, None, False
 
     def finished(rows: list[Any]) -> None:
         results.append(rows)  # as they finish: an interrupted campaign keeps them
@@ -293,11 +293,12 @@ def run(args: argparse.Namespace) -> int:
             engine = open_engine(cluster, args.jobs or default_jobs(len(todo)))
             results.begin()
             fly_campaign(CampaignJob(plan, cfg, spread, args.logs), todo, engine, finished)
+            flown = True
         except Stopped as stop:
             stopped = stop
         finally:
             progress.close()
-            close_quietly(engine)
+            close_quietly(engine, flown)
             where = {
                 "engine": engine.name if engine else None,
                 "resumed": results.resumed,
@@ -310,13 +311,18 @@ def run(args: argparse.Namespace) -> int:
     return 0 if cp.summarize(rows).in_window == len(rows) else 1
 
 
-def close_quietly(engine: Any) -> None:
-    """The engine closed with signals held off: a second Ctrl-C does not leave workers."""
+def close_quietly(engine: Engine | None, flown: bool) -> None:
+    """The engine closed with signals held off: a second Ctrl-C does not leave workers.
+    Unless every unit was `flown` (a signal, an error), its workers are killed, not waited
+    for: a unit mid-flight takes seconds, the command has 1 s to end (docs/contracts.md §6)."""
     if engine is None:
         return
     held = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        engine.close()
+        if flown:
+            engine.close()
+        else:
+            engine.kill()
     finally:
         for s, handler in held.items():
             signal.signal(s, handler)
