@@ -124,8 +124,14 @@ class ProcessPool:
         self._pool.shutdown(wait=True, cancel_futures=True)
 
     def kill(self) -> None:
-        """As close: the standard library's pool has no way to end a running unit."""
-        self.close()
+        """Queued units dropped, running ones killed: a stop waits for no unit."""
+        kill_workers = getattr(self._pool, "kill_workers", None)  # Python >= 3.14
+        if kill_workers is not None:
+            kill_workers()
+        else:  # before it, the pool's own table of its processes is the only way in
+            for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
+                proc.kill()
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
 
 def leave_signals() -> None:

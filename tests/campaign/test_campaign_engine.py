@@ -262,3 +262,39 @@ def test_a_stopped_engine_leaves_a_remote_schedulers_workers_running():
         assert engine.client.status == "closed"
         assert len(workers) == 1 and all(p.is_running() for p in workers)
         assert len(remote.scheduler_info["workers"]) == 1
+
+
+@pytest.mark.solo  # times the kill (tests/conftest.py)
+def test_a_stopped_process_pool_kills_its_busy_workers_rather_than_wait_for_their_units():
+    """The pool without Dask (the [cluster] extra absent): kill ends the running units too."""
+    import threading
+
+    from perchd.campaign.engine import ProcessPool
+
+    before = set(psutil.Process().children())
+    pool = ProcessPool(2)
+    ended: list[BaseException] = []
+
+    def consume() -> None:  # a campaign's loop: blocks in the first unit's result
+        try:
+            list(pool.map_unordered(time.sleep, [WAIT_S, WAIT_S]))
+        except BaseException as err:  # noqa: BLE001 - the killed pool's error, kept
+            ended.append(err)
+
+    reader = threading.Thread(target=consume, daemon=True)
+    reader.start()
+    deadline = time.monotonic() + WAIT_S
+    while len(set(psutil.Process().children()) - before) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = list(set(psutil.Process().children()) - before)
+    time.sleep(0.3)  # both units running
+    t0 = time.monotonic()
+    try:
+        pool.kill()
+    finally:
+        took = time.monotonic() - t0
+        pool.close()
+    reader.join(KILL_BOUND_S)
+    assert took < KILL_BOUND_S, f"{took:.1f} s: kill waited for the units"
+    assert len(workers) == 2 and not [p for p in workers if p.is_running()]
+    assert not reader.is_alive() and ended, "the campaign's loop never heard of the kill"
