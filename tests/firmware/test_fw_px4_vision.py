@@ -60,4 +60,8 @@ def test_px4s_ekf_follows_the_forwarded_mocap_with_gps_off(tmp_path):
             v.close()
     print("\n" + json.dumps({"test": "px4-vision", **figures, "load": os.getloadavg()}))
     assert figures["climbed_m"] > 0.5
-    assert figures["max_error_m"] < 0.15  # measured 0.10 (mean 0.06) m, climbing at 0.5 m/s
+    # EKF2 on the forwarded mocap: its height trails the climb's start by a few tenths of a
+    # second (measured: max 0.13-0.18 m, mean 0.071-0.076 m over six climbs at 0.5 m/s);
+    # unfused, with GPS off, it would not follow the climb at all (an error of the whole 1 m)
+    assert figures["max_error_m"] < 0.25
+    assert figures["mean_error_m"] < 0.1
