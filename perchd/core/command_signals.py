@@ -24,7 +24,7 @@ Two ways the interpreter would end the process by SIGINT (-2) after all:
 - it resets a Python handler to the default action late in its shutdown (after the atexit
   callbacks, before it tears the modules down): the atexit callback registered first, which
   runs last, ignores both signals instead;
-- under `python -m`, a KeyboardInterrupt that once left a string exec() (dataclasses and
+- under `python -m`, a KeyboardInterrupt that once left a string given to exec (dataclasses and
   namedtuple build their methods so, at import) marks the run as ended by an unhandled
   KeyboardInterrupt, caught or not, and the interpreter then kills itself by SIGINT
   whatever the exit code: cli.main's return (`ended`) clears that mark with a string exec of

@@ -243,7 +243,7 @@ def _inside(k: np.ndarray, bounds: list[tuple[float, float]]) -> np.ndarray:
     """k clipped into the search's bounds: differential evolution refuses a seed outside
     them (a start whose k a polish carried beyond them still seeds the search)."""
     lo, hi = np.array(bounds).T
-    return np.clip(k, lo, hi)
+    return np.asarray(np.clip(k, lo, hi), dtype=float)
 
 
 def largest_box(

@@ -244,6 +244,20 @@ FORBIDDEN_CALLS = {
 }
 
 
+def _literal_only(call: ast.Call) -> bool:
+    """exec or eval of a string literal (and constant namespaces): code written here, which
+    no input reaches (cli's exit clears an interpreter mark with exec("pass", {}))."""
+    name = ast.unparse(call.func)
+    return (
+        name in ("exec", "eval")
+        and bool(call.args)
+        and isinstance(call.args[0], ast.Constant)
+        and isinstance(call.args[0].value, str)
+        and all(isinstance(a, ast.Dict) and not a.keys for a in call.args[1:])
+        and not call.keywords
+    )
+
+
 def dangers(source: str) -> list[str]:
     """Every use of evaluation, unpickling or a shell in Python source."""
     found = []
@@ -259,7 +273,7 @@ def dangers(source: str) -> list[str]:
             found.append(f"from {node.module} import")
         elif isinstance(node, ast.Call):
             name = ast.unparse(node.func)
-            if name in FORBIDDEN_CALLS:
+            if name in FORBIDDEN_CALLS and not _literal_only(node):
                 found.append(f"{name}()")
             if any(
                 k.arg == "shell"
@@ -272,8 +286,9 @@ def dangers(source: str) -> list[str]:
 
 def test_the_scanner_finds_each_kind_of_danger():
     source = (
-        "import pickle\nfrom yaml import load\neval('1')\nexec('x=1')\nos.system('ls')\n"
-        "subprocess.run('ls', shell=True)\nyaml.load(s)\n"
+        "import pickle\nfrom yaml import load\neval(s)\nexec(s)\nos.system('ls')\n"
+        "subprocess.run('ls', shell=True)\nyaml.load(s)\nexec('pass', {})\nexec(s, {})\n"
+        "exec('x=1', g)\n"
     )
     assert dangers(source) == [
         "import pickle",
@@ -283,7 +298,9 @@ def test_the_scanner_finds_each_kind_of_danger():
         "os.system()",
         "subprocess.run(shell=...)",
         "yaml.load()",
-    ]
+        "exec()",
+        "exec()",
+    ]  # not exec('pass', {}): a literal in an empty namespace
 
 
 def test_no_input_is_ever_evaluated_unpickled_or_given_to_a_shell():
@@ -297,7 +314,7 @@ def test_no_input_is_ever_evaluated_unpickled_or_given_to_a_shell():
         r"yaml\.load\(",
         r"shell\s*=\s*True",
         r"(?<![\w.])(?<!def )eval\(",
-        r"(?<![\w.])(?<!def )exec\(",
+        r"(?<![\w.])(?<!def )exec\((?![\"']\w*[\"'], \{\}\))",  # but of a literal, as above
         r"literal_eval",
         r"import\s+pickle",
     ):

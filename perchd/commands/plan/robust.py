@@ -159,7 +159,7 @@ def run(args) -> int:
     return 0
 
 
-def _start(path, order: int):
+def _start(path: str | None, order: int) -> RobustResult | None:
     """A RobustResult from a robust plan file of order `order` at most, to seed the search.
     Every mode takes it: its k (padded with zeros) seeds the k search, and where boxes are
     searched (no box given) its box is one candidate too."""
@@ -167,7 +167,7 @@ def _start(path, order: int):
     if path is None:
         return None
     plan = load_plan(path)
-    if plan.robust is None:
+    if plan.robust is None or plan.k is None:
         raise PlanError(f"--start {path}: not a robust plan (no robust box)")
     if len(plan.k) - 1 > order:
         raise PlanError(
