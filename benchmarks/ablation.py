@@ -150,11 +150,6 @@ LAYERS: tuple[Variant, ...] = (
         "the stage-2 margin inside the window (V_c held as planned)",
         (("tau_gains", "v_contact_margin_mps", 0.0),),
     ),
-    Variant(
-        "place",
-        "the stage switch's place (stage 2 on the measured tau alone)",
-        patches=(("perchd.flight.supervisor", "SWITCH_AT_PLACE", False),),
-    ),
     Variant("s2-refit", "the stage-2 bias (and lag) refit", (("lag_id", "stage2_refit", False),)),
 )
 """One layer off each: the switches (config changes, module constants) that turn it off."""

@@ -46,9 +46,6 @@ APPROACH_I_LIMIT_MPS2 = 1.0
 REFIT_S = 0.25
 """[s] period of the identification's refits during the approach (its own feed-forward
 meets the drag found so far); the fit at the trigger is the one logged and flown."""
-SWITCH_AT_PLACE = True
-"""Stage 2 waits for X to reach the plan's switch place too (off: on the measured tau alone;
-benchmarks/ablation.py's `place`)."""
 HOLD_RATE = 1.0
 """Stage 2's speed loop answers at most this many times per lag (Supervisor._hold_gain)."""
 POST_CONTACT_S = 0.2
@@ -273,14 +270,9 @@ class Supervisor:
         return math.inf if lag <= 0.0 else HOLD_RATE * self.refs.v_hold / lag
 
     def _switch(self, t: float, st: State) -> None:
-        """Stage 2 from the tick the measured tau has reached tau_s and X the plan's switch
-        place V_c tau_s (docs/errata.md §9): a vehicle behind on stage 1's braking, faster
-        than the plan where it is, reaches tau_s short of the place, and stage 1 brakes on."""
+        """Stage 2 from the tick the measured tau reaches tau_s (docs/errata.md §9)."""
         tau_s, tau = self.refs.tau_s, st.tau
         if tau_s is None or tau is None or tau < tau_s:
-            return
-        place = self.refs.plan.v_contact * tau_s
-        if SWITCH_AT_PLACE and st.x < place:
             return
         self.refs.t_stage2 = t
         self._enter(
@@ -288,8 +280,6 @@ class Supervisor:
             t,
             "measured tau reached tau_s",
             tau=tau,
-            x=st.x,
-            place=place,
             since_trigger=t - self.trigger.t,
         )
         self._refit_stage2(t)
