@@ -297,8 +297,10 @@ def run(args: argparse.Namespace) -> int:
         except Stopped as stop:
             stopped = stop
         finally:
-            progress.close()
-            close_quietly(engine, flown)
+            try:  # the engine first: a signal in the progress line's close leaves no worker
+                close_quietly(engine, flown)
+            finally:
+                progress.close()
             where = {
                 "engine": engine.name if engine else None,
                 "resumed": results.resumed,
