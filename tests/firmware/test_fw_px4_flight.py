@@ -257,8 +257,10 @@ def test_the_agent_perches_on_px4_sih(tmp_path, flight):
     assert fly["outcome"] == "CONTACT", fly.get("detail")
     assert sim["contact"] is not None
     lo, hi = plan["limits"]["v_contact"]
-    assert lo - 0.1 <= sim["contact"]["speed"] <= hi + 0.2  # measured: 1.00-1.10 m/s
-    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.10)  # measured: +5-7 %
+    assert lo <= sim["contact"]["speed"] <= hi
+    # measured over two runs of its four flights: -1.0 to +1.1 % of the plan's time, contact
+    # 0.84-0.86 m/s (docs/controller.md, "On the firmwares": PX4 SIH, the benchmark's flight)
+    assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.03)
     assert figures["yaw_error_deg"] <= 5.0
     assert "AUTO.RTL" not in sim["modes"]
 
