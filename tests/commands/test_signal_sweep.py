@@ -44,8 +44,9 @@ STOPS = {INT: 130, TERM: 143}
 
 
 class Proc:
-    """`python -m perchd ARGS` in a session of its own, stdout and stderr read as they come
-    (stderr on a pseudo-terminal when `tty`, as a user at a terminal sees it)."""
+    """`python -m perchd ARGS` in a process group of its own (setsid), stdout and stderr
+    read as they come (stderr on a pseudo-terminal when `tty`, as a user at a terminal sees
+    it)."""
 
     def __init__(self, args: list[str], cwd: Path, tty: bool = False) -> None:
         self.out: list[str] = []
