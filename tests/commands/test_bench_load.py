@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+from sigint_child import popen_handling_sigint
 
 from perchd.bench.cpuload import cpu_hogs
 
@@ -58,21 +59,14 @@ def test_an_exception_inside_the_block_still_stops_them():
 
 
 def perchd_bench(*args: str) -> subprocess.Popen:
-    """`perchd bench ARGS`, SIGINT handled in it whatever this process inherited: a runner
-    that starts the tests in the background (`cmd &` from a script) passes them SIGINT
-    ignored, which exec keeps, and Python then installs no KeyboardInterrupt handler; a
-    handled one is reset to the default at exec."""
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        return subprocess.Popen(
-            [sys.executable, "-m", "perchd", "bench", *args],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "PYTHONPATH": str(ROOT)},
-        )
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    """`perchd bench ARGS`, SIGINT handled in it whatever this process inherited."""
+    return popen_handling_sigint(
+        [sys.executable, "-m", "perchd", "bench", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
 
 
 @pytest.mark.slow

@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import pytest
+from sigint_child import popen_handling_sigint
 
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = "plans/case1-ipts-n3.json"
@@ -60,21 +61,15 @@ def perchd_has_the_signals(pid: int) -> bool:
 
 
 def start(entry: list[str], args: list[str]) -> subprocess.Popen[str]:
-    # SIGINT handled in the child whatever this process inherited (a runner started with
-    # `cmd &` passes SIGINT ignored, which exec keeps; a handler is reset at exec)
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        return subprocess.Popen(
-            [*entry, *args],
-            cwd=ROOT,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "PYTHONPATH": str(ROOT)},
-        )
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    return popen_handling_sigint(
+        [*entry, *args],
+        cwd=ROOT,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
 
 
 @pytest.mark.solo  # real-time: see tests/conftest.py

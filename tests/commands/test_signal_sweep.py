@@ -24,6 +24,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from sigint_child import popen_handling_sigint
 
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
@@ -54,21 +55,15 @@ class Proc:
         leader = follower = None
         if tty:
             leader, follower = pty.openpty()
-        # SIGINT handled in the child whatever this process inherited (a runner started
-        # with `cmd &` passes SIGINT ignored, which exec keeps; a handler is reset at exec)
-        previous = signal.signal(INT, signal.default_int_handler)
-        try:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "perchd", *args],
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.PIPE,
-                stderr=follower if tty else subprocess.PIPE,
-                cwd=cwd,
-                env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"},
-                start_new_session=True,
-            )
-        finally:
-            signal.signal(INT, previous)
+        self.proc = popen_handling_sigint(
+            [sys.executable, "-m", "perchd", *args],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=follower if tty else subprocess.PIPE,
+            cwd=cwd,
+            env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"},
+            start_new_session=True,
+        )
         if follower is not None:
             os.close(follower)
         self.readers = [
