@@ -26,6 +26,7 @@ try:
 
         command_signals.take()
 except KeyboardInterrupt:  # a Ctrl-C that came before the handler was in place
+    # the line is made here, not by command_signals: its import may be what was cut short
     if _command is None:
         _command = _is_the_command()
     if not _command:

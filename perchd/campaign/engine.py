@@ -131,7 +131,7 @@ class ProcessPool:
         else:  # before it, the pool's own table of its processes is the only way in
             for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
                 proc.kill()
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        self.close()
 
 
 def leave_signals() -> None:

@@ -59,7 +59,7 @@ CMD = struct.Struct("<fffHH")
 POSE = struct.Struct("<7f")
 BRAKE = struct.Struct("<ffffd")
 STATUS = struct.Struct("<dd")
-HEIGHT = struct.Struct("<ffd")
+MOTION = struct.Struct("<ffd")
 
 PING_S = 0.02
 """[s] period of CRTP link-echo pings and of status reports to the driver."""
@@ -69,7 +69,7 @@ SILENT_S = 0.25
 """[s] no message from the driver (it sends one every PING_S) = the agent is hung: descend."""
 LEAN_MAX_S = 0.5
 """[s] the longest brake: at the 1.5 m/s of a perch's approach, all of it."""
-HEIGHT_MAX_AGE_S = 1.0
+MOTION_MAX_AGE_S = 1.0
 """[s] an older height (and vertical speed) from the driver is not known (the open loop's
 bound without one)."""
 DESCENT_MAX_S = cfsink.DESCENT_MAX_S
@@ -173,7 +173,7 @@ class Keeper:
         self.model = model or CrazyflieThrust()
         self.hover_n = self.model.newtons(self.model.hover_units)  # the hold thrusts' mean
         self.hold_at: float | None = None  # time.monotonic() of the last hold thrust
-        self.height: tuple[float, float, float] | None = None  # [m], [m/s] up, measured at
+        self.motion: tuple[float, float, float] | None = None  # z [m], vz [m/s] up, measured at
         self.mocap = mocap  # the flight's mocap, opened, started at the death
         self.mocap_seq = -1
         self.error = ""
@@ -260,8 +260,8 @@ class Keeper:
             self.send_cmd((roll, pitch, yawrate, thrust))
         elif kind == b"B" and len(body) == BRAKE.size:
             self.lean = Lean(*BRAKE.unpack(body))
-        elif kind == b"Z" and len(body) == HEIGHT.size:
-            self.height = HEIGHT.unpack(body)
+        elif kind == b"Z" and len(body) == MOTION.size:
+            self.motion = MOTION.unpack(body)
         elif kind == b"P" and self.stop_until is None:
             vals = POSE.unpack(body)
             self.loc.send_extpose(list(vals[:3]), list(vals[3:]))
@@ -312,9 +312,9 @@ class Keeper:
     def known_motion(self, now: float) -> tuple[float | None, float]:
         """[m] above the floor (None: unknown) and [m/s] sink (> 0 down; a climb below zero,
         for the open loop's brake), from the driver's last height if recent."""
-        if self.height is None or now - self.height[2] > HEIGHT_MAX_AGE_S:
+        if self.motion is None or now - self.motion[2] > MOTION_MAX_AGE_S:
             return None, 0.0
-        return self.height[0] - cfsink.FLOOR_Z_M, -self.height[1]
+        return self.motion[0] - cfsink.FLOOR_Z_M, -self.motion[1]
 
     def start_mocap(self) -> bool:
         """The flight's mocap, its sockets opened now (never beside the agent's own)."""

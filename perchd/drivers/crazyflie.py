@@ -290,7 +290,7 @@ class CrazyflieDriver(DriverBase):
         v = self._will.due(pose, now)
         if v is None or self._stopped:
             return
-        self._send(b"Z" + cflink.HEIGHT.pack(pose.p[2], v[2], now))
+        self._send(b"Z" + cflink.MOTION.pack(pose.p[2], v[2], now))
         roll, pitch, duration = lean_for(ned_vec(v, 0.0), -self._yaw)
         level = self.model.units(self._hold_n)
         factor = (
