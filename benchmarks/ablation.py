@@ -147,8 +147,13 @@ LAYERS: tuple[Variant, ...] = (
     Variant("scale", "stage 1's scale correction", (("tau_gains", "scale_gain", 0.0),)),
     Variant(
         "margin",
-        "the stage-2 margin inside the window (V_c held as planned)",
-        (("tau_gains", "v_contact_margin_mps", 0.0),),
+        "the stage-2 margin inside the window (no wall push: V_c held as planned)",
+        (("tau_gains", "wall_push_mps2", 0.0),),
+    ),
+    Variant(
+        "hold-ki",
+        "stage 2's integral from its gain (the configured ki throughout)",
+        patches=(("perchd.flight.references", "KI_SHARE", 0.0),),
     ),
     Variant("s2-refit", "the stage-2 bias (and lag) refit", (("lag_id", "stage2_refit", False),)),
 )

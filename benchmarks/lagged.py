@@ -7,7 +7,7 @@ take a second. Each plant is sim:// with link latency and an attitude time const
 together make the 0.13-0.35 s lag the firmwares were identified with (docs/firmware.md, "Lag
 and drag"), and the drag they meet, linear or growing with speed. Plan case1-ipts-n3; per
 plant over N noise seeds (1 mm): true contact speed (min..max), speed at the stage-2 switch,
-perch time error, and how many touched within 0.03 m/s of the speed stage 2 holds (hold_speed) inside the window.
+perch time error, and how many touched within 0.03 m/s of the speed its stage 2 held (hold_loop) inside the window.
 `--set tau_gains.scale_gain=0` (any FlightConfig field, repeatable) flies a variant.
 """
 
@@ -26,7 +26,6 @@ sys.path.insert(0, str(ROOT / "tests" / "helpers"))
 from simflight import Sim, case1
 
 from perchd.flight.config import FlightConfig
-from perchd.flight.references import hold_speed
 from perchd.logs.flightlog import read_log
 
 PLANTS = {
@@ -67,8 +66,9 @@ def fly(query: str, seed: int, cfg: FlightConfig) -> dict:
         "switch_speed": rows[0].xdot if rows else None,
         "perch_pct": 100 * (res.true_perch_time / plan.duration - 1) if v else None,
         "on_target": v is not None
+        and res.v_hold_mps is not None
         and lo <= v <= hi
-        and abs(v - hold_speed(plan, cfg.tau_gains.v_contact_margin_mps)) <= 0.03,
+        and abs(v - res.v_hold_mps) <= 0.03,
     }
 
 

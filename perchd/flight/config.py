@@ -115,10 +115,12 @@ class TauGains:
         is the lag identified in the hold and approach.
     identify: identify the vehicle's response along the approach (flight/lagid.py: delay,
         lag, linear and quadratic drag, bias) and feed it forward (docs/controller.md).
-    v_contact_margin_mps: [m/s] stage 2 holds the plan's V_c moved at least this far inside
-        the contact window [V_l, V_u] (docs/errata.md §9): a minimum-time plan puts V_c on
-        the window's top edge, and a push met within a lag of the wall, which no controller
-        can answer in time, would carry the contact out of it (docs/controller.md).
+    wall_push_mps2: [m/s^2] the push near the wall (a draught, the wall's own air) stage 2
+        keeps room for: a minimum-time plan puts V_c on the contact window's top edge, and
+        stage 2's speed loop, met by this push, runs over the speed it holds by push V_c / kp
+        (kp its gain) before it answers. So stage 2 holds V_c moved that far inside the
+        window, at most MARGIN_MAX_MPS (flight/references.py `hold_loop`; docs/errata.md §9,
+        docs/controller.md). 0: the plan's V_c held as planned.
     scale_gain: gamma of stage 1's scale correction: tau is the same for every trajectory
         c times the plan's (X and Xdot scaled alike), so a vehicle a lag behind in X keeps
         tau by being faster and reaches the stage-2 switch c times too fast. Stage 1 aims
@@ -133,7 +135,7 @@ class TauGains:
     kd: float = setting(from_paper_units(734.0), "m/s", 0.0, 20.0)
     feedforward: bool = True
     ff_lead_s: float = setting(0.1, "s", 0.0, 1.0)
-    v_contact_margin_mps: float = setting(0.05, "m/s", 0.0, 0.5)
+    wall_push_mps2: float = setting(0.3, "m/s^2", 0.0, 5.0)
     scale_gain: float = setting(3.0, "", 0.0, 10.0)
     identify: bool = True
 

@@ -123,6 +123,12 @@ class TauController:
         give = max(min(step, held), 0.0) if step > 0.0 else min(max(step, held), 0.0)
         self.pid.integral -= give / self.gains.ki
 
+    def retune(self, ki: float) -> None:
+        """The integral's gain becomes ki [m/s^3], what the integral supplies unchanged."""
+        if ki > 0.0 and self.pid.ki > 0.0:
+            self.pid.integral *= self.pid.ki / ki
+            self.pid.ki = ki
+
     def step(
         self,
         state: State,
@@ -130,15 +136,15 @@ class TauController:
         a_plan: float,
         dt: float,
         saturated: bool = False,
-        kp_max: float | None = None,
+        kp_hold: float | None = None,
     ) -> float:
-        """kp_max [m/s^2]: a speed reference's gain (stage 2): kp_slow both ways, at most
-        kp_max (eq. 20's argument, a shrinking |X| under a tau reference, does not hold
-        when the reference is a speed). None: eq. 20's schedule."""
+        """kp_hold [m/s^2]: a speed reference's gain (stage 2, both ways: eq. 20's argument,
+        a shrinking |X| under a tau reference, does not hold for a speed). None: eq. 20's
+        schedule."""
         g = self.gains
         e = min(max(tau_error(tau_ref, state.tau), TAU_ERROR_RANGE[0]), TAU_ERROR_RANGE[1])
-        if kp_max is not None:
-            kp = min(g.kp_slow, kp_max)
+        if kp_hold is not None:
+            kp = kp_hold
         else:  # eq. 20: tau_ref/tau > 1 <=> e < 0
             kp = g.kp_fast if e < 0.0 else g.kp_slow
         self.last_error, self.last_kp = e, kp

@@ -31,15 +31,59 @@ class Refs:
 NO_REFS = Refs()
 
 
-def hold_speed(plan: Plan, margin_mps: float = TauGains.v_contact_margin_mps) -> float:
-    """[m/s] the speed stage 2 holds: the plan's V_c moved at least margin_mps [m/s] (by
-    default the default config's) inside its contact window (its middle when the window is
-    narrower than twice the margin)."""
+HOLD_RATE = 1.0
+"""[1/lag] stage 2's speed loop is at most this fast against the vehicle's lag: e = 1 -
+Xdot/V_hold makes kp a speed gain of kp / V_hold [1/s], and a loop faster than once per lag
+brakes on what the vehicle will already do a lag later (ArduCopter's 0.34 s lag met 4.4 /s
+from the switch and touched at 0.80-0.83 m/s)."""
+KI_SHARE = 0.25
+"""Stage 2's integral gain in speed units, at least KI_SHARE x its speed gain squared: the
+loop s^2 + k s + ki on a vehicle that integrates its acceleration is critically damped at
+ki = k^2 / 4, so a push is worked off within a few loop times instead of leaving the
+proportional droop until the wall."""
+MARGIN_MAX_MPS = 0.05
+"""[m/s] the most stage 2's margin takes: a vehicle of lag over 0.17 s (its droop under 0.3
+m/s^2 over 0.05 m/s) would be asked for more, but it arrives at the switch still braking and
+touches under V_hold by more than that (the family's attitude time constant:
+docs/controller.md), and each 0.01 m/s costs 0.27 % of perch time on the README's plan."""
+
+
+@dataclass(frozen=True, slots=True)
+class HoldLoop:
+    """Stage 2's speed loop: it holds v_hold_mps [m/s] with gains kp_mps2 [m/s^2] and
+    ki_mps3 [m/s^3] on e = 1 - Xdot/V_hold, margin_mps [m/s] inside the window's top."""
+
+    v_hold_mps: float
+    kp_mps2: float
+    ki_mps3: float
+    margin_mps: float
+
+
+def hold_speed(plan: Plan, margin_mps: float) -> float:
+    """[m/s] the plan's V_c moved at least margin_mps [m/s] inside its contact window (its
+    middle when the window is narrower than twice the margin)."""
     v = float(plan.v_contact)
     lo, hi = plan.limits.v_contact
     if hi - lo <= 2.0 * margin_mps:
         return 0.5 * (lo + hi)
     return min(max(v, lo + margin_mps), hi - margin_mps)
+
+
+def hold_loop(plan: Plan, gains: TauGains, lag_s: float | None) -> HoldLoop:
+    """Stage 2's loop for a vehicle of lag lag_s [s]: as fast as HOLD_RATE lets it, up to
+    kp_fast; the integral at least KI_SHARE of critical damping; and V_hold moved inside
+    the window by the loop's droop under the wall's push, wall_push V_c / kp [m/s], at most
+    MARGIN_MAX_MPS (docs/controller.md, "Stage 2"). lag_s None (no lag identified): the
+    loop a vehicle of unknown lag is given, kp_slow with the configured integral and the
+    largest margin, wall_push permitting."""
+    if lag_s is None:
+        margin = MARGIN_MAX_MPS if gains.wall_push_mps2 > 0.0 else 0.0
+        return HoldLoop(hold_speed(plan, margin), gains.kp_slow, gains.ki, margin)
+    v_c = max(float(plan.v_contact), 1e-3)
+    kp = gains.kp_fast if lag_s <= 0.0 else min(gains.kp_fast, HOLD_RATE * v_c / lag_s)
+    ki = max(gains.ki, KI_SHARE * kp * kp / v_c)
+    margin = min(gains.wall_push_mps2 * v_c / kp, MARGIN_MAX_MPS) if kp > 0.0 else MARGIN_MAX_MPS
+    return HoldLoop(hold_speed(plan, margin), kp, ki, margin)
 
 
 class References:
@@ -68,9 +112,15 @@ class References:
             self._sampler = PlanSampler(plan)
 
     @property
+    def hold(self) -> HoldLoop:
+        """Stage 2's loop for the lag identified (hold_loop; None when none was)."""
+        known = self.response.model is not None
+        return hold_loop(self.plan, self.cfg.tau_gains, self.response.ff.lead_s if known else None)
+
+    @property
     def v_hold(self) -> float:
-        """[m/s] the stage-2 speed held (hold_speed)."""
-        return hold_speed(self.plan, self.cfg.tau_gains.v_contact_margin_mps)
+        """[m/s] the stage-2 speed held (hold_loop)."""
+        return self.hold.v_hold_mps
 
     @property
     def tau_s(self) -> float | None:

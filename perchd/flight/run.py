@@ -69,7 +69,8 @@ class FlightResult:
     bias refit less the approach's (None without one), this flight's own (never kept);
     log_lost: why the flight log stopped being written (a full disk; None: it was kept),
     which ends the flight as a software error; lag_model: the lag and drag the hold and
-    approach identified (None: refused or not identified), kept in the vehicle's profile."""
+    approach identified (None: refused or not identified), kept in the vehicle's profile;
+    v_hold_mps [m/s]: the speed stage 2 held (references.hold_loop; None before stage 2)."""
 
     outcome: EndReason
     detail: str
@@ -88,6 +89,7 @@ class FlightResult:
     stage2_departure_mps2: float | None = None
     log_lost: str | None = None
     lag_model: LagModel | None = None
+    v_hold_mps: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The `perchd fly --json` object (docs/contracts.md §2 keys first)."""
@@ -108,6 +110,7 @@ class FlightResult:
             "hover_n": self.hover_n,
             "hover_guess_n": self.hover_guess_n,
             "stage2_departure_mps2": self.stage2_departure_mps2,
+            "v_hold_mps": self.v_hold_mps,
             "log_lost": self.log_lost,
         }
 
@@ -429,4 +432,5 @@ def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult
         sup.response.departure_mps2,
         lost,
         sup.response.identified.model if sup.response.identified else None,
+        sup.refs.v_hold if sup.refs.t_stage2 is not None else None,
     )

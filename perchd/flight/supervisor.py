@@ -16,6 +16,7 @@ response and feeds forward is flight/response.py's.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 from dataclasses import dataclass
@@ -46,8 +47,6 @@ APPROACH_I_LIMIT_MPS2 = 1.0
 REFIT_S = 0.25
 """[s] period of the identification's refits during the approach (its own feed-forward
 meets the drag found so far); the fit at the trigger is the one logged and flown."""
-HOLD_RATE = 1.0
-"""Stage 2's speed loop answers at most this many times per lag (Supervisor._hold_gain)."""
 POST_CONTACT_S = 0.2
 """[s] the post-contact action (FlightConfig.post_contact) is held this long."""
 
@@ -242,8 +241,8 @@ class Supervisor:
             tau_aim = refs.tau_ref
             if self.phase is Phase.STAGE1:
                 tau_aim = self.refs.scale_corrected(t, st, refs)
-            kp_max = self._hold_gain() if self.phase is Phase.STAGE2 else None
-            ux = self.ctl.tau.step(st, tau_aim, refs.a, dt, self.ctl.saturated, kp_max)
+            kp = self.refs.hold.kp_mps2 if self.phase is Phase.STAGE2 else None
+            ux = self.ctl.tau.step(st, tau_aim, refs.a, dt, self.ctl.saturated, kp)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
             ux = self._approach_accel(t, st, dt)
@@ -261,14 +260,6 @@ class Supervisor:
         self._observe_response(t, st)
         return TickReport(self.phase, sp, None, False, refs, u, e)
 
-    def _hold_gain(self) -> float:
-        """[m/s^2] the most gain stage 2's speed loop may have: e = 1 - Xdot/V_hold, so kp
-        is a speed gain of kp / V_hold [1/s], and a loop faster than HOLD_RATE / lag
-        overshoots what the vehicle does a lag later (ArduCopter's 0.34 s lag met
-        kp_slow's 4.4 /s braking from the switch and touched at 0.80-0.83 m/s)."""
-        lag = self.response.ff.lead_s
-        return math.inf if lag <= 0.0 else HOLD_RATE * self.refs.v_hold / lag
-
     def _switch(self, t: float, st: State) -> None:
         """Stage 2 from the tick the measured tau reaches tau_s (docs/errata.md §9)."""
         tau_s, tau = self.refs.tau_s, st.tau
@@ -283,6 +274,7 @@ class Supervisor:
             since_trigger=t - self.trigger.t,
         )
         self._refit_stage2(t)
+        self._enter_hold(t)
 
     def _start(self, t: float, st: State) -> None:
         self._hold = (st.x, st.y, st.z)
@@ -490,3 +482,20 @@ class Supervisor:
         """Stage 2 flies the drag refitted from stage 1 (VehicleResponse.refit_stage2); what
         that adds, the tau PID's integral gives back as far as it holds it."""
         self.ctl.tau.give_back(self.response.refit_stage2(t, self.trigger.t, self.refs.v_hold))
+
+    def _enter_hold(self, t: float) -> None:
+        """Stage 2's loop for the lag flown from here on (references.hold_loop): its
+        integral's gain set without a step in the command, and the `hold-loop` event."""
+        hold = self.refs.hold
+        self.ctl.tau.retune(hold.ki_mps3)
+        push = self.cfg.tau_gains.wall_push_mps2
+        self.events.append(
+            LogEvent(
+                t,
+                "hold-loop",
+                f"stage 2 holds {hold.v_hold_mps:.3f} m/s, {hold.margin_mps:.3f} m/s inside the "
+                f"window for a {push:g} m/s^2 push; gains {hold.kp_mps2:.2f} m/s^2, "
+                f"{hold.ki_mps3:.2f} m/s^3",
+                dataclasses.asdict(hold),
+            )
+        )

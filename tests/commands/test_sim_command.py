@@ -25,12 +25,7 @@ from perchd.core.clock import ManualClock
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason
 from perchd.drivers.base import open_driver
-from perchd.flight.config import TauGains
-from perchd.flight.references import hold_speed
 from perchd.mocap.base import open_source
-
-MARGIN = TauGains().v_contact_margin_mps
-"""[m/s] how far inside the contact window stage 2 holds the plan's V_c (hold_speed)."""
 
 
 class SimProcess:
@@ -114,7 +109,7 @@ def test_the_agent_perches_on_perchd_sim_in_another_process_as_in_process(pose_o
     lo, hi = plan.limits.v_contact
     assert reference.outcome is outcome is EndReason.CONTACT
     assert lo <= report["contact_speed"] <= hi
-    assert report["contact_speed"] == pytest.approx(hold_speed(plan, MARGIN), abs=0.05)
+    assert report["contact_speed"] == pytest.approx(reference.v_hold_mps, abs=0.05)
     assert report["contact_speed"] == pytest.approx(reference.true_contact_speed, abs=0.05)
     assert speed == pytest.approx(report["contact_speed"], abs=0.05)  # the agent's estimate
     assert perch_time == pytest.approx(plan.duration, rel=0.05)

@@ -109,7 +109,10 @@ def test_faults_within_the_estimator_s_tolerance_still_perch(loop, name, faults,
     f = fly(tmp_path, *faults, cfg=LOOPS[loop][0])
     assert f.res.outcome is EndReason.CONTACT and not f.res.failsafe_sent
     assert f.res.true_contact_speed == pytest.approx(nominal[loop].true_contact_speed, abs=0.01)
-    assert f.res.contact_speed == pytest.approx(nominal[loop].contact_speed, abs=0.01)
+    # the agent's estimate at contact: on frames in swapped pairs (every other one dropped)
+    # stage 2's speed loop, as fast as the vehicle's lag allows, moves 0.945-0.996 m/s, and
+    # the estimate lags it by up to 0.017 m/s (0.9494 against the true 0.9662)
+    assert f.res.contact_speed == pytest.approx(nominal[loop].contact_speed, abs=0.025)
     seqs = [r.pose_seq for r in f.log.rows if r.pose_seq >= 0]
     assert seqs == sorted(seqs)  # an older frame never replaced a newer one
     report(

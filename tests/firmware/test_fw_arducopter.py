@@ -21,9 +21,6 @@ import pytest
 from fwharness import ENV, PLAN, lag_event, start_harness, stop_harness
 from fwharness import log_rows as rows
 
-from perchd.flight.references import hold_speed
-from perchd.tau import load_plan
-
 ARDUCOPTER = os.environ.get("PERCHD_ARDUCOPTER", "")
 INSTANCE = os.environ.get("PERCHD_FW_INSTANCE", "0")
 """SITL's -I N: one per instance number on a machine shared with other runs."""
@@ -220,7 +217,7 @@ def assert_perched(fly: dict, sim: dict) -> None:
     # 0.838-0.937 m/s, under the held 0.95 by the slow vehicle's braking still in flight at
     # the stage-2 switch (a 0.34 s lag), perch time -0.93 and -1.23 % median, 2.25 % at most
     assert lo <= sim["contact"]["speed"] <= hi
-    assert sim["contact"]["speed"] == pytest.approx(hold_speed(load_plan(PLAN)), abs=0.12)
+    assert sim["contact"]["speed"] == pytest.approx(fly["v_hold_mps"], abs=0.12)
     assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.05)
 
 

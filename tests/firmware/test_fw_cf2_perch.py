@@ -19,8 +19,6 @@ from cf2rig import CF2, needs_cf2
 from fwharness import ENV, PLAN, lag_event, start_harness, stop_harness
 
 from perchd.drivers.thrust import CrazyflieThrust
-from perchd.flight.references import hold_speed
-from perchd.tau import load_plan
 
 pytestmark = [pytest.mark.firmware, needs_cf2]
 pytest.importorskip("cflib")
@@ -104,7 +102,7 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
     assert lo <= sim["contact"]["speed"] <= hi
     # measured (docs/firmware.md): -0.03 m/s and +1.4..2 % with the lag and drag identified,
     # -0.055 m/s and +5.2 % without
-    assert sim["contact"]["speed"] == pytest.approx(hold_speed(load_plan(PLAN)), abs=0.05)
+    assert sim["contact"]["speed"] == pytest.approx(fly["v_hold_mps"], abs=0.05)
     assert fly["perch_time"] == pytest.approx(plan["duration"], rel=0.03)
     assert 0.05 <= figures["lag"]["lag_s"] <= 0.3 and 0.1 <= figures["lag"]["drag_per_s"] <= 0.4
     assert fly["hover_n"] == pytest.approx(HOVER_TRUE_N, rel=0.03)

@@ -116,15 +116,30 @@ def test_a_reset_starts_the_integral_supplying_what_it_is_handed(held, starts):
 
 
 @pytest.mark.parametrize("tau", [-0.4, -0.6])
-@pytest.mark.parametrize("kp_max", [0.5, 2.0, 100.0])
-def test_a_speed_references_gain_is_kp_slow_both_ways_capped_by_kp_max(tau, kp_max):
-    """Stage 2 (kp_max given): no schedule, kp_slow at most kp_max, on either side of the
-    reference; without kp_max, eq. 20's schedule."""
+@pytest.mark.parametrize("kp_hold", [0.5, 2.0, 100.0])
+def test_a_speed_references_gain_is_the_one_given_both_ways(tau, kp_hold):
+    """Stage 2 (kp_hold given): no schedule, kp_hold on either side of the reference;
+    without it, eq. 20's schedule."""
     g = TauGains(ki=0.0, kd=0.0, feedforward=False)
     held, sched = TauController(g), TauController(g)
     e = tau_error(-0.5, tau)
-    assert held.step(state(tau), -0.5, 0.0, 0.01, kp_max=kp_max) == pytest.approx(
-        min(g.kp_slow, kp_max) * e
-    )
+    assert held.step(state(tau), -0.5, 0.0, 0.01, kp_hold=kp_hold) == pytest.approx(kp_hold * e)
     kp = g.kp_fast if e < 0.0 else g.kp_slow
     assert sched.step(state(tau), -0.5, 0.0, 0.01) == pytest.approx(kp * e)
+
+
+@pytest.mark.parametrize("ki", [0.5, 6.0, 40.0])
+def test_a_retuned_integral_supplies_what_it_supplied(ki):
+    """Stage 2's integral gain (references.hold_loop) replaces the approach's without a
+    step in the command; the next error then integrates at the new gain."""
+    ctl = TauController(TauGains(kd=0.0, feedforward=False))
+    ctl.reset(0.4)
+    ctl.retune(ki)
+    assert ctl.pid.ki * ctl.pid.integral == pytest.approx(0.4, abs=1e-12)
+    before = ctl.pid.ki * ctl.pid.integral
+    ctl.step(state(-0.5), -0.5, 0.0, 0.01, kp_hold=1.0)
+    assert ctl.pid.ki * ctl.pid.integral - before == pytest.approx(0.0, abs=1e-12)
+    ctl.step(state(-0.4), -0.5, 0.0, 0.01, kp_hold=1.0)
+    assert ctl.pid.ki * ctl.pid.integral - before == pytest.approx(
+        ki * tau_error(-0.5, -0.4) * 0.01, rel=1e-9
+    )

@@ -12,11 +12,7 @@ from simflight import Sim, case1
 from perchd.core.types import EndReason
 from perchd.flight import lagid, supervisor
 from perchd.flight.config import FlightConfig, LagIdGains, TauGains
-from perchd.flight.references import hold_speed
 from perchd.logs.flightlog import read_log
-
-MARGIN = TauGains().v_contact_margin_mps
-"""[m/s] how far inside the contact window stage 2 holds the plan's V_c (hold_speed)."""
 
 SLOW = {
     "drag 0.3/s": "sim://?drag=0.3&noise=0.001",
@@ -41,7 +37,7 @@ def test_a_late_vehicle_with_drag_perches_within_2_percent_and_3_cm_per_s(slow_f
     assert res.outcome is EndReason.CONTACT
     lo, hi = plan.limits.v_contact
     assert lo <= res.true_contact_speed <= hi
-    assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.03)
+    assert res.true_contact_speed == pytest.approx(res.v_hold_mps, abs=0.03)
     assert res.true_perch_time == pytest.approx(plan.duration, rel=0.02)
 
 
@@ -68,6 +64,8 @@ def test_a_refused_fit_flies_the_configured_lead_and_says_why(tmp_path, monkeypa
     assert "bound 0.04 s" in ev.detail
     assert "flying the configured lead 0.1 s and no drag term" in ev.detail
     assert res.outcome is EndReason.CONTACT
+    hold = next(e for e in read_log(tmp_path / "f.jsonl").events if e.kind == "hold-loop")
+    assert hold.values["kp_mps2"] == TauGains().kp_slow  # an unknown lag: the cautious loop
 
 
 def largest_approach_step(log, x_before: float) -> float:
@@ -100,7 +98,7 @@ def test_a_refit_hands_its_drag_over_from_the_integral_without_a_step(tmp_path, 
 def test_stage_2_flies_the_push_stage_1_met_and_touches_on_the_plans_speed(tmp_path, push):
     """Air off the wall pushes 0.3 m/s^2 along X from x = -2.9 m on, past the trigger: the
     approach's fit never met it. Refitted from stage 1 at the switch, the perch touches
-    within 0.02 m/s of the speed stage 2 holds (hold_speed). Left to the tau PID's integral
+    within 0.02 m/s of the speed stage 2 holds (hold_loop). Left to the tau PID's integral
     alone, the push with the vehicle carries the contact further above it (against it, the
     integral takes it up; with the paper's integral gain both were 0.06 m/s off)."""
     plan = case1("ipts")
@@ -112,9 +110,9 @@ def test_stage_2_flies_the_push_stage_1_met_and_touches_on_the_plans_speed(tmp_p
         old = Sim(uri).fly(plan, tmp_path / f"kept{seed}.jsonl", kept)
         assert res.outcome is old.outcome is EndReason.CONTACT
         assert lo <= res.true_contact_speed <= hi
-        assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.02)
+        assert res.true_contact_speed == pytest.approx(res.v_hold_mps, abs=0.02)
         if push > 0.0:  # held at V_c, the kept model's contact left the window (1.009-1.011)
-            held = hold_speed(plan, MARGIN)
+            held = res.v_hold_mps
             assert old.true_contact_speed - held > abs(res.true_contact_speed - held), (
                 old.true_contact_speed,
                 res.true_contact_speed,

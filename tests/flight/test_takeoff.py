@@ -8,8 +8,7 @@ import pytest
 from caseplans import case1
 
 from perchd.core.types import EndReason
-from perchd.flight.config import FlightConfig, TauGains
-from perchd.flight.references import hold_speed
+from perchd.flight.config import FlightConfig
 from perchd.flight.takeoff import (
     GROUND_WAIT_S,
     LEAD_M,
@@ -20,9 +19,6 @@ from perchd.flight.takeoff import (
 from perchd.session import open_session
 from perchd.sim.plant import PlantParams
 from perchd.sim.world import WorldParams
-
-MARGIN = TauGains().v_contact_margin_mps
-"""[m/s] how far inside the contact window stage 2 holds the plan's V_c (hold_speed)."""
 
 HOLD_M = FlightConfig().approach.takeoff_height_m
 
@@ -60,7 +56,7 @@ def test_a_vehicle_stuck_to_the_ground_takes_off_without_overshoot_and_perches(
     )
     assert res.outcome is EndReason.CONTACT, res.detail
     assert overshoot(heights) <= 0.1
-    assert res.true_contact_speed == pytest.approx(hold_speed(case1("ipts"), MARGIN), abs=0.05)
+    assert res.true_contact_speed == pytest.approx(res.v_hold_mps, abs=0.05)
 
 
 def test_while_stuck_the_thrust_asked_for_does_not_grow(tmp_path):
