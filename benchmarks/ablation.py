@@ -89,6 +89,13 @@ class Variant:
             cfg, **{s: dataclasses.replace(getattr(cfg, s), **kv) for s, kv in sections.items()}
         )
 
+    def config_toml(self) -> str:
+        """The changes as TOML tables, appended to a flight config file."""
+        sections: dict[str, list[str]] = {}
+        for section, key, value in self.changes:
+            sections.setdefault(section, []).append(f"{key} = {_toml(value)}")
+        return "".join(f"\n[{s}]\n" + "\n".join(kv) + "\n" for s, kv in sections.items())
+
     def toml(self) -> str:
         return "; ".join(
             [f"[{s}] {k} = {_toml(v)}" for s, k, v in self.changes]

@@ -48,15 +48,6 @@ def bench_module(name: str) -> Any:
     return sys.modules[key]
 
 
-def config_toml(changes: tuple[tuple[str, str, Any], ...]) -> str:
-    """The variant's switches as TOML tables appended to a flight config."""
-    sections: dict[str, list[str]] = {}
-    for section, key, value in changes:
-        text = str(value).lower() if isinstance(value, bool) else format(value, "g")
-        sections.setdefault(section, []).append(f"{key} = {text}")
-    return "".join(f"\n[{s}]\n" + "\n".join(kv) + "\n" for s, kv in sections.items())
-
-
 def figures(flights: list[dict], plan: dict) -> dict[str, Any]:
     """One variant's figures on one firmware."""
     lo, hi = plan["limits"]["v_contact"]
@@ -101,6 +92,24 @@ HEAD = (
 )
 
 
+def fly_variant(fw: Any, binary: str, variant: Any, home: Path, args: Any) -> list[dict]:
+    """args.flights flights of the variant on one firmware under home/, one vehicle profile
+    (empty at the first)."""
+    home.mkdir(parents=True, exist_ok=True)
+    state = home / "vehicle.json"
+    state.unlink(missing_ok=True)
+    add = variant.config_toml()
+    flights = []
+    for i in range(args.flights):
+        (home / str(i)).mkdir(exist_ok=True)
+        flights.append(
+            bench_module("firmware").fly_firmware(
+                fw, binary, args.noise, i, home / str(i), add, "", state
+            )
+        )
+    return flights
+
+
 def main(argv: list[str] | None = None) -> int:
     fwb, abl = bench_module("firmware"), bench_module("ablation")
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -123,16 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     for fw, binary in fwb.selected(args.only):
         out[fw.name] = {"load_avg": os.getloadavg()}
         for v in variants:
-            home = root / fw.name / v.name
-            home.mkdir(parents=True, exist_ok=True)
-            state = home / "vehicle.json"
-            state.unlink(missing_ok=True)
-            flights = []
-            for i in range(args.flights):
-                tmp = home / str(i)
-                tmp.mkdir(exist_ok=True)
-                add = config_toml(v.changes)
-                flights.append(fwb.fly_firmware(fw, binary, args.noise, i, tmp, add, "", state))
+            flights = fly_variant(fw, binary, v, root / fw.name / v.name, args)
             out[fw.name][v.name] = figures(flights, plan)
             base = None if v is variants[0] else out[fw.name][variants[0].name]
             lines.append(row(v.name, fw.name, out[fw.name][v.name], base))

@@ -89,7 +89,8 @@ def hold_loop(plan: Plan, gains: TauGains, lag_s: float | None) -> HoldLoop:
 class References:
     """The plan flown and what the references need of the flight: t0 [s] the plan's t = 0
     on the clock (None before the trigger), t_stage2 [s] the stage-2 switch (None before),
-    a_app [m/s^2] the approach's acceleration to the trigger state. desk: the trigger's (a
+    hold: stage 2's loop, fixed at the switch (None before), a_app [m/s^2] the approach's
+    acceleration to the trigger state. desk: the trigger's (a
     replan awaited holds the approach's speed); response: the vehicle's, as fitted so far."""
 
     def __init__(
@@ -101,6 +102,7 @@ class References:
         self.response = response
         self.t0: float | None = None
         self.t_stage2: float | None = None
+        self.hold: HoldLoop | None = None
         self.a_app = 0.0
         self._sampler = PlanSampler(plan)
         self._memo: tuple[Any, Refs] = (None, NO_REFS)  # (tick key, its Refs)
@@ -111,16 +113,21 @@ class References:
         if plan is not self._sampler.plan:
             self._sampler = PlanSampler(plan)
 
-    @property
-    def hold(self) -> HoldLoop:
-        """Stage 2's loop for the lag identified (hold_loop; None when none was)."""
+    def fix_hold(self) -> HoldLoop:
+        """Stage 2's loop from here on (`hold`): the one the lag identified gives."""
+        self.hold = self._loop_for_lag()
+        return self.hold
+
+    def _loop_for_lag(self) -> HoldLoop:
+        """hold_loop for the lag identified so far (None to it when none was)."""
         known = self.response.model is not None
         return hold_loop(self.plan, self.cfg.tau_gains, self.response.ff.lead_s if known else None)
 
     @property
     def v_hold(self) -> float:
-        """[m/s] the stage-2 speed held (hold_loop)."""
-        return self.hold.v_hold_mps
+        """[m/s] the stage-2 speed held: the fixed loop's, before the switch the one the lag
+        identified so far gives."""
+        return (self.hold or self._loop_for_lag()).v_hold_mps
 
     @property
     def tau_s(self) -> float | None:

@@ -432,5 +432,5 @@ def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult
         sup.response.departure_mps2,
         lost,
         sup.response.identified.model if sup.response.identified else None,
-        sup.refs.v_hold if sup.refs.t_stage2 is not None else None,
+        sup.refs.hold.v_hold_mps if sup.refs.hold is not None else None,
     )

@@ -241,7 +241,8 @@ class Supervisor:
             tau_aim = refs.tau_ref
             if self.phase is Phase.STAGE1:
                 tau_aim = self.refs.scale_corrected(t, st, refs)
-            kp = self.refs.hold.kp_mps2 if self.phase is Phase.STAGE2 else None
+            hold = self.refs.hold if self.phase is Phase.STAGE2 else None
+            kp = hold.kp_mps2 if hold is not None else None
             ux = self.ctl.tau.step(st, tau_aim, refs.a, dt, self.ctl.saturated, kp)
             e = self.ctl.tau.last_error
         elif self.phase is Phase.APPROACH:
@@ -484,9 +485,9 @@ class Supervisor:
         self.ctl.tau.give_back(self.response.refit_stage2(t, self.trigger.t, self.refs.v_hold))
 
     def _enter_hold(self, t: float) -> None:
-        """Stage 2's loop for the lag flown from here on (references.hold_loop): its
-        integral's gain set without a step in the command, and the `hold-loop` event."""
-        hold = self.refs.hold
+        """Stage 2's loop fixed for the lag flown (References.fix_hold): its integral's gain
+        set without a step in the command, and the `hold-loop` event."""
+        hold = self.refs.fix_hold()
         self.ctl.tau.retune(hold.ki_mps3)
         push = self.cfg.tau_gains.wall_push_mps2
         self.events.append(

@@ -29,7 +29,7 @@ def test_a_variants_toml_on_a_firmwares_config_is_the_variant(variant, fw, tmp_p
     base_text = fw.config or "version = 1\n"
     path.write_text(base_text)
     base = load_flight_config(path)
-    path.write_text(base_text + fwablation.config_toml(variant.changes))
+    path.write_text(base_text + variant.config_toml())
     assert load_flight_config(path) == variant.apply(base)
 
 
