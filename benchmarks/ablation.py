@@ -162,7 +162,6 @@ LAYERS: tuple[Variant, ...] = (
         "stage 2's integral from its gain (the configured ki throughout)",
         patches=(("perchd.flight.references", "KI_SHARE", 0.0),),
     ),
-    Variant("s2-refit", "the stage-2 bias (and lag) refit", (("lag_id", "stage2_refit", False),)),
 )
 """One layer off each: the switches (config changes, module constants) that turn it off."""
 
@@ -187,7 +186,6 @@ GROUPS: tuple[Variant, ...] = (
         "qdrag",
         "refits",
         "lag-attitude",
-        "s2-refit",
     ),
     _group(
         "paper-only",

@@ -227,7 +227,7 @@ def fly_firmware(
     state: Path | None = None,
 ) -> dict:
     proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
-    from fwharness import YawWatch, first_event, flight_window, heading_error
+    from fwharness import YawWatch, flight_window, heading_error
 
     watch = YawWatch(mocap)
     try:
@@ -261,7 +261,6 @@ def fly_firmware(
         "trigger_v": (fly.get("trigger") or {}).get("v"),
         "yaw_dev_deg": math.degrees(heading_error(yaws, heading)) if yaws else None,
         "lag": lag_event(tmp / "flight.jsonl"),
-        "stage2": first_event(tmp / "flight.jsonl", "bias-refit"),
         "sim_clock_rate": sim.get("sim_clock_rate"),
         "attitude_push": sim.get("attitude_push_mps2"),
     }
@@ -457,8 +456,8 @@ def main() -> int:
                     f"{fw.name} flight {i + 1}: {f['outcome']} contact "
                     f"{fmt(f['contact_speed'], '.3f')} m/s, perch time "
                     f"{fmt(f['perch_time'], '.3f')} s of {fmt(f['plan_duration'], '.3f')} s, lag {fmt(f['lag'].get('lag_s'), '.3f')} s "
-                    f"drag {fmt(f['lag'].get('drag_per_s'), '.3f')} 1/s, stage 1's push "
-                    f"{fmt(f['stage2'].get('departure_mps2'), '+.3f')} m/s^2",
+                    f"drag {fmt(f['lag'].get('drag_per_s'), '.3f')} 1/s, stage 2 held "
+                    f"{fmt(f['held'], '.3f')} m/s",
                     file=sys.stderr,
                 )
         out["firmwares"][fw.name] = {

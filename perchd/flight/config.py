@@ -145,9 +145,6 @@ class LagIdGains:
     """The identification of the vehicle's response (flight/lagid.py, whose constants bound
     its grid, window and acceptance).
 
-    stage2_refit: at the stage-2 switch, fit the bias again from stage 1 alone (lag and
-        drag kept) and feed it forward in stage 2: a push the approach never met
-        (LagIdentifier.refit_bias). A push is this flight's own: none is carried over.
     from_attitude: take the delay and the first-order lag from the attitude the mocap
         measures, answering the setpoints' (LagIdentifier.lean_response), and the drag from
         the acceleration that attitude makes; the positions' own fit when the lean swept too
@@ -156,7 +153,6 @@ class LagIdGains:
         "The attitude the mocap measures").
     """
 
-    stage2_refit: bool = True
     from_attitude: bool = True
 
 

@@ -166,24 +166,22 @@ class LagIdentifier:
         self._lean.append((t, sent, t_measured, measured))
         _keep_window(self._lean, t - WINDOW_S)
 
-    def lean_response(self, since_t: float = -np.inf) -> tuple[float, float] | None:
+    def lean_response(self) -> tuple[float, float] | None:
         """(delay [s], T [s]) of the attitude's answer to the setpoints' lean, fitted to
-        the lean the mocap measured since since_t [s] (the commands before it still count,
-        in flight), on a coarse grid and then a fine one about its best (a few ms in
-        all); None when the lean swept too little, the best sits on a bound, the lag
+        the lean the mocap measured, on a coarse grid and then a fine one about its best (a
+        few ms in all); None when the lean swept too little, the best sits on a bound, the lag
         (delay + T) reaches lag_max_s, or the fit is poor: a residual above LEAN_RMS_MAX of
         the sweep or the measured lean not the sent one's size (LEAN_GAIN: a rigid body
         whose axes are not the vehicle's)."""
         if len(self._lean) < 20:
             return None
         data = tuple(np.array(col) for col in zip(*self._lean))
-        t, sent = data[0], data[1]
-        sweep = float(np.ptp(sent[t >= since_t])) if (t >= since_t).any() else 0.0
+        sweep = float(np.ptp(data[1]))  # of the lean sent
         if sweep < LEAN_SPAN_MIN:
             return None
         bounds = (LAG_MAX_S, LEAN_TC_MAX_S)
         axes = [np.arange(0.0, top + 1e-9, step) for top, step in zip(bounds, LEAN_COARSE_S)]
-        mse, gain, j, i = _lean_best(data, axes, LEAN_POINTS[0], since_t)
+        mse, gain, j, i = _lean_best(data, axes, LEAN_POINTS[0])
         if i == len(axes[0]) - 1 or j == len(axes[1]) - 1 or not np.isfinite(mse[j, i]):
             return None
         # One fine grid about the coarse best: its residual's valley runs along delay + T
@@ -193,7 +191,7 @@ class LagIdentifier:
             np.unique(np.clip(ax[k] + np.arange(-4, 5) * step, 0.0, top))
             for ax, k, step, top in zip(axes, (i, j), LEAN_FINE_S, bounds)
         ]
-        mse, gain, j, i = _lean_best(data, axes, LEAN_POINTS[1], since_t)
+        mse, gain, j, i = _lean_best(data, axes, LEAN_POINTS[1])
         if (
             not np.sqrt(mse[j, i]) <= LEAN_RMS_MAX * sweep
             or not LEAN_GAIN[0] <= gain[j, i] <= LEAN_GAIN[1]
@@ -252,41 +250,10 @@ class LagIdentifier:
         mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
         s = np.clip(np.interp(mid, tm, lean), -0.9, 0.9)
         a = G_M_S2 * s / np.sqrt(1.0 - s * s)
-        sol = _fixed_drags(t, a[None, :], x, v, np.zeros(1), FREE, 0)
+        sol = _fixed_drags(t, a[None, :], x, v, np.zeros(1), FREE)
         drag, qdrag = float(sol[0]), float(sol[1])
         ok = 0.0 <= drag <= DRAG_MAX_PER_S and 0.0 <= qdrag <= QDRAG_MAX_PER_M
         return (drag, qdrag) if ok else None
-
-    def refit_bias(self, base: LagModel, since_t: float) -> LagFit:
-        """The bias again, base's lag and drag kept, from the ticks since since_t [s]: what
-        the perch's stage 1 shows beyond the approach's model is a push stage 2 meets too
-        (docs/errata.md §10). Drag and bias together are not told apart over stage 1's
-        narrow speed range (the approach's 0-to-v0 tells the drag). Refused on too few
-        ticks or a large residual. No hold-out test: judged on stage 1's last 40 %, it
-        refused ArduCopter's refit in 5 flights of 36, which touched at 0.957-0.983 m/s
-        where the 31 refitted touched at 0.983-1.000 (docs/firmware.md, "The stage-2
-        refit")."""
-        t, u, x, v = (np.array(col) for col in zip(*self._rows)) if self._rows else ([],) * 4
-        first = int(np.searchsorted(t, since_t))
-        n = len(t) - first
-        if n < 40:
-            return LagFit(None, f"{n} ticks since {since_t:.3f} s, too few to fit")
-        # The ticks before since_t stay in: the commands still in flight at since_t.
-        span = float(v[first:].max() - v[first:].min())
-        m = _model_at(
-            t,
-            u,
-            x,
-            v,
-            base.delay_s,
-            base.time_constant_s,
-            span,
-            (base.drag_per_s, base.qdrag_per_m),
-            first,
-        )
-        return _checked(
-            replace(m, from_attitude=base.from_attitude, drag_from_attitude=base.drag_from_attitude)
-        )
 
 
 def _keep_window(rows: deque, since_t: float) -> None:
@@ -304,24 +271,23 @@ def _model_at(
     tc_s: float,
     span: float,
     drag: tuple[float | None, float | None] = (None, None),
-    start: int = 0,
 ) -> LagModel:
     """Drag, quadratic drag (each unless given) and bias at delay_s [s] and time constant
-    tc_s [s], integrated from tick start; rms_mps is how far the speed they predict from the
+    tc_s [s]; rms_mps is how far the speed they predict from the
     fitted Xdot(s) strays from the speed measured (_drags has the signs' rule)."""
     a, delay = _first_order(t, u, np.array([tc_s])), np.array([delay_s])
-    sol = _fixed_drags(t, a, x, v, delay, drag, start)
+    sol = _fixed_drags(t, a, x, v, delay, drag)
     m = LagModel(
         delay_s + tc_s,
         float(sol[0]),
         float(sol[2]),
         0.0,
-        len(t) - start,
+        len(t),
         span,
         tc_s,
         qdrag_per_m=float(sol[1]),
     )
-    err = _speed_errors(t, u, x, v, m, start, float(sol[3]))
+    err = _speed_errors(t, u, x, v, m, float(sol[3]))
     return replace(m, rms_mps=float(np.sqrt(np.mean(err * err))))
 
 
@@ -336,7 +302,6 @@ def _fixed_drags(
     v: np.ndarray,
     lags: np.ndarray,
     drag: Drags,
-    start: int,
 ) -> np.ndarray:
     """(drag, qdrag, bias, Xdot(s), offset) of the fit at the first input and lag. The two
     drags trade over an approach's speeds, so a negative one is noise about none, or the
@@ -346,15 +311,15 @@ def _fixed_drags(
     would keep the others fitted beside it, off by the clipped term's push."""
     if not QUADRATIC_DRAG and drag[1] is None:
         drag = (drag[0], 0.0)
-    sol = _solve(t, a, x, v, lags, drag, start)[1][0, :, 0]
+    sol = _solve(t, a, x, v, lags, drag)[1][0, :, 0]
     if drag[1] is None and sol[1] < 0.0:
         drag = (drag[0], 0.0)
-        sol = _solve(t, a, x, v, lags, drag, start)[1][0, :, 0]
+        sol = _solve(t, a, x, v, lags, drag)[1][0, :, 0]
     if drag[0] is None and sol[0] < 0.0 and (sol[1] > 0.0 or sol[0] >= -0.1 * DRAG_MAX_PER_S):
         drag = (0.0, drag[1])
-        sol = _solve(t, a, x, v, lags, drag, start)[1][0, :, 0]
+        sol = _solve(t, a, x, v, lags, drag)[1][0, :, 0]
         if drag[1] is None and sol[1] < 0.0:
-            sol = _solve(t, a, x, v, lags, (0.0, 0.0), start)[1][0, :, 0]
+            sol = _solve(t, a, x, v, lags, (0.0, 0.0))[1][0, :, 0]
     return sol
 
 
@@ -374,18 +339,18 @@ def _checked(m: LagModel) -> LagFit:
     return LagFit(m)
 
 
-def _speed_errors(t, u, x, v, m: LagModel, k: int, v_k: float) -> np.ndarray:
-    """[m/s] the speed measured from tick k on, less the speed m predicts from v_k [m/s]
-    at tick k."""
+def _speed_errors(t, u, x, v, m: LagModel, v_0: float) -> np.ndarray:
+    """[m/s] the speed measured at each tick, less the speed m predicts from v_0 [m/s] at
+    the first."""
     a = _first_order(t, u, np.array([m.time_constant_s]))
-    big_a = _delayed(t, _integrals(t, a)[0], t[None, k:] - m.delay_s, a, 1)[0, 0]
+    big_a = _delayed(t, _integrals(t, a)[0], t[None, :] - m.delay_s, a, 1)[0, 0]
     q1 = _quadratic_integrals(t, v)[0]
     return (
-        (v[k:] - v_k)
+        (v - v_0)
         - (big_a - big_a[0])
-        + m.drag_per_s * (x[k:] - x[k])
-        + m.qdrag_per_m * (q1[k:] - q1[k])
-        - m.bias_mps2 * (t[k:] - t[k])
+        + m.drag_per_s * (x - x[0])
+        + m.qdrag_per_m * (q1 - q1[0])
+        - m.bias_mps2 * (t - t[0])
     )
 
 
@@ -454,16 +419,14 @@ def _solve(
     v,
     lags: np.ndarray,
     drag: tuple[float | None, float | None] = (None, None),
-    start: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """For each row of a (inputs, ticks) and each lag (its delay): the mean squared
     residual [m^2], shaped (inputs, lags), and the least-squares (drag, qdrag, bias,
-    Xdot(s), offset), shaped (inputs, 5, lags), integrated from tick s = `start` (a drag
-    given in `drag` = (linear [1/s], quadratic [1/m]) is held; the ticks before start only
-    supply the commands in flight). The regressors depend on neither, so one
+    Xdot(s), offset), shaped (inputs, 5, lags), integrated from the first tick (a drag
+    given in `drag` = (linear [1/s], quadratic [1/m]) is held). The regressors depend on neither, so one
     pseudo-inverse serves all; the integrals take every tick, the regression at most
     FIT_POINTS of them (a fit stays a few ms)."""
-    at = np.unique(np.linspace(start, len(t) - 1, min(len(t) - start, FIT_POINTS)).astype(int))
+    at = np.unique(np.linspace(0, len(t) - 1, min(len(t), FIT_POINTS)).astype(int))
     big_a, big_w = _integrals(t, a)
     times = t[at][None, :] - lags[:, None]
     w, a_s = _delayed(t, big_w, times, a, 2), _delayed(t, big_a, times[:, :1], a, 1)
@@ -495,25 +458,24 @@ def _solve(
     return np.maximum(mse, 0.0), sol
 
 
-def _lean_best(data, axes: list[np.ndarray], points: int, since_t: float):
+def _lean_best(data, axes: list[np.ndarray], points: int):
     """(mse, gain, j, i) of the attitude's fit on the grid axes = (delays, taus): the
     residuals and gains (_lean_mse) and the best's indices, T first."""
-    mse, gain = _lean_mse(*data, axes[0], axes[1], points, since_t)
+    mse, gain = _lean_mse(*data, axes[0], axes[1], points)
     j, i = np.unravel_index(int(np.argmin(mse)), mse.shape)
     return mse, gain, int(j), int(i)
 
 
 def _lean_mse(
-    t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray, points: int, since_t: float = -np.inf
+    t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray, points: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean squared residual, shaped (taus, delays), of the lean measured at tm (since
-    since_t) against the lean sent at t through each first-order lag and delay, a constant
+    """Mean squared residual, shaped (taus, delays), of the lean measured at tm against the lean sent at t through each first-order lag and delay, a constant
     offset (the markers' trim) removed; and the gain by which the measured lean's swing
     regresses on the predicted one's (about 1 for a rigid body aligned with the vehicle).
     The filtered lean is each tick's interval mean, read at the intervals' midpoints."""
     f = _first_order(t, sent, taus)
     mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
-    keep = (tm - delays[-1] >= mid[0]) & (tm >= since_t)
+    keep = tm - delays[-1] >= mid[0]
     if keep.sum() < 20 or len(mid) < 3 or np.any(np.diff(mid) <= 0.0):
         return np.full((len(taus), len(delays)), np.inf), np.zeros((len(taus), len(delays)))
     at = np.unique(np.linspace(0, keep.sum() - 1, min(int(keep.sum()), points)).astype(int))

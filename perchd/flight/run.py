@@ -65,9 +65,7 @@ class FlightResult:
     simulator's own figures when flying in simulation (None otherwise); log: the log path;
     loop: timing statistics; failsafe_sent: driver.failsafe was called; hover_n [N]: the
     hover thrust the hold learned (None if it did not settle or learning is off),
-    hover_guess_n [N] the guess it started from; stage2_departure_mps2 [m/s^2]: stage 1's
-    bias refit less the approach's (None without one), this flight's own (never kept);
-    log_lost: why the flight log stopped being written (a full disk; None: it was kept),
+    hover_guess_n [N] the guess it started from; log_lost: why the flight log stopped being written (a full disk; None: it was kept),
     which ends the flight as a software error; lag_model: the lag and drag the hold and
     approach identified (None: refused or not identified), kept in the vehicle's profile;
     v_hold_mps [m/s]: the speed stage 2 held (references.hold_loop; None before stage 2)."""
@@ -86,7 +84,6 @@ class FlightResult:
     failsafe_sent: bool
     hover_n: float | None = None
     hover_guess_n: float | None = None
-    stage2_departure_mps2: float | None = None
     log_lost: str | None = None
     lag_model: LagModel | None = None
     v_hold_mps: float | None = None
@@ -109,7 +106,6 @@ class FlightResult:
             "failsafe_sent": self.failsafe_sent,
             "hover_n": self.hover_n,
             "hover_guess_n": self.hover_guess_n,
-            "stage2_departure_mps2": self.stage2_departure_mps2,
             "v_hold_mps": self.v_hold_mps,
             "log_lost": self.log_lost,
         }
@@ -429,7 +425,6 @@ def _result(run: _Run, world: GroundTruth | None, log_path: str) -> FlightResult
         run.failsafe_sent,
         sup.hover_learned_n,
         sup.hover.guess_n,
-        sup.response.departure_mps2,
         lost,
         sup.response.identified.model if sup.response.identified else None,
         sup.refs.hold.v_hold_mps if sup.refs.hold is not None else None,

@@ -274,7 +274,6 @@ class Supervisor:
             tau=tau,
             since_trigger=t - self.trigger.t,
         )
-        self._refit_stage2(t)
         self._enter_hold(t)
 
     def _start(self, t: float, st: State) -> None:
@@ -478,11 +477,6 @@ class Supervisor:
         step = ff.step_from(self.response.ff, self.refs.a_app, v_ref)
         bound = APPROACH_I_LIMIT_MPS2 / APPROACH_KI_V
         self._v_int = min(max(self._v_int - step / APPROACH_KI_V, -bound), bound)
-
-    def _refit_stage2(self, t: float) -> None:
-        """Stage 2 flies the drag refitted from stage 1 (VehicleResponse.refit_stage2); what
-        that adds, the tau PID's integral gives back as far as it holds it."""
-        self.ctl.tau.give_back(self.response.refit_stage2(t, self.trigger.t, self.refs.v_hold))
 
     def _enter_hold(self, t: float) -> None:
         """Stage 2's loop fixed for the lag flown (References.fix_hold): its integral's gain

@@ -95,7 +95,7 @@ def test_the_flight_holds_the_loop_its_lag_gives_and_says_so(tmp_path):
     assert res.outcome is EndReason.CONTACT
     events = read_log(log).events
     said = next(e for e in events if e.kind == "hold-loop")
-    lag = next(e for e in events if e.kind == "lag-refit").values["lag_s"]
+    lag = next(e for e in events if e.kind == "lag-identified").values["lag_s"]
     expected = hold_loop(PLAN, TauGains(), lag)
     assert said.values["v_hold_mps"] == pytest.approx(expected.v_hold_mps, abs=1e-9)
     assert said.values["kp_mps2"] == pytest.approx(expected.kp_mps2, abs=1e-9)

@@ -4,14 +4,12 @@ per-vehicle setting; what it identified is in the log; a refused fit falls back,
 
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
 from simflight import Sim, case1
 
 from perchd.core.types import EndReason
 from perchd.flight import lagid, supervisor
-from perchd.flight.config import FlightConfig, LagIdGains, TauGains
+from perchd.flight.config import TauGains
 from perchd.logs.flightlog import read_log
 
 SLOW = {
@@ -95,53 +93,17 @@ def test_a_refit_hands_its_drag_over_from_the_integral_without_a_step(tmp_path, 
 
 
 @pytest.mark.parametrize("push", [-0.3, 0.3])
-def test_stage_2_flies_the_push_stage_1_met_and_touches_on_the_plans_speed(tmp_path, push):
+def test_a_push_met_only_in_stage_1_ends_on_the_held_speed_in_time(tmp_path, push):
     """Air off the wall pushes 0.3 m/s^2 along X from x = -2.9 m on, past the trigger: the
-    approach's fit never met it. Refitted from stage 1 at the switch, the perch touches
-    within 0.02 m/s of the speed stage 2 holds (hold_loop). Left to the tau PID's integral
-    alone, the push with the vehicle carries the contact further above it (against it, the
-    integral takes it up; with the paper's integral gain both were 0.06 m/s off)."""
+    approach's fit never met it. Stage 2's loop (hold_loop) keeps room for such a push and
+    takes it up: the perch touches inside the window, within 0.02 m/s of the speed it held
+    and within 1 % of the plan's perch time."""
     plan = case1("ipts")
     lo, hi = plan.limits.v_contact
-    kept = dataclasses.replace(FlightConfig(), lag_id=LagIdGains(stage2_refit=False))
     for seed in range(2):
         uri = f"sim://?draught=-2.9,{push}&noise=0.001&seed={seed}"
-        res = Sim(uri).fly(plan, tmp_path / f"refit{seed}.jsonl")
-        old = Sim(uri).fly(plan, tmp_path / f"kept{seed}.jsonl", kept)
-        assert res.outcome is old.outcome is EndReason.CONTACT
+        res = Sim(uri).fly(plan, tmp_path / f"pushed{seed}.jsonl")
+        assert res.outcome is EndReason.CONTACT
         assert lo <= res.true_contact_speed <= hi
         assert res.true_contact_speed == pytest.approx(res.v_hold_mps, abs=0.02)
-        if push > 0.0:  # held at V_c, the kept model's contact left the window (1.009-1.011)
-            held = res.v_hold_mps
-            assert old.true_contact_speed - held > abs(res.true_contact_speed - held), (
-                old.true_contact_speed,
-                res.true_contact_speed,
-            )
-        refit = next(
-            (e for e in read_log(tmp_path / f"refit{seed}.jsonl").events if e.kind == "bias-refit"),
-            None,
-        )
-        assert refit is not None
-        assert refit.values["bias_mps2"] == pytest.approx(push, abs=0.1)
-
-
-def pushed_in_stage_1(tmp_path, lag_id: LagIdGains):
-    """A perch whose air pushes 0.3 m/s^2 from just past the trigger on, flown with lag_id:
-    (its result, the approach's bias, the bias-refit event's values)."""
-    log = tmp_path / "pushed.jsonl"
-    cfg = dataclasses.replace(FlightConfig(), lag_id=lag_id)
-    res = Sim("sim://?draught=-2.9,0.3&noise=0.001&seed=0").fly(case1("ipts"), log, cfg)
-    assert res.outcome is EndReason.CONTACT
-    events = read_log(log).events
-    approach = next(e for e in events if e.kind == "lag-identified").values["bias_mps2"]
-    return res, approach, next(e for e in events if e.kind == "bias-refit").values
-
-
-def test_stage_2_flies_this_flights_own_push_whole_and_reports_it(tmp_path):
-    """Stage 2 flies the refit's departure from the approach's bias whole, and the result carries it; nothing of an earlier flight's enters."""
-    res, approach, refit = pushed_in_stage_1(tmp_path, LagIdGains())
-    own = refit["fitted_mps2"] - approach
-    assert own == pytest.approx(0.3, abs=0.1)
-    assert res.stage2_departure_mps2 == pytest.approx(own, abs=1e-12)
-    assert refit["bias_mps2"] == pytest.approx(refit["fitted_mps2"], abs=1e-9)
-    assert "pooled_mps2" not in refit and "prior_flights" not in refit
+        assert res.true_perch_time == pytest.approx(res.plan_duration, rel=0.01)

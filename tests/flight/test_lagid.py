@@ -28,16 +28,13 @@ def fly(
     noise_m: float = 0.0,
     seed: int = 0,
     cfg: LagIdGains = LagIdGains(),
-    brake: tuple[float, ...] | None = None,
     estimated: bool = False,
     time_constant_s: float = 0.0,
 ) -> LagIdentifier:
     """Record a hold and an approach of the model Xddot = u(t - lag) - drag Xdot + bias, the
     command holding position until the approach, then `accel` plus drag at the speed
     reached; X measured with noise_m [m] of noise, Xdot with 10 noise_m / s (about the
-    estimator's velocity scatter on millimetre mocap noise). brake (seconds, decel, drag,
-    bias): then that many seconds braking at decel [m/s^2] while the vehicle meets that
-    drag and push (a perch's stage 1), its command still compensating the approach's. estimated: X and Xdot are instead
+    estimator's velocity scatter on millimetre mocap noise). estimated: X and Xdot are instead
     perchd's estimator's, from mocap poses of X with noise_m of noise, as in flight.
     time_constant_s: the delayed command reaches the vehicle through a first-order lag."""
     rng = random.Random(seed)
@@ -45,13 +42,9 @@ def fly(
     est = Estimator(EstimatorConfig(), PerchFrame.from_surface((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)))
     x, v, reached, sent = -4.5, 0.0, -bias, []
     n_hold, n_app = int(hold_s / DT), int((hold_s + approach_s) / DT)
-    n = n_app + (int(brake[0] / DT) if brake else 0)
-    for k in range(n):
+    for k in range(n_app):
         t = k * DT
-        u = -bias if k < n_hold else (accel if k < n_app else -brake[1]) + drag * v - bias
-        since = (k - round(lag_s / DT) - n_app) * DT  # [s] into the braking, as flown
-        braking = brake is not None and since >= 0.0
-        true_drag, true_bias = (brake[2], brake[3]) if braking else (drag, bias)
+        u = -bias if k < n_hold else accel + drag * v - bias
         sent.append(u)
         if estimated:
             est.offer(Pose("cf", k + 1, t, (x + rng.gauss(0.0, noise_m), 0.0, 1.0), (0, 0, 0, 1)))
@@ -63,7 +56,7 @@ def fly(
         u_now = sent[late] if late >= 0 else sent[0]
         for _ in range(10):  # 1 ms steps
             reached += (u_now - reached) * min(1.0, DT / 10 / max(time_constant_s, 1e-9))
-            a = reached - true_drag * v + true_bias
+            a = reached - drag * v + bias
             v += a * DT / 10
             x += v * DT / 10
     return ident
@@ -110,29 +103,6 @@ def test_a_constant_push_is_told_from_drag():
     fit = fly(0.15, 0.3, bias=0.2).fit()
     assert fit.model.bias_mps2 == pytest.approx(0.2, abs=0.03)
     assert fit.model.drag_per_s == pytest.approx(0.3, abs=0.03)
-
-
-def test_the_refit_finds_the_push_of_the_braking_alone_with_lag_and_drag_kept():
-    """Approach at drag 0.2 /s, then 1.5 s braking at 0.5 m/s^2 with a push of -0.15
-    m/s^2 that the approach did not have: the fit of everything is pulled toward the
-    approach's; the refit since the braking began finds the braking's push."""
-    base = fly(0.15, 0.2, noise_m=0.001).fit().model  # the trigger's fit of the approach
-    ident = fly(0.15, 0.2, brake=(1.5, 0.5, 0.2, -0.15), noise_m=0.001)
-    since = ident.refit_bias(base, since_t=3.0 + 0.15).model
-    assert since is not None
-    assert (since.lag_s, since.drag_per_s) == (base.lag_s, base.drag_per_s)
-    assert since.bias_mps2 == pytest.approx(-0.15, abs=0.03)
-    whole = ident.fit().model
-    assert abs(whole.bias_mps2 - whole.drag_per_s + 0.15 + 0.2) > 3 * abs(
-        since.bias_mps2 + 0.15
-    )  # the push at 1 m/s, off in the fit of everything
-
-
-def test_a_refit_over_too_few_ticks_is_refused():
-    ident = fly(0.15, 0.2, brake=(0.1, 0.5, 0.2, 0.0))
-    fit = ident.refit_bias(ident.fit().model, since_t=3.0)
-    assert fit.model is None
-    assert "too few to fit" in fit.why
 
 
 def drag_free_bias(rows, lag_s: float) -> float:
@@ -214,18 +184,6 @@ def test_an_absurd_drag_is_refused(monkeypatch):
     fit = fly(0.1, 1.5).fit()
     assert fit.model is None
     assert "drag" in fit.why and "outside 0..1 1/s" in fit.why
-
-
-def test_the_refit_counts_the_commands_in_flight_when_it_begins():
-    """Refitted from the braking command's first tick with 0.3 s of lag, the approach's
-    commands of the last 0.3 s are still arriving. Taken for the braking's (as the refit
-    once did), they predicted 0.3 s of braking that never came, and the refit was refused.
-    The push of -0.15 m/s^2 arrives with the braking, 0.3 s into the 1.8 s refitted."""
-    base = fly(0.3, 0.2).fit().model
-    ident = fly(0.3, 0.2, brake=(1.5, 0.5, 0.2, -0.15))
-    since = ident.refit_bias(base, since_t=3.0).model
-    assert since is not None
-    assert -0.15 <= since.bias_mps2 <= -0.15 * 1.5 / 1.8
 
 
 @pytest.mark.parametrize("seed", range(40))

@@ -12,11 +12,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from perchd.core.types import Pose
-from perchd.flight.config import LagIdGains, TauGains
+from perchd.flight.config import LagIdGains
 from perchd.flight.estimator import Estimator, EstimatorConfig
 from perchd.flight.frame import PerchFrame, body_z
 from perchd.flight.lagid import LagIdentifier, _model_at
-from perchd.flight.response import VehicleResponse
 
 DT, G = 0.01, 9.81
 
@@ -40,15 +39,13 @@ def fly(
     seconds: float = 4.5,
     seed: int = 0,
     cfg: LagIdGains | None = None,
-    then: tuple[float, float, float] | None = None,
     lean_per_mps: float = 0.0,
 ) -> LagIdentifier:
     """Record a flight whose lean answers the lean sent `delay_s` [s] late through a
     first-order lag `tc_s` [s] (integrated in 1 ms steps), Xddot = g lean - drag Xdot.
     The mocap measures each tick's lean 4 ms before the tick, with `noise` added, `offset`
     (the markers' trim) and scaled by seen_as (-1: a rigid body turned half round; 0: one
-    whose X sees none of the lean). then (t, delay, tc): from t [s] on the response is that
-    one (a shaping that answers the brake's swings sooner). lean_per_mps: the vehicle holds
+    whose X sees none of the lean). lean_per_mps: the vehicle holds
     this much more lean per m/s of speed than it answers (an autopilot whose attitude
     estimate errs the more the faster it flies; the mocap sees the lean held)."""
     rng = random.Random(seed)
@@ -58,8 +55,6 @@ def fly(
     history: list[float] = []  # the true lean at every 1 ms from 0
     for k in range(int(seconds / DT)):
         t = k * DT
-        if then is not None and t >= then[0]:
-            delay_s, tc_s = then[1], then[2]
         sent.append(lean_command(t))
         measured_at = t - 0.004
         seen = history[round(measured_at / (DT / 10))] if k else 0.0
@@ -130,50 +125,6 @@ def test_non_finite_leans_are_not_kept():
     assert ident.lean_response() == before
 
 
-def test_the_attitude_since_a_time_is_fitted_to_the_lean_measured_since_then():
-    """The brake from 3 s on is answered 0.03 s sooner; fitted since 3 s, the commands
-    sent before still count (in flight)."""
-    ident = fly(0.11, 0.24, then=(3.0, 0.12, 0.2), seconds=4.5)
-    found = ident.lean_response(since_t=3.0)
-    assert found is not None
-    assert sum(found) == pytest.approx(0.32, abs=0.008)
-    assert sum(ident.lean_response(since_t=3.0)) < sum(fly(0.11, 0.24).lean_response()) - 0.02
-
-
-def test_stage_2_flies_the_lag_of_stage_1s_attitude_and_logs_it():
-    events = []
-    resp = VehicleResponse(TauGains(), LagIdGains(), events)
-    resp.lagid = fly(0.11, 0.24, then=(3.0, 0.12, 0.2))
-    resp.model = fly(0.11, 0.24, seconds=3.0).fit().model  # the trigger's, at 3 s
-    assert resp.model.from_attitude and resp.model.lag_s == pytest.approx(0.35, abs=0.003)
-    resp.refit_stage2(4.5, 3.0, 1.0)
-    refit = next(e for e in events if e.kind == "lag-refit")
-    assert resp.model.lag_s == pytest.approx(0.32, abs=0.008)
-    assert resp.ff.lead_s == resp.model.lag_s
-    assert refit.values["lag_s"] == resp.model.lag_s
-    assert refit.values["was_lag_s"] > resp.model.lag_s
-
-
-def test_a_stage_1_lag_far_from_the_approachs_is_not_flown():
-    events = []
-    resp = VehicleResponse(TauGains(), LagIdGains(), events)
-    resp.lagid = fly(0.11, 0.24, then=(3.0, 0.05, 0.1))
-    resp.model = model = fly(0.11, 0.24, seconds=3.0).fit().model
-    resp.refit_stage2(4.5, 3.0, 1.0)
-    assert not any(e.kind == "lag-refit" for e in events)
-    assert resp.model.lag_s == model.lag_s
-
-
-def test_a_lag_from_the_positions_is_kept_in_stage_2():
-    events = []
-    resp = VehicleResponse(TauGains(), LagIdGains(), events)
-    resp.lagid = ident = fly(0.11, 0.24, seen_as=0.0, then=(3.0, 0.12, 0.2))
-    resp.model = model = ident.fit().model
-    resp.refit_stage2(4.5, 3.0, 1.0)
-    assert not any(e.kind == "lag-refit" for e in events)
-    assert resp.model.lag_s == model.lag_s
-
-
 def test_a_lean_that_swept_too_little_is_refused():
     ident = LagIdentifier(LagIdGains())
     for k in range(300):
@@ -230,14 +181,3 @@ def test_the_estimator_measures_the_lean_the_setpoint_would_send(normal, angles)
     est.offer(Pose("cf", 1, 0.0, (0.0, 0.0, 1.0), quaternion(*angles)))
     sent = frame.rotate_in(body_z(*angles))[0]
     assert est.state(0.0).lean_x == pytest.approx(sent, abs=1e-12)
-
-
-def test_the_stage_2_refit_keeps_the_attitudes_lag_and_says_so():
-    """The bias refitted at the switch (3.4 s) from stage 1 (since 3 s) keeps the trigger's
-    lag and drag, and the model still says its lag came from the attitude."""
-    ident = fly(0.11, 0.24, seconds=3.4)
-    base = ident.fit().model
-    assert base is not None and base.from_attitude
-    m = ident.refit_bias(base, 3.0).model
-    assert m is not None and m.from_attitude and m.drag_from_attitude
-    assert (m.lag_s, m.drag_per_s) == (base.lag_s, base.drag_per_s)

@@ -11,8 +11,8 @@ from perchd.core.types import EndReason
 # From plans/case1-ipts-n3.json flown on sim:// with a manual clock (the model with its
 # quadratic drag, stage 2's loop from the lag: references.hold_loop): a simulated flight
 # repeats to the last bit.
-CONTACT_SPEED = 0.967981207501274  # [m/s] the agent's estimate
-PERCH_TIME = 2.024422916676206  # [s] trigger to contact, the agent's estimate
+CONTACT_SPEED = 0.9679173670398736  # [m/s] the agent's estimate
+PERCH_TIME = 2.0245068868016944  # [s] trigger to contact, the agent's estimate
 TICKS = 573
 
 
