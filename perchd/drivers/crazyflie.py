@@ -13,8 +13,8 @@ Conversions (perchd SI -> cflib send_setpoint):
 - roll [rad] -> degrees, same sign: the firmware's roll is right-handed about body x.
 - pitch [rad] -> degrees, same sign: cflib's `pitch` argument is positive nose-down
   (right-handed about y with z up), and cflib puts -pitch on the wire because the
-  firmware's legacy attitude is positive nose-up (commander.py packs `-pitch`; see
-  bitcraze/crazyflie-firmware#884 and crazyflie-lib-rs#7 on that legacy sign).
+  firmware's legacy attitude is positive nose-up (commander.py packs `-pitch`; the sign
+  is flown against the firmware in tests/firmware/test_fw_cf2_signs.py).
 - yaw [rad] -> a yaw *rate* [deg/s]: the RPYT packet commands yaw rate. With a measured
   yaw (observe_pose) it is K_YAW * wrap(yaw_sp - yaw), clamped to YAW_RATE_MAX;
   without one it is 0 (hold the heading the vehicle has). It goes on the wire negated:
