@@ -273,8 +273,8 @@ def _model_at(
     drag: tuple[float | None, float | None] = (None, None),
 ) -> LagModel:
     """Drag, quadratic drag (each unless given) and bias at delay_s [s] and time constant
-    tc_s [s]; rms_mps is how far the speed they predict from the
-    fitted Xdot(s) strays from the speed measured (_drags has the signs' rule)."""
+    tc_s [s]; rms_mps is how far the speed they predict from the fitted Xdot(s) strays from
+    the speed measured (_drags has the signs' rule)."""
     a, delay = _first_order(t, u, np.array([tc_s])), np.array([delay_s])
     sol = _fixed_drags(t, a, x, v, delay, drag)
     m = LagModel(
@@ -423,19 +423,17 @@ def _solve(
     """For each row of a (inputs, ticks) and each lag (its delay): the mean squared
     residual [m^2], shaped (inputs, lags), and the least-squares (drag, qdrag, bias,
     Xdot(s), offset), shaped (inputs, 5, lags), integrated from the first tick (a drag
-    given in `drag` = (linear [1/s], quadratic [1/m]) is held). The regressors depend on neither, so one
-    pseudo-inverse serves all; the integrals take every tick, the regression at most
-    FIT_POINTS of them (a fit stays a few ms)."""
+    given in `drag` = (linear [1/s], quadratic [1/m]) is held). The regressors depend on
+    neither, so one pseudo-inverse serves all; the integrals take every tick, the regression
+    at most FIT_POINTS of them (a fit stays a few ms)."""
     at = np.unique(np.linspace(0, len(t) - 1, min(len(t), FIT_POINTS)).astype(int))
     big_a, big_w = _integrals(t, a)
     times = t[at][None, :] - lags[:, None]
     w, a_s = _delayed(t, big_w, times, a, 2), _delayed(t, big_a, times[:, :1], a, 1)
-    s = t[at] - t[at[0]]
-    x_s = x[at[0]]
-    area = np.concatenate(([0.0], np.cumsum(0.5 * (x[1:] + x[:-1] - 2.0 * x_s) * np.diff(t))))
-    area = area[at] - area[at[0]]
-    q1, q2 = _quadratic_integrals(t, v)
-    quad = q2[at] - q2[at[0]] - q1[at[0]] * s
+    s = t[at] - t[0]  # at[0] is the first tick
+    x_s = x[0]
+    area = np.concatenate(([0.0], np.cumsum(0.5 * (x[1:] + x[:-1] - 2.0 * x_s) * np.diff(t))))[at]
+    quad = _quadratic_integrals(t, v)[1][at]  # it starts at 0, as does area
     y = (x[at] - x_s) - (w - w[..., :1] - a_s * s)
     # The speed column takes Xdot(s); the ones column the noise of X(s) itself.
     cols = np.column_stack((-area, -quad, 0.5 * s * s, s, np.ones_like(s)))
@@ -469,8 +467,9 @@ def _lean_best(data, axes: list[np.ndarray], points: int):
 def _lean_mse(
     t, sent, tm, lean, delays: np.ndarray, taus: np.ndarray, points: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean squared residual, shaped (taus, delays), of the lean measured at tm against the lean sent at t through each first-order lag and delay, a constant
-    offset (the markers' trim) removed; and the gain by which the measured lean's swing
+    """Mean squared residual, shaped (taus, delays), of the lean measured at tm against the
+    lean sent at t through each first-order lag and delay, a constant offset (the markers'
+    trim) removed; and the gain by which the measured lean's swing
     regresses on the predicted one's (about 1 for a rigid body aligned with the vehicle).
     The filtered lean is each tick's interval mean, read at the intervals' midpoints."""
     f = _first_order(t, sent, taus)

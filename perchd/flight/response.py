@@ -24,7 +24,7 @@ class VehicleResponse:
     refused); identified: the trigger's fit, once made. events: where fits are logged."""
 
     def __init__(self, gains: TauGains, cfg: LagIdGains, events: list[LogEvent]) -> None:
-        self.gains, self.cfg = gains, cfg
+        self.gains = gains
         self.lagid = LagIdentifier(cfg)
         self.ff = FeedForward(gains.ff_lead_s)
         self.model: LagModel | None = None
