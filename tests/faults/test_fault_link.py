@@ -117,6 +117,8 @@ def test_a_link_200_ms_slow_is_a_lost_link_before_it_flies(tmp_path):
 
 
 # --- real drivers, real time ----------------------------------------------------------------
+# Each flight below is judged in real time (a pose every period, a link within its timeout):
+# `solo`, it runs with the CPU to itself (tests/conftest.py).
 class RealFlight:
     """fly() in real time against a real driver; the peer's commands drive a simulated world
     whose mocap the agent reads (tests/drivers/test_lost_link_flight.bridge)."""
@@ -190,6 +192,7 @@ def closing(rig, relay):
     rig.close()
 
 
+@pytest.mark.solo
 @pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
 def test_a_peer_that_stops_answering_is_lost_link_within_3_ticks_of_the_timeout(make, tmp_path):
     timeout = 0.1
@@ -230,6 +233,7 @@ def fly_slowed(make, delay_s: float, tmp_path, what: str):
     return rig, relay, res
 
 
+@pytest.mark.solo
 @pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
 def test_a_slow_peer_within_the_round_trip_limit_is_not_a_lost_link(make, tmp_path):
     rig, relay, res = fly_slowed(make, 0.1, tmp_path, "slow peer")
@@ -244,6 +248,7 @@ def test_a_slow_peer_within_the_round_trip_limit_is_not_a_lost_link(make, tmp_pa
     )
 
 
+@pytest.mark.solo
 def test_a_crazyflie_link_slower_than_the_round_trip_limit_is_lost_link(tmp_path):
     _, _, res = fly_slowed(crazyflie, 0.15, tmp_path, "slow crazyflie link")
     assert res.outcome is EndReason.LOST_LINK and res.failsafe_sent
@@ -291,6 +296,7 @@ def outage_then_back(make, tmp_path, blip: bool = True):
     return rig, res, flight.marks, ended
 
 
+@pytest.mark.solo
 @pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
 def test_a_short_outage_is_ridden_out_and_a_long_one_is_lost_link_for_good(make, tmp_path):
     rig, res, marks, ended = outage_then_back(make, tmp_path)
@@ -315,6 +321,7 @@ def stops_heard(rig) -> list[float]:
     return [t for t, mode in rig.peer.modes if mode == 9]  # ARDUPILOT_LAND
 
 
+@pytest.mark.solo
 @pytest.mark.parametrize("make", [crazyflie, mavlink], ids=["crazyflie-udp", "mavlink"])
 def test_a_failsafe_sent_into_a_dead_link_reaches_the_vehicle_when_it_returns(make, tmp_path):
     rig, res, marks, ended = outage_then_back(make, tmp_path, blip=False)
@@ -336,6 +343,7 @@ def test_a_failsafe_sent_into_a_dead_link_reaches_the_vehicle_when_it_returns(ma
     )
 
 
+@pytest.mark.solo
 def test_a_zmq_subscriber_that_returns_on_the_same_port_gets_no_setpoint(tmp_path):
     rig = ZmqRig()
     flight = RealFlight(rig, rig.uri)

@@ -145,6 +145,7 @@ def test_the_idle_watchdog_stops_when_the_link_to_the_vehicle_dies(tmp_path, not
     assert code == 0
 
 
+@pytest.mark.solo  # a real-time perch: a pose every mocap period (tests/conftest.py)
 def test_a_flight_through_ctl_wait_perches_on_the_configured_surface(tmp_path, notify):
     wall = "[surface]\npoint = [2.0, 1.0, 0.0]\nnormal = [0.0, 1.0, 0.0]\n"
     serve = Serve(tmp_path, notify, "--driver", "sim://", "--mocap", "sim://", tables=wall)
