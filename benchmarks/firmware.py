@@ -186,14 +186,17 @@ def fly_argv(
     config_add: str = "",
     driver_add: str = "",
     state: Path | None = None,
+    replan: bool = True,
 ) -> list[str]:
     """`perchd fly` against a started harness, as a user flies it; its flight log is
     tmp/flight.jsonl. config_add: TOML appended to the flight config; driver_add: URI
     parameters appended to the driver's; state: the vehicle profile shared by the flights,
     named after the firmware (the harness's ports are ephemeral); None: tmp's own, a
-    vehicle flown for the first time."""
+    vehicle flown for the first time; replan: with TRIGGER, else the plan as made (the
+    trigger's default)."""
     driver += ("&" if "?" in driver else "?") + driver_add if driver_add else ""
-    (tmp / "flight.toml").write_text(with_trigger((fw.config or "version = 1\n") + config_add))
+    config = (fw.config or "version = 1\n") + config_add
+    (tmp / "flight.toml").write_text(with_trigger(config) if replan else config)
     return [
         sys.executable,
         "-m",
@@ -225,6 +228,7 @@ def fly_firmware(
     config_add: str = "",
     driver_add: str = "",
     state: Path | None = None,
+    replan: bool = True,
 ) -> dict:
     proc, mocap, driver, surface = start_harness(fw, binary, noise, tmp)
     from fwharness import YawWatch, flight_window, heading_error
@@ -232,7 +236,7 @@ def fly_firmware(
     watch = YawWatch(mocap)
     try:
         done = subprocess.run(
-            fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add, state),
+            fly_argv(fw, tmp, mocap, driver, surface, config_add, driver_add, state, replan),
             check=False,
             capture_output=True,
             text=True,
@@ -416,6 +420,12 @@ def main() -> int:
         help="every flight a vehicle flown for the first time (default: one "
         "vehicle profile per firmware, empty at its first flight)",
     )
+    ap.add_argument(
+        "--as-made",
+        action="store_true",
+        help="fly the plan as made for v0 (the trigger's default: refused past "
+        "[trigger] v_tol_mps), not replanned from the state at x0",
+    )
     args = ap.parse_args()
     if args.flights < 1 or not 0.0 <= args.noise <= 0.1:
         print(
@@ -447,6 +457,7 @@ def main() -> int:
                     args.config_add.replace("\\n", "\n") + "\n",
                     args.driver_add,
                     state,
+                    not args.as_made,
                 )
             )
             runs["sim"].append(fly_sim(args.noise, i, tmp))

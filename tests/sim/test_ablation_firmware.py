@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from perchd.flight.config import FlightConfig, TriggerPolicy
 from perchd.service.config import load_flight_config
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -70,6 +71,17 @@ def test_every_firmware_flight_replans_at_the_trigger_as_a_campaign_does(fw, tmp
     )
     assert Path(trigger.library).exists()
     assert campaign.trigger.library == str(firmware.LIBRARY)
+
+
+@pytest.mark.parametrize("fw", firmware.FIRMWARES, ids=lambda f: f.name)
+def test_as_made_a_firmware_flight_keeps_the_triggers_default(fw, tmp_path):
+    """--as-made: the firmware's own config, its trigger the default (refuse past v_tol)."""
+    policies = {}
+    for replan in (True, False):
+        firmware.fly_argv(fw, tmp_path, "zmq://x", "udp://x", ["0", "0", "0"], replan=replan)
+        policies[replan] = load_flight_config(tmp_path / "flight.toml").trigger.policy
+    assert policies == {True: TriggerPolicy.REPLAN, False: FlightConfig().trigger.policy}
+    assert FlightConfig().trigger.policy is TriggerPolicy.REFUSE
 
 
 def test_a_flights_perch_time_is_measured_against_the_plan_it_flew():
