@@ -19,6 +19,7 @@ import pytest
 import zmq
 from announced import start_announced
 from caseplans import PLANS, case1_ipts
+from svc import HARNESS_SAFETY
 
 import perchd.flight.run as flight
 from perchd.core.clock import ManualClock
@@ -55,16 +56,11 @@ class SimProcess:
             self.proc.communicate()
 
 
-HARNESS_CONFIG = "version = 1\n[safety]\nstale_timeout_s = 0.25\n"
-"""Three processes share two cores here, none of them a lab's mocap that keeps its rate: a
-pose descheduled past the default 3-period (30 ms) stale rule measures the machine, not the
-agreement this file tests (the stale rule has tests/faults of its own)."""
-
-
 def fly_agent(sim: SimProcess, log: Path):
-    """`perchd fly` against the sim process, as a user runs it (with HARNESS_CONFIG)."""
+    """`perchd fly` against the sim process, as a user runs it, with the stale limit of a
+    mocap process on these shared cores (svc.HARNESS_SAFETY)."""
     config = log.with_suffix(".toml")
-    config.write_text(HARNESS_CONFIG)
+    config.write_text("version = 1\n" + HARNESS_SAFETY)
     done = subprocess.run(
         [
             sys.executable,
