@@ -40,17 +40,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "helpers"))  # the firmware tests' harness helpers
+from stale import HARNESS_SAFETY  # noqa: E402  (the firmware tests' stale limit)
+
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 INSTANCE = os.environ.get("PERCHD_FW_INSTANCE")
 """The SITL instance (ports moved by N) as the firmware tests take it, for a machine shared
 with other runs; None: the harness's default (0)."""
-STALE = """[safety]
-stale_timeout_s = 0.25
-"""
-"""The stale-mocap limit as tests/firmware/test_fw_px4_flight.py has it: beside a firmware
-and its harness on two shared cores `perchd fly` is descheduled for tens of milliseconds,
-past the default three mocap periods (30 ms at 100 Hz)."""
 HEADING_DEG = "60"
 """[deg] PX4 turns to this compass heading before the flight, as the PX4 trial flies: a
 heading off the world's axes (the frame's rotation) and both truth velocity components in
@@ -86,7 +82,7 @@ mass_kg = 1.0
 thrust_min_n = 2.0
 thrust_max_n = 18.0
 """
-    + STALE
+    + HARNESS_SAFETY
 )
 """SIH's quadrotor (1 kg, 4 x 5 N)."""
 
@@ -110,7 +106,7 @@ FIRMWARES = (
         "PERCHD_CF2",
         "--cf2",
         ("--link", "udp://127.0.0.1:0"),
-        config="version = 1\n" + STALE,
+        config="version = 1\n" + HARNESS_SAFETY,
     ),
     Firmware(
         "arducopter",

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from announced import start_announced
+from stale import HARNESS_SAFETY
 
 PLANS = Path(__file__).resolve().parents[2] / "plans"
 PLAN = PLANS / "case1-ipts-n3.json"
@@ -62,16 +63,9 @@ class NotifyListener:
         self.sock.close()
 
 
-HARNESS_SAFETY = "[safety]\nstale_timeout_s = 0.25\n"
-"""The stale limit of a flight whose mocap is another test process or thread on these two
-shared cores, as the firmware harness's (docs/firmware.md): such a pose stream is
-descheduled past the default 3 mocap periods (30 ms; 68 ms seen), which measures the
-machine, not what the test asks. The stale rule has tests of its own (tests/faults)."""
-
-
 def write_config(tmp: Path, tables: str = "", **service: str) -> Path:
     """perchd.toml for `perchd serve` under tmp: its [service] table, then `tables`, with
-    HARNESS_SAFETY unless they hold a [safety] table of their own."""
+    HARNESS_SAFETY (stale.py) unless they hold a [safety] table of their own."""
     lines = [
         "version = 1",
         "" if "[safety]" in tables else HARNESS_SAFETY,  # before [service]: tests append to it
