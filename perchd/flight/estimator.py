@@ -14,7 +14,10 @@ Timing: each pose is applied at its own measurement time `pose.t`; `state(t)` pr
 (without updating) to the control tick `t`, which compensates the mocap latency. Outliers
 (a jump from the last accepted position implying more than `outlier_speed_mps`) are dropped;
 after `outlier_max_rejects` in a row the filter re-initialises on the new position, since the
-old track is then the unbelievable one. `State.age` is the time since the newest accepted pose
+old track is then the unbelievable one. A frame inside that gate but off the track's
+prediction by more than `glitch_speed_mps` of speed error waits for the next frame: back on
+the track, it was a glitch (a reflection tracked as the body for a frame) and is dropped; off
+the track too, the vehicle did move so (a shove) and both are fused, one frame late. `State.age` is the time since the newest accepted pose
 was measured. tau is None when Xdot <= `min_speed_mps` (no division near zero speed).
 """
 
@@ -35,6 +38,8 @@ class EstimatorConfig:
     meas_std_m: [m] mocap position noise (a motion-capture system's: about 1 mm).
     outlier_speed_mps: [m/s] a jump implying more than this speed is rejected.
     outlier_max_rejects: consecutive rejections after which the filter re-initialises.
+    glitch_speed_mps: [m/s] a frame off the track's prediction by more than this speed error
+        (over the interval since the last fused frame, plus 6 sigma) waits for the next.
     min_speed_mps: [m/s] tau is undefined (None) when Xdot is at or below this.
     """
 
@@ -42,6 +47,7 @@ class EstimatorConfig:
     meas_std_m: float = 0.001
     outlier_speed_mps: float = 10.0
     outlier_max_rejects: int = 5
+    glitch_speed_mps: float = 1.0
     min_speed_mps: float = 0.05
 
 
@@ -93,6 +99,7 @@ class Estimator:
         self._tilt = 0.0
         self._lean_x = 0.0
         self._rejects = 0
+        self._held: tuple[Pose, tuple[float, float, float]] | None = None
         self.rejected = 0
         self.accepted = 0
         self._period = None  # [s] smoothed interval between accepted poses
@@ -126,9 +133,33 @@ class Estimator:
                 if self._rejects <= self.cfg.outlier_max_rejects:
                     return False
             self._init(pose, z)
-        else:
+        elif self._settled(pose, z):
             self._update(pose, z)
+        else:
+            return False
         self._accept(pose, z)
+        return True
+
+    def _settled(self, pose: Pose, z: tuple[float, float, float]) -> bool:
+        """May z be fused now? Off the track, it is held for the next frame to tell a
+        glitch (the next back on the track: dropped) from a move (the next off it too: the
+        held frame is fused first)."""
+        dt = pose.t - self._t
+        h = 0.5 * dt * dt
+        pos, vel, acc = self._pos, self._vel, self._acc
+        off = math.sqrt(sum((z[i] - (pos[i] + dt * vel[i] + h * acc[i])) ** 2 for i in range(3)))
+        held, self._held = self._held, None
+        # one frame's speed error: after a held frame, back on the track means within it
+        # since that frame, not since the last fused (a shove would pass twice the gate)
+        since = pose.t - (held[0].t if held is not None else self._t)
+        if off <= self.cfg.glitch_speed_mps * since + self._gate:
+            self.rejected += held is not None  # the held frame was a glitch
+            return True
+        if held is None:
+            self._held = (pose, z)
+            return False
+        self._update(*held)
+        self._accept(*held)
         return True
 
     def _is_outlier(self, pose: Pose, z: tuple[float, float, float]) -> bool:
@@ -138,6 +169,7 @@ class Estimator:
         return jump > self.cfg.outlier_speed_mps * dt + self._gate
 
     def _init(self, pose: Pose, z: tuple[float, float, float]) -> None:
+        self._held = None
         self._pos, self._vel, self._acc = list(z), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
         # speed and acceleration unknown: metres per second (squared)
         self._P = (self._r, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 16.0)

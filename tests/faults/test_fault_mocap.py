@@ -96,6 +96,8 @@ def test_a_gap_of_two_frames_is_flown_through(tmp_path, nominal):
         ("every frame 3 times", (Repeat(times=3),)),
         ("outlier (0.5 m) every 10th frame", (Outliers(every=10),)),
         ("outlier (0.5 m) every 3rd frame", (Outliers(every=3),)),
+        ("glitch (3 cm) every 37th frame", (Outliers(every=37, jump_m=0.03),)),
+        ("glitch (4 cm) every 31st frame", (Outliers(every=31, jump_m=0.04),)),
         ("invalid for 2 frames", (Invalid(3.0, 3.0 + 2 * PERIOD),)),
         ("rate drops to 50 %", (RateDrop(keep_every=2),)),
         ("NaN in every 10th frame", (Corrupt(every=10),)),
@@ -117,7 +119,8 @@ def test_faults_within_the_estimator_s_tolerance_still_perch(loop, name, faults,
     assert seqs == sorted(seqs)  # an older frame never replaced a newer one
     report(
         f"mocap: {name} ({loop} loop)",
-        "per frame (dropped: older, same seq, non-finite, or a jump > 10 m/s)",
+        "per frame (dropped: older, same seq, non-finite, a jump > 10 m/s, or off the track"
+        " for one frame)",
         "frame ignored; the filter predicts",
         "perches",
     )
