@@ -1,7 +1,7 @@
 """Benchmark: what one driver.send() costs the control loop, and how long until the vehicle
 end has the setpoint, for each driver over its real library on loopback.
 
-    python tests/drivers/bench_links.py [--n 2000] [--json]
+    python3 benchmarks/links.py [--n 2000] [--json]
 
 Prints medians and 99th percentiles in microseconds. Not a test: it asserts nothing.
 """
@@ -15,7 +15,7 @@ import statistics
 import sys
 import time
 
-sys.path.insert(0, os.path.dirname(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests", "helpers"))
 
 from rigs import MASS, CrazyflieRig, MavlinkRig, ZmqRig  # noqa: E402
 
