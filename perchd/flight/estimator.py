@@ -11,14 +11,15 @@ the log. The three axes share one model and one measurement schedule, so they sh
 covariance P: one 3x3 update per pose serves all axes.
 
 Timing: each pose is applied at its own measurement time `pose.t`; `state(t)` predicts
-(without updating) to the control tick `t`, which compensates the mocap latency. Outliers
-(a jump from the last accepted position implying more than `outlier_speed_mps`) are dropped;
-after `outlier_max_rejects` in a row the filter re-initialises on the new position, since the
-old track is then the unbelievable one. A frame inside that gate but off the track's
+(without updating) to the control tick `t`, which compensates the mocap latency. Outliers (a
+jump from the last accepted position implying more than `outlier_speed_mps`) are dropped;
+after `outlier_max_rejects` in a row the filter re-initialises on the new position, since
+the old track is then the unbelievable one. A frame inside that gate but off the track's
 prediction by more than `glitch_speed_mps` of speed error waits for the next frame: back on
-the track, it was a glitch (a reflection tracked as the body for a frame) and is dropped; off
-the track too, the vehicle did move so (a shove) and both are fused, one frame late. `State.age` is the time since the newest accepted pose
-was measured. tau is None when Xdot <= `min_speed_mps` (no division near zero speed).
+the track, it was a glitch (a reflection tracked as the body for a frame) and is dropped;
+off the track too, the vehicle did move so (a shove) and both are fused, one frame late.
+`State.age` is the time since the newest accepted pose was measured. tau is None when Xdot
+<= `min_speed_mps` (no division near zero speed).
 """
 
 from __future__ import annotations
@@ -153,7 +154,8 @@ class Estimator:
         # since that frame, not since the last fused (a shove would pass twice the gate)
         since = pose.t - (held[0].t if held is not None else self._t)
         if off <= self.cfg.glitch_speed_mps * since + self._gate:
-            self.rejected += held is not None  # the held frame was a glitch
+            if held is not None:
+                self.rejected += 1  # the held frame was a glitch
             return True
         if held is None:
             self._held = (pose, z)
