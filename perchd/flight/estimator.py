@@ -145,9 +145,9 @@ class Estimator:
         """May z be fused now? Off the track, it is held for the next frame to tell a
         glitch (the next back on the track: dropped) from a move (the next off it too: the
         held frame is fused first)."""
+        pos, vel, acc = self._pos or z, self._vel, self._acc  # pos: set by the first frame
         dt = pose.t - self._t
         h = 0.5 * dt * dt
-        pos, vel, acc = self._pos, self._vel, self._acc
         off = math.sqrt(sum((z[i] - (pos[i] + dt * vel[i] + h * acc[i])) ** 2 for i in range(3)))
         held, self._held = self._held, None
         # one frame's speed error: after a held frame, back on the track means within it
