@@ -111,7 +111,7 @@ class Proc:
         return Ended(self.proc.returncode, took, left, self.stderr())
 
     def kill(self) -> None:
-        """Whatever is left of the session, gone (teardown)."""
+        """Whatever is left of the process and its descendants, gone (teardown)."""
         for p in [*descendants(self.pid), *([self.proc] if self.proc.poll() is None else [])]:
             try:
                 os.kill(p.pid, signal.SIGKILL)
