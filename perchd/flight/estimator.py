@@ -145,10 +145,7 @@ class Estimator:
         """May z be fused now? Off the track, it is held for the next frame to tell a
         glitch (the next back on the track: dropped) from a move (the next off it too: the
         held frame is fused first)."""
-        pos, vel, acc = self._pos or z, self._vel, self._acc  # pos: set by the first frame
-        dt = pose.t - self._t
-        h = 0.5 * dt * dt
-        off = math.sqrt(sum((z[i] - (pos[i] + dt * vel[i] + h * acc[i])) ** 2 for i in range(3)))
+        off = math.dist(z, self._position_at(pose.t))
         held, self._held = self._held, None
         # one frame's speed error: after a held frame, back on the track means within it
         # since that frame, not since the last fused (a shove would pass twice the gate)
@@ -178,15 +175,22 @@ class Estimator:
         self._t = pose.t
         self._period = None
 
+    def _position_at(self, t: float) -> list[float]:
+        """[m] the track's position predicted to t [s] (constant acceleration)."""
+        dt = t - self._t
+        h = 0.5 * dt * dt
+        pos, vel, acc = self._pos or [0.0, 0.0, 0.0], self._vel, self._acc  # pos: once fused
+        return [pos[i] + dt * vel[i] + h * acc[i] for i in range(3)]
+
     def _update(self, pose: Pose, z: tuple[float, float, float]) -> None:
         dt = pose.t - self._t
-        h = 0.5 * dt * dt
         P = _predict_cov(self._P, dt, self.cfg.jerk_psd)
         s = P[0] + self._r
         k0, k1, k2 = P[0] / s, P[3] / s, P[6] / s
         pos, vel, acc = self._pos, self._vel, self._acc
+        predicted = self._position_at(pose.t)
         for i in range(3):  # the three axes share P and hence the gain
-            p, v, a = pos[i] + dt * vel[i] + h * acc[i], vel[i] + dt * acc[i], acc[i]
+            p, v, a = predicted[i], vel[i] + dt * acc[i], acc[i]
             innovation = z[i] - p
             pos[i], vel[i], acc[i] = p + k0 * innovation, v + k1 * innovation, a + k2 * innovation
         r0, r1, r2 = P[0], P[1], P[2]
