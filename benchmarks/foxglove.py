@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "helpers"))
 
 from foxglove_client import serving_url, watch  # noqa: E402
+from stale import harness_config  # noqa: E402
 from svc import PLAN, SimProcess  # noqa: E402
 
 FIGURES = (
@@ -52,6 +53,8 @@ def fly(sim: SimProcess, log: Path, view: bool) -> tuple[dict, int]:
             sim.driver,
             "--mocap",
             sim.mocap,
+            "--config",
+            str(harness_config(log.parent)),
             "--log",
             str(log),
             "--force",

@@ -17,6 +17,8 @@ HELPERS = Path(__file__).resolve().parent / "helpers"
 if str(HELPERS) not in sys.path:
     sys.path.insert(0, str(HELPERS))
 
+from stale import HARNESS_SAFETY, below_the_harness_limit  # noqa: E402 - a helper, path above
+
 
 @pytest.fixture(autouse=True)
 def _vehicle_state_in_a_temporary_folder(tmp_path_factory, monkeypatch):
@@ -41,3 +43,16 @@ def _solo_tests_run_alone(request) -> Iterator[None]:
             yield
         finally:
             fcntl.flock(f, fcntl.LOCK_UN)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+    """A passing test whose flights read a pose stream of this machine flew them with the
+    harness's stale limit (stale.py), unless it is marked `own_stale_limit`: a flight that
+    only passes while no process beside it is descheduled for 30 ms fails on a loaded CI."""
+    result = yield
+    tmp = getattr(item, "funcargs", {}).get("tmp_path")
+    if tmp is not None and item.get_closest_marker("own_stale_limit") is None:
+        short = below_the_harness_limit(tmp)
+        assert not short, f"fly these with {HARNESS_SAFETY!r} (tests/helpers/stale.py): {short}"
+    return result

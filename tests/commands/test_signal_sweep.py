@@ -25,6 +25,7 @@ from pathlib import Path
 import psutil
 import pytest
 from sigint_child import popen_handling_sigint
+from stale import harness_config
 
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = ROOT / "plans" / "case1-ipts-n3.json"
@@ -286,7 +287,19 @@ def case_sim_firmware(procs, tmp):
 
 def fly_args(sim: Proc, tmp: Path) -> list[str]:
     mocap, driver = sim_uris(sim)
-    return ["fly", str(PLAN), "--driver", driver, "--mocap", mocap, "--log", str(tmp / "f.jsonl")]
+    config = str(harness_config(tmp))
+    return [
+        "fly",
+        str(PLAN),
+        "--driver",
+        driver,
+        "--mocap",
+        mocap,
+        "--config",
+        config,
+        "--log",
+        str(tmp / "f.jsonl"),
+    ]
 
 
 def flying(p: Proc) -> bool:

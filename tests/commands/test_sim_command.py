@@ -19,7 +19,7 @@ import pytest
 import zmq
 from announced import start_announced
 from caseplans import PLANS, case1_ipts
-from stale import HARNESS_SAFETY
+from stale import harness_config
 
 import perchd.flight.run as flight
 from perchd.core.clock import ManualClock
@@ -58,9 +58,8 @@ class SimProcess:
 
 def fly_agent(sim: SimProcess, log: Path):
     """`perchd fly` against the sim process, as a user runs it, with the stale limit of a
-    mocap process on these shared cores (stale.HARNESS_SAFETY)."""
-    config = log.with_suffix(".toml")
-    config.write_text("version = 1\n" + HARNESS_SAFETY)
+    mocap process on these shared cores (stale.py)."""
+    config = harness_config(log.parent)
     done = subprocess.run(
         [
             sys.executable,

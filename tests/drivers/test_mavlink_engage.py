@@ -18,6 +18,7 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from mavlink_double import ARDUPILOT, PX4, VehicleDouble, connected
+from stale import harness_config
 from still_poses import StillPoses
 
 from perchd.core.errors import LinkError
@@ -142,6 +143,8 @@ def test_perchd_fly_arms_an_ekf_on_mocap_alone_from_the_ground(tmp_path):
                 f"{v.uri}?arm=1",
                 "--mocap",
                 poses.uri,
+                "--config",
+                str(harness_config(tmp_path)),
                 "--log",
                 str(tmp_path / "f.jsonl"),
                 "--json",

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 from faultsim import TICK, fly, injected, report
+from stale import harness_config
 from svc import PLAN, SimProcess
 
 from perchd.core.types import EndReason
@@ -42,10 +43,12 @@ def sim():
 
 
 class Fly:
-    """`perchd fly` against a `perchd sim` process, in real time."""
+    """`perchd fly` against a `perchd sim` process, in real time, with the harness's stale
+    limit (stale.py); `harness=False`: the default limit, for a test of that limit."""
 
-    def __init__(self, sim: SimProcess, log: Path, preexec=None) -> None:
+    def __init__(self, sim: SimProcess, log: Path, preexec=None, harness: bool = True) -> None:
         self.log = log
+        config = ["--config", str(harness_config(log.parent))] if harness else []
         self.proc = subprocess.Popen(
             [
                 sys.executable,
@@ -57,6 +60,7 @@ class Fly:
                 sim.driver,
                 "--mocap",
                 sim.mocap,
+                *config,
                 "--log",
                 str(log),
                 "--json",
@@ -155,10 +159,12 @@ def ended(log: Path) -> bool:
         return False
 
 
+@pytest.mark.own_stale_limit  # the stale rule is one of the two ends under test
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="needs two CPUs to pin apart")
 def test_a_loop_starved_of_cpu_ends_in_a_named_abort_with_the_failsafe(sim, tmp_path):
     """perchd fly (nice 19) shares one CPU with two busy processes (nice 0); perchd sim keeps
-    the other CPU, so the vehicle and its mocap run on while the agent starves."""
+    the other CPU, so the vehicle and its mocap run on while the agent starves: the default
+    stale limit, a stream that keeps its rate."""
     cpus = sorted(os.sched_getaffinity(0))
     os.sched_setaffinity(sim.proc.pid, {cpus[1]})
 
@@ -166,7 +172,7 @@ def test_a_loop_starved_of_cpu_ends_in_a_named_abort_with_the_failsafe(sim, tmp_
         os.sched_setaffinity(0, {cpus[0]})
         os.nice(19)
 
-    flight = Fly(sim, tmp_path / "f.jsonl", preexec=starved)
+    flight = Fly(sim, tmp_path / "f.jsonl", preexec=starved, harness=False)
     hogs = []
     try:
         flight.wait_phase("approach")

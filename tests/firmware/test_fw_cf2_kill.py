@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 from cf2rig import CF2, needs_cf2
 from fwharness import ENV, PLAN, start_harness, stop_harness
+from stale import harness_config
 
 from perchd.drivers import cflink, cfsink
 
@@ -109,6 +110,8 @@ def fly_and_kill(tmp_path: Path, phase: str) -> dict | None:
                 driver,
                 "--mocap",
                 mocap,
+                "--config",
+                str(harness_config(tmp_path)),
                 "--log",
                 str(log),
                 "--json",

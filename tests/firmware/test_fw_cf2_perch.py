@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from cf2rig import CF2, needs_cf2
 from fwharness import ENV, PLAN, lag_event, start_harness, stop_harness
-from stale import HARNESS_SAFETY
+from stale import harness_config
 
 from perchd.drivers.thrust import CrazyflieThrust
 
@@ -48,8 +48,7 @@ def test_the_agent_perches_on_the_firmware_in_the_loop(tmp_path, flight):
     plan = json.loads(PLAN.read_text())
     proc, mocap, driver = harness(tmp_path)
     driver = driver.split("?")[0]  # no mass, no hover: the hold learns it
-    config = tmp_path / "flight.toml"
-    config.write_text("version = 1\n" + HARNESS_SAFETY)  # as benchmarks/firmware.py flies cf2
+    config = harness_config(tmp_path)  # as benchmarks/firmware.py flies cf2
     try:
         done = subprocess.run(
             [

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 from announced import start_announced
 from simflight import NOISY, PLANS, Sim
+from stale import harness_config
 from ticks import wait_for
 
 from perchd.core.clock import MonotonicClock
@@ -276,9 +277,7 @@ def test_the_worker_a_flight_starts_is_gone_when_it_ends(tmp_path, end, reason):
 
 
 def _config(tmp_path: Path) -> Path:
-    path = tmp_path / "replan.toml"
-    path.write_text('version = 1\n[trigger]\npolicy = "replan"\n')
-    return path
+    return harness_config(tmp_path, '[trigger]\npolicy = "replan"\n')
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])

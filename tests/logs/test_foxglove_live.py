@@ -14,6 +14,7 @@ import threading
 import time
 
 import pytest
+from stale import harness_config
 from svc import PLAN, SimProcess
 
 from perchd.logs.flightlog import read_log
@@ -46,6 +47,8 @@ def test_a_client_subscribed_during_the_flight_receives_the_flight_log_s_values(
             sim.driver,
             "--mocap",
             sim.mocap,
+            "--config",
+            str(harness_config(tmp_path)),
             "--log",
             str(log),
             "--json",
@@ -153,6 +156,8 @@ def test_ctrl_c_to_the_process_group_still_publishes_the_flight_s_end(sim, tmp_p
             sim.driver,
             "--mocap",
             sim.mocap,
+            "--config",
+            str(harness_config(tmp_path)),
             "--log",
             str(tmp_path / "f.jsonl"),
             "--json",

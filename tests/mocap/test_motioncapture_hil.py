@@ -13,6 +13,7 @@ import pytest
 from announced import start_announced
 from caseplans import PLANS, case1_ipts
 from freeport import free_udp_port
+from stale import harness_config
 
 from perchd.core.types import EndReason
 
@@ -51,6 +52,8 @@ def test_the_agent_perches_on_perchd_sim_read_through_libmotioncapture(tmp_path)
                 driver,
                 "--mocap",
                 mocap,
+                "--config",
+                str(harness_config(tmp_path)),
                 "--log",
                 str(tmp_path / "hil.jsonl"),
                 "--json",
