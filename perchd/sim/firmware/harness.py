@@ -83,9 +83,9 @@ class FirmwareVehicle(Protocol):
 class ProcessGroup:
     """Every process the harness starts, stopped by close() (and at interpreter exit).
 
-    Each child gets its own process session (setsid), so a Ctrl-C at the terminal reaches
-    only the harness, which then stops its children in order rather than leaving a firmware
-    half-killed.
+    Each child is started by setsid, in a process group of its own, so a Ctrl-C at the
+    terminal reaches only the harness, which then stops its children in order rather than
+    leaving a firmware half-killed.
     A harness that cannot stop them (killed itself) takes them with it: each is tied to
     the thread that launches it (tied_to_parent), so launch from the thread that outlives
     them (the main thread)."""
